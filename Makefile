@@ -1,0 +1,35 @@
+# The two quickstart commands are `make demo` and `make test`; everything else is theirs.
+VENV ?= .venv
+PY := $(VENV)/bin/python
+DEBS := socat mbpoll
+
+.PHONY: setup system-deps demo test bench paper
+
+$(VENV)/.installed: pyproject.toml
+	python3 -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[test]'
+	touch $@
+
+setup: $(VENV)/.installed system-deps
+
+# Test peers from Debian (pseudo-terminal pairs, an independent Modbus client).
+system-deps:
+	@missing=""; for p in $(DEBS); do command -v $$p >/dev/null || missing="$$missing $$p"; done; \
+	if [ -n "$$missing" ]; then \
+	  echo "installing Debian packages:$$missing"; \
+	  SUDO=""; [ "$$(id -u)" = 0 ] || SUDO=sudo; \
+	  $$SUDO apt-get update -qq && $$SUDO apt-get install -y -qq $$missing >/dev/null; \
+	fi
+
+demo: setup
+	$(VENV)/bin/bench demo --out out/demo
+
+paper: setup
+	$(VENV)/bin/bench paper --out out/paper
+
+test: setup
+	$(PY) -m pytest -q
+
+bench: setup
+	$(PY) benchmarks/bench_sim.py

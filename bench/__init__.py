@@ -1,0 +1,1 @@
+"""The bench application: command line, configuration, storage, reports."""
