@@ -2,10 +2,11 @@
 
 One equation serves the seed's dimensionless Eq. 8 and the simulated rig:
 
-    u'' = a_f * (-F(u)/F_s + gamma * sin(omega * t + phase)) - c1 * u' - k1 * u
+    u'' = a_f * (-F(u)/F_s + gamma * sin(omega * t + phase) + bias) - c1 * u' - k1 * u
 
-Eq. 8 is a_f = 1/beta^2, omega = 1 (t is tau), c1 = k1 = 0.  The rig uses physical time
-with a_f = omega_s^2 and the optional viscous (c1) and spring (k1) terms.
+Eq. 8 is a_f = 1/beta^2, omega = 1 (t is tau), bias = c1 = k1 = 0.  The rig uses physical
+time with a_f = omega_s^2, a static force (bias, from a generator offset) and the optional
+viscous (c1) and spring (k1) terms.
 
 The friction state (reversal stack, direction) changes only at motion reversals; a
 reversal is located inside the RK4 step (cubic Hermite interpolation of the velocity),
@@ -59,11 +60,11 @@ def _rk4(u, v, h, P0, Ph, P1, k, su, sF, d, lam, g, p, a_f, c1, k1):
 
 
 @njit(cache=True, nogil=True)
-def _rk4_at(u, v, t, h, k, su, sF, d, lam, g, p, a_f, gamma, omega, phase, c1, k1):
+def _rk4_at(u, v, t, h, k, su, sF, d, lam, g, p, a_f, gamma, omega, phase, bias, c1, k1):
     """RK4 step of arbitrary size (used to split a step at a reversal)."""
-    P0 = gamma * math.sin(omega * t + phase)
-    Ph = gamma * math.sin(omega * (t + 0.5 * h) + phase)
-    P1 = gamma * math.sin(omega * (t + h) + phase)
+    P0 = gamma * math.sin(omega * t + phase) + bias
+    Ph = gamma * math.sin(omega * (t + 0.5 * h) + phase) + bias
+    P1 = gamma * math.sin(omega * (t + h) + phase) + bias
     return _rk4(u, v, h, P0, Ph, P1, k, su, sF, d, lam, g, p, a_f, c1, k1)
 
 
@@ -89,7 +90,7 @@ def _velocity_root(v0, v1, m0, m1):
 
 
 @njit(cache=True, nogil=True)
-def rk4_run(u, v, t0, k, d, su, sF, lam, g, p, a_f, gamma, omega, phase, c1, k1, h, nsteps, rec_every, rec):
+def rk4_run(u, v, t0, k, d, su, sF, lam, g, p, a_f, gamma, omega, phase, bias, c1, k1, h, nsteps, rec_every, rec):
     """Integrate ``nsteps`` RK4 steps of size ``h`` from time ``t0``.
 
     ``rec`` is a (m, 5) array receiving (t, u, u', u'', F/F_s) every ``rec_every`` steps,
@@ -120,7 +121,7 @@ def rk4_run(u, v, t0, k, d, su, sF, lam, g, p, a_f, gamma, omega, phase, c1, k1,
             rec[j, 0] = t
             rec[j, 1] = u
             rec[j, 2] = v
-            rec[j, 3] = a_f * (gamma * sn - F) - c1 * v - k1 * u
+            rec[j, 3] = a_f * (gamma * sn + bias - F) - c1 * v - k1 * u
             rec[j, 4] = F
             j += 1
         if i == nsteps:
@@ -129,7 +130,7 @@ def rk4_run(u, v, t0, k, d, su, sF, lam, g, p, a_f, gamma, omega, phase, c1, k1,
         c_h = cs * ch - sn * sh
         s_1 = s_h * ch + c_h * sh
         c_1 = c_h * ch - s_h * sh
-        un, vn, a0 = _rk4(u, v, h, gamma * sn, gamma * s_h, gamma * s_1, k, su, sF, d, lam, g, p, a_f, c1, k1)
+        un, vn, a0 = _rk4(u, v, h, gamma * sn + bias, gamma * s_h + bias, gamma * s_1 + bias, k, su, sF, d, lam, g, p, a_f, c1, k1)
         sn = s_1
         cs = c_1
         if d == 0.0:
@@ -141,13 +142,13 @@ def rk4_run(u, v, t0, k, d, su, sF, lam, g, p, a_f, gamma, omega, phase, c1, k1,
         elif d * vn < 0.0:
             # Motion reverses inside this step: split it at the zero of the velocity.
             if d * v > 0.0:
-                a_end = _accel(un, vn, gamma * sn, k, su, sF, d, lam, g, p, a_f, c1, k1)
+                a_end = _accel(un, vn, gamma * sn + bias, k, su, sF, d, lam, g, p, a_f, c1, k1)
                 theta = _velocity_root(v, vn, a0 * h, a_end * h)
             else:
                 theta = 0.0
             h1 = theta * h
             if h1 > 0.0:
-                u, v, _ = _rk4_at(u, v, t, h1, k, su, sF, d, lam, g, p, a_f, gamma, omega, phase, c1, k1)
+                u, v, _ = _rk4_at(u, v, t, h1, k, su, sF, d, lam, g, p, a_f, gamma, omega, phase, bias, c1, k1)
             k = active_depth(u, k, su, d)
             F_r = branch_force(u, k, su, sF, lam, g, p)
             k, su, sF = push_reversal(u, F_r, k, su, sF)
@@ -157,7 +158,7 @@ def rk4_run(u, v, t0, k, d, su, sF, lam, g, p, a_f, gamma, omega, phase, c1, k1,
                 umax = u
             if u < umin:
                 umin = u
-            u, v, _ = _rk4_at(u, v, t + h1, h - h1, k, su, sF, d, lam, g, p, a_f, gamma, omega, phase, c1, k1)
+            u, v, _ = _rk4_at(u, v, t + h1, h - h1, k, su, sF, d, lam, g, p, a_f, gamma, omega, phase, bias, c1, k1)
         else:
             u, v = un, vn
         k = active_depth(u, k, su, d)

@@ -1,0 +1,188 @@
+"""CAN buses chosen by URL, and a loopback TCP bridge to an in-process virtual bus.
+
+URLs: ``virtual:<channel>`` (python-can's in-process virtual bus) and
+``tcp://127.0.0.1:<port>`` (a :class:`CanTcpBridge` in another process). Anything else is
+handed to ``can.Bus`` as ``<interface>:<channel>`` (e.g. ``socketcan:can0`` on a real
+rig). Why a TCP bridge and not udp_multicast: docs/decisions/0006.
+
+Bridge wire format, per frame, little-endian: ``uint32 arbitration_id, uint8 flags
+(1 FD, 2 BRS, 4 extended id, 8 error frame), uint8 length``, then ``length`` data bytes.
+"""
+
+from __future__ import annotations
+
+import logging
+import select
+import socket
+import struct
+import threading
+import time
+from typing import Any
+
+import can
+
+log = logging.getLogger(__name__)
+
+_HEAD = struct.Struct("<IBB")
+_FD, _BRS, _EXT, _ERR = 1, 2, 4, 8
+
+
+def _encode(msg: can.Message) -> bytes:
+    flags = ((_FD if msg.is_fd else 0) | (_BRS if msg.bitrate_switch else 0)
+             | (_EXT if msg.is_extended_id else 0) | (_ERR if msg.is_error_frame else 0))
+    data = bytes(msg.data)
+    return _HEAD.pack(msg.arbitration_id, flags, len(data)) + data
+
+
+class _FrameReader:
+    def __init__(self) -> None:
+        self.buffer = bytearray()
+
+    def feed(self, data: bytes) -> list[can.Message]:
+        self.buffer += data
+        out = []
+        while len(self.buffer) >= _HEAD.size:
+            fid, flags, length = _HEAD.unpack_from(self.buffer)
+            if len(self.buffer) < _HEAD.size + length:
+                break
+            data = bytes(self.buffer[_HEAD.size:_HEAD.size + length])
+            del self.buffer[:_HEAD.size + length]
+            out.append(can.Message(arbitration_id=fid, data=data, is_fd=bool(flags & _FD),
+                                   bitrate_switch=bool(flags & _BRS),
+                                   is_extended_id=bool(flags & _EXT),
+                                   is_error_frame=bool(flags & _ERR), timestamp=time.time()))
+        return out
+
+
+class TcpCanBus(can.BusABC):
+    """Client end of the bridge: a python-can bus over one TCP connection."""
+
+    def __init__(self, host: str, port: int, connect_timeout_s: float = 2.0, **kwargs: Any) -> None:
+        self._sock = socket.create_connection((host, port), timeout=connect_timeout_s)
+        self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self._sock.settimeout(None)
+        self._reader = _FrameReader()
+        self._pending: list[can.Message] = []
+        self._send_lock = threading.Lock()
+        self.channel_info = f"tcp://{host}:{port}"
+        super().__init__(channel=self.channel_info, **kwargs)
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        try:
+            with self._send_lock:
+                self._sock.sendall(_encode(msg))
+        except OSError as exc:
+            raise can.CanOperationError(f"bridge {self.channel_info}: send failed: {exc}") from exc
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while not self._pending:
+            left = None if deadline is None else max(0.0, deadline - time.monotonic())
+            ready, _, _ = select.select([self._sock], [], [], left)
+            if not ready:
+                return None, False
+            data = self._sock.recv(65536)
+            if not data:
+                raise can.CanOperationError(f"bridge {self.channel_info}: connection closed")
+            self._pending.extend(self._reader.feed(data))
+        return self._pending.pop(0), False
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        self._sock.close()
+
+
+class CanTcpBridge:
+    """Serves an in-process virtual CAN channel on a loopback TCP port."""
+
+    def __init__(self, channel: str, host: str = "127.0.0.1", port: int = 0) -> None:
+        self.channel = channel
+        self._server = socket.create_server((host, port))
+        self.host, self.port = self._server.getsockname()[:2]
+        self._stop = threading.Event()
+        self._links: list[tuple[socket.socket, can.BusABC]] = []
+        self._lock = threading.Lock()
+        threading.Thread(target=self._accept_loop, daemon=True, name="can-bridge").start()
+        log.info("CAN bridge for virtual channel %r on %s", channel, self.url)
+
+    @property
+    def url(self) -> str:
+        return f"tcp://{self.host}:{self.port}"
+
+    def _accept_loop(self) -> None:
+        while not self._stop.is_set():
+            try:
+                conn, _ = self._server.accept()
+            except OSError:
+                return
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            bus = can.Bus(interface="virtual", channel=self.channel)
+            with self._lock:
+                self._links.append((conn, bus))
+            threading.Thread(target=self._socket_to_bus, args=(conn, bus), daemon=True).start()
+            threading.Thread(target=self._bus_to_socket, args=(conn, bus), daemon=True).start()
+
+    def _socket_to_bus(self, conn: socket.socket, bus: can.BusABC) -> None:
+        reader = _FrameReader()
+        try:
+            while data := conn.recv(65536):
+                for msg in reader.feed(data):
+                    bus.send(msg)
+        except (OSError, can.CanError) as exc:
+            log.debug("CAN bridge: link ended: %s", exc)
+        finally:
+            self._drop(conn, bus)
+
+    def _bus_to_socket(self, conn: socket.socket, bus: can.BusABC) -> None:
+        try:
+            while not self._stop.is_set():
+                msg = bus.recv(timeout=0.05)
+                if msg is None:
+                    continue
+                batch = [_encode(msg)]
+                while len(batch) < 512 and (more := bus.recv(timeout=0.0)) is not None:
+                    batch.append(_encode(more))
+                conn.sendall(b"".join(batch))
+        except (OSError, can.CanError, ValueError) as exc:
+            log.debug("CAN bridge: link ended: %s", exc)
+        finally:
+            self._drop(conn, bus)
+
+    def _drop(self, conn: socket.socket, bus: can.BusABC) -> None:
+        with self._lock:
+            if (conn, bus) not in self._links:
+                return
+            self._links.remove((conn, bus))
+        try:
+            conn.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+        conn.close()
+        bus.shutdown()
+
+    def close(self) -> None:
+        self._stop.set()
+        try:
+            self._server.shutdown(socket.SHUT_RDWR)  # wakes the thread blocked in accept()
+        except OSError:
+            pass
+        self._server.close()
+        with self._lock:
+            links = list(self._links)
+        for conn, bus in links:
+            self._drop(conn, bus)
+
+
+def open_can_bus(url: str) -> can.BusABC:
+    """A python-can bus from a URL: ``virtual:<channel>``, ``tcp://host:port``, or
+    ``<interface>:<channel>`` for any python-can interface."""
+    if url.startswith("virtual:"):
+        return can.Bus(interface="virtual", channel=url[len("virtual:"):])
+    if url.startswith("tcp://"):
+        host, _, port = url[len("tcp://"):].rpartition(":")
+        return TcpCanBus(host, int(port))
+    interface, sep, channel = url.partition(":")
+    if not sep:
+        raise ValueError(f"CAN bus URL {url!r}: expected virtual:<ch>, tcp://host:port or "
+                         f"<interface>:<channel>")
+    return can.Bus(interface=interface, channel=channel, fd=True)

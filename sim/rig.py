@@ -1,0 +1,213 @@
+"""The simulated rig: one plant that the three instrument twins share.
+
+    generator voltage -> amplifier + shaker (gain, force limit) -> force P(t) at the
+    impedance head -> carriage mass with Masing friction -> sensors -> DAQ inputs (V)
+
+    m x'' = -F_Masing(x) - c x' - k x + P(t)
+
+Time is virtual: it advances only when :meth:`SimulatedRig.run` is asked for samples
+(by the DAQ twin), so simulated tests run faster than real time; noise comes from a
+seeded generator, so a run is reproducible.
+
+Sensors: impedance-head force (V/N), accelerometer (V/(m/s^2)), eddy-current probe
+(V/m about a stand-off gap).  Each has Gaussian noise and clips at +-10 V; the DAQ twin
+quantises.  Optional effects (all off by default): viscous damping, a linear spring,
+a displacement-channel delay and sensor gain errors.  The amplifier's saturation is
+modelled as a limit on the force amplitude (the drive stays sinusoidal).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+from . import _kernel
+from .dynamics import FrictionState
+from .masing import LAMBDA_MASING
+from .virgin import SakaiCurve, check_positive_finite
+
+log = logging.getLogger(__name__)
+
+OUTPUT_RANGE_V = 10.0
+
+
+@dataclass(frozen=True)
+class RigModel:
+    """Physical parameters of the simulated rig (SI units)."""
+
+    F_s_N: float = 10.0
+    x_s_m: float = 10e-6
+    n: float = 1.5
+    mass_kg: float = 10.0
+    amp_gain_N_per_V: float = 20.0          # generator volt (amplitude) -> shaker force
+    amp_force_limit_N: float = 150.0
+    force_sens_V_per_N: float = 0.0225      # impedance head, 22.5 mV/N
+    accel_sens_V_per_m_s2: float = 0.0102   # 100 mV/g
+    disp_sens_V_per_m: float = 8000.0       # eddy-current probe, 8 V/mm
+    probe_standoff_m: float = 1.1e-3        # gap at x = 0, mid-range of a 0.1-2.1 mm probe
+    force_noise_N: float = 0.002
+    accel_noise_m_s2: float = 0.002
+    disp_noise_m: float = 2e-9
+    # optional effects, off by default
+    viscous_N_s_per_m: float = 0.0
+    spring_N_per_m: float = 0.0
+    disp_delay_s: float = 0.0
+    force_gain_error: float = 0.0           # relative, e.g. 0.02 = reads 2 % high
+    accel_gain_error: float = 0.0
+    disp_gain_error: float = 0.0
+    steps_per_period: int = 400             # RK4 resolution of the drive period (minimum)
+    seed: int = 0
+
+    def __post_init__(self):
+        for name in ("F_s_N", "x_s_m", "mass_kg", "amp_gain_N_per_V", "amp_force_limit_N",
+                     "force_sens_V_per_N", "accel_sens_V_per_m_s2", "disp_sens_V_per_m"):
+            check_positive_finite(name, getattr(self, name))
+        for name in ("force_noise_N", "accel_noise_m_s2", "disp_noise_m", "viscous_N_s_per_m",
+                     "spring_N_per_m", "disp_delay_s", "probe_standoff_m"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+        SakaiCurve(self.n)  # validates n
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "RigModel":
+        known = {f.name for f in fields(cls)}
+        unknown = set(d) - known
+        if unknown:
+            raise ValueError(f"unknown rig model keys {sorted(unknown)}; allowed: {sorted(known)}")
+        return cls(**d)
+
+    @property
+    def omega_s(self) -> float:
+        """Natural angular frequency at the starting rolling displacement (rad/s)."""
+        return math.sqrt(self.F_s_N / (self.x_s_m * self.mass_kg))
+
+
+@dataclass
+class RigBlock:
+    """Sampled sensor voltages at the DAQ inputs."""
+
+    t0_s: float
+    fs_Hz: float
+    force_V: np.ndarray
+    accel_V: np.ndarray
+    disp_V: np.ndarray
+
+
+@dataclass
+class _Generator:
+    freq_Hz: float = 1000.0
+    amplitude_Vpp: float = 0.1
+    offset_V: float = 0.0
+    output_on: bool = False
+
+
+class SimulatedRig:
+    """The plant behind the twins.  Hold ``lock`` when calling from several threads."""
+
+    def __init__(self, model: RigModel | None = None):
+        self.model = model or RigModel()
+        self.lock = threading.RLock()
+        self.curve = SakaiCurve(self.model.n)
+        self.state = FrictionState()
+        self.gen = _Generator()
+        self._t = 0.0
+        self._phase = 0.0
+        self._rng = np.random.default_rng(self.model.seed)
+        self._disp_tail = np.zeros(0)   # recent true displacement, for the delay effect
+        self._fs_tail = 0.0
+
+    @property
+    def time_s(self) -> float:
+        return self._t
+
+    def set_generator(self, *, freq_Hz: float | None = None, amplitude_Vpp: float | None = None,
+                      offset_V: float | None = None, output_on: bool | None = None) -> None:
+        with self.lock:
+            if freq_Hz is not None:
+                self.gen.freq_Hz = check_positive_finite("freq_Hz", freq_Hz)
+            if amplitude_Vpp is not None:
+                if not (math.isfinite(amplitude_Vpp) and amplitude_Vpp >= 0):
+                    raise ValueError(f"amplitude_Vpp must be finite and >= 0, got {amplitude_Vpp!r}")
+                self.gen.amplitude_Vpp = float(amplitude_Vpp)
+            if offset_V is not None:
+                if not math.isfinite(offset_V):
+                    raise ValueError(f"offset_V must be finite, got {offset_V!r}")
+                self.gen.offset_V = float(offset_V)
+            if output_on is not None:
+                self.gen.output_on = bool(output_on)
+
+    def drive_force(self) -> tuple[float, float]:
+        """(amplitude, static part) of the shaker force in N for the present settings."""
+        m, g = self.model, self.gen
+        if not g.output_on:
+            return 0.0, 0.0
+        amp = min(m.amp_gain_N_per_V * 0.5 * g.amplitude_Vpp, m.amp_force_limit_N)
+        dc = float(np.clip(m.amp_gain_N_per_V * g.offset_V, -m.amp_force_limit_N, m.amp_force_limit_N))
+        return amp, dc
+
+    def gap_m(self) -> float:
+        with self.lock:
+            return self.model.probe_standoff_m + self.state.u * self.model.x_s_m
+
+    def run(self, n_samples: int, fs_Hz: float) -> RigBlock:
+        """Advance the plant by ``n_samples / fs_Hz`` seconds and sample the sensors."""
+        n_samples = int(n_samples)
+        if n_samples <= 0:
+            raise ValueError(f"n_samples must be > 0, got {n_samples}")
+        fs_Hz = check_positive_finite("fs_Hz", fs_Hz)
+        with self.lock:
+            return self._run(n_samples, fs_Hz)
+
+    def _run(self, n: int, fs: float) -> RigBlock:
+        m, st = self.model, self.state
+        P_amp, P_dc = self.drive_force()
+        omega = 2 * math.pi * self.gen.freq_Hz
+        # Resolve the drive period and the friction's small-amplitude natural period.
+        k0 = self.curve.stiffness0 if math.isfinite(self.curve.stiffness0) else 10.0
+        f_nat = m.omega_s * math.sqrt(k0 + m.spring_N_per_m * m.x_s_m / m.F_s_N) / (2 * math.pi)
+        f_res = max(self.gen.freq_Hz, f_nat)
+        sub = max(1, math.ceil(m.steps_per_period * f_res / fs))
+        h = 1.0 / (fs * sub)
+        rec = np.empty((n, 5))
+        (st.u, st.v, st.k, st.d, st.su, st.sF, *_rest) = _kernel.rk4_run(
+            st.u, st.v, 0.0, st.k, st.d, st.su, st.sF, LAMBDA_MASING, self.curve.g, self.curve.params,
+            m.omega_s ** 2, P_amp / m.F_s_N, omega, self._phase, P_dc / m.F_s_N,
+            m.viscous_N_s_per_m / m.mass_kg, m.spring_N_per_m / m.mass_kg,
+            h, n * sub, sub, rec)
+        t_rel = np.arange(n) / fs
+        force = P_amp * np.sin(omega * t_rel + self._phase) + P_dc
+        accel = rec[:, 3] * m.x_s_m
+        disp = rec[:, 1] * m.x_s_m
+        if m.disp_delay_s > 0:
+            disp = self._delayed(disp, fs)
+        rng = self._rng
+        out = RigBlock(
+            t0_s=self._t, fs_Hz=fs,
+            force_V=self._sensor(force, m.force_sens_V_per_N, m.force_gain_error, m.force_noise_N, rng),
+            accel_V=self._sensor(accel, m.accel_sens_V_per_m_s2, m.accel_gain_error, m.accel_noise_m_s2, rng),
+            disp_V=self._sensor(disp, m.disp_sens_V_per_m, m.disp_gain_error, m.disp_noise_m, rng))
+        self._t += n / fs
+        self._phase = math.fmod(self._phase + omega * n / fs, 2 * math.pi)
+        return out
+
+    def _delayed(self, disp: np.ndarray, fs: float) -> np.ndarray:
+        """Displacement seen through a channel delay (linear interpolation of the past)."""
+        if self._fs_tail != fs:
+            self._disp_tail = np.full(1, disp[0])
+            self._fs_tail = fs
+        hist = np.concatenate([self._disp_tail, disp])
+        lag = self.model.disp_delay_s * fs
+        idx = np.arange(disp.size) + self._disp_tail.size - lag
+        delayed = np.interp(idx, np.arange(hist.size), hist)
+        self._disp_tail = hist[-(int(lag) + 2):]
+        return delayed
+
+    @staticmethod
+    def _sensor(x, sens, gain_error, noise, rng) -> np.ndarray:
+        v = (x + noise * rng.standard_normal(x.size)) * sens * (1.0 + gain_error)
+        return np.clip(v, -OUTPUT_RANGE_V, OUTPUT_RANGE_V)

@@ -1,0 +1,78 @@
+"""start_twins: three twins around one plant, reached through the real drivers."""
+
+import socket
+import threading
+
+import numpy as np
+import pytest
+
+from tests.drivers.fake_rig import AMP_N_PER_V, CHANNELS, needs_fake_rig
+from drivers import (CanFdDaq, ModbusEddySensor, ScpiFunctionGenerator, open_can_bus,
+                     run_standalone, start_twins)
+
+pytestmark = pytest.mark.timeout(60)
+
+
+def test_urls_point_at_loopback_ephemeral_ports(twins):
+    urls = twins.urls()
+    assert urls["generator"].startswith("socket://127.0.0.1:")
+    assert urls["sensor"].startswith("modbus-tcp://127.0.0.1:")
+    assert urls["daq_bridge"].startswith("tcp://127.0.0.1:")
+    assert urls["daq"].startswith("virtual:")
+
+
+@needs_fake_rig
+def test_generator_setting_shows_up_in_the_daq_force_through_the_shared_plant(twins):
+    with ScpiFunctionGenerator(twins.generator_url, drive_limit_V=2.0) as gen:
+        gen.configure_sine()
+        gen.set_frequency(200.0)
+        gen.set_amplitude(0.6)
+        gen.set_output(True)
+        daq = CanFdDaq(open_can_bus(twins.daq_url), CHANNELS)
+        block = daq.acquire_periods(200.0, 10)
+        daq.close()
+    # independent fact: the stand-in amplifier makes AMP_N_PER_V newton per volt peak
+    assert np.max(np.abs(block.force_N)) == pytest.approx(AMP_N_PER_V * 0.3, rel=3e-3)
+
+
+def test_sensor_reads_the_plant_gap_after_acquisition_advanced_the_clock(twins, rig):
+    sensor = ModbusEddySensor(twins.sensor_url)
+    before = sensor.read_gap().gap_mm
+    with rig.lock:
+        expected = rig.gap_m() * 1e3
+    sensor.close()
+    assert before == pytest.approx(expected, abs=1e-6)
+
+
+def test_close_releases_the_ports(rig):
+    t = start_twins(rig)
+    port = int(t.generator_url.rsplit(":", 1)[1])
+    t.close()
+    with pytest.raises(OSError):
+        socket.create_connection(("127.0.0.1", port), timeout=0.5).close()
+
+
+@needs_fake_rig
+def test_serial_ports_option_serves_scpi_and_rtu_on_ptys(rig):
+    with start_twins(rig, serial_ports=True) as t:
+        gen = ScpiFunctionGenerator(t.generator_serial_port, timeout_s=1.0)
+        assert gen.identify().model == "33511B"
+        gen.close()
+        sensor = ModbusEddySensor(t.sensor_rtu_url)
+        assert sensor.read_gap().in_range
+        sensor.close()
+
+
+def test_run_standalone_prints_urls_and_stops_on_request(rig):
+    lines, stop = [], threading.Event()
+    thread = threading.Thread(target=run_standalone, args=(rig,),
+                              kwargs=dict(print_fn=lines.append, stop=stop))
+    thread.start()
+    for _ in range(100):
+        if len(lines) >= 5:
+            break
+        threading.Event().wait(0.02)
+    stop.set()
+    thread.join(timeout=5)
+    assert not thread.is_alive()
+    assert any(line.startswith("generator ") for line in lines)
