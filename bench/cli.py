@@ -62,10 +62,109 @@ def cmd_frf(args) -> int:
     return 0
 
 
+def _load_configs(args):
+    from .config import DEFAULTS, load_plan, load_rig
+
+    plan = load_plan(Path(args.plan) if args.plan else DEFAULTS / "demo_plan.toml")
+    rig = load_rig(Path(args.rig) if args.rig else DEFAULTS / "sim_rig.toml")
+    return plan, rig
+
+
+def cmd_dry_run(args) -> int:
+    from .session import EnvelopeError, check_envelope, envelope, envelope_report
+
+    plan, rig = _load_configs(args)
+    steps = plan.schedule()
+    print(f"plan '{plan.name}': {len(plan.levels_N)} levels x {len(plan.freqs_Hz)} frequencies "
+          f"({plan.direction}) = {len(steps)} steps; rig '{rig.name}'{' (simulated)' if rig.simulated else ''}")
+    print(envelope_report(envelope(plan, rig)))
+    try:
+        check_envelope(plan, rig)
+    except EnvelopeError as e:
+        print(f"REFUSED: {str(e).splitlines()[0]}")
+        return 3
+    print("envelope ok: the rig's limits hold every step")
+    return 0
+
+
+def _run(args, resume: bool) -> int:
+    from .session import run_plan
+    from .storage import RunStore
+
+    if resume:
+        from .config import parse_plan, parse_rig
+        meta = RunStore.open(Path(args.run)).metadata
+        plan = parse_plan({"plan": _plan_toml(meta["plan"])}, f"{args.run}/run.json")
+        rig = parse_rig({"rig": _rig_toml(meta["rig"])}, f"{args.run}/run.json")
+        out, seed = Path(args.run), meta.get("sim_seed")
+    else:
+        plan, rig = _load_configs(args)
+        out, seed = Path(args.out), args.seed
+    store = run_plan(plan, rig, out, resume=resume, progress=Progress("stepped sine"), sim_seed=seed)
+    meta = store.metadata
+    print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/")
+    if meta["status"] == "completed" and not getattr(args, "no_report", False):
+        from .report import write_report
+        print(f"report: {write_report(out)}")
+    return 0 if meta["status"] == "completed" else 4
+
+
+def _plan_toml(p: dict) -> dict:
+    """The stored plan back into the TOML layout (the stored grid is used verbatim)."""
+    keys = ("settle_cycles", "min_settle_s", "measure_cycles", "control_cycles", "force_tolerance",
+            "max_iterations", "harmonics", "ramp_s", "min_sample_rate_Hz")
+    out = {"name": p["name"], "levels_N": list(p["levels_N"]),
+           "frequencies": {"list_Hz": list(p["freqs_Hz"]), "direction": p["direction"]},
+           "control": {k: p[k] for k in keys}}
+    if p.get("limits"):
+        out["limits"] = p["limits"]
+    return out
+
+
+def _rig_toml(r: dict) -> dict:
+    return {"name": r["name"], "notes": r["notes"], "simulated": r["simulated"],
+            "instruments": {"generator": r["generator_url"], "sensor": r["sensor_url"], "daq": r["daq_url"]},
+            "calibration": {k: r[k] for k in ("force_V_per_N", "accel_V_per_m_s2", "disp_V_per_m",
+                                              "amp_gain_N_per_V")},
+            "limits": r["limits"], "expected": {"mass_kg": r["expected_mass_kg"], "x_s_m": r["expected_x_s_m"]},
+            **({"model": r["model"]} if r["model"] else {})}
+
+
+def cmd_run(args) -> int:
+    return _run(args, resume=False)
+
+
+def cmd_resume(args) -> int:
+    return _run(args, resume=True)
+
+
 def cmd_demo(args) -> int:
-    """The main job.  Until the stepped-sine procedure lands it reproduces the paper."""
-    args.quick = False
-    return cmd_paper(args)
+    """The main job: the default plan on the simulated rig, then its report."""
+    args.plan = args.rig = None
+    args.seed = None
+    out = Path(args.out)
+    if out.exists() and any(out.iterdir()):
+        import shutil
+        shutil.rmtree(out)   # the demo always starts afresh
+    return _run(args, resume=False)
+
+
+def cmd_report(args) -> int:
+    from .report import write_report
+    print(f"report: {write_report(Path(args.run))}")
+    return 0
+
+
+def cmd_twins(args) -> int:
+    from drivers import run_standalone
+    from sim.rig import RigModel, SimulatedRig
+
+    from .config import DEFAULTS, load_rig
+    rig = load_rig(Path(args.rig) if args.rig else DEFAULTS / "sim_rig.toml")
+    if not rig.simulated:
+        raise ValueError(f"{args.rig}: not a simulated rig (simulated = true is needed)")
+    run_standalone(SimulatedRig(RigModel.from_dict(rig.model)), args.host, serial_ports=args.serial)
+    return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -78,9 +177,35 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--quick", action="store_true", help="coarse grids (seconds)")
     s.set_defaults(func=cmd_paper)
 
-    s = sub.add_parser("demo", help="the main job: full run on the simulated rig with its report")
+    s = sub.add_parser("demo", help="the main job: the default plan on the simulated rig, with its report")
     s.add_argument("--out", default="out/demo")
     s.set_defaults(func=cmd_demo)
+
+    for name, func, hlp in (("run", cmd_run, "run a stepped-sine plan on a rig"),
+                            ("dry-run", cmd_dry_run, "check a plan against the rig's limits; print the envelope")):
+        s = sub.add_parser(name, help=hlp)
+        s.add_argument("--plan", help="plan TOML (default: the demo plan)")
+        s.add_argument("--rig", help="rig TOML (default: the simulated rig)")
+        if name == "run":
+            s.add_argument("--out", required=True, help="new run directory")
+            s.add_argument("--seed", type=int, help="noise seed of a simulated rig")
+            s.add_argument("--no-report", action="store_true")
+        s.set_defaults(func=func)
+
+    s = sub.add_parser("resume", help="continue an interrupted run without repeating completed steps")
+    s.add_argument("run")
+    s.add_argument("--no-report", action="store_true")
+    s.set_defaults(func=cmd_resume)
+
+    s = sub.add_parser("report", help="(re)write the report of a run directory")
+    s.add_argument("run")
+    s.set_defaults(func=cmd_report)
+
+    s = sub.add_parser("twins", help="serve the simulated rig's instruments on loopback; print their URLs")
+    s.add_argument("--rig", help="simulated rig TOML (default: bench/defaults/sim_rig.toml)")
+    s.add_argument("--host", default="127.0.0.1")
+    s.add_argument("--serial", action="store_true", help="also serve SCPI and Modbus RTU on pty pairs")
+    s.set_defaults(func=cmd_twins)
 
     s = sub.add_parser("frf", help="compliance G(beta) of the model at one force level (CSV to stdout)")
     s.add_argument("--gamma0", type=float, default=0.6)

@@ -1,0 +1,276 @@
+"""Test plan and rig configuration (TOML), validated before anything moves.
+
+Every error names the file, the key and the allowed values.  See ``bench/defaults/`` for
+annotated examples (the demo's plan and the simulated rig).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import tomllib
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+MAX_FREQ_HZ = 1000.0
+DEFAULTS = Path(__file__).with_name("defaults")
+
+
+class ConfigError(ValueError):
+    """A configuration value is missing, unknown or out of range."""
+
+
+class _Section:
+    """Typed access to one TOML table that remembers where it came from."""
+
+    def __init__(self, source: str, path: str, data: dict):
+        if not isinstance(data, dict):
+            raise ConfigError(f"{source}: [{path}] must be a table")
+        self.source, self.path, self.data, self.used = source, path, data, set()
+
+    def where(self, key: str) -> str:
+        return f"{self.source}: [{self.path}] {key}"
+
+    def _get(self, key, default):
+        self.used.add(key)
+        if key not in self.data:
+            if default is _REQUIRED:
+                raise ConfigError(f"{self.where(key)}: missing (required)")
+            return default
+        return self.data[key]
+
+    def number(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, integer=False):
+        v = self._get(key, default)
+        kind = "an integer" if integer else "a number"
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not float(v).is_integer()):
+            raise ConfigError(f"{self.where(key)}: must be {kind}, got {v!r}")
+        ok = (v > lo if lo_open else v >= lo) and v <= hi and math.isfinite(v)
+        if not ok:
+            lo_s = f"> {lo:g}" if lo_open else f">= {lo:g}"
+            raise ConfigError(f"{self.where(key)}: must be {lo_s} and <= {hi:g}, got {v!r}")
+        return int(v) if integer else float(v)
+
+    def numbers(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False):
+        v = self._get(key, default)
+        if not isinstance(v, list) or not v:
+            raise ConfigError(f"{self.where(key)}: must be a non-empty list of numbers, got {v!r}")
+        sub = _Section(self.source, self.path, {f"{key}[{i}]": x for i, x in enumerate(v)})
+        return [sub.number(f"{key}[{i}]", lo=lo, hi=hi, lo_open=lo_open) for i in range(len(v))]
+
+    def choice(self, key, default, allowed):
+        v = self._get(key, default)
+        if v not in allowed:
+            raise ConfigError(f"{self.where(key)}: must be one of {list(allowed)}, got {v!r}")
+        return v
+
+    def text(self, key, default=""):
+        v = self._get(key, default)
+        if not isinstance(v, str):
+            raise ConfigError(f"{self.where(key)}: must be a string, got {v!r}")
+        return v
+
+    def flag(self, key, default=False):
+        v = self._get(key, default)
+        if not isinstance(v, bool):
+            raise ConfigError(f"{self.where(key)}: must be true or false, got {v!r}")
+        return v
+
+    def table(self, key) -> "_Section":
+        self.used.add(key)
+        return _Section(self.source, f"{self.path}.{key}", self.data.get(key, {}))
+
+    def done(self) -> None:
+        unknown = sorted(set(self.data) - self.used)
+        if unknown:
+            raise ConfigError(f"{self.source}: [{self.path}] unknown key(s) {unknown}; "
+                              f"allowed: {sorted(self.used)}")
+
+
+_REQUIRED = object()
+
+
+@dataclass(frozen=True)
+class Limits:
+    drive_V: float          # peak generator output |offset| + Vpp/2
+    force_N: float          # peak force at the impedance head
+    disp_m: float           # peak displacement about the start position
+    accel_m_s2: float       # peak acceleration
+
+
+@dataclass(frozen=True)
+class Plan:
+    name: str
+    levels_N: tuple[float, ...]
+    freqs_Hz: tuple[float, ...]          # ascending grid
+    direction: str                       # "up", "down" or "both"
+    settle_cycles: int
+    min_settle_s: float
+    measure_cycles: int
+    control_cycles: int
+    force_tolerance: float
+    max_iterations: int
+    harmonics: int
+    ramp_s: float
+    min_sample_rate_Hz: float
+    limits: Limits | None                # optional, tighter than the rig's
+
+    def sweeps(self) -> list[tuple[str, tuple[float, ...]]]:
+        up = ("up", self.freqs_Hz)
+        down = ("down", tuple(reversed(self.freqs_Hz)))
+        return {"up": [up], "down": [down], "both": [up, down]}[self.direction]
+
+    def schedule(self) -> list["StepSpec"]:
+        """Every step of the test in order; a step's key identifies it across resumes."""
+        steps = []
+        for li, level in enumerate(self.levels_N):
+            for direction, freqs in self.sweeps():
+                for f in freqs:
+                    fi = self.freqs_Hz.index(f)
+                    steps.append(StepSpec(len(steps), li, fi, direction, level, f))
+        return steps
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class StepSpec:
+    index: int
+    level_index: int
+    freq_index: int
+    direction: str
+    force_N: float
+    freq_Hz: float
+
+    @property
+    def key(self) -> str:
+        return f"{self.index:05d}-L{self.level_index:02d}-F{self.freq_index:03d}-{self.direction}"
+
+
+@dataclass(frozen=True)
+class Rig:
+    name: str
+    notes: str
+    simulated: bool
+    generator_url: str
+    sensor_url: str
+    daq_url: str
+    force_V_per_N: float
+    accel_V_per_m_s2: float
+    disp_V_per_m: float
+    amp_gain_N_per_V: float              # estimate, for the first drive of each level
+    limits: Limits
+    expected_mass_kg: float
+    expected_x_s_m: float
+    model: dict = field(default_factory=dict)   # sim.rig.RigModel keys (simulated rigs)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def _load(path: Path) -> dict:
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: file not found") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{path}: not valid TOML: {e}") from None
+
+
+def _limits(sec: _Section) -> Limits:
+    lim = Limits(drive_V=sec.number("drive_V", _REQUIRED, 0, 10, lo_open=True),
+                 force_N=sec.number("force_N", _REQUIRED, 0, 1000, lo_open=True),
+                 disp_m=sec.number("disp_m", _REQUIRED, 0, 0.01, lo_open=True),
+                 accel_m_s2=sec.number("accel_m_s2", _REQUIRED, 0, 1e4, lo_open=True))
+    sec.done()
+    return lim
+
+
+def load_plan(path: Path) -> Plan:
+    return parse_plan(_load(path), str(path))
+
+
+def parse_plan(data: dict, source: str = "plan") -> Plan:
+    top = _Section(source, "", data)
+    p = top.table("plan")
+    top.done()
+    levels = p.numbers("levels_N", _REQUIRED, 0.0, 1000.0, lo_open=True)
+    fr = p.table("frequencies")
+    if "list_Hz" in fr.data:
+        freqs = sorted(fr.numbers("list_Hz", None, 0.0, MAX_FREQ_HZ, lo_open=True))
+    else:
+        start = fr.number("start_Hz", _REQUIRED, 0.0, MAX_FREQ_HZ, lo_open=True)
+        stop = fr.number("stop_Hz", _REQUIRED, start, MAX_FREQ_HZ)
+        points = fr.number("points", _REQUIRED, 1, 10000, integer=True)
+        spacing = fr.choice("spacing", "log", ("log", "linear"))
+        grid = np.geomspace(start, stop, points) if spacing == "log" else np.linspace(start, stop, points)
+        freqs = [float(f"{f:.6g}") for f in grid]
+    if len(set(freqs)) != len(freqs):
+        raise ConfigError(f"{fr.where('frequencies')}: grid has repeated frequencies")
+    direction = fr.choice("direction", "up", ("up", "down", "both"))
+    fr.done()
+    c = p.table("control")
+    lim = p.table("limits")
+    plan = Plan(
+        name=p.text("name", "stepped sine"), levels_N=tuple(levels), freqs_Hz=tuple(freqs),
+        direction=direction,
+        settle_cycles=c.number("settle_cycles", 20, 0, 1e6, integer=True),
+        min_settle_s=c.number("min_settle_s", 0.05, 0, 3600),
+        measure_cycles=c.number("measure_cycles", 10, 1, 1e6, integer=True),
+        control_cycles=c.number("control_cycles", 4, 1, 1e6, integer=True),
+        force_tolerance=c.number("force_tolerance", 0.02, 0, 0.5, lo_open=True),
+        max_iterations=c.number("max_iterations", 8, 1, 100, integer=True),
+        harmonics=c.number("harmonics", 5, 1, 50, integer=True),
+        ramp_s=c.number("ramp_s", 0.1, 0, 60),
+        min_sample_rate_Hz=c.number("min_sample_rate_Hz", 25600.0, 1000, 204800),
+        limits=_limits(lim) if lim.data else None)
+    c.done()
+    p.done()
+    return plan
+
+
+def load_rig(path: Path) -> Rig:
+    return parse_rig(_load(path), str(path))
+
+
+def parse_rig(data: dict, source: str = "rig") -> Rig:
+    top = _Section(source, "", data)
+    r = top.table("rig")
+    top.done()
+    simulated = r.flag("simulated", False)
+    ins = r.table("instruments")
+    # a simulated rig starts its own twins and fills the URLs in at run time
+    urls = {k: ins.text(k, "" if simulated else _REQUIRED) for k in ("generator", "sensor", "daq")}
+    ins.done()
+    cal = r.table("calibration")
+    exp = r.table("expected")
+    rig = Rig(
+        name=r.text("name", "rig"), notes=r.text("notes", ""), simulated=simulated,
+        generator_url=urls["generator"], sensor_url=urls["sensor"], daq_url=urls["daq"],
+        force_V_per_N=cal.number("force_V_per_N", _REQUIRED, 0, 100, lo_open=True),
+        accel_V_per_m_s2=cal.number("accel_V_per_m_s2", _REQUIRED, 0, 100, lo_open=True),
+        disp_V_per_m=cal.number("disp_V_per_m", _REQUIRED, 0, 1e7, lo_open=True),
+        amp_gain_N_per_V=cal.number("amp_gain_N_per_V", _REQUIRED, 0, 1e4, lo_open=True),
+        limits=_limits(r.table("limits")),
+        expected_mass_kg=exp.number("mass_kg", 10.0, 0, 1e4, lo_open=True),
+        expected_x_s_m=exp.number("x_s_m", 20e-6, 0, 1e-2, lo_open=True),
+        model=dict(r.data.get("model", {})))
+    r.used.add("model")
+    if rig.model and not simulated:
+        raise ConfigError(f"{source}: [rig.model] is only allowed with simulated = true")
+    if simulated:
+        from sim.rig import RigModel
+        try:
+            RigModel.from_dict(rig.model)
+        except (TypeError, ValueError) as e:
+            raise ConfigError(f"{source}: [rig.model] {e}") from None
+    cal.done()
+    exp.done()
+    r.done()
+    return rig

@@ -1,0 +1,217 @@
+"""Run a plan on a rig: open the instruments, check the envelope, run, store, clean up.
+
+Exit paths all end with the generator's output off: normal end, exception, Ctrl-C,
+SIGTERM, instrument error, lost connection, safety limit.  (kill -9 cannot be caught:
+on the real rig the generator then keeps its last output; stored data stays intact.)
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import platform
+import signal
+import sys
+from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass
+from importlib import metadata as importlib_metadata
+from pathlib import Path
+
+import numpy as np
+
+from drivers import (CanFdDaq, Channel, ChannelSpec, InstrumentError, ModbusEddySensor,
+                     ScpiFunctionGenerator, open_can_bus, start_twins)
+from procedures.safety import LimitExceeded, SupervisedDaq, SupervisedGenerator, Supervisor, tightest
+from procedures.stepped_sine import SteppedSine
+
+from .config import Limits, Plan, Rig
+from .storage import RunStore
+
+log = logging.getLogger(__name__)
+
+FORCE_MARGIN = 1.25      # control overshoot allowance in the envelope check
+
+
+@dataclass(frozen=True)
+class EnvelopePoint:
+    force_N: float
+    freq_Hz: float
+    drive_V: float
+    disp_m: float
+    accel_m_s2: float
+    problems: tuple[str, ...]
+
+
+def envelope(plan: Plan, rig: Rig) -> list[EnvelopePoint]:
+    """Expected peak drive, displacement and acceleration of every (level, frequency).
+
+    Displacement: free mass P/(m w^2) plus a pre-rolling allowance of 3 x_s; acceleration
+    P/m (the free-mass bound, reached above the friction resonance)."""
+    lim = tightest(rig.limits, plan.limits)
+    out = []
+    for F in plan.levels_N:
+        for f in plan.freqs_Hz:
+            Fp = F * FORCE_MARGIN
+            w = 2 * math.pi * f
+            drive = Fp / rig.amp_gain_N_per_V
+            disp = Fp / (rig.expected_mass_kg * w * w) + 3 * rig.expected_x_s_m
+            acc = Fp / rig.expected_mass_kg
+            problems = tuple(p for p, bad in (
+                (f"drive {drive:.3g} V > {lim.drive_V:g} V", drive > lim.drive_V),
+                (f"force {Fp:.3g} N > {lim.force_N:g} N", Fp > lim.force_N),
+                (f"displacement {disp * 1e3:.3g} mm > {lim.disp_m * 1e3:g} mm", disp > lim.disp_m),
+                (f"acceleration {acc:.3g} m/s^2 > {lim.accel_m_s2:g} m/s^2", acc > lim.accel_m_s2)) if bad)
+            out.append(EnvelopePoint(F, f, drive, disp, acc, problems))
+    return out
+
+
+def envelope_report(points: list[EnvelopePoint]) -> str:
+    lines = [f"{'level N':>8} {'drive V':>8} {'disp mm (max)':>14} {'accel m/s2':>10}  problems"]
+    for F in sorted({p.force_N for p in points}):
+        ps = [p for p in points if p.force_N == F]
+        bad = [f"{p.freq_Hz:g} Hz: {'; '.join(p.problems)}" for p in ps if p.problems]
+        lines.append(f"{F:8.3g} {max(p.drive_V for p in ps):8.3g} {max(p.disp_m for p in ps) * 1e3:14.4g} "
+                     f"{max(p.accel_m_s2 for p in ps):10.3g}  {bad[0] + (f' (+{len(bad) - 1} more)' if len(bad) > 1 else '') if bad else 'ok'}")
+    return "\n".join(lines)
+
+
+class EnvelopeError(ValueError):
+    pass
+
+
+def check_envelope(plan: Plan, rig: Rig) -> list[EnvelopePoint]:
+    points = envelope(plan, rig)
+    bad = [p for p in points if p.problems]
+    if bad:
+        raise EnvelopeError(f"the rig's limits cannot hold {len(bad)} of {len(points)} steps of the plan, "
+                            f"e.g. {bad[0].force_N:g} N at {bad[0].freq_Hz:g} Hz: {'; '.join(bad[0].problems)}\n"
+                            + envelope_report(points))
+    return points
+
+
+def versions() -> dict:
+    out = {"python": sys.version.split()[0], "platform": platform.platform()}
+    for pkg in ("guideway-bench", "numpy", "scipy", "numba", "pyserial", "python-can", "cantools", "pymodbus"):
+        try:
+            out[pkg] = importlib_metadata.version(pkg)
+        except importlib_metadata.PackageNotFoundError:
+            out[pkg] = None
+    return out
+
+
+@contextmanager
+def _sigterm_as_interrupt():
+    """SIGTERM takes the same clean exit as Ctrl-C."""
+    def handler(signum, frame):
+        raise KeyboardInterrupt(f"signal {signum}")
+    try:
+        old = signal.signal(signal.SIGTERM, handler)
+    except ValueError:          # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+@dataclass
+class Instruments:
+    generator: ScpiFunctionGenerator
+    daq: CanFdDaq
+    sensor: ModbusEddySensor
+    identities: dict
+    sim_rig: object = None
+
+
+def open_instruments(rig: Rig, stack: ExitStack, *, sim_seed: int | None = None) -> Instruments:
+    """Open the three drivers (starting the twins first for a simulated rig)."""
+    g_url, s_url, d_url = rig.generator_url, rig.sensor_url, rig.daq_url
+    sim = None
+    if rig.simulated:
+        from sim.rig import RigModel, SimulatedRig
+        model = dict(rig.model)
+        if sim_seed is not None:
+            model["seed"] = sim_seed
+        sim = SimulatedRig(RigModel.from_dict(model))
+        twins = stack.enter_context(start_twins(sim))
+        g_url, s_url, d_url = twins.generator_url, twins.sensor_url, twins.daq_url
+    gen = ScpiFunctionGenerator(g_url, drive_limit_V=rig.limits.drive_V)
+    stack.callback(gen.close)
+    stack.callback(gen.safe_off)          # runs before close: output off on every exit path
+    gen.set_output(False)
+    gen.configure_sine(drive_limit_V=rig.limits.drive_V)
+    channels = (ChannelSpec(Channel.FORCE, rig.force_V_per_N, "N"),
+                ChannelSpec(Channel.ACCELERATION, rig.accel_V_per_m_s2, "m/s^2"),
+                ChannelSpec(Channel.DISPLACEMENT, rig.disp_V_per_m, "m"))
+    daq = CanFdDaq(open_can_bus(d_url), channels)
+    stack.callback(daq.close)
+    sensor = ModbusEddySensor(s_url)
+    stack.callback(sensor.close)
+    ids = {"generator": gen.identify().__dict__, "sensor": sensor.identify().__dict__,
+           "daq": {"url": d_url}}
+    return Instruments(gen, daq, sensor, ids, sim)
+
+
+def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=None,
+             sim_seed: int | None = None) -> RunStore:
+    """Run (or resume) ``plan`` on ``rig`` into the run directory ``out``."""
+    check_envelope(plan, rig)
+    limits = tightest(rig.limits, plan.limits)
+    if resume:
+        store = RunStore.open(out)
+        store.event("resume", done=len(store.done_keys()))
+        store.update(status="running")
+    else:
+        store = RunStore.create(out, {"plan": plan.to_dict(), "rig": rig.to_dict(), "versions": versions(),
+                                      "sim_seed": sim_seed})
+    _log_to(store.path / "bench.log")
+    status = "failed"
+    with ExitStack() as stack, _sigterm_as_interrupt():
+        try:
+            ins = open_instruments(rig, stack, sim_seed=sim_seed)
+            store.update(identities=ins.identities)
+            sup = Supervisor(limits, ins.generator)
+            gen, daq = SupervisedGenerator(ins.generator, sup), SupervisedDaq(ins.daq, sup)
+
+            def sensor_check() -> dict:
+                reading = ins.sensor.read_gap()
+                if not reading.in_range:
+                    raise LimitExceeded(f"displacement sensor reports {reading.status!r} "
+                                        f"(gap {reading.gap_mm:.4f} mm): target out of range")
+                store.event("sensor", gap_mm=reading.gap_mm, status=int(reading.status),
+                            temperature_C=reading.temperature_C)
+                return reading.__dict__
+
+            # reference position with the output off
+            sup.x_ref_m = float(np.mean(ins.daq.acquire_periods(100.0, 10).disp_m))
+            proc = SteppedSine(plan, gen, daq, amp_gain_N_per_V=rig.amp_gain_N_per_V,
+                               sensor_check=sensor_check)
+            proc.run(store.done_keys(), lambda step, res, raw: store.write_step(step.key, res, raw), progress)
+            status = "completed"
+        except LimitExceeded as e:
+            status = "aborted"
+            store.event("abort", reason=str(e))
+            log.error("aborted: %s", e)
+        except KeyboardInterrupt as e:
+            status = "interrupted"
+            store.event("interrupted", reason=str(e) or "Ctrl-C")
+            log.warning("interrupted; resume with: bench resume %s", store.path)
+            raise
+        except InstrumentError as e:
+            status = "instrument error"
+            store.event("instrument_error", error=f"{type(e).__name__}: {e}")
+            log.error("instrument error: %s: %s", type(e).__name__, e)
+        finally:
+            stack.close()        # output off, then close links and twins
+            store.finish(status, steps_done=len(store.done_keys()), steps_total=len(plan.schedule()))
+    return store
+
+
+def _log_to(path: Path) -> None:
+    root = logging.getLogger()
+    if any(getattr(h, "baseFilename", None) == str(path) for h in root.handlers):
+        return
+    h = logging.FileHandler(path)
+    h.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    root.addHandler(h)
