@@ -21,7 +21,7 @@ from sim.shooting import frf_shooting
 def ns_per_step(fn, n, steps):
     c = Integrator(n=n).curve
     st = FrictionState()
-    args = (2.0, c.g, c.params, 1 / 1.2**2, 0.6, 1.0, 0.0, 0.0, 0.0, 0.0, 2 * math.pi / 10000)
+    args = (2.0, c.kind, c.params, 1 / 1.2**2, 0.6, 1.0, 0.0, 0.0, 0.0, 0.0, 2 * math.pi / 10000)
     fn(st.u, st.v, 0.0, st.k, st.d, st.su, st.sF, *args, 10, 1, np.empty((0, 5)))  # warm up
     t = time.perf_counter()
     fn(st.u, st.v, 0.0, st.k, st.d, st.su, st.sF, *args, steps, 1, np.empty((0, 5)))

@@ -4,6 +4,12 @@ Every block is checked before it is returned: header, data frame lengths, sequen
 numbers, block id, sample count and CRC32 against both the header and the end-of-block
 frame. On any failure the driver sends RESEND (up to ``max_resends`` times) and then
 raises :class:`BlockIntegrityError`; it never returns silently wrong data.
+
+Waiting for a block: the deadline is the block's duration plus its transfer time plus
+``timeout_s``. A DAQ that needs longer (the simulated twin computes its plant, which can
+be slower than real time) sends STATUS frames in state ACQUIRING meanwhile; each one
+moves the deadline to ``timeout_s`` after it, up to ``max_busy_s`` past the nominal
+deadline, so a silent DAQ still fails in bounded time and a busy one is not cut off.
 """
 
 from __future__ import annotations
@@ -47,10 +53,12 @@ class CanFdDaq:
     :param bus: any python-can bus (``interface="virtual"`` in-process, the TCP bridge
         of ``open_can_bus("tcp://...")`` across processes, a real CAN FD adapter).
     :param channels: force, acceleration and displacement transducers, in that order.
+    :param max_busy_s: how much longer than the nominal block deadline to wait while the
+        DAQ keeps reporting ACQUIRING (s).
     """
 
     def __init__(self, bus: can.BusABC, channels: tuple[ChannelSpec, ...], *,
-                 timeout_s: float = 2.0, max_resends: int = 2) -> None:
+                 timeout_s: float = 2.0, max_resends: int = 2, max_busy_s: float = 60.0) -> None:
         order = tuple(spec.channel for spec in channels)
         if order != (Channel.FORCE, Channel.ACCELERATION, Channel.DISPLACEMENT):
             raise ValueError(f"channels must be FORCE, ACCELERATION, DISPLACEMENT, got {order}")
@@ -58,6 +66,7 @@ class CanFdDaq:
         self.channels = tuple(channels)
         self.timeout_s = timeout_s
         self.max_resends = max_resends
+        self.max_busy_s = max_busy_s
         self._rate_mHz = 0
         self._n_samples = 0
 
@@ -198,6 +207,7 @@ class CanFdDaq:
                  ) -> tuple[codec.BlockHeader, list[bytes], dict]:
         header: codec.BlockHeader | None = None
         frames: list[bytes] = []
+        busy_limit = deadline + self.max_busy_s
         while True:
             try:
                 msg = self._recv(deadline, "data block" if header is None else "end of block")
@@ -237,6 +247,8 @@ class CanFdDaq:
             elif fid == codec.ID_STATUS:
                 status = codec.decode(codec.ID_STATUS, bytes(msg.data))
                 self._raise_on_error(status, int(status["LastCommand"]))
+                if header is None and int(status["State"]) == codec.State.ACQUIRING:
+                    deadline = min(max(deadline, time.monotonic() + self.timeout_s), busy_limit)
 
     @staticmethod
     def _check_end(header: codec.BlockHeader, end: dict) -> None:

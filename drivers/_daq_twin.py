@@ -4,6 +4,15 @@ On TRIGGER it advances the plant's virtual clock by one block (``rig.run``, hold
 ``rig.lock``), quantises the three input voltages to 24-bit counts and sends header, data
 frames and end-of-block. The last block is kept so RESEND can repeat it.
 
+The plant is simulated, not real time: a block can take longer to compute than it lasts
+(the first ``rig.run`` of a process pays the kernel's JIT compilation, seconds). While
+it computes, the twin sends a STATUS frame in state ACQUIRING every
+``BUSY_STATUS_INTERVAL_S`` so the host knows the DAQ is alive (see ``CanFdDaq``).
+
+The twin's thread owns the bus: :meth:`DaqTwin.close` asks it to stop, and the thread
+abandons any block in progress, sends nothing more and shuts the bus down itself, so no
+frame is ever sent on a closed bus and no exception escapes the thread.
+
 Fault injection for tests: :meth:`DaqTwin.inject_fault` queues a function that edits the
 list of outgoing data frames of the next transmission (drop, duplicate, corrupt, ...).
 """
@@ -26,8 +35,13 @@ log = logging.getLogger(__name__)
 MIN_RATE_mHz = 1_000_000
 MAX_RATE_mHz = 204_800_000
 MAX_SAMPLES = 2**24 - 1
+BUSY_STATUS_INTERVAL_S = 0.1
 
 FrameFault = Callable[[list[bytes]], list[bytes]]
+
+
+class _Stopping(Exception):
+    """Raised inside the twin's thread when close() was asked for: abandon the work."""
 
 
 class DaqTwin:
@@ -55,19 +69,39 @@ class DaqTwin:
 
     # ----------------------------------------------------------------- loop
     def _loop(self) -> None:
-        while not self._stop.is_set():
+        try:
+            while not self._stop.is_set():
+                try:
+                    msg = self._bus.recv(timeout=0.05)
+                except can.CanError as exc:
+                    log.warning("DAQ twin: bus receive failed: %s", exc)
+                    self._stop.wait(0.05)
+                    continue
+                if msg is None or msg.is_error_frame:
+                    continue
+                try:
+                    self._handle(msg)
+                except _Stopping:
+                    break
+                except Exception:  # noqa: BLE001 - the twin keeps serving after bad input
+                    log.exception("DAQ twin: failed to handle frame %s", msg)
+                    self._report_failure()
+        except Exception:  # noqa: BLE001 - never let an exception escape the thread
+            log.exception("DAQ twin: serving loop failed")
+        finally:
             try:
-                msg = self._bus.recv(timeout=0.05)
-            except can.CanError as exc:
-                log.warning("DAQ twin: bus receive failed: %s", exc)
-                continue
-            if msg is None or msg.is_error_frame:
-                continue
-            try:
-                self._handle(msg)
-            except Exception:  # noqa: BLE001 - the twin keeps serving after bad input
-                log.exception("DAQ twin: failed to handle frame %s", msg)
-                self._status(0, codec.ErrorCode.UNKNOWN_COMMAND, codec.State.ERROR)
+                self._bus.shutdown()
+            except Exception as exc:  # noqa: BLE001
+                log.warning("DAQ twin: bus shutdown failed: %s", exc)
+            log.debug("DAQ twin: stopped")
+
+    def _report_failure(self) -> None:
+        try:
+            self._status(0, codec.ErrorCode.UNKNOWN_COMMAND, codec.State.ERROR)
+        except _Stopping:
+            pass
+        except Exception as exc:  # noqa: BLE001
+            log.warning("DAQ twin: could not report the failure: %s", exc)
 
     def _handle(self, msg: can.Message) -> None:
         if msg.arbitration_id == codec.ID_CONFIG:
@@ -77,6 +111,8 @@ class DaqTwin:
             self._command(int(fields["Command"]), int(fields["BlockId"]))
 
     def _send(self, frame_id: int, data: bytes) -> None:
+        if self._stop.is_set():
+            raise _Stopping
         self._bus.send(can.Message(arbitration_id=frame_id, data=data, is_fd=True,
                                    bitrate_switch=True, is_extended_id=False))
         self.frames_sent += 1
@@ -131,9 +167,7 @@ class DaqTwin:
 
     def _acquire_and_send(self) -> None:
         self.state = codec.State.ACQUIRING
-        fs_Hz = self.sample_rate_mHz / 1000.0
-        with self._rig.lock:
-            block = self._rig.run(self.n_samples, fs_Hz)
+        block = self._run_plant(self.n_samples, self.sample_rate_mHz / 1000.0)
         volts = np.stack([block.force_V, block.accel_V, block.disp_V], axis=1)
         counts = codec.volts_to_counts(volts, self.full_scale_V)
         payload = codec.pack_samples(counts)
@@ -150,6 +184,28 @@ class DaqTwin:
         self._transmit(header, frames)
         self.state = codec.State.CONFIGURED
 
+    def _run_plant(self, n_samples: int, fs_Hz: float) -> Any:
+        """``rig.run`` on a helper thread; a busy STATUS every BUSY_STATUS_INTERVAL_S
+        until it returns. Raises _Stopping (block abandoned) if close() is asked for."""
+        done = threading.Event()
+        outcome: dict[str, Any] = {}
+
+        def compute() -> None:
+            try:
+                with self._rig.lock:
+                    outcome["block"] = self._rig.run(n_samples, fs_Hz)
+            except BaseException as exc:  # noqa: BLE001 - handed to the serving thread
+                outcome["error"] = exc
+            finally:
+                done.set()
+
+        threading.Thread(target=compute, name="daq-twin-plant", daemon=True).start()
+        while not done.wait(BUSY_STATUS_INTERVAL_S):
+            self._status(codec.Command.TRIGGER, codec.ErrorCode.NONE, codec.State.ACQUIRING)
+        if "error" in outcome:
+            raise outcome["error"]
+        return outcome["block"]
+
     def _transmit(self, header: codec.BlockHeader, frames: list[bytes]) -> None:
         if self._faults:
             frames = self._faults.popleft()(list(frames))
@@ -161,6 +217,9 @@ class DaqTwin:
             PayloadCrc32=header.payload_crc32))
 
     def close(self) -> None:
+        """Stop serving; the thread abandons a block in progress and closes the bus."""
         self._stop.set()
         self._thread.join(timeout=2.0)
-        self._bus.shutdown()
+        if self._thread.is_alive():
+            log.warning("DAQ twin: thread still busy after close(); it will release the "
+                        "bus when it returns")

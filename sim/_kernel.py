@@ -23,49 +23,50 @@ import numpy as np
 from numba import njit
 
 from .masing import active_depth, branch_force, friction, push_reversal
+from .virgin import virgin_g
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _accel(u, v, P, k, su, sF, d, lam, g, p, a_f, c1, k1):
+def _accel(u, v, P, k, su, sF, d, lam, kind, p, a_f, c1, k1):
     """u'' for the external force term P = gamma sin(omega t + phase)."""
     # Fast path: u has not reached the point where the present branch closes.
     if k >= 2:
         if d * (u - su[k - 2]) < 0.0:
             s = (u - su[k - 1]) / lam
             if s >= 0.0:
-                F = sF[k - 1] + lam * g(s, p)
+                F = sF[k - 1] + lam * virgin_g(kind, s, p)
             else:
-                F = sF[k - 1] - lam * g(-s, p)
+                F = sF[k - 1] - lam * virgin_g(kind, -s, p)
             return a_f * (P - F) - c1 * v - k1 * u
-    F = friction(u, k, su, sF, d, lam, g, p)
+    F = friction(u, k, su, sF, d, lam, kind, p)
     return a_f * (P - F) - c1 * v - k1 * u
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _rk4(u, v, h, P0, Ph, P1, k, su, sF, d, lam, g, p, a_f, c1, k1):
+def _rk4(u, v, h, P0, Ph, P1, k, su, sF, d, lam, kind, p, a_f, c1, k1):
     """One classic RK4 step; P0, Ph, P1 are the force terms at t, t + h/2, t + h."""
-    a1 = _accel(u, v, P0, k, su, sF, d, lam, g, p, a_f, c1, k1)
+    a1 = _accel(u, v, P0, k, su, sF, d, lam, kind, p, a_f, c1, k1)
     u2 = u + 0.5 * h * v
     v2 = v + 0.5 * h * a1
-    a2 = _accel(u2, v2, Ph, k, su, sF, d, lam, g, p, a_f, c1, k1)
+    a2 = _accel(u2, v2, Ph, k, su, sF, d, lam, kind, p, a_f, c1, k1)
     u3 = u + 0.5 * h * v2
     v3 = v + 0.5 * h * a2
-    a3 = _accel(u3, v3, Ph, k, su, sF, d, lam, g, p, a_f, c1, k1)
+    a3 = _accel(u3, v3, Ph, k, su, sF, d, lam, kind, p, a_f, c1, k1)
     u4 = u + h * v3
     v4 = v + h * a3
-    a4 = _accel(u4, v4, P1, k, su, sF, d, lam, g, p, a_f, c1, k1)
+    a4 = _accel(u4, v4, P1, k, su, sF, d, lam, kind, p, a_f, c1, k1)
     un = u + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
     vn = v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
     return un, vn, a1
 
 
 @njit(cache=True, nogil=True)
-def _rk4_at(u, v, t, h, k, su, sF, d, lam, g, p, a_f, gamma, omega, phase, bias, c1, k1):
+def _rk4_at(u, v, t, h, k, su, sF, d, lam, kind, p, a_f, gamma, omega, phase, bias, c1, k1):
     """RK4 step of arbitrary size (used to split a step at a reversal)."""
     P0 = gamma * math.sin(omega * t + phase) + bias
     Ph = gamma * math.sin(omega * (t + 0.5 * h) + phase) + bias
     P1 = gamma * math.sin(omega * (t + h) + phase) + bias
-    return _rk4(u, v, h, P0, Ph, P1, k, su, sF, d, lam, g, p, a_f, c1, k1)
+    return _rk4(u, v, h, P0, Ph, P1, k, su, sF, d, lam, kind, p, a_f, c1, k1)
 
 
 @njit(cache=True, nogil=True)
@@ -90,7 +91,7 @@ def _velocity_root(v0, v1, m0, m1):
 
 
 @njit(cache=True, nogil=True)
-def rk4_run(u, v, t0, k, d, su, sF, lam, g, p, a_f, gamma, omega, phase, bias, c1, k1, h, nsteps, rec_every, rec):
+def rk4_run(u, v, t0, k, d, su, sF, lam, kind, p, a_f, gamma, omega, phase, bias, c1, k1, h, nsteps, rec_every, rec):
     """Integrate ``nsteps`` RK4 steps of size ``h`` from time ``t0``.
 
     ``rec`` is a (m, 5) array receiving (t, u, u', u'', F/F_s) every ``rec_every`` steps,
@@ -117,7 +118,7 @@ def rk4_run(u, v, t0, k, d, su, sF, lam, g, p, a_f, gamma, omega, phase, bias, c
             cs = math.cos(omega * t + phase)
         if j < nrec and i % rec_every == 0:
             kk = active_depth(u, k, su, d)
-            F = branch_force(u, kk, su, sF, lam, g, p)
+            F = branch_force(u, kk, su, sF, lam, kind, p)
             rec[j, 0] = t
             rec[j, 1] = u
             rec[j, 2] = v
@@ -130,7 +131,7 @@ def rk4_run(u, v, t0, k, d, su, sF, lam, g, p, a_f, gamma, omega, phase, bias, c
         c_h = cs * ch - sn * sh
         s_1 = s_h * ch + c_h * sh
         c_1 = c_h * ch - s_h * sh
-        un, vn, a0 = _rk4(u, v, h, gamma * sn + bias, gamma * s_h + bias, gamma * s_1 + bias, k, su, sF, d, lam, g, p, a_f, c1, k1)
+        un, vn, a0 = _rk4(u, v, h, gamma * sn + bias, gamma * s_h + bias, gamma * s_1 + bias, k, su, sF, d, lam, kind, p, a_f, c1, k1)
         sn = s_1
         cs = c_1
         if d == 0.0:
@@ -142,15 +143,15 @@ def rk4_run(u, v, t0, k, d, su, sF, lam, g, p, a_f, gamma, omega, phase, bias, c
         elif d * vn < 0.0:
             # Motion reverses inside this step: split it at the zero of the velocity.
             if d * v > 0.0:
-                a_end = _accel(un, vn, gamma * sn + bias, k, su, sF, d, lam, g, p, a_f, c1, k1)
+                a_end = _accel(un, vn, gamma * sn + bias, k, su, sF, d, lam, kind, p, a_f, c1, k1)
                 theta = _velocity_root(v, vn, a0 * h, a_end * h)
             else:
                 theta = 0.0
             h1 = theta * h
             if h1 > 0.0:
-                u, v, _ = _rk4_at(u, v, t, h1, k, su, sF, d, lam, g, p, a_f, gamma, omega, phase, bias, c1, k1)
+                u, v, _ = _rk4_at(u, v, t, h1, k, su, sF, d, lam, kind, p, a_f, gamma, omega, phase, bias, c1, k1)
             k = active_depth(u, k, su, d)
-            F_r = branch_force(u, k, su, sF, lam, g, p)
+            F_r = branch_force(u, k, su, sF, lam, kind, p)
             k, su, sF = push_reversal(u, F_r, k, su, sF)
             d = -d
             n_rev += 1
@@ -158,7 +159,7 @@ def rk4_run(u, v, t0, k, d, su, sF, lam, g, p, a_f, gamma, omega, phase, bias, c
                 umax = u
             if u < umin:
                 umin = u
-            u, v, _ = _rk4_at(u, v, t + h1, h - h1, k, su, sF, d, lam, g, p, a_f, gamma, omega, phase, bias, c1, k1)
+            u, v, _ = _rk4_at(u, v, t + h1, h - h1, k, su, sF, d, lam, kind, p, a_f, gamma, omega, phase, bias, c1, k1)
         else:
             u, v = un, vn
         k = active_depth(u, k, su, d)

@@ -95,7 +95,7 @@ class Integrator:
         (state.u, state.v, state.k, state.d, state.su, state.sF,
          umax, umin, depth, nrev) = _kernel.rk4_run(
             state.u, state.v, 0.0, state.k, state.d, state.su, state.sF,
-            self.lam, self.curve.g, self.curve.params,
+            self.lam, self.curve.kind, self.curve.params,
             1.0 / (beta * beta), gamma0, 1.0, 0.0, 0.0, 0.0, 0.0,
             h, N * periods, max(record_every, 1), rec)
         return umax, umin, depth, nrev

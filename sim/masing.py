@@ -22,7 +22,7 @@ Memory rules:
   its travel exceeds ``lam`` (2 x_s for lam = 2).
 
 The stack is a growable array (doubling, never silently overflowing).  Functions
-here are numba-compiled; each takes the virgin curve ``g`` and its ``params`` as
+here are numba-compiled; each takes the virgin curve's ``kind`` and ``params`` as
 arguments so any curve from :mod:`sim.virgin` can be used.
 """
 
@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from .virgin import SakaiCurve
+from .virgin import SakaiCurve, virgin_g
 
 log = logging.getLogger(__name__)
 
@@ -57,22 +57,22 @@ def active_depth(u, k, su, d):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def branch_force(u, k, su, sF, lam, g, p):
+def branch_force(u, k, su, sF, lam, kind, p):
     """F/F_s at ``u`` on the branch from reversal ``k`` (virgin curve for k == 0)."""
     if k == 0:
         if u >= 0.0:
-            return g(u, p)
-        return -g(-u, p)
+            return virgin_g(kind, u, p)
+        return -virgin_g(kind, -u, p)
     s = (u - su[k - 1]) / lam
     if s >= 0.0:
-        return sF[k - 1] + lam * g(s, p)
-    return sF[k - 1] - lam * g(-s, p)
+        return sF[k - 1] + lam * virgin_g(kind, s, p)
+    return sF[k - 1] - lam * virgin_g(kind, -s, p)
 
 
 @njit(cache=True, nogil=True, inline="always")
-def friction(u, k, su, sF, d, lam, g, p):
+def friction(u, k, su, sF, d, lam, kind, p):
     """F/F_s at ``u`` reached by moving in direction ``d`` from the present state."""
-    return branch_force(u, active_depth(u, k, su, d), su, sF, lam, g, p)
+    return branch_force(u, active_depth(u, k, su, d), su, sF, lam, kind, p)
 
 
 @njit(cache=True)
@@ -91,7 +91,7 @@ def push_reversal(u_r, F_r, k, su, sF):
 
 
 @njit(cache=True)
-def quasi_static_path(path, lam, g, p, k, su, sF, d):
+def quasi_static_path(path, lam, kind, p, k, su, sF, d):
     """Friction along a sampled displacement path; a reversal is taken at the sample
     where the direction changes.  Returns (F, k, su, sF, d, max_depth)."""
     n = path.shape[0]
@@ -104,7 +104,7 @@ def quasi_static_path(path, lam, g, p, k, su, sF, d):
             if step * d < 0.0:
                 prev = path[i - 1]
                 k = active_depth(prev, k, su, d)
-                F_r = branch_force(prev, k, su, sF, lam, g, p)
+                F_r = branch_force(prev, k, su, sF, lam, kind, p)
                 k, su, sF = push_reversal(prev, F_r, k, su, sF)
                 d = -d
             elif d == 0.0 and step != 0.0:
@@ -112,7 +112,7 @@ def quasi_static_path(path, lam, g, p, k, su, sF, d):
         k = active_depth(u, k, su, d)
         if k > max_depth:
             max_depth = k
-        out[i] = branch_force(u, k, su, sF, lam, g, p)
+        out[i] = branch_force(u, k, su, sF, lam, kind, p)
     return out, k, su, sF, d, max_depth
 
 
@@ -150,7 +150,7 @@ class MasingFriction:
         if not np.all(np.isfinite(path)):
             raise ValueError("displacement path contains NaN or inf")
         F, self.k, self._su, self._sF, self.d, depth = quasi_static_path(
-            path, self.lam, self.curve.g, self.curve.params, self.k, self._su, self._sF, self.d
+            path, self.lam, self.curve.kind, self.curve.params, self.k, self._su, self._sF, self.d
         )
         self.max_depth = max(self.max_depth, depth)
         self._last = path[-1]

@@ -175,7 +175,7 @@ class SimulatedRig:
         h = 1.0 / (fs * sub)
         rec = np.empty((n, 5))
         (st.u, st.v, st.k, st.d, st.su, st.sF, *_rest) = _kernel.rk4_run(
-            st.u, st.v, 0.0, st.k, st.d, st.su, st.sF, LAMBDA_MASING, self.curve.g, self.curve.params,
+            st.u, st.v, 0.0, st.k, st.d, st.su, st.sF, LAMBDA_MASING, self.curve.kind, self.curve.params,
             m.omega_s ** 2, P_amp / m.F_s_N, omega, self._phase, P_dc / m.F_s_N,
             m.viscous_N_s_per_m / m.mass_kg, m.spring_N_per_m / m.mass_kg,
             h, n * sub, sub, rec)

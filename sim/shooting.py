@@ -25,18 +25,19 @@ from numba import njit
 
 from .dynamics import Integrator, SteadyState, steady_state
 from .frf import FrequencyResponse, _grid
+from .virgin import virgin_g
 
 log = logging.getLogger(__name__)
 
 
 @njit(cache=True, nogil=True)
-def _half_period(a, tau_r, beta, gamma0, g, p, m):
+def _half_period(a, tau_r, beta, gamma0, kind, p, m):
     """Integrate the downward branch from (a, 0) at tau_r over pi in m RK4 steps.
 
     Returns (u_end, v_end, v_max), v_max the largest velocity seen (> 0 means the motion
     reversed inside the half period, outside this engine's assumptions).
     """
-    Fa = g(a, p)
+    Fa = virgin_g(kind, a, p)
     ib2 = 1.0 / (beta * beta)
     h = math.pi / m
     u = a
@@ -46,22 +47,22 @@ def _half_period(a, tau_r, beta, gamma0, g, p, m):
         t = tau_r + i * h
         # F(u) = Fa - 2 g((a - u) / 2) (u < a here; the odd extension covers u > a)
         s = 0.5 * (a - u)
-        F1 = Fa - 2.0 * g(s, p) if s >= 0 else Fa + 2.0 * g(-s, p)
+        F1 = Fa - 2.0 * virgin_g(kind, s, p) if s >= 0 else Fa + 2.0 * virgin_g(kind, -s, p)
         k1v = ib2 * (-F1 + gamma0 * math.sin(t))
         u2 = u + 0.5 * h * v
         v2 = v + 0.5 * h * k1v
         s = 0.5 * (a - u2)
-        F2 = Fa - 2.0 * g(s, p) if s >= 0 else Fa + 2.0 * g(-s, p)
+        F2 = Fa - 2.0 * virgin_g(kind, s, p) if s >= 0 else Fa + 2.0 * virgin_g(kind, -s, p)
         k2v = ib2 * (-F2 + gamma0 * math.sin(t + 0.5 * h))
         u3 = u + 0.5 * h * v2
         v3 = v + 0.5 * h * k2v
         s = 0.5 * (a - u3)
-        F3 = Fa - 2.0 * g(s, p) if s >= 0 else Fa + 2.0 * g(-s, p)
+        F3 = Fa - 2.0 * virgin_g(kind, s, p) if s >= 0 else Fa + 2.0 * virgin_g(kind, -s, p)
         k3v = ib2 * (-F3 + gamma0 * math.sin(t + 0.5 * h))
         u4 = u + h * v3
         v4 = v + h * k3v
         s = 0.5 * (a - u4)
-        F4 = Fa - 2.0 * g(s, p) if s >= 0 else Fa + 2.0 * g(-s, p)
+        F4 = Fa - 2.0 * virgin_g(kind, s, p) if s >= 0 else Fa + 2.0 * virgin_g(kind, -s, p)
         k4v = ib2 * (-F4 + gamma0 * math.sin(t + h))
         u = u + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
         v = v + h / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
@@ -81,11 +82,11 @@ def solve_half_period(beta: float, gamma0: float, curve, a0: float, tau0: float,
                       steps: int = 1000, tol: float = 1e-10, max_iter: int = 20) -> ShootingSolution | None:
     """Newton on (a, tau_r); returns None when it does not converge or the orbit reverses
     inside the half period."""
-    g, p = curve.g, curve.params
+    kind, p = curve.kind, curve.params
     x = np.array([a0, tau0], dtype=np.float64)
 
     def residual(x):
-        u, v, vmax = _half_period(x[0], x[1], beta, gamma0, g, p, steps)
+        u, v, vmax = _half_period(x[0], x[1], beta, gamma0, kind, p, steps)
         return np.array([u + x[0], beta * v]), vmax
 
     for it in range(1, max_iter + 1):

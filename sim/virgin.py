@@ -4,12 +4,14 @@ A virgin curve is a replaceable part of the model. It is used in dimensionless f
 ``g(s) = f(s * x_s) / F_s`` for ``s = x / x_s >= 0``, so that ``g(0) = 0`` and ``g -> 1`` in
 the rolling region. A curve is a small object with
 
+- ``kind``: an integer that :func:`virgin_g` dispatches on inside the compiled kernels;
 - ``params``: a float64 array of its shape parameters, passed to the compiled kernels;
-- ``g``: a numba-compiled function ``g(s, params) -> float`` for ``s >= 0``;
 - ``stiffness0``: the initial slope dg/ds at s = 0 (inf where the curve has none).
 
-To drop in another curve (the published Eq. 3, say), write an ``@njit`` function of the
-same signature and a class like :class:`SakaiCurve`; nothing else changes.
+To drop in another curve (the published Eq. 3, say), write an ``@njit`` function
+``g(s, params)``, give it a kind number and a branch in :func:`virgin_g`, and a class like
+:class:`SakaiCurve`; nothing else changes.  (A dispatch on an integer, rather than passing
+the function itself into the kernels, keeps numba's on-disk cache valid across processes.)
 """
 
 from __future__ import annotations
@@ -46,6 +48,17 @@ def sakai_g(s, params):
     return (s**n - n * s) / (1.0 - n)
 
 
+CURVE_SAKAI = 0
+
+
+@njit(cache=True, nogil=True, inline="always")
+def virgin_g(kind, s, params):
+    """g(s) of the curve ``kind`` (the one place to add a curve)."""
+    if kind == CURVE_SAKAI:
+        return sakai_g(s, params)
+    return math.nan
+
+
 @dataclass(frozen=True)
 class SakaiCurve:
     """f1 = A x^n + B x on [0, x_s], f2 = F_s beyond; A, B from seed Eqs. 4-5.
@@ -69,9 +82,7 @@ class SakaiCurve:
     def params(self) -> np.ndarray:
         return np.array([self.n], dtype=np.float64)
 
-    @property
-    def g(self):
-        return sakai_g
+    kind = CURVE_SAKAI
 
     @property
     def stiffness0(self) -> float:

@@ -1,9 +1,8 @@
-"""Fixtures for the driver tests: a plant, and twins on ephemeral loopback ports.
+"""Fixtures for the driver tests: the real plant, and twins on ephemeral loopback ports.
 
-``rig`` is the linear stand-in of ``fake_rig.py`` (exactly the ``sim.rig.SimulatedRig``
-interface: set_generator, run, gap_m, time_s, lock). When ``sim/rig.py`` exists, set
-``DRIVERS_TEST_REAL_RIG=1`` (or change ``make_rig``) to run the drivers against the real
-plant; tests that check the stand-in's own numbers are marked with ``needs_fake_rig``.
+``rig`` is ``sim.rig.SimulatedRig`` with its default model, wrapped in
+:class:`~tests.drivers.plant.RecordingRig` so tests can see the generator settings the
+twins pushed into it.
 """
 
 from __future__ import annotations
@@ -19,20 +18,20 @@ from drivers._eddy_twin import EddySensorModel, EddySensorTcpTwin
 from drivers._pty import PtyPair
 from drivers._scpi_twin_model import ScpiGeneratorModel
 from drivers._scpi_twin_server import ScpiTcpServer
-from tests.drivers.fake_rig import CHANNELS, REAL_RIG, FakeRig, RecordingRig
-
-
-def make_rig():
-    if REAL_RIG:
-        from sim.rig import SimulatedRig  # the lead's plant
-        return SimulatedRig()
-    return FakeRig()
+from sim.rig import SimulatedRig
+from tests.drivers.plant import RecordingRig, channel_specs
 
 
 @pytest.fixture
 def rig():
-    """The plant, wrapped so tests can see the generator settings pushed into it."""
-    return RecordingRig(make_rig())
+    """The real plant, wrapped so tests can see the generator settings pushed into it."""
+    return RecordingRig(SimulatedRig())
+
+
+@pytest.fixture
+def channels(rig):
+    """DAQ channel specs with the plant's own sensor sensitivities."""
+    return channel_specs(rig.model)
 
 
 @pytest.fixture
@@ -80,8 +79,8 @@ def daq_twin(rig, can_channel):
 
 
 @pytest.fixture
-def daq(daq_twin, can_channel):
-    driver = CanFdDaq(open_can_bus(f"virtual:{can_channel}"), CHANNELS, timeout_s=1.0)
+def daq(daq_twin, can_channel, channels):
+    driver = CanFdDaq(open_can_bus(f"virtual:{can_channel}"), channels, timeout_s=1.0)
     yield driver
     driver.close()
 

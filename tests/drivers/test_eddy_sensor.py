@@ -9,7 +9,6 @@ import time
 
 import pytest
 
-from tests.drivers.fake_rig import STANDOFF_M, needs_fake_rig
 from drivers import (ConnectionLost, InstrumentTimeout, ModbusEddySensor, ModbusError,
                      SensorStatus, TargetMaterial)
 from drivers._eddy_registers import Reg
@@ -61,10 +60,10 @@ def test_gap_follows_the_plant_probe_distance(sensor, rig):
     assert sensor.read_gap_raw_mm() == pytest.approx(plant_gap_mm(rig), abs=1e-4)
 
 
-@needs_fake_rig
-def test_carriage_at_rest_is_inside_the_measuring_range(sensor):
+def test_carriage_at_rest_reads_the_probe_standoff_inside_the_measuring_range(sensor, rig):
     reading = sensor.read_gap()
-    assert reading.gap_mm == pytest.approx(STANDOFF_M * 1e3, abs=1e-6)
+    # independent fact: at x = 0 the probe sees its mounting stand-off (float32 on the wire)
+    assert reading.gap_mm == pytest.approx(rig.model.probe_standoff_m * 1e3, abs=1e-6)
     assert reading.in_range
 
 

@@ -5,9 +5,12 @@ import pytest
 from drivers import (CanFdDaq, Channel, ChannelSpec, Daq, DisplacementSensor, FunctionGenerator,
                      GapReading, ModbusEddySensor, ScpiFunctionGenerator, SensorStatus,
                      open_can_bus)
-from tests.drivers.fake_rig import CHANNELS
+from sim.rig import RigModel
+from tests.drivers.plant import channel_specs
 
 pytestmark = pytest.mark.timeout(60)
+
+CHANNELS = channel_specs(RigModel())
 
 
 def test_generator_driver_is_a_function_generator(scpi_server):

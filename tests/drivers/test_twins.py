@@ -3,12 +3,11 @@
 import socket
 import threading
 
-import numpy as np
 import pytest
 
-from tests.drivers.fake_rig import AMP_N_PER_V, CHANNELS, needs_fake_rig
 from drivers import (CanFdDaq, ModbusEddySensor, ScpiFunctionGenerator, open_can_bus,
                      run_standalone, start_twins)
+from tests.drivers.plant import fundamental
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -21,18 +20,19 @@ def test_urls_point_at_loopback_ephemeral_ports(twins):
     assert urls["daq"].startswith("virtual:")
 
 
-@needs_fake_rig
-def test_generator_setting_shows_up_in_the_daq_force_through_the_shared_plant(twins):
+def test_generator_setting_shows_up_in_the_daq_force_through_the_shared_plant(twins, rig,
+                                                                               channels):
     with ScpiFunctionGenerator(twins.generator_url, drive_limit_V=2.0) as gen:
         gen.configure_sine()
         gen.set_frequency(200.0)
         gen.set_amplitude(0.6)
         gen.set_output(True)
-        daq = CanFdDaq(open_can_bus(twins.daq_url), CHANNELS)
+        daq = CanFdDaq(open_can_bus(twins.daq_url), channels)
         block = daq.acquire_periods(200.0, 10)
         daq.close()
-    # independent fact: the stand-in amplifier makes AMP_N_PER_V newton per volt peak
-    assert np.max(np.abs(block.force_N)) == pytest.approx(AMP_N_PER_V * 0.3, rel=3e-3)
+    # independent fact: the amplifier makes amp_gain_N_per_V newton per generator volt
+    force_N = abs(fundamental(block.force_N, block.fs_Hz, 200.0))
+    assert force_N == pytest.approx(rig.model.amp_gain_N_per_V * 0.6 / 2.0, rel=1e-3)
 
 
 def test_sensor_reads_the_plant_gap_after_acquisition_advanced_the_clock(twins, rig):
@@ -52,7 +52,6 @@ def test_close_releases_the_ports(rig):
         socket.create_connection(("127.0.0.1", port), timeout=0.5).close()
 
 
-@needs_fake_rig
 def test_serial_ports_option_serves_scpi_and_rtu_on_ptys(rig):
     with start_twins(rig, serial_ports=True) as t:
         gen = ScpiFunctionGenerator(t.generator_serial_port, timeout_s=1.0)

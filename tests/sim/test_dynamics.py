@@ -11,7 +11,7 @@ from sim.virgin import SakaiCurve
 
 def test_compiled_kernel_matches_plain_python_reference():
     c = SakaiCurve(0.5)
-    args = dict(lam=2.0, g=c.g, p=c.params, a_f=1 / 0.54**2, gamma=0.6, omega=1.0, phase=0.0, bias=0.0,
+    args = dict(lam=2.0, kind=c.kind, p=c.params, a_f=1 / 0.54**2, gamma=0.6, omega=1.0, phase=0.0, bias=0.0,
                 c1=0.0, k1=0.0, h=2 * math.pi / 500, nsteps=1500, rec_every=1, rec=None)
     out = {}
     for name, fn in (("jit", _kernel.rk4_run), ("py", _kernel.rk4_run.py_func)):
