@@ -33,3 +33,5 @@ test: setup
 
 bench: setup
 	$(PY) benchmarks/bench_sim.py
+	$(PY) benchmarks/bench_drivers.py
+	$(PY) benchmarks/bench_procedure.py

@@ -78,12 +78,19 @@ def cmd_dry_run(args) -> int:
     print(f"plan '{plan.name}': {len(plan.levels_N)} levels x {len(plan.freqs_Hz)} frequencies "
           f"({plan.direction}) = {len(steps)} steps; rig '{rig.name}'{' (simulated)' if rig.simulated else ''}")
     print(envelope_report(envelope(plan, rig)))
+    from procedures.online_id import identifiability
     try:
-        check_envelope(plan, rig)
+        runnable = check_envelope(plan, rig)
     except EnvelopeError as e:
         print(f"REFUSED: {str(e).splitlines()[0]}")
         return 3
-    print("envelope ok: the rig's limits hold every step")
+    if runnable.skip:
+        print(f"envelope: {len(runnable.schedule())} steps run, {len(steps) - len(runnable.schedule())} "
+              f"skipped (infeasible = \"skip\")")
+    else:
+        print("envelope ok: the rig's limits hold every step")
+    for w in identifiability(runnable, rig):
+        print(f"identifiability warning: {w}")
     return 0
 
 
@@ -113,7 +120,7 @@ def _plan_toml(p: dict) -> dict:
     """The stored plan back into the TOML layout (the stored grid is used verbatim)."""
     keys = ("settle_cycles", "min_settle_s", "measure_cycles", "control_cycles", "force_tolerance",
             "max_iterations", "harmonics", "ramp_s", "min_sample_rate_Hz")
-    out = {"name": p["name"], "levels_N": list(p["levels_N"]),
+    out = {"name": p["name"], "levels_N": list(p["levels_N"]), "infeasible": p.get("infeasible", "refuse"),
            "frequencies": {"list_Hz": list(p["freqs_Hz"]), "direction": p["direction"]},
            "control": {k: p[k] for k in keys}}
     if p.get("limits"):
@@ -126,7 +133,9 @@ def _rig_toml(r: dict) -> dict:
             "instruments": {"generator": r["generator_url"], "sensor": r["sensor_url"], "daq": r["daq_url"]},
             "calibration": {k: r[k] for k in ("force_V_per_N", "accel_V_per_m_s2", "disp_V_per_m",
                                               "amp_gain_N_per_V")},
-            "limits": r["limits"], "expected": {"mass_kg": r["expected_mass_kg"], "x_s_m": r["expected_x_s_m"]},
+            "limits": r["limits"],
+            "expected": {"mass_kg": r["expected_mass_kg"], "x_s_m": r["expected_x_s_m"],
+                         "F_s_N": r["expected_F_s_N"], "n": r["expected_n"]},
             **({"model": r["model"]} if r["model"] else {})}
 
 
@@ -152,6 +161,39 @@ def cmd_demo(args) -> int:
 def cmd_report(args) -> int:
     from .report import write_report
     print(f"report: {write_report(Path(args.run))}")
+    return 0
+
+
+def cmd_export(args) -> int:
+    from .export import export_run
+    paths = export_run(Path(args.run), Path(args.out) if args.out else None, time_records=not args.no_time)
+    for p in paths:
+        print(p)
+    return 0
+
+
+def cmd_identify(args) -> int:
+    """Offline identification of a stored run (writes identification into run.json)."""
+    from sim.identify import identify_results
+    from .config import parse_rig
+    from .storage import RunStore
+
+    store = RunStore.open(Path(args.run))
+    meta = store.metadata
+    rig = parse_rig({"rig": _rig_toml(meta["rig"])}, f"{args.run}/run.json")
+    results = store.results()
+    if not results:
+        raise ValueError(f"{args.run}: no completed steps to identify from")
+    guess = dict(F_s_N=rig.expected_F_s_N, x_s_m=rig.expected_x_s_m, n=rig.expected_n,
+                 mass_kg=rig.expected_mass_kg)
+    est = identify_results(results, guess, min(meta["plan"]["harmonics"], 5)).estimate
+    store.update(identification=est.as_dict())
+    print(f"{'parameter':>10} {'estimate':>12} {'95 % interval':>28}")
+    for k, v in est.values.items():
+        print(f"{k:>10} {v:12.5g} [{est.low[k]:12.5g}, {est.high[k]:12.5g}]")
+    print(f"{len(results)} steps, reduced chi^2 {est.cost:.3g}")
+    for w in est.warnings:
+        print(f"warning: {w}")
     return 0
 
 
@@ -200,6 +242,16 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("report", help="(re)write the report of a run directory")
     s.add_argument("run")
     s.set_defaults(func=cmd_report)
+
+    s = sub.add_parser("export", help="write a run's steps as CSV and UFF 58 (FRFs and time records)")
+    s.add_argument("run")
+    s.add_argument("--out", help="output directory (default: <run>/export)")
+    s.add_argument("--no-time", action="store_true", help="skip the time records (time.uff)")
+    s.set_defaults(func=cmd_export)
+
+    s = sub.add_parser("identify", help="identify F_s, x_s, n and the mass from a stored run")
+    s.add_argument("run")
+    s.set_defaults(func=cmd_identify)
 
     s = sub.add_parser("twins", help="serve the simulated rig's instruments on loopback; print their URLs")
     s.add_argument("--rig", help="simulated rig TOML (default: bench/defaults/sim_rig.toml)")

@@ -81,7 +81,7 @@ class _Section:
 
     def table(self, key) -> "_Section":
         self.used.add(key)
-        return _Section(self.source, f"{self.path}.{key}", self.data.get(key, {}))
+        return _Section(self.source, f"{self.path}.{key}" if self.path else key, self.data.get(key, {}))
 
     def done(self) -> None:
         unknown = sorted(set(self.data) - self.used)
@@ -117,6 +117,8 @@ class Plan:
     ramp_s: float
     min_sample_rate_Hz: float
     limits: Limits | None                # optional, tighter than the rig's
+    infeasible: str = "refuse"           # steps the limits cannot hold: "refuse" the plan or "skip" them
+    skip: tuple[tuple[int, int], ...] = ()   # (level index, frequency index) left out
 
     def sweeps(self) -> list[tuple[str, tuple[float, ...]]]:
         up = ("up", self.freqs_Hz)
@@ -125,12 +127,15 @@ class Plan:
 
     def schedule(self) -> list["StepSpec"]:
         """Every step of the test in order; a step's key identifies it across resumes."""
-        steps = []
+        steps, index = [], 0
+        skip = set(self.skip)
         for li, level in enumerate(self.levels_N):
             for direction, freqs in self.sweeps():
                 for f in freqs:
                     fi = self.freqs_Hz.index(f)
-                    steps.append(StepSpec(len(steps), li, fi, direction, level, f))
+                    if (li, fi) not in skip:
+                        steps.append(StepSpec(index, li, fi, direction, level, f))
+                    index += 1     # keys stay the same whatever is skipped
         return steps
 
     def to_dict(self) -> dict:
@@ -166,6 +171,8 @@ class Rig:
     limits: Limits
     expected_mass_kg: float
     expected_x_s_m: float
+    expected_F_s_N: float
+    expected_n: float
     model: dict = field(default_factory=dict)   # sim.rig.RigModel keys (simulated rigs)
 
     def to_dict(self) -> dict:
@@ -229,7 +236,15 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
         harmonics=c.number("harmonics", 5, 1, 50, integer=True),
         ramp_s=c.number("ramp_s", 0.1, 0, 60),
         min_sample_rate_Hz=c.number("min_sample_rate_Hz", 25600.0, 1000, 204800),
-        limits=_limits(lim) if lim.data else None)
+        limits=_limits(lim) if lim.data else None,
+        infeasible=p.choice("infeasible", "refuse", ("refuse", "skip")))
+    # every fitted harmonic must stay below Nyquist at the highest frequency (the DAQ samples
+    # at >= min_sample_rate_Hz); above it harmonics alias and the fit's amplitudes are wrong
+    max_harmonics = math.ceil(plan.min_sample_rate_Hz / (2 * max(plan.freqs_Hz))) - 1
+    if plan.harmonics > max_harmonics:
+        raise ConfigError(f"{c.where('harmonics')}: must be <= {max_harmonics} (below Nyquist at "
+                          f"{max(plan.freqs_Hz):g} Hz with min_sample_rate_Hz = {plan.min_sample_rate_Hz:g}), "
+                          f"got {plan.harmonics}")
     c.done()
     p.done()
     return plan
@@ -260,6 +275,8 @@ def parse_rig(data: dict, source: str = "rig") -> Rig:
         limits=_limits(r.table("limits")),
         expected_mass_kg=exp.number("mass_kg", 10.0, 0, 1e4, lo_open=True),
         expected_x_s_m=exp.number("x_s_m", 20e-6, 0, 1e-2, lo_open=True),
+        expected_F_s_N=exp.number("F_s_N", 10.0, 0, 1e4, lo_open=True),
+        expected_n=exp.number("n", 1.5, 0.05, 10),
         model=dict(r.data.get("model", {})))
     r.used.add("model")
     if rig.model and not simulated:

@@ -13,7 +13,7 @@ import platform
 import signal
 import sys
 from contextlib import ExitStack, contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from importlib import metadata as importlib_metadata
 from pathlib import Path
 
@@ -21,6 +21,7 @@ import numpy as np
 
 from drivers import (CanFdDaq, Channel, ChannelSpec, InstrumentError, ModbusEddySensor,
                      ScpiFunctionGenerator, open_can_bus, start_twins)
+from procedures.online_id import OnlineIdentification, identifiability
 from procedures.safety import LimitExceeded, SupervisedDaq, SupervisedGenerator, Supervisor, tightest
 from procedures.stepped_sine import SteppedSine
 
@@ -79,14 +80,23 @@ class EnvelopeError(ValueError):
     pass
 
 
-def check_envelope(plan: Plan, rig: Rig) -> list[EnvelopePoint]:
+def check_envelope(plan: Plan, rig: Rig) -> Plan:
+    """The plan the rig can run: unchanged, or with infeasible steps skipped if the plan
+    says ``infeasible = "skip"``; otherwise a plan with any infeasible step is refused."""
     points = envelope(plan, rig)
     bad = [p for p in points if p.problems]
+    if bad and plan.infeasible == "skip":
+        li = {F: i for i, F in enumerate(plan.levels_N)}
+        fi = {f: i for i, f in enumerate(plan.freqs_Hz)}
+        skip = tuple(sorted({(li[p.force_N], fi[p.freq_Hz]) for p in bad}))
+        log.warning("skipping %d of %d (level, frequency) points the rig's limits cannot hold",
+                    len(skip), len(points))
+        return replace(plan, skip=skip)
     if bad:
         raise EnvelopeError(f"the rig's limits cannot hold {len(bad)} of {len(points)} steps of the plan, "
                             f"e.g. {bad[0].force_N:g} N at {bad[0].freq_Hz:g} Hz: {'; '.join(bad[0].problems)}\n"
                             + envelope_report(points))
-    return points
+    return plan
 
 
 def versions() -> dict:
@@ -124,8 +134,31 @@ class Instruments:
     sim_rig: object = None
 
 
-def open_instruments(rig: Rig, stack: ExitStack, *, sim_seed: int | None = None) -> Instruments:
-    """Open the three drivers (starting the twins first for a simulated rig)."""
+def switch_off(gen: ScpiFunctionGenerator, url: str) -> bool:
+    """Output off, confirmed by the instrument; over a new connection if the link is gone
+    (a dropped connection, a rebooted LAN module).  True if confirmed.  Never raises: this
+    runs on every exit path."""
+    gen.safe_off()
+    try:
+        if not gen.output_enabled():
+            return True
+    except Exception as exc:  # noqa: BLE001 - try the new connection below
+        log.warning("output off not confirmed on the open link (%s); reconnecting to %s", exc, url)
+    try:
+        with ScpiFunctionGenerator(url, timeout_s=gen.timeout_s) as again:
+            again.set_output(False)
+        return True
+    except Exception as exc:  # noqa: BLE001
+        log.error("could not switch the output off at %s: %s", url, exc)
+        return False
+
+
+def open_instruments(rig: Rig, stack: ExitStack, *, sim_seed: int | None = None,
+                     on_output_off=None) -> Instruments:
+    """Open the three drivers (starting the twins first for a simulated rig).
+
+    On closing ``stack`` the output is switched off first; ``on_output_off(confirmed)``
+    is told whether the instrument confirmed it."""
     g_url, s_url, d_url = rig.generator_url, rig.sensor_url, rig.daq_url
     sim = None
     if rig.simulated:
@@ -138,7 +171,12 @@ def open_instruments(rig: Rig, stack: ExitStack, *, sim_seed: int | None = None)
         g_url, s_url, d_url = twins.generator_url, twins.sensor_url, twins.daq_url
     gen = ScpiFunctionGenerator(g_url, drive_limit_V=rig.limits.drive_V)
     stack.callback(gen.close)
-    stack.callback(gen.safe_off)          # runs before close: output off on every exit path
+
+    def output_off() -> None:             # runs before close: output off on every exit path
+        confirmed = switch_off(gen, g_url)
+        if on_output_off:
+            on_output_off(confirmed)
+    stack.callback(output_off)
     gen.set_output(False)
     gen.configure_sine(drive_limit_V=rig.limits.drive_V)
     channels = (ChannelSpec(Channel.FORCE, rig.force_V_per_N, "N"),
@@ -154,9 +192,12 @@ def open_instruments(rig: Rig, stack: ExitStack, *, sim_seed: int | None = None)
 
 
 def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=None,
-             sim_seed: int | None = None) -> RunStore:
+             sim_seed: int | None = None, identify: bool = True) -> RunStore:
     """Run (or resume) ``plan`` on ``rig`` into the run directory ``out``."""
-    check_envelope(plan, rig)
+    plan = check_envelope(plan, rig)
+    warnings = identifiability(plan, rig)
+    for w in warnings:
+        log.warning("identifiability: %s", w)
     limits = tightest(rig.limits, plan.limits)
     if resume:
         store = RunStore.open(out)
@@ -164,12 +205,13 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
         store.update(status="running")
     else:
         store = RunStore.create(out, {"plan": plan.to_dict(), "rig": rig.to_dict(), "versions": versions(),
-                                      "sim_seed": sim_seed})
-    _log_to(store.path / "bench.log")
+                                      "sim_seed": sim_seed, "identifiability_warnings": warnings})
+    log_handler = _log_to(store.path / "bench.log")
     status = "failed"
     with ExitStack() as stack, _sigterm_as_interrupt():
         try:
-            ins = open_instruments(rig, stack, sim_seed=sim_seed)
+            ins = open_instruments(rig, stack, sim_seed=sim_seed,
+                                   on_output_off=lambda ok: store.event("output_off", confirmed=ok))
             store.update(identities=ins.identities)
             sup = Supervisor(limits, ins.generator)
             gen, daq = SupervisedGenerator(ins.generator, sup), SupervisedDaq(ins.daq, sup)
@@ -187,8 +229,29 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
             sup.x_ref_m = float(np.mean(ins.daq.acquire_periods(100.0, 10).disp_m))
             proc = SteppedSine(plan, gen, daq, amp_gain_N_per_V=rig.amp_gain_N_per_V,
                                sensor_check=sensor_check)
-            proc.run(store.done_keys(), lambda step, res, raw: store.write_step(step.key, res, raw), progress)
+            online = OnlineIdentification(store.path, rig, plan.harmonics) if identify else None
+            if online:
+                online.preload(store.results())
+
+            def record(step, res, raw):
+                store.write_step(step.key, res, raw)
+                if online:
+                    est = online.update(res)
+                    if est and progress_note is not None:
+                        v = est["values"]
+                        progress_note[0] = (f"F_s {v['F_s_N']:.3g} N x_s {v['x_s_m'] * 1e6:.3g} um "
+                                            f"n {v['n']:.3g} m {v['mass_kg']:.3g} kg")
+
+            progress_note = [""]
+
+            def show(done, total, note):
+                if progress:
+                    progress(done, total, f"{note} | {progress_note[0]}")
+
+            proc.run(store.done_keys(), record, show)
             status = "completed"
+            if online:
+                store.update(identification=online.final())
         except LimitExceeded as e:
             status = "aborted"
             store.event("abort", reason=str(e))
@@ -202,16 +265,25 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
             status = "instrument error"
             store.event("instrument_error", error=f"{type(e).__name__}: {e}")
             log.error("instrument error: %s: %s", type(e).__name__, e)
+        except Exception as e:
+            store.event("error", error=f"{type(e).__name__}: {e}")
+            log.exception("run failed")
+            raise
         finally:
             stack.close()        # output off, then close links and twins
             store.finish(status, steps_done=len(store.done_keys()), steps_total=len(plan.schedule()))
+            if log_handler:
+                logging.getLogger().removeHandler(log_handler)
+                log_handler.close()
     return store
 
 
-def _log_to(path: Path) -> None:
+def _log_to(path: Path) -> logging.Handler | None:
+    """Add a root handler writing to ``path``; the caller removes it when the run ends."""
     root = logging.getLogger()
     if any(getattr(h, "baseFilename", None) == str(path) for h in root.handlers):
-        return
+        return None
     h = logging.FileHandler(path)
     h.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
     root.addHandler(h)
+    return h

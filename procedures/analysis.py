@@ -24,7 +24,8 @@ class HarmonicFit:
     phase_rad: np.ndarray    # phi_k
     offset: float
     noise_rms: float         # rms of the residual
-    peak_to_peak: float      # of the recorded signal (Eq. 9 uses (max - min) / 2)
+    peak_to_peak: float      # of the fitted periodic signal (Eq. 9 uses (max - min) / 2)
+    raw_peak_to_peak: float  # of the record itself (biased by noise and free vibration)
 
     @property
     def fundamental(self) -> complex:
@@ -41,10 +42,17 @@ class HarmonicFit:
 def fit_harmonics(x: np.ndarray, fs_Hz: float, freq_Hz: float, n_harmonics: int = 5) -> HarmonicFit:
     """Least-squares fit of the fundamental and ``n_harmonics - 1`` harmonics."""
     x = np.asarray(x, dtype=np.float64)
-    if x.ndim != 1 or x.size < 2 * n_harmonics + 2:
-        raise ValueError(f"need a 1-D record of at least {2 * n_harmonics + 2} samples, got shape {x.shape}")
     if n_harmonics < 1:
         raise ValueError(f"n_harmonics must be >= 1, got {n_harmonics}")
+    if x.ndim != 1 or x.size < 2 * n_harmonics + 2:
+        raise ValueError(f"need a 1-D record of at least {2 * n_harmonics + 2} samples, got shape {x.shape}")
+    if not (fs_Hz > 0 and freq_Hz > 0):
+        raise ValueError(f"need fs_Hz > 0 and freq_Hz > 0, got {fs_Hz!r}, {freq_Hz!r}")
+    if 2 * n_harmonics * freq_Hz >= fs_Hz:
+        # above Nyquist a harmonic's columns alias onto lower ones: the least-squares split
+        # between them is arbitrary and every amplitude, the fundamental's too, comes out wrong
+        raise ValueError(f"harmonic {n_harmonics} of {freq_Hz:g} Hz is at or above the Nyquist "
+                         f"frequency {fs_Hz / 2:g} Hz of the record (sample rate {fs_Hz:g} S/s)")
     if not np.all(np.isfinite(x)):
         raise ValueError("record contains NaN or inf")
     t = np.arange(x.size) / fs_Hz
@@ -55,6 +63,10 @@ def fit_harmonics(x: np.ndarray, fs_Hz: float, freq_Hz: float, n_harmonics: int 
     a, b, c = coef[:n_harmonics], coef[n_harmonics:2 * n_harmonics], coef[-1]
     resid = x - A @ coef
     dof = max(1, x.size - A.shape[1])
+    # one period of the fitted signal, finely sampled: the steady periodic response
+    wt1 = 2 * np.pi * np.outer(np.arange(1024) / 1024, k)
+    periodic = np.sin(wt1) @ a + np.cos(wt1) @ b
     return HarmonicFit(freq_Hz=float(freq_Hz), amplitude=np.hypot(a, b), phase_rad=np.arctan2(b, a),
                        offset=float(c), noise_rms=float(np.sqrt(resid @ resid / dof)),
-                       peak_to_peak=float(x.max() - x.min()))
+                       peak_to_peak=float(periodic.max() - periodic.min()),
+                       raw_peak_to_peak=float(x.max() - x.min()))

@@ -37,7 +37,8 @@ class DriveState:
 
 def _fit_summary(fit: HarmonicFit) -> dict:
     return dict(amplitude=fit.amplitude.tolist(), phase_rad=fit.phase_rad.tolist(),
-                offset=fit.offset, thd=fit.thd, noise_rms=fit.noise_rms, peak_to_peak=fit.peak_to_peak)
+                offset=fit.offset, thd=fit.thd, noise_rms=fit.noise_rms, peak_to_peak=fit.peak_to_peak,
+                raw_peak_to_peak=fit.raw_peak_to_peak)
 
 
 class SteppedSine:
@@ -165,7 +166,8 @@ class SteppedSine:
             compliance_m_per_N={"re": compliance.real, "im": compliance.imag},
             compliance_abs_m_per_N=abs(compliance), compliance_phase_rad=float(np.angle(compliance)),
             accelerance_abs_kg_inv=abs(accelerance), accelerance_phase_rad=float(np.angle(accelerance)),
-            # seed Eq. 9 in SI: half the peak-to-peak displacement per force amplitude
+            # seed Eq. 9 in SI: half the peak-to-peak of the steady (fitted periodic)
+            # displacement per force amplitude
             compliance_pp_m_per_N=0.5 * fits["disp"].peak_to_peak / abs(F1),
             force=_fit_summary(fits["force"]), accel=_fit_summary(fits["accel"]),
             disp=_fit_summary(fits["disp"]),

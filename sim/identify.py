@@ -173,7 +173,7 @@ class Identifier:
         dof = max(1, res.fun.size - res.x.size)
         chi2 = float(res.fun @ res.fun / dof)
         try:
-            cov = np.linalg.inv(res.jac.T @ res.jac) * max(chi2, 1e-12)
+            cov = np.linalg.inv(res.jac.T @ res.jac) * max(chi2, 1.0)   # never narrower than the noise says
             std = np.sqrt(np.clip(np.diag(cov), 0, None))
         except np.linalg.LinAlgError:
             std = np.full(4, np.inf)
@@ -186,7 +186,8 @@ class Identifier:
                 low[name], high[name] = vals[name] - z * std[i], vals[name] + z * std[i]
                 rel[name] = std[i] / abs(vals[name])
             else:   # log-parameters: asymmetric interval
-                low[name], high[name] = vals[name] * math.exp(-z * std[i]), vals[name] * math.exp(z * std[i])
+                w = min(z * std[i], 700.0)   # an undetermined parameter gets (0, inf)
+                low[name], high[name] = vals[name] * math.exp(-w), vals[name] * math.exp(w)
                 rel[name] = float(std[i])
         warnings = tuple(f"{name} is poorly determined by these steps (relative standard error "
                          f"{100 * rel[name]:.0f} %)" for name in PARAMS if not rel[name] < 0.1)

@@ -1,0 +1,304 @@
+"""Export a run directory to CSV and universal files (UFF dataset 58), and read UFF 58 back.
+
+    <out>/steps.csv      one row per step (columns: CSV_COLUMNS)
+    <out>/frf.uff        dataset 58, function type 4 (FRF): complex compliance X1/F1 (m/N)
+                         over frequency, one function per force level and sweep direction
+    <out>/time.uff       dataset 58, function type 1 (time response): force (N),
+                         acceleration (m/s^2) and displacement (m) of every step's measured
+                         block, abscissa spacing 1/fs
+
+UFF header conventions (so :func:`import_uff58` can rebuild step results): ID lines 4
+and 5 carry ``key=value`` tags (``bench`` marks our files), e.g.
+``bench step=00002-L00-F002-up ch=disp level=1 dir=up`` and
+``bench f=94.8683 fs=25614.441 t0=4.42517 harmonics=5`` (t0: block start, s; the time
+abscissa starts at 0 at the block start);
+record 6 uses node 1 / direction +X (the carriage in the feed direction) for response
+and reference; record 8-10 specific data types: 17 time, 18 frequency, 13 excitation
+force, 12 acceleration, 8 displacement.  ASCII UFF writes abscissa values with 6
+significant digits (format E13.5); the exact frequency and sample rate are in the tags.
+"""
+
+from __future__ import annotations
+
+import csv
+import logging
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .storage import RunStore
+
+log = logging.getLogger(__name__)
+
+CSV_COLUMNS = (
+    "key", "index", "level_index", "target_force_N", "direction", "freq_Hz", "force_N",
+    "compliance_re_m_per_N", "compliance_im_m_per_N", "compliance_abs_m_per_N", "compliance_phase_rad",
+    "compliance_pp_m_per_N", "accelerance_abs_kg_inv", "accelerance_phase_rad",
+    "thd_force", "thd_accel", "thd_disp", "noise_force_N", "noise_accel_m_s2", "noise_disp_m",
+    "force_error", "control_iterations", "force_converged")
+
+# channel -> (specific data type of UFF 58 record 9, unit label, raw key in steps/<key>.npz)
+CHANNELS = {"force": (13, "N", "force_N"), "accel": (12, "m/s^2", "accel_m_s2"), "disp": (8, "m", "disp_m")}
+TAG = "bench"
+FUNC_TIME, FUNC_FRF = 1, 4
+SDT_TIME, SDT_FREQ = 17, 18
+SDT_LABEL = {8: "displacement", 12: "acceleration", 13: "force"}
+
+
+def step_row(r: dict) -> dict:
+    """One step result flattened to the CSV columns."""
+    return {
+        "key": r["key"], "index": r["index"], "level_index": r["level_index"],
+        "target_force_N": r["target_force_N"], "direction": r["direction"], "freq_Hz": r["freq_Hz"],
+        "force_N": r["force_N"],
+        "compliance_re_m_per_N": r["compliance_m_per_N"]["re"], "compliance_im_m_per_N": r["compliance_m_per_N"]["im"],
+        "compliance_abs_m_per_N": r["compliance_abs_m_per_N"], "compliance_phase_rad": r["compliance_phase_rad"],
+        "compliance_pp_m_per_N": r["compliance_pp_m_per_N"],
+        "accelerance_abs_kg_inv": r["accelerance_abs_kg_inv"], "accelerance_phase_rad": r["accelerance_phase_rad"],
+        "thd_force": r["force"]["thd"], "thd_accel": r["accel"]["thd"], "thd_disp": r["disp"]["thd"],
+        "noise_force_N": r["force"]["noise_rms"], "noise_accel_m_s2": r["accel"]["noise_rms"],
+        "noise_disp_m": r["disp"]["noise_rms"],
+        "force_error": r["force_error"], "control_iterations": r["control_iterations"],
+        "force_converged": int(bool(r["force_converged"])),
+    }
+
+
+def write_csv(results: list[dict], path: Path) -> Path:
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=CSV_COLUMNS)
+        w.writeheader()
+        for r in results:
+            w.writerow({k: (repr(v) if isinstance(v, float) else v) for k, v in step_row(r).items()})
+    return path
+
+
+# ---------------------------------------------------------------------------- UFF writing
+
+
+def _tags(**kw) -> str:
+    s = " ".join([TAG] + [f"{k}={v}" for k, v in kw.items()])
+    if len(s) > 80:
+        raise ValueError(f"UFF ID line longer than 80 characters: {s!r}")
+    return s
+
+
+def _id(text: str) -> str:
+    return (text or "NONE")[:80]
+
+
+def _dset58(*, func_type, func_id, x, data, id1, id2, id3, id4, id5, abscissa, ordinate, denominator=None):
+    """A dataset-58 dict for pyuff (node 1, +X, single-point excitation)."""
+    a_sdt, a_unit = abscissa
+    o_sdt, o_unit = ordinate
+    d = dict(type=58, func_type=func_type, func_id=func_id, id1=_id(id1), id2=_id(id2), id3=_id(id3), id4=_id(id4), id5=_id(id5),
+             rsp_node=1, rsp_dir=1, ref_node=1, ref_dir=1, load_case_id=0,
+             abscissa_spacing=1 if func_type == FUNC_TIME else 0,
+             abscissa_spec_data_type=a_sdt, abscissa_axis_lab="time" if a_sdt == SDT_TIME else "frequency",
+             abscissa_axis_units_lab=a_unit,
+             ordinate_spec_data_type=o_sdt, ordinate_axis_units_lab=o_unit,
+             ordinate_axis_lab=SDT_LABEL.get(o_sdt, "NONE"),
+             x=np.asarray(x, dtype=float), data=np.asarray(data))
+    den_sdt, den_unit = denominator or (0, "NONE")      # record 10 unused: data type 0
+    d.update(orddenom_spec_data_type=den_sdt, orddenom_axis_units_lab=den_unit)
+    return d
+
+
+def frf_datasets(meta: dict, results: list[dict]) -> list[dict]:
+    """One FRF (compliance X1/F1, m/N) per force level and sweep direction."""
+    plan = meta.get("plan") or {}
+    levels = plan.get("levels_N") or []
+    groups: dict[tuple[int, str], list[dict]] = {}
+    for r in results:
+        groups.setdefault((r["level_index"], r["direction"]), []).append(r)
+    out = []
+    for (li, d), steps in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1] != "up")):
+        steps = sorted(steps, key=lambda s: s["freq_Hz"])
+        level = levels[li] if li < len(levels) else steps[0]["target_force_N"]
+        H = np.array([complex(s["compliance_m_per_N"]["re"], s["compliance_m_per_N"]["im"]) for s in steps])
+        ds = _dset58(func_type=FUNC_FRF, func_id=len(out) + 1, x=[s["freq_Hz"] for s in steps], data=H,
+                     id1=f"compliance X/F, {level:g} N, {d} sweep",
+                     id2=f"{plan.get('name', '')} on {(meta.get('rig') or {}).get('name', '')}",
+                     id3=str(meta.get("started", "")), id4=_tags(level=f"{level:g}", L=li, dir=d, n=len(steps)),
+                     id5="X1/F1 from harmonic fits; force amplitude held at the level",
+                     abscissa=(SDT_FREQ, "Hz"), ordinate=(8, "m"), denominator=(13, "N"))
+        out.append(ds)
+    return out
+
+
+def time_datasets(store: RunStore, meta: dict, results: list[dict]) -> list[dict]:
+    """Force, acceleration and displacement of each step's measured block."""
+    out = []
+    for r in results:
+        raw = store.raw(r["key"])
+        fs = float(raw["fs_Hz"])
+        t0 = float(raw["t0_s"])
+        for ch, (sdt, unit, rk) in CHANNELS.items():
+            x = raw[rk]
+            out.append(_dset58(
+                func_type=FUNC_TIME, func_id=len(out) + 1, x=np.arange(x.size) / fs, data=np.asarray(x, dtype=float),
+                id1=f"{ch} ({unit}), step {r['key']}",
+                id2=f"{(meta.get('plan') or {}).get('name', '')}",
+                id3=str(meta.get("started", "")),
+                id4=_tags(step=r["key"], ch=ch, level=f"{r['target_force_N']:g}", dir=r["direction"]),
+                id5=_tags(f=f"{r['freq_Hz']:.10g}", fs=f"{fs:.10g}", t0=f"{t0:.10g}",
+                          harmonics=len(r[ch]["amplitude"])),
+                abscissa=(SDT_TIME, "s"), ordinate=(sdt, unit)))
+    return out
+
+
+def _write_uff(path: Path, dsets: list[dict]) -> Path:
+    import pyuff
+    if path.exists():
+        path.unlink()
+    pyuff.UFF(str(path)).write_sets(dsets, mode="add")
+    return path
+
+
+def export_run(run_dir: Path, out_dir: Path | None = None, *, time_records: bool = True) -> list[Path]:
+    """Write steps.csv, frf.uff and (unless ``time_records`` is False) time.uff into
+    ``out_dir`` (default ``<run>/export``); returns the paths written."""
+    store = RunStore.open(Path(run_dir))
+    meta, results = store.metadata, store.results()
+    out = Path(out_dir) if out_dir else store.path / "export"
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [write_csv(results, out / "steps.csv")]
+    if results:
+        paths.append(_write_uff(out / "frf.uff", frf_datasets(meta, results)))
+        if time_records:
+            paths.append(_write_uff(out / "time.uff", time_datasets(store, meta, results)))
+    else:
+        log.warning("%s: no completed steps; only the CSV header was written", run_dir)
+    return paths
+
+
+# ---------------------------------------------------------------------------- UFF reading
+
+
+def _parse_tags(line: str) -> dict[str, str]:
+    words = (line or "").split()
+    if not words or words[0] != TAG:
+        return {}
+    return dict(w.split("=", 1) for w in words[1:] if "=" in w)
+
+
+@dataclass
+class UffImport:
+    """Step results rebuilt from a UFF file, in the shape of ``steps/<key>.json``.
+
+    From FRFs (function type 4) only the compliance fields and the sweep identity are
+    known (``source`` = "uff58-frf"); from time records (type 1) a full result is computed
+    from the signals (``source`` = "uff58-time") and the signals are in ``raw``."""
+
+    steps: list[dict] = field(default_factory=list)
+    raw: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
+
+
+def _frf_steps(ds: dict, n_fn: int) -> list[dict]:
+    tags = _parse_tags(ds.get("id4", ""))
+    level = float(tags["level"]) if "level" in tags else math.nan
+    li = int(tags.get("L", n_fn))
+    direction = tags.get("dir", "up")
+    out = []
+    for i, (f, H) in enumerate(zip(np.asarray(ds["x"], float), np.asarray(ds["data"]))):
+        H = complex(H)
+        out.append(dict(
+            key=f"uff-L{li:02d}-F{i:03d}-{direction}", level_index=li, freq_index=i, direction=direction,
+            target_force_N=level, force_N=level, freq_Hz=float(f),
+            compliance_m_per_N={"re": H.real, "im": H.imag}, compliance_abs_m_per_N=abs(H),
+            compliance_phase_rad=float(np.angle(H)), source="uff58-frf"))
+    return out
+
+
+def _estimate_freq(x: np.ndarray, fs: float) -> float:
+    spec = np.abs(np.fft.rfft((x - x.mean()) * np.hanning(x.size)))
+    k = int(np.argmax(spec[1:])) + 1
+    return k * fs / x.size
+
+
+def step_from_signals(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float, harmonics: int = 5) -> dict:
+    """The measured fields of a step result, computed as procedures.stepped_sine does."""
+    from procedures.analysis import fit_harmonics
+
+    fits = {"force": fit_harmonics(force_N, fs_Hz, freq_Hz, harmonics),
+            "accel": fit_harmonics(accel_m_s2, fs_Hz, freq_Hz, harmonics),
+            "disp": fit_harmonics(disp_m, fs_Hz, freq_Hz, harmonics)}
+    F1, A1, X1 = fits["force"].fundamental, fits["accel"].fundamental, fits["disp"].fundamental
+    C, Acc = X1 / F1, A1 / F1
+    summary = {k: dict(amplitude=v.amplitude.tolist(), phase_rad=v.phase_rad.tolist(), offset=v.offset,
+                       thd=v.thd, noise_rms=v.noise_rms, peak_to_peak=v.peak_to_peak,
+                       raw_peak_to_peak=v.raw_peak_to_peak) for k, v in fits.items()}
+    return dict(freq_Hz=float(freq_Hz), force_N=abs(F1),
+                compliance_m_per_N={"re": C.real, "im": C.imag}, compliance_abs_m_per_N=abs(C),
+                compliance_phase_rad=float(np.angle(C)),
+                accelerance_abs_kg_inv=abs(Acc), accelerance_phase_rad=float(np.angle(Acc)),
+                compliance_pp_m_per_N=0.5 * fits["disp"].peak_to_peak / abs(F1),
+                fs_Hz=float(fs_Hz), n_samples=int(np.size(force_N)), **summary)
+
+
+def _time_steps(records: list[dict]) -> UffImport:
+    """Group time records into steps (by our step tag, else consecutive force/accel/disp)."""
+    by_sdt = {v[0]: k for k, v in CHANNELS.items()}
+    groups: list[tuple[dict, dict[str, dict]]] = []
+    for ds in records:
+        tags = {**_parse_tags(ds.get("id4", "")), **_parse_tags(ds.get("id5", ""))}
+        ch = tags.get("ch") or by_sdt.get(int(ds.get("ordinate_spec_data_type", -1)))
+        if ch not in CHANNELS:
+            log.warning("skipping a time record of unknown channel (%s)", ds.get("id1", "").strip())
+            continue
+        key = tags.get("step")
+        last = groups[-1] if groups else None
+        if last is None or (key is not None and last[0].get("step") != key) or ch in last[1]:
+            groups.append((tags, {}))
+        groups[-1][1][ch] = ds
+    out = UffImport()
+    for n, (tags, chans) in enumerate(groups):
+        missing = set(CHANNELS) - set(chans)
+        if missing:
+            log.warning("time records %s: missing channel(s) %s; skipped", tags.get("step", n), sorted(missing))
+            continue
+        f0 = chans["force"]
+        x = np.asarray(f0["x"], float)
+        fs = float(tags["fs"]) if "fs" in tags else 1.0 / float(f0.get("abscissa_inc") or (x[1] - x[0]))
+        sig = {ch: np.asarray(chans[ch]["data"], float) for ch in CHANNELS}
+        freq = float(tags["f"]) if "f" in tags else _estimate_freq(sig["force"], fs)
+        step = step_from_signals(sig["force"], sig["accel"], sig["disp"], fs, freq, int(tags.get("harmonics", 5)))
+        key = tags.get("step", f"uff-{n:05d}")
+        km = re.match(r"(\d+)-L(\d+)-F(\d+)-(\w+)$", key)
+        level = float(tags["level"]) if "level" in tags else step["force_N"]
+        step.update(key=key, source="uff58-time", direction=tags.get("dir", km.group(4) if km else "up"),
+                    target_force_N=level, force_error=step["force_N"] / level - 1.0,
+                    t0_s=float(tags.get("t0", 0.0)))
+        if km:
+            step.update(index=int(km.group(1)), level_index=int(km.group(2)), freq_index=int(km.group(3)))
+        out.steps.append(step)
+        out.raw[key] = dict(force_N=sig["force"], accel_m_s2=sig["accel"], disp_m=sig["disp"],
+                            fs_Hz=np.array(fs), t0_s=np.array(step["t0_s"]))
+    return out
+
+
+def import_uff58(path: Path) -> UffImport:
+    """Read FRFs (function type 4) and time records (type 1) of dataset 58 from ``path``."""
+    import pyuff
+
+    uff = pyuff.UFF(str(path))
+    types = list(uff.get_set_types())
+    idx = [i for i, t in enumerate(types) if int(t) == 58]
+    if not idx:
+        raise ValueError(f"{path}: no dataset 58 in the file (types: {sorted(set(int(t) for t in types))})")
+    sets = uff.read_sets(idx)
+    sets = [sets] if isinstance(sets, dict) else sets
+    out = UffImport()
+    frfs = [d for d in sets if int(d["func_type"]) == FUNC_FRF]
+    times = [d for d in sets if int(d["func_type"]) == FUNC_TIME]
+    for n, ds in enumerate(frfs):
+        out.steps.extend(_frf_steps(ds, n))
+    t = _time_steps(times)
+    out.steps.extend(t.steps)
+    out.raw.update(t.raw)
+    ignored = len(sets) - len(frfs) - len(times)
+    if ignored:
+        log.info("%s: %d dataset-58 functions of other types ignored", path, ignored)
+    return out

@@ -1,0 +1,96 @@
+"""Online identification of F_s, x_s, n and m while a stepped-sine test runs.
+
+After every step the identifier (sim.identify) is refitted, warm-started from the last
+estimate with a small evaluation budget; each estimate, with its 95 % intervals and the
+update's time, is appended to <run>/identification.jsonl.  At the end a full fit over
+all steps is stored in run.json.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import time
+
+import numpy as np
+
+from bench.config import Plan, Rig
+from sim.identify import Identifier
+
+log = logging.getLogger(__name__)
+
+
+def identifiability(plan: Plan, rig: Rig) -> list[str]:
+    """What the plan cannot pin down, judged with the rig's expected parameters."""
+    F_s, x_s, m = rig.expected_F_s_N, rig.expected_x_s_m, rig.expected_mass_kg
+    f_s = math.sqrt(F_s / (x_s * m)) / (2 * math.pi)
+    freqs = np.array(plan.freqs_Hz)
+    gammas = np.array(plan.levels_N) / F_s
+    out = []
+    if not np.any((gammas >= 0.3) & (gammas <= 0.9)):
+        out.append(f"F_s, n: no force level between 0.3 and 0.9 of the expected F_s ({0.3 * F_s:.3g}-"
+                   f"{0.9 * F_s:.3g} N), where the friction loop shows its shape")
+    if not np.any(gammas >= 1.0):
+        out.append(f"F_s: no force level at or above the expected F_s ({F_s:.3g} N): the rolling "
+                   f"plateau is never reached")
+    near = np.count_nonzero((freqs >= 0.5 * f_s) & (freqs <= 2.0 * f_s))
+    if near < 3:
+        out.append(f"x_s, n: only {near} frequencies within 0.5-2x the expected friction resonance "
+                   f"({f_s:.3g} Hz); the resonance itself will not be seen")
+    if not np.any(freqs >= 3.0 * f_s):
+        out.append(f"mass: no frequency above 3x the expected friction resonance ({3 * f_s:.3g} Hz), "
+                   f"where the mass dominates")
+    return out
+
+
+class OnlineIdentification:
+    def __init__(self, run_dir, rig: Rig, harmonics: int = 5, budget: int = 25):
+        self.path = run_dir / "identification.jsonl"
+        self.ident = Identifier(dict(F_s_N=rig.expected_F_s_N, x_s_m=rig.expected_x_s_m,
+                                     n=rig.expected_n, mass_kg=rig.expected_mass_kg),
+                                harmonics=min(harmonics, 5))
+        self.budget = budget
+        self.update_times_s: list[float] = []
+
+    def preload(self, results: list[dict]) -> None:
+        """Steps already measured (resume): fitted once before new steps arrive."""
+        for r in results:
+            self.ident.add(r)
+        if results:
+            self.ident.fit(max_nfev=200)
+
+    def update(self, result: dict) -> dict | None:
+        t = time.perf_counter()
+        self.ident.add(result)
+        try:
+            est = self.ident.fit(max_nfev=self.budget)
+        except Exception as e:  # noqa: BLE001 - identification must never stop a test
+            log.warning("identification update failed after step %s: %s", result.get("key"), e)
+            return None
+        dt = time.perf_counter() - t
+        self.update_times_s.append(dt)
+        rec = dict(step=result.get("key"), update_s=dt, **est.as_dict())
+        with open(self.path, "a") as fh:
+            fh.write(json.dumps(rec) + "\n")
+        return rec
+
+    def final(self) -> dict:
+        est = self.ident.fit(max_nfev=300)
+        for w in est.warnings:
+            log.warning("identification: %s", w)
+        times = np.array(self.update_times_s) if self.update_times_s else np.array([np.nan])
+        return dict(est.as_dict(), update_ms_median=float(np.median(times) * 1e3),
+                    update_ms_max=float(np.max(times) * 1e3))
+
+
+def history(run_dir) -> list[dict]:
+    p = run_dir / "identification.jsonl"
+    out = []
+    if p.exists():
+        for line in p.read_text().splitlines():
+            try:
+                out.append(json.loads(line))
+            except json.JSONDecodeError:
+                pass
+    return out
