@@ -119,10 +119,10 @@ def _run(args, resume: bool) -> int:
 def _plan_toml(p: dict) -> dict:
     """The stored plan back into the TOML layout (the stored grid is used verbatim)."""
     keys = ("settle_cycles", "min_settle_s", "measure_cycles", "control_cycles", "force_tolerance",
-            "max_iterations", "harmonics", "ramp_s", "min_sample_rate_Hz")
+            "max_iterations", "harmonics", "ramp_s", "min_sample_rate_Hz", "max_extra_settle_blocks")
     out = {"name": p["name"], "levels_N": list(p["levels_N"]), "infeasible": p.get("infeasible", "refuse"),
            "frequencies": {"list_Hz": list(p["freqs_Hz"]), "direction": p["direction"]},
-           "control": {k: p[k] for k in keys}}
+           "control": {k: p[k] for k in keys if k in p}}
     if p.get("limits"):
         out["limits"] = p["limits"]
     return out
@@ -174,7 +174,9 @@ def cmd_export(args) -> int:
 
 def cmd_identify(args) -> int:
     """Offline identification of a stored run (writes identification into run.json)."""
+    from procedures.online_id import MAX_HARMONICS
     from sim.identify import identify_results
+
     from .config import parse_rig
     from .storage import RunStore
 
@@ -186,7 +188,7 @@ def cmd_identify(args) -> int:
         raise ValueError(f"{args.run}: no completed steps to identify from")
     guess = dict(F_s_N=rig.expected_F_s_N, x_s_m=rig.expected_x_s_m, n=rig.expected_n,
                  mass_kg=rig.expected_mass_kg)
-    est = identify_results(results, guess, min(meta["plan"]["harmonics"], 5)).estimate
+    est = identify_results(results, guess, min(meta["plan"]["harmonics"], MAX_HARMONICS)).estimate
     store.update(identification=est.as_dict())
     print(f"{'parameter':>10} {'estimate':>12} {'95 % interval':>28}")
     for k, v in est.values.items():

@@ -116,6 +116,7 @@ class Plan:
     harmonics: int
     ramp_s: float
     min_sample_rate_Hz: float
+    max_extra_settle_blocks: int         # re-measure while a free vibration still decays
     limits: Limits | None                # optional, tighter than the rig's
     infeasible: str = "refuse"           # steps the limits cannot hold: "refuse" the plan or "skip" them
     skip: tuple[tuple[int, int], ...] = ()   # (level index, frequency index) left out
@@ -236,6 +237,7 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
         harmonics=c.number("harmonics", 5, 1, 50, integer=True),
         ramp_s=c.number("ramp_s", 0.1, 0, 60),
         min_sample_rate_Hz=c.number("min_sample_rate_Hz", 25600.0, 1000, 204800),
+        max_extra_settle_blocks=c.number("max_extra_settle_blocks", 3, 0, 100, integer=True),
         limits=_limits(lim) if lim.data else None,
         infeasible=p.choice("infeasible", "refuse", ("refuse", "skip")))
     # every fitted harmonic must stay below Nyquist at the highest frequency (the DAQ samples

@@ -226,9 +226,11 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
                 return reading.__dict__
 
             # reference position with the output off
-            sup.x_ref_m = float(np.mean(ins.daq.acquire_periods(100.0, 10).disp_m))
+            rest = ins.daq.acquire_periods(100.0, 10).disp_m
+            sup.x_ref_m = float(np.mean(rest))
             proc = SteppedSine(plan, gen, daq, amp_gain_N_per_V=rig.amp_gain_N_per_V,
                                sensor_check=sensor_check)
+            proc.disp_noise_floor_m = float(np.std(rest))
             online = OnlineIdentification(store.path, rig, plan.harmonics) if identify else None
             if online:
                 online.preload(store.results())

@@ -50,6 +50,7 @@ class SteppedSine:
         self.gen = generator
         self.daq = daq
         self.sensor_check = sensor_check          # gap in range? called before each sweep
+        self.disp_noise_floor_m = 0.0             # rms at rest; set by the session
         self.drive = DriveState(gain_N_per_Vpp=amp_gain_N_per_V / 2.0)
 
     # ------------------------------------------------------------------ primitives
@@ -150,12 +151,31 @@ class SteppedSine:
             self._set_amplitude(self.drive.amplitude_Vpp * target / F1)
         return err, it, False
 
+    def _fit_block(self, block, f):
+        return {name: fit_harmonics(x, block.fs_Hz, f, self.plan.harmonics)
+                for name, x in (("force", block.force_N), ("accel", block.accel_m_s2), ("disp", block.disp_m))}
+
     def measure(self, step: StepSpec) -> tuple[dict, dict]:
-        f, H = step.freq_Hz, self.plan.harmonics
+        """Settle, then measure; re-measure while a free vibration is still dying out.
+
+        A weakly damped mode (small-amplitude pre-rolling, n > 1) can ring for hundreds of
+        periods after a change.  While the displacement residual (what the harmonics do not
+        explain) is above 3x the sensor noise at rest and still falling by more than 10 %
+        from block to block, the block is discarded and another taken (at most
+        ``max_extra_settle_blocks`` of the plan)."""
+        f = step.freq_Hz
         self._wait(f, self.plan.min_settle_s, min_periods=self.plan.settle_cycles)
         block = self._acquire(f, self.plan.measure_cycles)
-        fits = {name: fit_harmonics(x, block.fs_Hz, f, H)
-                for name, x in (("force", block.force_N), ("accel", block.accel_m_s2), ("disp", block.disp_m))}
+        fits = self._fit_block(block, f)
+        extra = 0
+        while extra < self.plan.max_extra_settle_blocks and fits["disp"].noise_rms > 3 * self.disp_noise_floor_m:
+            nxt = self._acquire(f, self.plan.measure_cycles)
+            nfits = self._fit_block(nxt, f)
+            extra += 1
+            improved = nfits["disp"].noise_rms < 0.9 * fits["disp"].noise_rms
+            block, fits = nxt, nfits
+            if not improved:
+                break
         F1 = fits["force"].fundamental
         X1 = fits["disp"].fundamental
         A1 = fits["accel"].fundamental
@@ -172,7 +192,7 @@ class SteppedSine:
             force=_fit_summary(fits["force"]), accel=_fit_summary(fits["accel"]),
             disp=_fit_summary(fits["disp"]),
             fs_Hz=block.fs_Hz, n_samples=block.n_samples, t0_s=block.t0_s, block_id=block.block_id,
-            resends=block.resends)
+            resends=block.resends, settle_extra_blocks=extra)
         raw = dict(force_N=block.force_N, accel_m_s2=block.accel_m_s2, disp_m=block.disp_m,
                    fs_Hz=np.array(block.fs_Hz), t0_s=np.array(block.t0_s))
         return result, raw

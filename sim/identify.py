@@ -45,6 +45,7 @@ class StepHarmonics:
     disp: np.ndarray       # m
     sigma_force: float     # standard error of one harmonic's real/imag part, N
     sigma_accel: float     # m/s^2
+    sigma_disp: float = 0.0   # m
 
     @classmethod
     def from_result(cls, r: dict) -> "StepHarmonics":
@@ -52,7 +53,8 @@ class StepHarmonics:
             return np.asarray(fit["amplitude"]) * np.exp(1j * np.asarray(fit["phase_rad"]))
         scale = math.sqrt(2.0 / max(r.get("n_samples", 1000), 1))
         return cls(freq_Hz=r["freq_Hz"], force=c(r["force"]), accel=c(r["accel"]), disp=c(r["disp"]),
-                   sigma_force=r["force"]["noise_rms"] * scale, sigma_accel=r["accel"]["noise_rms"] * scale)
+                   sigma_force=r["force"]["noise_rms"] * scale, sigma_accel=r["accel"]["noise_rms"] * scale,
+                   sigma_disp=r["disp"]["noise_rms"] * scale)
 
 
 @dataclass(frozen=True)
@@ -144,12 +146,15 @@ class Identifier:
         F[rows, idx] = out
         return F_s * analyse(F, X.shape[1])
 
-    def _residual(self, th, X, P, A, wF, wA):
+    def _residual(self, th, X, P, A, wF, wA, wX):
         F_s, x_s, n, m = math.exp(th[0]), math.exp(th[1]), th[2], math.exp(th[3])
         if abs(n - 1.0) < 1e-6:
             n = 1.0 + 1e-6
         meas = P - m * A
-        sigma = np.sqrt(wF ** 2 + (m * wA) ** 2)[:, None]
+        # displacement noise enters through the friction's stiffness (errors in variables):
+        # a step whose displacement is buried in noise says little about the friction
+        k_eff = np.abs(meas[:, 0]) / np.maximum(np.abs(X[:, 0]), 1e-300)
+        sigma = np.sqrt(wF ** 2 + (m * wA) ** 2 + (k_eff * wX) ** 2)[:, None]
         r = (meas - self.model_friction(F_s, x_s, n, X)) / sigma
         return np.concatenate([r.real.ravel(), r.imag.ravel()])
 
@@ -164,10 +169,11 @@ class Identifier:
         # noise floor: 0.1 % of each step's force, so near-noiseless data stays well posed
         wF = np.array([max(s.sigma_force, 1e-3 * abs(s.force[0])) for s in self.steps])
         wA = np.array([max(s.sigma_accel, 1e-3 * abs(s.accel[0])) for s in self.steps])
+        wX = np.array([max(s.sigma_disp, 1e-3 * abs(s.disp[0])) for s in self.steps])
         lo = [-np.inf, -np.inf, N_BOUNDS[0], -np.inf]
         hi = [np.inf, np.inf, N_BOUNDS[1], np.inf]
         th0 = np.clip(self.theta, np.array(lo) + 1e-9, np.array(hi) - 1e-9)
-        res = least_squares(self._residual, th0, args=(X, P, A, wF, wA), bounds=(lo, hi),
+        res = least_squares(self._residual, th0, args=(X, P, A, wF, wA, wX), bounds=(lo, hi),
                             x_scale=np.array([0.1, 0.1, 0.1, 0.1]), max_nfev=max_nfev, method="trf")
         self.theta = res.x
         dof = max(1, res.fun.size - res.x.size)
@@ -196,7 +202,7 @@ class Identifier:
         return self.estimate
 
 
-def identify_results(results: list[dict], guess: dict, harmonics: int = 5) -> Identifier:
+def identify_results(results: list[dict], guess: dict, harmonics: int = 9) -> Identifier:
     """Offline identification from stored step results (or imported UFF58 data)."""
     ident = Identifier(guess, harmonics)
     for r in results:
