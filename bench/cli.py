@@ -118,7 +118,7 @@ def _run(args, resume: bool) -> int:
 
 def _plan_toml(p: dict) -> dict:
     """The stored plan back into the TOML layout (the stored grid is used verbatim)."""
-    keys = ("settle_cycles", "min_settle_s", "measure_cycles", "control_cycles", "force_tolerance",
+    keys = ("settle_cycles", "min_settle_s", "measure_cycles", "min_measure_s", "control_cycles", "force_tolerance",
             "max_iterations", "harmonics", "ramp_s", "min_sample_rate_Hz", "max_extra_settle_blocks")
     out = {"name": p["name"], "levels_N": list(p["levels_N"]), "infeasible": p.get("infeasible", "refuse"),
            "frequencies": {"list_Hz": list(p["freqs_Hz"]), "direction": p["direction"]},

@@ -110,6 +110,7 @@ class Plan:
     settle_cycles: int
     min_settle_s: float
     measure_cycles: int
+    min_measure_s: float                 # measured block at least this long (noise at high f)
     control_cycles: int
     force_tolerance: float
     max_iterations: int
@@ -231,6 +232,7 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
         settle_cycles=c.number("settle_cycles", 20, 0, 1e6, integer=True),
         min_settle_s=c.number("min_settle_s", 0.05, 0, 3600),
         measure_cycles=c.number("measure_cycles", 10, 1, 1e6, integer=True),
+        min_measure_s=c.number("min_measure_s", 0.0, 0, 3600),
         control_cycles=c.number("control_cycles", 4, 1, 1e6, integer=True),
         force_tolerance=c.number("force_tolerance", 0.02, 0, 0.5, lo_open=True),
         max_iterations=c.number("max_iterations", 8, 1, 100, integer=True),

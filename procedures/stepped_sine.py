@@ -164,12 +164,13 @@ class SteppedSine:
         from block to block, the block is discarded and another taken (at most
         ``max_extra_settle_blocks`` of the plan)."""
         f = step.freq_Hz
+        periods = max(self.plan.measure_cycles, math.ceil(self.plan.min_measure_s * f))
         self._wait(f, self.plan.min_settle_s, min_periods=self.plan.settle_cycles)
-        block = self._acquire(f, self.plan.measure_cycles)
+        block = self._acquire(f, periods)
         fits = self._fit_block(block, f)
         extra = 0
         while extra < self.plan.max_extra_settle_blocks and fits["disp"].noise_rms > 3 * self.disp_noise_floor_m:
-            nxt = self._acquire(f, self.plan.measure_cycles)
+            nxt = self._acquire(f, periods)
             nfits = self._fit_block(nxt, f)
             extra += 1
             improved = nfits["disp"].noise_rms < 0.9 * fits["disp"].noise_rms
