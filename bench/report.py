@@ -1,11 +1,12 @@
 """The report of a run directory: PNG plots and ``report/report.md`` (read that first).
 
     <run>/report/report.md                what ran, on what, and what came out
-    <run>/report/compliance.png           |X1/F1|, (x_max - x_min)/(2 F1) and phase vs frequency
+    <run>/report/compliance.png           |X1/F1|, compliance_pp (x_max - x_min)/(2 F1) and phase vs frequency
     <run>/report/accelerance.png          |A1/F1| vs frequency
     <run>/report/quality.png              THD of displacement, force error, residual
     <run>/report/resonance.png            harmonic resonance frequency and compliance vs force
     <run>/report/model_vs_measurement.png simulated rigs only: the sim/ engine's prediction
+    <run>/report/identification.png       online estimates of F_s, x_s, n, m vs steps completed
 
 Works on partial runs (interrupted, aborted): whatever steps are stored are shown.
 Plots use matplotlib ``Figure`` objects (Agg), never pyplot's global state.
@@ -21,6 +22,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
 
 from .storage import RunStore
 
@@ -64,18 +66,18 @@ def series_of(results: list[dict], levels_N) -> list[Series]:
     return out
 
 
-def fitted_half_pp(fit: dict, n: int = 2048) -> float:
-    """Half the peak-to-peak of the periodic waveform rebuilt from a channel's harmonic
-    fit: seed Eq. 9 without the noise and non-periodic residual the raw record carries."""
-    amp, ph = np.asarray(fit["amplitude"]), np.asarray(fit["phase_rad"])
-    wt = np.linspace(0.0, 2 * math.pi, n, endpoint=False)
-    k = np.arange(1, amp.size + 1)
-    x = (amp * np.sin(np.outer(wt, k) + ph)).sum(axis=1)
-    return 0.5 * float(x.max() - x.min())
+def legacy_pp(results: list[dict]) -> bool:
+    """True for runs stored before compliance_pp came from the harmonic fit: their steps
+    have no ``disp.raw_peak_to_peak`` and their compliance_pp is the raw record's."""
+    return any("raw_peak_to_peak" not in r.get("disp", {}) for r in results)
 
 
-def fitted_compliance_pp(step: dict) -> float:
-    return fitted_half_pp(step["disp"]) / step["force_N"]
+def pp_source(results: list[dict]) -> str:
+    """Where the stored compliance_pp of this run comes from, for the texts."""
+    if legacy_pp(results):
+        return ("the raw record (this run predates compliance_pp from the harmonic fit: it is biased high "
+                "by noise and non-periodic motion, most at the flagged steps)")
+    return "the periodic displacement of the harmonic fit"
 
 
 def residual_ratio(step: dict) -> float:
@@ -100,11 +102,10 @@ class LevelComparison:
     level_N: float
     gamma0: float
     n_steps: int
-    n_clean: int                 # steps with residual ratio <= UNSETTLED_RESIDUAL
-    median_raw: float            # raw compliance_pp, clean steps only
-    max_raw: float
-    median_fit: float            # harmonic-fit compliance_pp, all steps
-    max_fit: float
+    n_flagged: int               # steps with residual ratio > UNSETTLED_RESIDUAL
+    median: float                # of the stored compliance_pp, all steps
+    max: float
+    max_unflagged: float         # unflagged steps only
     notes: list[str]
 
 
@@ -188,16 +189,15 @@ def model_comparison(meta: dict, results: list[dict]) -> ModelComparison | None:
             f_model, G, flags = grid, np.full(grid.size, np.nan), np.ones(grid.size, bool)
         C = G * scale
         curves[level] = (f_model, C, flags)
-        raw, fit = [], []
+        diff = []
         for s in steps:
             i = int(np.argmin(np.abs(f_model - s["freq_Hz"])))
             at_steps[s["key"]] = float(C[i])
-            raw.append(s["compliance_pp_m_per_N"] / C[i] - 1.0)
-            fit.append(fitted_compliance_pp(s) / C[i] - 1.0)
-        clean = np.array([residual_ratio(s) <= UNSETTLED_RESIDUAL for s in steps])
-        raw, fit = np.array(raw)[clean], np.array(fit)
-        levels.append(LevelComparison(level, gamma0, len(steps), int(clean.sum()), _median(raw), _signed_max(raw),
-                                      _median(fit), _signed_max(fit), notes))
+            diff.append(s["compliance_pp_m_per_N"] / C[i] - 1.0)
+        flagged = np.array([residual_ratio(s) > UNSETTLED_RESIDUAL for s in steps])
+        diff = np.array(diff)
+        levels.append(LevelComparison(level, gamma0, len(steps), int(flagged.sum()), _median(diff), _signed_max(diff),
+                                      _signed_max(diff[~flagged]), notes))
     return ModelComparison(model.__dict__.copy(), ws, curves, at_steps, levels, engine_notes)
 
 
@@ -290,14 +290,16 @@ def _save(fig: Figure, path: Path) -> Path:
     return path
 
 
-def plot_compliance(series, colours, title) -> Figure:
+def plot_compliance(series, colours, title, legacy: bool = False) -> Figure:
     fig = Figure(figsize=(10, 10), layout="constrained")
     ax1, ax2, ax3 = fig.subplots(3, 1, sharex=True)
     _plot_series(ax1, series, colours, lambda s: s.col(lambda st: st["compliance_abs_m_per_N"]))
     ax1.set(yscale="log", ylabel="|X1/F1|  (m/N)", title="fundamental: |X1/F1| (harmonic fit)")
     _plot_series(ax2, series, colours, lambda s: s.col(lambda st: st["compliance_pp_m_per_N"]))
     ax2.set(yscale="log", ylabel="(x_max - x_min)/(2 F1)  (m/N)",
-            title="peak-to-peak compliance (seed Eq. 9 in SI), from the raw record")
+            title="peak-to-peak compliance (seed Eq. 9 in SI), "
+                  + ("from the raw record (run stored before the harmonic-fit compliance_pp)" if legacy
+                     else "from the fitted periodic displacement"))
     _plot_series(ax3, series, colours, lambda s: phase_deg(s.col(lambda st: st["compliance_phase_rad"])))
     ax3.set(xscale="log", xlabel="frequency (Hz)", ylabel="phase of X1/F1  (deg)",
             title="phase (displacement behind force: 0 = spring, -180 = mass)")
@@ -361,24 +363,26 @@ def plot_model(series, colours, title, cmp: ModelComparison) -> Figure:
                      marker="|", ms=8, color="r")
     for s in series:
         c = colours[s.level_N]
-        ax1.plot(s.freq_Hz, s.col(lambda st: st["compliance_pp_m_per_N"]), ls="none",
-                 marker=DIRECTION_MARKER.get(s.direction, "s"), mfc="none", mec=c, ms=7)
-        model = s.col(lambda st: cmp.at_steps.get(st["key"], math.nan))
-        ax2.plot(s.freq_Hz, 100 * (s.col(lambda st: st["compliance_pp_m_per_N"]) / model - 1),
-                 ls="none", marker=DIRECTION_MARKER.get(s.direction, "s"), mfc="none", mec=c, ms=7)
-        ax2.plot(s.freq_Hz, 100 * (s.col(fitted_compliance_pp) / model - 1), ls="none", marker="x",
-                 color=c, ms=6)
+        measured = s.col(lambda st: st["compliance_pp_m_per_N"])
+        diff = 100 * (measured / s.col(lambda st: cmp.at_steps.get(st["key"], math.nan)) - 1)
+        flagged = s.col(residual_ratio) > UNSETTLED_RESIDUAL
+        ax1.plot(s.freq_Hz, measured, ls="none", marker=DIRECTION_MARKER.get(s.direction, "s"), mfc="none",
+                 mec=c, ms=7)
+        ax2.plot(s.freq_Hz, diff, ls="none", marker=DIRECTION_MARKER.get(s.direction, "s"), mfc="none",
+                 mec=c, ms=7)
+        ax2.plot(s.freq_Hz[flagged], diff[flagged], ls="none", marker="x", color="r", ms=5)
     ax1.set(yscale="log", ylabel="compliance_pp (m/N)",
-            title="lines: model (sim.shooting, rig's true parameters); open markers: measured (raw)")
+            title="lines: model (sim.shooting, rig's true parameters); markers: measured compliance_pp")
     ax2.axhline(0, color="k", lw=0.8)
     ax2.set(xscale="log", xlabel="frequency (Hz)", ylabel="measured / model - 1 (%)",
-            title="relative difference: open = raw peak-to-peak, x = from the harmonic fit")
+            title=f"relative difference (red x: displacement residual > {100 * UNSETTLED_RESIDUAL:g} % of the "
+                  "fundamental, see quality.png)")
     ax2.set_yscale("symlog", linthresh=1)
     for ax in (ax1, ax2):
         ax.grid(True, which="both", alpha=0.3)
     extra = [Line2D([], [], color="0.3", lw=1.5, label="model"),
              Line2D([], [], color="0.3", lw=1.5, ls=":", label="model, gamma0 >= 1\n(gross rolling)"),
-             Line2D([], [], color="0.3", marker="x", ls="none", label="harmonic-fit pp"),
+             Line2D([], [], color="r", marker="x", ls="none", label="flagged step (residual)"),
              Line2D([], [], color="r", marker="|", ls="none", label="model: no steady state")]
     handles = [Line2D([], [], color=c, lw=2, label=f"{lv:g} N") for lv, c in sorted(colours.items())]
     handles += [Line2D([], [], color="0.3", marker=DIRECTION_MARKER[d], mfc="none", ls="none",
@@ -412,6 +416,239 @@ def plot_resonance(res: list[Resonance], title) -> Figure:
     return fig
 
 
+# ---------------------------------------------------------------------------- identification
+
+
+@dataclass(frozen=True)
+class IdParam:
+    key: str            # as in the estimate's dicts (SI)
+    label: str
+    unit: str           # display unit
+    scale: float        # SI -> display unit
+    log_y: bool
+
+
+ID_PARAMS = (IdParam("F_s_N", "F_s", "N", 1.0, True), IdParam("x_s_m", "x_s", "um", 1e6, True),
+             IdParam("n", "n", "", 1.0, False), IdParam("mass_kg", "m", "kg", 1.0, True))
+ID_LOG_SPAN = 2.0       # log axes show at most the final value /2 .. x2; estimates beyond are drawn at the edge
+ID_LIN_SPAN = 0.3       # linear axes (n): at most the final value +- max(0.3, 20 %)
+
+
+@dataclass
+class IdentificationData:
+    """The online identification of a run: what procedures.online_id stored."""
+
+    history: list[dict]            # identification.jsonl: one estimate per completed step
+    final: dict | None             # run.json "identification": the full fit at the end
+    truth: dict | None             # simulated rig: the RigModel's parameters (SI)
+    identifiability: list[str]     # run.json "identifiability_warnings" (judged before the run)
+    unknown: object = None         # a run.json "identification" entry that is not an estimate
+
+    @property
+    def latest(self) -> dict | None:
+        """The estimate to report: the final fit, else the last online one."""
+        return self.final if self.final is not None else (self.history[-1] if self.history else None)
+
+
+def _is_estimate(d) -> bool:
+    return isinstance(d, dict) and isinstance(d.get("values"), dict)
+
+
+def identification_data(run_dir: Path, meta: dict) -> IdentificationData:
+    from procedures.online_id import history
+    final = meta.get("identification")
+    truth = None
+    rig = meta.get("rig") or {}
+    if rig.get("simulated") and rig.get("model"):
+        from sim.rig import RigModel
+        try:
+            model = RigModel.from_dict(rig["model"])
+            truth = {p.key: float(getattr(model, p.key)) for p in ID_PARAMS}
+        except Exception as e:          # the report must come out even with a bad model entry
+            log.warning("rig model unreadable: %s", e)
+    return IdentificationData([h for h in history(Path(run_dir)) if _is_estimate(h)],
+                              final if _is_estimate(final) else None, truth,
+                              list(meta.get("identifiability_warnings") or []),
+                              None if final is None or _is_estimate(final) else final)
+
+
+def _finite(v) -> float:
+    try:
+        v = float(v)
+    except (TypeError, ValueError):
+        return math.nan
+    return v if math.isfinite(v) else math.nan
+
+
+def _steps_of(history: list[dict]) -> np.ndarray:
+    return np.array([h.get("steps_used", i + 1) for i, h in enumerate(history)], dtype=float)
+
+
+def _determined_from(history: list[dict]) -> int | None:
+    """Steps completed from which on no estimate carried a warning (every relative
+    standard error below 10 %); None if the last one still does."""
+    if not history or history[-1].get("warnings"):
+        return None
+    i = len(history) - 1
+    while i > 0 and not history[i - 1].get("warnings"):
+        i -= 1
+    return int(_steps_of(history)[i])
+
+
+def _id_caps(ref: float, log_y: bool) -> tuple[float, float]:
+    if log_y:
+        return ref / ID_LOG_SPAN, ref * ID_LOG_SPAN
+    w = max(ID_LIN_SPAN, 0.2 * abs(ref))
+    return ref - w, ref + w
+
+
+def plot_identification(ident: IdentificationData, title: str, level_starts: list[tuple[float, float]]) -> Figure:
+    """Estimate vs steps completed, one panel per parameter, 95 % interval as a band."""
+    from matplotlib.ticker import FuncFormatter, MaxNLocator, NullFormatter
+    fig = Figure(figsize=(10, 8), layout="constrained")
+    axes = fig.subplots(2, 2, sharex=True).ravel()
+    x = _steps_of(ident.history)
+    final = ident.final
+    off_scale = False
+    for ax, p in zip(axes, ID_PARAMS):
+        def col(part, hist=ident.history, key=p.key):
+            return np.array([_finite((h.get(part) or {}).get(key)) * p.scale for h in hist])   # floats: inf, no warning
+        v, lo, hi = col("values"), col("low"), col("high")
+        ref = _finite(final["values"].get(p.key)) * p.scale if final else math.nan
+        if not math.isfinite(ref) or (p.log_y and ref <= 0):
+            good = v[np.isfinite(v) & ((v > 0) if p.log_y else True)]
+            ref = float(good[-1]) if good.size else (1.0 if p.log_y else 0.0)
+        cap_lo, cap_hi = _id_caps(ref, p.log_y)
+        # an undetermined bound fills the axis; the band is clipped to it
+        band_lo = np.clip(np.where(np.isfinite(lo) & ((lo > 0) if p.log_y else True), lo, cap_lo), cap_lo, cap_hi)
+        band_hi = np.clip(np.where(np.isfinite(hi), hi, cap_hi), cap_lo, cap_hi)
+        ax.fill_between(x, band_lo, band_hi, color="C0", alpha=0.2, lw=0)
+        inside = (v >= cap_lo) & (v <= cap_hi)
+        ax.plot(x[inside], v[inside], "o-", color="C0", ms=3, lw=1)
+        for sel, edge, mk in ((v > cap_hi, cap_hi, "^"), (v < cap_lo, cap_lo, "v")):
+            if sel.any():
+                off_scale = True
+                ax.plot(x[sel], np.full(sel.sum(), edge), ls="none", marker=mk, color="C0", mfc="none", ms=6,
+                        clip_on=False)
+        shown = list(v[inside]) + list(band_lo[np.isfinite(lo)]) + list(band_hi[np.isfinite(hi)])
+        if final:
+            fv, fl, fh = (_finite(final[k].get(p.key)) * p.scale if isinstance(final.get(k), dict) else math.nan
+                          for k in ("values", "low", "high"))
+            xf = final.get("steps_used", x[-1] if x.size else 1)
+            if math.isfinite(fv):
+                err = [[max(fv - fl, 0.0) if math.isfinite(fl) else 0.0],
+                       [max(fh - fv, 0.0) if math.isfinite(fh) else 0.0]]
+                ax.errorbar([xf], [fv], yerr=err, fmt="*", color="C3", ms=11, capsize=4, zorder=5)
+                shown += [fv]
+        if ident.truth:
+            t = ident.truth[p.key] * p.scale
+            ax.axhline(t, color="k", ls="--", lw=1.2)
+            shown.append(t)
+        shown = np.clip([s for s in shown if math.isfinite(s) and (s > 0 or not p.log_y)], cap_lo, cap_hi)
+        a, b = (float(shown.min()), float(shown.max())) if shown.size else (cap_lo, cap_hi)
+        if p.log_y:
+            pad = max((b / a) ** 0.06, 1.002)
+            ax.set_ylim(a / pad, b * pad)
+            ax.set_yscale("log")
+            ax.yaxis.set_major_formatter(FuncFormatter(lambda val, _: f"{val:g}"))
+            ax.yaxis.set_minor_formatter(FuncFormatter(lambda val, _: f"{val:g}") if b / a < 30 else NullFormatter())
+        else:
+            pad = max(0.06 * (b - a), 0.002 * max(abs(a), abs(b), 1e-12))
+            ax.set_ylim(a - pad, b + pad)
+        for i, (xs, level) in enumerate(level_starts):
+            if i:       # the first level starts with the plot
+                ax.axvline(xs - 0.5, color="0.6", lw=0.8, ls=":")
+            if ax in axes[:2]:
+                ax.text(xs - 0.5, 1.0, f" {level:g} N", transform=ax.get_xaxis_transform(), fontsize=7,
+                        color="0.4", va="bottom", ha="left")
+        unit = f" ({p.unit})" if p.unit else ""
+        ax.set_ylabel(f"{p.label}{unit}{', log scale' if p.log_y else ''}")
+        ax.grid(True, which="both", alpha=0.3)
+    for ax in axes[2:]:
+        ax.set_xlabel("steps completed")
+    axes[0].xaxis.set_major_locator(MaxNLocator(integer=True))
+    handles = [Line2D([], [], color="C0", marker="o", ms=3, label="online estimate"),
+               Patch(color="C0", alpha=0.2, label="95 % interval")]
+    if off_scale:
+        handles.append(Line2D([], [], color="C0", marker="^", mfc="none", ls="none", label="estimate off scale"))
+    if final:
+        handles.append(Line2D([], [], color="C3", marker="*", ms=10, ls="none", label="final fit (95 %)"))
+    if ident.truth:
+        handles.append(Line2D([], [], color="k", ls="--", label="truth (rig model)"))
+    handles.append(Line2D([], [], color="0.6", ls=":", label="first step of a level"))
+    fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=8, frameon=False)
+    fig.suptitle(f"Online identification: estimate vs steps completed: {title}")
+    return fig
+
+
+def _num(v, scale: float = 1.0) -> str:
+    v = _finite(v)
+    if math.isnan(v):
+        return "n/a"
+    v *= scale
+    return "unbounded" if abs(v) > 1e100 else f"{v:.4g}"
+
+
+def identification_md(ident: IdentificationData, plotted: bool) -> list[str]:
+    md = ["## Identification of F_s, x_s, n and m", ""]
+    est = ident.latest
+    if ident.unknown is not None:
+        md += [f"run.json holds an identification entry this report cannot read: `{ident.unknown!r}`", ""]
+    if est is None:
+        md += ["No identification data: this run has no `identification.jsonl` and no `identification` in "
+               "`run.json` (run without online identification, or before it existed). "
+               "`bench identify <run>` fits the stored steps offline.", ""]
+    else:
+        md += ["After every step the friction (Masing, F_s, x_s, n) and the moving mass m are refitted to the "
+               "harmonics of all steps so far (procedures.online_id, warm-started); at the end a full fit over "
+               "all steps is stored in run.json."
+               + (" identification.png shows the estimates." if plotted else ""), ""]
+        if est is ident.final:
+            src = f"final fit over {est.get('steps_used', '?')} steps (run.json)"
+        else:
+            src = (f"last online estimate, after step {est.get('step', '?')} ({est.get('steps_used', '?')} steps); "
+                   "there is no final fit (the run did not complete)")
+        md += [f"Estimate: {src}.", ""]
+        head = ["parameter", "unit", "estimate", "95 % low", "95 % high", "rel. std. error"]
+        if ident.truth:
+            head += ["truth (rig model)", "error", "truth in interval"]
+        rows = []
+        for p in ID_PARAMS:
+            get = {k: (est.get(k) or {}).get(p.key) for k in ("values", "low", "high", "rel_std")}
+            row = [p.label, p.unit or "-", _num(get["values"], p.scale), _num(get["low"], p.scale),
+                   _num(get["high"], p.scale), _pct(_finite(get["rel_std"])).lstrip("+")]
+            if ident.truth:
+                t, v = ident.truth[p.key], _finite(get["values"])
+                lo, hi = _finite(get["low"]), _finite(get["high"])
+                row += [_num(t, p.scale), _pct(v / t - 1.0),
+                        "n/a" if math.isnan(lo) or math.isnan(hi) else ("yes" if lo <= t <= hi else "**no**")]
+            rows.append(row)
+        md += _table(head, rows) + [""]
+        times = [_finite(h.get("update_s")) * 1e3 for h in ident.history]
+        times = [t for t in times if math.isfinite(t)]
+        med = _finite((ident.final or {}).get("update_ms_median"))
+        mx = _finite((ident.final or {}).get("update_ms_max"))
+        if math.isnan(med) and times:
+            med, mx = float(np.median(times)), float(np.max(times))
+        md.append(f"- online update time per step: median {med:.3g} ms, max {mx:.3g} ms"
+                  if math.isfinite(med) else "- online update time: n/a (no online updates stored)")
+        md.append(f"- reduced chi^2: {_num(est.get('reduced_chi2'))} (about 1 when the residual is the "
+                  "measurement noise the fit assumes; intervals are never scaled below it)")
+        first = _determined_from(ident.history)
+        if ident.history:
+            md.append(f"- every parameter's relative standard error below 10 % from step {first} of "
+                      f"{int(_steps_of(ident.history)[-1])} on" if first is not None else
+                      "- the last online estimate still has a parameter with a relative standard error of 10 % "
+                      "or more")
+        warnings = est.get("warnings") or []
+        md.append("- fit warnings: " + ("none" if not warnings else ""))
+        md += [f"  - {w}" for w in warnings]
+    md.append("- identifiability warnings (from the plan and the rig's expected parameters, before the run): "
+              + ("none" if not ident.identifiability else ""))
+    md += [f"  - {w}" for w in ident.identifiability]
+    return md + [""]
+
+
 # ---------------------------------------------------------------------------- markdown
 
 
@@ -425,35 +662,16 @@ def _table(header: list[str], rows: list[list]) -> list[str]:
     return out
 
 
-def _identification(ident) -> list[str]:
-    """Render whatever the identification entry holds, without interpreting it.
-
-    Dict-valued entries become one table: either {"parameters": {name: {value, low, ...}}}
-    (a row per parameter, a column per field) or {"values": {name: v}, "low": {...}, ...}
-    (a row per parameter, a column per entry).  Everything else is listed below it."""
-    lines = ["## Identification", ""]
-    if not isinstance(ident, dict):
-        return lines + [f"`{ident!r}`", ""]
-    if isinstance(ident.get("parameters"), dict):
-        table = ident["parameters"]
-        rest = {k: v for k, v in ident.items() if k != "parameters"}
-        cols = list(dict.fromkeys(c for v in table.values() if isinstance(v, dict) for c in v))
-        rows = [[name] + ([_fmt(v.get(c, "")) for c in cols] if isinstance(v, dict) else [v] + [""] * max(0, len(cols) - 1))
-                for name, v in table.items()]
-        lines += _table(["parameter"] + (cols or ["value"]), rows)
-    else:
-        cols = [k for k, v in ident.items() if isinstance(v, dict)]
-        rest = {k: v for k, v in ident.items() if k not in cols}
-        names = list(dict.fromkeys(n for c in cols for n in ident[c]))
-        if cols:
-            lines += _table(["parameter"] + cols, [[n] + [_fmt(ident[c].get(n, "")) for c in cols] for n in names])
-    lines.append("")
-    lines += [f"- {k}: {_fmt(v)}" for k, v in rest.items()]
-    return lines + [""]
-
-
-def _fmt(v) -> str:
-    return f"{v:.6g}" if isinstance(v, float) else str(v)
+def _level_starts(history: list[dict], results: list[dict]) -> list[tuple[float, float]]:
+    """(steps completed, level N) where the online history first meets each new force level."""
+    level_of = {r["key"]: r["target_force_N"] for r in results}
+    out, last = [], None
+    for x, h in zip(_steps_of(history), history):
+        level = level_of.get(h.get("step"))
+        if level is not None and level != last:
+            out.append((float(x), float(level)))
+            last = level
+    return out
 
 
 def write_report(run_dir: Path) -> Path:
@@ -496,19 +714,22 @@ def write_report(run_dir: Path) -> Path:
     else:
         md.append("none (events.jsonl records only start, sensor checks, output off and end)")
     md.append("")
+    ident = identification_data(store.path, meta)
 
     if not results:
-        md += ["## Results", "", "No step was completed, so there is nothing to plot."]
+        md += ["## Results", "", "No step was completed, so there is nothing to plot.", ""]
+        md += identification_md(ident, plotted=False)
         path = out / "report.md"
         path.write_text("\n".join(md) + "\n")
         return path
 
+    legacy = legacy_pp(results)
     files: list[tuple[str, str]] = []
-    _save(plot_compliance(series, colours, title), out / "compliance.png")
+    _save(plot_compliance(series, colours, title, legacy), out / "compliance.png")
     files.append(("compliance.png", "compliance vs frequency, log-log, one colour per force level, "
                   "solid = up sweep, dashed = down sweep. Top: |X1/F1| from the fundamentals of the harmonic "
-                  "fits; middle: (x_max - x_min)/(2 F1), the seed's Eq. 9 in SI, from the raw record; "
-                  "bottom: phase of X1/F1 in degrees (0 = spring-like, -180 = mass-like)."))
+                  "fits; middle: compliance_pp = (x_max - x_min)/(2 F1), the seed's Eq. 9 in SI, from "
+                  f"{pp_source(results)}; bottom: phase of X1/F1 in degrees (0 = spring-like, -180 = mass-like)."))
     mass = rig.get("expected_mass_kg")
     _save(plot_accelerance(series, colours, title, mass), out / "accelerance.png")
     files.append(("accelerance.png", "|A1/F1| vs frequency per level; it tends to 1/m above the friction "
@@ -516,7 +737,8 @@ def write_report(run_dir: Path) -> Path:
     _save(plot_quality(series, colours, title, plan.get("force_tolerance")), out / "quality.png")
     files.append(("quality.png", "THD of the displacement (friction nonlinearity), force-control error "
                   "of the fundamental with the tolerance, and the displacement residual after the harmonic fit "
-                  "relative to the fundamental (noise and non-periodic motion such as an unsettled free vibration)."))
+                  "relative to the fundamental (noise and non-periodic motion such as an unsettled free vibration; "
+                  f"steps above {100 * UNSETTLED_RESIDUAL:g} % are flagged)."))
 
     cmp = None
     if rig.get("simulated") and rig.get("model"):
@@ -534,7 +756,13 @@ def write_report(run_dir: Path) -> Path:
         _save(plot_model(series, colours, title, cmp), out / "model_vs_measurement.png")
         files.append(("model_vs_measurement.png", "simulated rig only: the sim/ engine's compliance_pp for "
                       "the rig's true parameters (lines) over the measured compliance_pp (markers), and the "
-                      "relative differences (raw peak-to-peak and harmonic-fit peak-to-peak)."))
+                      "relative differences (flagged steps marked)."))
+    if ident.history:
+        _save(plot_identification(ident, title, _level_starts(ident.history, results)), out / "identification.png")
+        files.append(("identification.png", "online identification: the estimate of F_s, x_s, n and m after "
+                      "each step with its 95 % interval (band)"
+                      + (", the final fit (star) and the rig model's truth (dashed)" if ident.truth
+                         else " and the final fit (star)") + "; dotted: the first step of each force level."))
 
     md += ["## Files", "", f"All in `{out}/` (raw data: `{store.path}/steps/`; "
            f"CSV and UFF: `bench export {store.path}`).", ""]
@@ -544,6 +772,8 @@ def write_report(run_dir: Path) -> Path:
     md += ["## Harmonic resonance per level", "",
            "The step of largest compliance_pp (x_max - x_min)/(2 F1) at each level, either sweep direction "
            "(grid maximum: its accuracy is the grid spacing)."]
+    if legacy:
+        md += ["", f"compliance_pp of this run is from {pp_source(results)}."]
     rows = []
     for r in res:
         row = [f"{r.level_N:g}", f"{r.freq_Hz:.4g}{' (grid edge)' if r.at_grid_edge else ''}",
@@ -569,20 +799,16 @@ def write_report(run_dir: Path) -> Path:
                f"Rig model (true parameters, defaults filled in): F_s = {p['F_s_N']:g} N, x_s = {p['x_s_m']:g} m, "
                f"n = {p['n']:g}, m = {p['mass_kg']:g} kg.", ""]
         md += [f"- {n}" for n in cmp.engine_notes]
-        md += ["- relative difference = measured / model - 1; max = the value of largest magnitude.",
-               "- raw: the stored compliance_pp, over the *clean* steps only (displacement residual <= "
-               f"{100 * UNSETTLED_RESIDUAL:g} % of the fundamental). The peak-to-peak of a noisy record is biased "
-               "high by about 3 noise sigma / amplitude, and a non-periodic residual (an unsettled free vibration "
-               "at the small-amplitude natural frequency, or a displacement below the sensor noise at high "
-               "frequency) inflates it further: see quality.png.",
-               "- fit: peak-to-peak of the periodic waveform rebuilt from the displacement's harmonic fit, "
-               "over all steps (free of most of the noise and residual).", ""]
-        md += _table(["level (N)", "gamma0", "clean / all steps", "median raw", "max raw", "median fit", "max fit",
-                      "notes"],
-                     [[f"{c.level_N:g}", f"{c.gamma0:.3g}", f"{c.n_clean} / {c.n_steps}", _pct(c.median_raw),
-                       _pct(c.max_raw), _pct(c.median_fit), _pct(c.max_fit), "; ".join(c.notes) or "ok"]
-                      for c in cmp.levels])
+        md += ["- relative difference = measured / model - 1 of the stored compliance_pp (from "
+               f"{pp_source(results)}), over all steps; max = the value of largest magnitude.",
+               f"- flagged: steps whose displacement residual is above {100 * UNSETTLED_RESIDUAL:g} % of the "
+               "fundamental (see quality.png and the steps needing attention).", ""]
+        md += _table(["level (N)", "gamma0", "steps (flagged)", "median", "max", "max, unflagged steps", "notes"],
+                     [[f"{c.level_N:g}", f"{c.gamma0:.3g}", f"{c.n_steps} ({c.n_flagged})", _pct(c.median),
+                       _pct(c.max), _pct(c.max_unflagged), "; ".join(c.notes) or "ok"] for c in cmp.levels])
         md.append("")
+
+    md += identification_md(ident, plotted=bool(ident.history))
 
     md += ["## Steps needing attention", ""]
     failed = [r for r in results if not r.get("force_converged", True)]
@@ -594,8 +820,11 @@ def write_report(run_dir: Path) -> Path:
                        r["control_iterations"]] for r in failed])
     else:
         md.append("Force control reached the tolerance at every step.")
+    caveat = ("compliance_pp of these steps, from the raw record, is biased high; |X1/F1| much less affected"
+              if legacy else "the record is not only the steady periodic response; the harmonic fit, from which "
+              "compliance_pp and |X1/F1| come, rejects most of it, but treat these steps with care")
     md += ["", f"Displacement residual above {100 * UNSETTLED_RESIDUAL:g} % of the fundamental (noise or "
-           "non-periodic motion; compliance_pp of these steps is unreliable, |X1/F1| much less affected):", ""]
+           f"non-periodic motion such as an unsettled free vibration; {caveat}):", ""]
     rows = []
     for s in series:
         bad = [st for st in s.steps if residual_ratio(st) > UNSETTLED_RESIDUAL]
@@ -606,9 +835,6 @@ def write_report(run_dir: Path) -> Path:
                          f"{100 * residual_ratio(worst):.3g} % at {worst['freq_Hz']:.4g} Hz"])
     md += _table(["level (N)", "sweep", "steps", "frequencies (Hz)", "worst"], rows) if rows else ["none"]
     md.append("")
-
-    if "identification" in meta:
-        md += _identification(meta["identification"])
 
     path = out / "report.md"
     path.write_text("\n".join(md) + "\n")

@@ -33,6 +33,10 @@ log = logging.getLogger(__name__)
 POINTS_PER_PERIOD = 256
 PARAMS = ("F_s_N", "x_s_m", "n", "mass_kg")
 N_BOUNDS = (0.1, 6.0)
+# A weak prior at the guess (a factor 4 on F_s, x_s, m; 1.5 on n): it keeps the first
+# few, uninformative steps from sending the estimate astray and gives an undetermined
+# parameter an honest interval.  With a full plan its weight is negligible.
+PRIOR_SIGMA = np.array([math.log(4.0), math.log(4.0), 1.5, math.log(4.0)])
 
 
 @dataclass(frozen=True)
@@ -121,6 +125,7 @@ class Identifier:
         self.steps: list[StepHarmonics] = []
         self.theta = np.log([guess["F_s_N"], guess["x_s_m"], 1.0, guess["mass_kg"]])
         self.theta[2] = guess["n"]
+        self.theta_prior = self.theta.copy()
         self.estimate: Estimate | None = None
         self.history: list[dict] = []
 
@@ -156,16 +161,18 @@ class Identifier:
         k_eff = np.abs(meas[:, 0]) / np.maximum(np.abs(X[:, 0]), 1e-300)
         sigma = np.sqrt(wF ** 2 + (m * wA) ** 2 + (k_eff * wX) ** 2)[:, None]
         r = (meas - self.model_friction(F_s, x_s, n, X)) / sigma
-        return np.concatenate([r.real.ravel(), r.imag.ravel()])
+        prior = (th - self.theta_prior) / PRIOR_SIGMA
+        return np.concatenate([r.real.ravel(), r.imag.ravel(), prior])
 
     # ------------------------------------------------------------------ fit
     def fit(self, max_nfev: int = 60) -> Estimate:
         if not self.steps:
             raise ValueError("no steps to identify from")
-        K = self.K
-        X = np.array([np.pad(s.disp, (0, max(0, K - s.disp.size)))[:K] for s in self.steps])
-        P = np.array([np.pad(s.force, (0, max(0, K - s.force.size)))[:K] for s in self.steps])
-        A = np.array([np.pad(s.accel, (0, max(0, K - s.accel.size)))[:K] for s in self.steps])
+        # only harmonics every step measured (a missing one is not a zero)
+        K = min([self.K] + [min(s.disp.size, s.force.size, s.accel.size) for s in self.steps])
+        X = np.array([s.disp[:K] for s in self.steps])
+        P = np.array([s.force[:K] for s in self.steps])
+        A = np.array([s.accel[:K] for s in self.steps])
         # noise floor: 0.1 % of each step's force, so near-noiseless data stays well posed
         wF = np.array([max(s.sigma_force, 1e-3 * abs(s.force[0])) for s in self.steps])
         wA = np.array([max(s.sigma_accel, 1e-3 * abs(s.accel[0])) for s in self.steps])
@@ -176,13 +183,14 @@ class Identifier:
         res = least_squares(self._residual, th0, args=(X, P, A, wF, wA, wX), bounds=(lo, hi),
                             x_scale=np.array([0.1, 0.1, 0.1, 0.1]), max_nfev=max_nfev, method="trf")
         self.theta = res.x
-        dof = max(1, res.fun.size - res.x.size)
-        chi2 = float(res.fun @ res.fun / dof)
-        try:
-            cov = np.linalg.inv(res.jac.T @ res.jac) * max(chi2, 1.0)   # never narrower than the noise says
-            std = np.sqrt(np.clip(np.diag(cov), 0, None))
-        except np.linalg.LinAlgError:
-            std = np.full(4, np.inf)
+        data = res.fun[:-4]                       # without the prior's rows
+        dof = max(1, data.size - res.x.size)
+        chi2 = float(data @ data / dof)
+        # covariance from the SVD of the Jacobian (prior rows included, so it is never
+        # singular), never narrower than the noise says
+        _, sv, Vt = np.linalg.svd(res.jac, full_matrices=False)
+        cov = (Vt.T / sv ** 2) @ Vt * max(chi2, 1.0)
+        std = np.sqrt(np.clip(np.diag(cov), 0, None))
         vals = dict(F_s_N=math.exp(res.x[0]), x_s_m=math.exp(res.x[1]), n=float(res.x[2]),
                     mass_kg=math.exp(res.x[3]))
         z = 1.959964

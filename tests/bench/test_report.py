@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from bench.config import DEFAULTS, load_plan, load_rig
-from bench.report import UNSETTLED_RESIDUAL, fitted_compliance_pp, residual_ratio, write_report
+from bench.report import (ID_PARAMS, UNSETTLED_RESIDUAL, identification_data, plot_identification, residual_ratio,
+                          write_report)
 from bench.session import run_plan
 from bench.storage import RunStore
 from sim.rig import RigModel
@@ -26,7 +27,8 @@ stop_Hz = 300.0
 points = 5
 direction = "both"
 """
-PNGS = ("compliance.png", "accelerance.png", "quality.png", "resonance.png", "model_vs_measurement.png")
+PNGS = ("compliance.png", "accelerance.png", "quality.png", "resonance.png", "model_vs_measurement.png",
+        "identification.png")
 
 
 @pytest.fixture(scope="module")
@@ -110,60 +112,180 @@ def _model_pp(run_dir):
 def test_simulated_rig_agrees_with_model_engine_where_the_record_is_clean(run_dir):
     """An independent check of the whole chain (plant, twins, DAQ, force control, fits):
     the rig's RK4 plant seen through noisy sensors must give the shooting engine's
-    compliance.  Raw peak-to-peak carries a noise bias of about 3 sigma / amplitude
-    (about 1 % here), so allow 3 %; records with a large non-periodic residual (an
-    unsettled free vibration, see the report) are excluded from the raw check."""
+    compliance.  The stored compliance_pp is the peak-to-peak of the fitted periodic
+    displacement, so sensor noise biases it only through the fitted harmonics; on the
+    unflagged steps it agrees within 0.1 % in this run; allow 0.5 %."""
     pairs = _model_pp(run_dir)
     clean = [(r, c) for r, c in pairs.values() if residual_ratio(r) < UNSETTLED_RESIDUAL]
     assert len(clean) >= 10
     for r, c in clean:
-        assert r["compliance_pp_m_per_N"] / c - 1 == pytest.approx(0, abs=0.03), r["key"]
+        assert r["compliance_pp_m_per_N"] / c - 1 == pytest.approx(0, abs=0.005), r["key"]
 
 
-def test_harmonic_fit_compliance_matches_model_at_every_level(run_dir):
-    """Peak-to-peak of the fitted periodic waveform is free of noise and most of the
-    residual: its median over each level's steps must match the model within 1 %."""
+def test_stored_compliance_matches_model_at_every_level_flagged_steps_included(run_dir):
+    """Flagged steps (displacement residual up to 80 % of the fundamental at 300 Hz, 1 N)
+    still give compliance_pp within 1.5 % here, where the raw record's peak-to-peak is up to
+    2x the model: the harmonic fit rejects the residual.  Median within 0.5 %, max 3 %."""
     pairs = _model_pp(run_dir)
     for level in (1.0, 5.0):
-        d = [fitted_compliance_pp(r) / c - 1 for r, c in pairs.values() if r["target_force_N"] == level]
-        assert abs(np.median(d)) < 0.01, level
-        assert max(abs(x) for x in d) < 0.06, level
+        d = [r["compliance_pp_m_per_N"] / c - 1 for r, c in pairs.values() if r["target_force_N"] == level]
+        assert abs(np.median(d)) < 0.005, level
+        assert max(abs(x) for x in d) < 0.03, level
 
 
-def test_model_table_reports_each_level_with_small_median_difference(report):
-    section = report.read_text().split("## Model vs measurement")[1].split("\n## ")[0]
-    rows = [[c.strip() for c in line.strip("|").split("|")] for line in section.splitlines()
-            if line.startswith("| 1 |") or line.startswith("| 5 |")]
-    assert len(rows) == 2
-    for row in rows:
-        median_raw, median_fit = (float(row[i].split()[0]) for i in (3, 5))
-        assert abs(median_raw) < 3 and abs(median_fit) < 1
+def _section(text, title):
+    return text.split(f"## {title}")[1].split("\n## ")[0]
 
 
-def test_identification_entry_is_rendered_as_a_table(run_dir, tmp_path):
+def _rows(section, first_cells):
+    out = {}
+    for line in section.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if line.startswith("|") and cells[0] in first_cells:
+            out[cells[0]] = cells
+    return out
+
+
+def test_model_table_reports_each_level_with_small_differences(report):
+    rows = _rows(_section(report.read_text(), "Model vs measurement"), ("1", "5"))
+    assert set(rows) == {"1", "5"}
+    for row in rows.values():
+        median, largest, largest_unflagged = (float(row[i].split()[0]) for i in (3, 4, 5))
+        assert abs(median) < 0.5 and abs(largest) < 3 and abs(largest_unflagged) < 0.5
+
+
+def test_resonance_table_shows_the_stored_compliance_pp(report, run_dir):
+    results = RunStore.open(run_dir).results()
+    rows = _rows(_section(report.read_text(), "Harmonic resonance per level"), ("1", "5"))
+    for level in (1.0, 5.0):
+        best = max(r["compliance_pp_m_per_N"] for r in results if r["target_force_N"] == level)
+        assert float(rows[f"{level:g}"][2]) == pytest.approx(best, rel=1e-3)
+
+
+def test_texts_say_where_compliance_pp_comes_from(report):
+    text = report.read_text()
+    assert "from the periodic displacement of the harmonic fit" in text
+    assert "raw record" not in text
+
+
+def test_run_stored_before_fitted_compliance_pp_is_reported_as_raw(run_dir, tmp_path):
+    """Older runs have no disp.raw_peak_to_peak and their compliance_pp is the raw record's."""
+    run = _copy(run_dir, tmp_path)
+    for p in (run / "steps").glob("*.json"):
+        r = json.loads(p.read_text())
+        r["disp"]["peak_to_peak"] = r["disp"].pop("raw_peak_to_peak")
+        r["compliance_pp_m_per_N"] = 0.5 * r["disp"]["peak_to_peak"] / r["force_N"]
+        p.write_text(json.dumps(r))
+    text = write_report(run).read_text()
+    assert "from the raw record (this run predates" in text
+    assert "from the periodic displacement of the harmonic fit" not in text
+    assert "from the raw record, is biased high" in _section(text, "Steps needing attention")
+    assert (run / "report" / "compliance.png").is_file()
+
+
+# ---------------------------------------------------------------------------- identification
+
+
+def _id_table(text):
+    return _rows(_section(text, "Identification of F_s, x_s, n and m"), [p.label for p in ID_PARAMS])
+
+
+def test_identification_table_shows_the_final_fit_of_run_json(report, run_dir):
+    final = RunStore.open(run_dir).metadata["identification"]
+    rows = _id_table(report.read_text())
+    assert set(rows) == {p.label for p in ID_PARAMS}
+    for p in ID_PARAMS:
+        row = rows[p.label]
+        for col, part in ((2, "values"), (3, "low"), (4, "high")):
+            assert float(row[col]) == pytest.approx(final[part][p.key] * p.scale, rel=1e-3), (p.key, part)
+        assert float(row[5].split()[0]) == pytest.approx(100 * final["rel_std"][p.key], abs=0.006)
+
+
+def test_identification_section_lists_times_chi2_and_warnings(report, run_dir):
+    meta = RunStore.open(run_dir).metadata
+    final = meta["identification"]
+    section = _section(report.read_text(), "Identification of F_s, x_s, n and m")
+    assert f"final fit over {final['steps_used']} steps" in section
+    assert (f"median {final['update_ms_median']:.3g} ms, max {final['update_ms_max']:.3g} ms") in section
+    assert f"reduced chi^2: {final['reduced_chi2']:.4g}" in section
+    assert "fit warnings: none" in section and not final["warnings"]
+    # this plan has no level at or above F_s and few frequencies near the resonance
+    assert len(meta["identifiability_warnings"]) == 2
+    for w in meta["identifiability_warnings"]:
+        assert f"  - {w}" in section
+
+
+def test_simulated_rig_identification_recovers_the_true_parameters(report, run_dir):
+    """The truth is the rig model's (an independent fact), not the identifier's own output.
+    With 20 steps the final fit's 95 % half-widths are at most 0.5 % (x_s) and the estimates
+    come out within 0.02 %: require each within 1 % of the truth and the truth inside the
+    reported interval, and the report's truth and error columns to say so."""
+    meta = RunStore.open(run_dir).metadata
+    final, truth = meta["identification"], RigModel.from_dict(meta["rig"]["model"])
+    rows = _id_table(report.read_text())
+    for p in ID_PARAMS:
+        t, v = getattr(truth, p.key), final["values"][p.key]
+        assert v / t - 1 == pytest.approx(0, abs=0.01), p.key
+        assert final["low"][p.key] <= t <= final["high"][p.key], p.key
+        row = rows[p.label]
+        assert float(row[6]) == pytest.approx(t * p.scale, rel=1e-3)
+        assert float(row[7].split()[0]) == pytest.approx(100 * (v / t - 1), abs=0.006)
+        assert row[8] == "yes"
+
+
+def test_identification_plot_keeps_truth_and_final_estimate_on_scale(run_dir):
+    """The first estimates are far off (the axis caps them); truth and final fit must stay visible."""
+    meta = RunStore.open(run_dir).metadata
+    ident = identification_data(run_dir, meta)
+    assert len(ident.history) == 20 and ident.truth
+    fig = plot_identification(ident, "t", [])
+    for ax, p in zip(fig.axes, ID_PARAMS):
+        lo, hi = ax.get_ylim()
+        for v in (ident.truth[p.key], meta["identification"]["values"][p.key]):
+            assert lo < v * p.scale < hi, p.key
+        assert ax.get_yscale() == ("log" if p.log_y else "linear")
+
+
+def test_interrupted_run_reports_the_last_online_estimate(run_dir, tmp_path):
     run = _copy(run_dir, tmp_path)
     meta = json.loads((run / "run.json").read_text())
-    meta["identification"] = {"parameters": {"F_s_N": {"value": 10.1, "low": 9.8, "high": 10.4, "unit": "N"},
-                                             "n": {"value": 1.49, "low": 1.41, "high": 1.57}},
-                              "method": "test"}
+    del meta["identification"]
+    (run / "run.json").write_text(json.dumps(meta))
+    lines = (run / "identification.jsonl").read_text().splitlines()[:7]
+    (run / "identification.jsonl").write_text("\n".join(lines) + "\n")
+    last = json.loads(lines[-1])
+    text = write_report(run).read_text()
+    section = _section(text, "Identification of F_s, x_s, n and m")
+    assert f"last online estimate, after step {last['step']} (7 steps)" in section
+    assert "no final fit" in section
+    rows = _id_table(text)
+    for p in ID_PARAMS:
+        assert float(rows[p.label][2]) == pytest.approx(last["values"][p.key] * p.scale, rel=1e-3)
+    assert (run / "report" / "identification.png").is_file()
+
+
+def test_run_without_identification_says_so_and_has_no_plot(run_dir, tmp_path):
+    run = _copy(run_dir, tmp_path)
+    (run / "identification.jsonl").unlink()
+    meta = json.loads((run / "run.json").read_text())
+    del meta["identification"]
     (run / "run.json").write_text(json.dumps(meta))
     text = write_report(run).read_text()
-    ident = text.split("## Identification")[1]
-    assert "| parameter | value | low | high | unit |" in ident
-    assert "| F_s_N | 10.1 | 9.8 | 10.4 | N |" in ident
-    assert "- method: test" in ident
+    section = _section(text, "Identification of F_s, x_s, n and m")
+    assert "No identification data" in section
+    assert meta["identifiability_warnings"][0] in section
+    assert not (run / "report" / "identification.png").exists()
+    assert "identification.png" not in text
 
 
-def test_identification_entry_of_per_field_dicts_is_rendered_per_parameter(run_dir, tmp_path):
+def test_unreadable_identification_entry_is_shown_not_fatal(run_dir, tmp_path):
     run = _copy(run_dir, tmp_path)
     meta = json.loads((run / "run.json").read_text())
-    meta["identification"] = {"values": {"F_s_N": 10.0, "n": 1.5}, "low": {"F_s_N": 9.9, "n": 1.45},
-                              "high": {"F_s_N": 10.1, "n": 1.55}, "steps_used": 20}
+    meta["identification"] = {"method": "something else"}
     (run / "run.json").write_text(json.dumps(meta))
-    ident = write_report(run).read_text().split("## Identification")[1]
-    assert "| parameter | values | low | high |" in ident
-    assert "| n | 1.5 | 1.45 | 1.55 |" in ident
-    assert "- steps_used: 20" in ident
+    section = _section(write_report(run).read_text(), "Identification of F_s, x_s, n and m")
+    assert "cannot read" in section and "something else" in section
+    assert "last online estimate" in section       # the history is still there
 
 
 def test_partial_run_reports_its_interruption(run_dir, tmp_path):
