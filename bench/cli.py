@@ -173,23 +173,34 @@ def cmd_export(args) -> int:
 
 
 def cmd_identify(args) -> int:
-    """Offline identification of a stored run (writes identification into run.json)."""
+    """Offline identification of a stored run (result written into its run.json) or of
+    UFF58 time records (guesses from --rig, default: the simulated rig's file)."""
     from procedures.online_id import MAX_HARMONICS
     from sim.identify import identify_results
 
-    from .config import parse_rig
+    from .config import DEFAULTS, load_rig, parse_rig
     from .storage import RunStore
 
-    store = RunStore.open(Path(args.run))
-    meta = store.metadata
-    rig = parse_rig({"rig": _rig_toml(meta["rig"])}, f"{args.run}/run.json")
-    results = store.results()
+    source = Path(args.source)
+    store = None
+    if source.is_dir():
+        store = RunStore.open(source)
+        meta = store.metadata
+        rig = parse_rig({"rig": _rig_toml(meta["rig"])}, f"{source}/run.json")
+        results = store.results()
+        harmonics = min(meta["plan"]["harmonics"], MAX_HARMONICS)
+    else:
+        from .export import import_uff58
+        rig = load_rig(Path(args.rig) if args.rig else DEFAULTS / "sim_rig.toml")
+        results = [s for s in import_uff58(source).steps if s.get("source") == "uff58-time"]
+        harmonics = MAX_HARMONICS
     if not results:
-        raise ValueError(f"{args.run}: no completed steps to identify from")
+        raise ValueError(f"{source}: no steps with force, acceleration and displacement to identify from")
     guess = dict(F_s_N=rig.expected_F_s_N, x_s_m=rig.expected_x_s_m, n=rig.expected_n,
                  mass_kg=rig.expected_mass_kg)
-    est = identify_results(results, guess, min(meta["plan"]["harmonics"], MAX_HARMONICS)).estimate
-    store.update(identification=est.as_dict())
+    est = identify_results(results, guess, harmonics).estimate
+    if store:
+        store.update(identification=est.as_dict())
     print(f"{'parameter':>10} {'estimate':>12} {'95 % interval':>28}")
     for k, v in est.values.items():
         print(f"{k:>10} {v:12.5g} [{est.low[k]:12.5g}, {est.high[k]:12.5g}]")
@@ -251,8 +262,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-time", action="store_true", help="skip the time records (time.uff)")
     s.set_defaults(func=cmd_export)
 
-    s = sub.add_parser("identify", help="identify F_s, x_s, n and the mass from a stored run")
-    s.add_argument("run")
+    s = sub.add_parser("identify", help="identify F_s, x_s, n and the mass from a stored run or a UFF58 file")
+    s.add_argument("source", help="run directory, or a UFF file of time records (bench export)")
+    s.add_argument("--rig", help="rig TOML whose [rig.expected] values start the fit (UFF input)")
     s.set_defaults(func=cmd_identify)
 
     s = sub.add_parser("twins", help="serve the simulated rig's instruments on loopback; print their URLs")

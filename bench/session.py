@@ -25,7 +25,7 @@ from procedures.online_id import OnlineIdentification, identifiability
 from procedures.safety import LimitExceeded, SupervisedDaq, SupervisedGenerator, Supervisor, tightest
 from procedures.stepped_sine import SteppedSine
 
-from .config import Limits, Plan, Rig
+from .config import Plan, Rig
 from .storage import RunStore
 
 log = logging.getLogger(__name__)

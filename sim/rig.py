@@ -21,7 +21,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, fields
 
 import numpy as np
 

@@ -9,30 +9,11 @@ import pytest
 import pyuff
 
 from bench.cli import main
-from bench.config import DEFAULTS, load_plan, load_rig
 from bench.export import CSV_COLUMNS, export_run, import_uff58
-from bench.session import run_plan
-from bench.storage import RunStore
-
-PLAN = """
-[plan]
-name = "export test"
-levels_N = [1.0, 5.0]
-[plan.frequencies]
-start_Hz = 30.0
-stop_Hz = 300.0
-points = 5
-direction = "both"
-"""
-
 
 @pytest.fixture(scope="module")
-def run(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("export")
-    (tmp / "plan.toml").write_text(PLAN)
-    store = run_plan(load_plan(tmp / "plan.toml"), load_rig(DEFAULTS / "sim_rig.toml"), tmp / "run")
-    assert store.metadata["status"] == "completed"
-    return store
+def run(small_run):
+    return small_run
 
 
 @pytest.fixture(scope="module")

@@ -9,35 +9,22 @@ import shutil
 import numpy as np
 import pytest
 
-from bench.config import DEFAULTS, load_plan, load_rig
 from bench.report import (ID_PARAMS, UNSETTLED_RESIDUAL, identification_data, plot_identification, residual_ratio,
                           write_report)
-from bench.session import run_plan
 from bench.storage import RunStore
 from sim.rig import RigModel
 from sim.shooting import frf_shooting
 
-PLAN = """
-[plan]
-name = "report test"
-levels_N = [1.0, 5.0]
-[plan.frequencies]
-start_Hz = 30.0
-stop_Hz = 300.0
-points = 5
-direction = "both"
-"""
 PNGS = ("compliance.png", "accelerance.png", "quality.png", "resonance.png", "model_vs_measurement.png",
         "identification.png")
 
 
 @pytest.fixture(scope="module")
-def run_dir(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("report")
-    (tmp / "plan.toml").write_text(PLAN)
-    store = run_plan(load_plan(tmp / "plan.toml"), load_rig(DEFAULTS / "sim_rig.toml"), tmp / "run")
-    assert store.metadata["status"] == "completed"
-    return store.path
+def run_dir(small_run, tmp_path_factory):
+    # the report is written into the run directory: work on a copy of the shared run
+    dst = tmp_path_factory.mktemp("report") / "run"
+    shutil.copytree(small_run.path, dst)
+    return dst
 
 
 @pytest.fixture(scope="module")
@@ -72,7 +59,7 @@ def test_plots_are_valid_non_blank_pngs(report, name):
 def test_report_names_plan_rig_status_and_each_level(report, run_dir):
     text = report.read_text()
     meta = RunStore.open(run_dir).metadata
-    assert "report test" in text and meta["rig"]["name"] in text
+    assert "small test plan" in text and meta["rig"]["name"] in text
     assert "**completed**" in text and "20 / 20" in text
     for part in ("TWIN000001", "numpy", "none (events.jsonl"):
         assert part in text

@@ -73,7 +73,7 @@ def test_truth_inside_the_95_percent_interval_in_most_cases(outcomes):
 
 
 def test_identifiability_warnings_name_the_parameter():
-    truth, guess = dict(F_s_N=10.0, x_s_m=10e-6, n=1.5, mass_kg=10.0), None
+    truth = dict(F_s_N=10.0, x_s_m=10e-6, n=1.5, mass_kg=10.0)
     plan, rig = configs(truth, dict(truth), 0)
     assert identifiability(plan, rig) == []          # the default plan pins everything
     from dataclasses import replace

@@ -1,0 +1,29 @@
+"""A small stepped-sine run on the simulated rig, shared by the bench tests (read-only:
+a test that changes a run works on a copy)."""
+
+from __future__ import annotations
+
+import pytest
+
+from bench.config import DEFAULTS, load_plan, load_rig
+from bench.session import run_plan
+
+SMALL_PLAN = """
+[plan]
+name = "small test plan"
+levels_N = [1.0, 5.0]
+[plan.frequencies]
+start_Hz = 30.0
+stop_Hz = 300.0
+points = 5
+direction = "both"
+"""
+
+
+@pytest.fixture(scope="session")
+def small_run(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("small_run")
+    (tmp / "plan.toml").write_text(SMALL_PLAN)
+    store = run_plan(load_plan(tmp / "plan.toml"), load_rig(DEFAULTS / "sim_rig.toml"), tmp / "run")
+    assert store.metadata["status"] == "completed"
+    return store

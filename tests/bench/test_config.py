@@ -1,0 +1,295 @@
+"""Plan and rig TOML: the shipped defaults parse; every error names the file, the key and
+what is allowed; the schedule is the documented one."""
+
+from __future__ import annotations
+
+import logging
+import math
+import textwrap
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from bench.cli import main
+from bench.config import DEFAULTS, MAX_FREQ_HZ, ConfigError, load_plan, load_rig, parse_plan
+
+PLAN = """\
+[plan]
+name = "config test"
+levels_N = [1.0, 3.0]
+
+[plan.frequencies]
+list_Hz = [40.0, 80.0, 160.0]
+direction = "up"
+
+[plan.control]
+settle_cycles = 4
+"""
+
+RIG = """\
+[rig]
+name = "a real rig"
+simulated = false
+
+[rig.instruments]
+generator = "socket://192.0.2.10:5025"
+sensor = "modbus-tcp://192.0.2.11:502?unit=1"
+daq = "tcp://192.0.2.12:29536"
+
+[rig.calibration]
+force_V_per_N = 0.0225
+accel_V_per_m_s2 = 0.0102
+disp_V_per_m = 8000.0
+amp_gain_N_per_V = 20.0
+
+[rig.limits]
+drive_V = 7.0
+force_N = 130.0
+disp_m = 0.9e-3
+accel_m_s2 = 20.0
+"""
+
+
+def write(tmp_path: Path, name: str, text: str) -> Path:
+    path = tmp_path / name
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+def edit(text: str, old: str, new: str) -> str:
+    assert old in text, f"test setup: {old!r} not in the template"
+    return text.replace(old, new, 1)
+
+
+# --------------------------------------------------------------------------- defaults
+
+def test_the_demo_plan_parses_as_documented():
+    plan = load_plan(DEFAULTS / "demo_plan.toml")
+    assert plan.levels_N == (0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0)
+    assert plan.direction == "up"
+    assert len(plan.freqs_Hz) == 24
+    assert plan.freqs_Hz[0] == 20.0 and plan.freqs_Hz[-1] == 1000.0
+    # log spacing: a constant ratio (50 ** (1/23)) up to the 6 significant digits kept
+    ratios = [b / a for a, b in zip(plan.freqs_Hz, plan.freqs_Hz[1:])]
+    assert all(r == pytest.approx(50 ** (1 / 23), rel=1e-5) for r in ratios)
+    # every control setting is the file's (read here with tomllib, independently)
+    with open(DEFAULTS / "demo_plan.toml", "rb") as fh:
+        control = tomllib.load(fh)["plan"]["control"]
+    assert control and all(getattr(plan, key) == value for key, value in control.items())
+    assert plan.limits is None
+    assert len(plan.schedule()) == 7 * 24
+
+
+def test_the_simulated_rig_parses_as_documented():
+    rig = load_rig(DEFAULTS / "sim_rig.toml")
+    assert rig.simulated
+    assert (rig.generator_url, rig.sensor_url, rig.daq_url) == ("", "", "")   # filled in at run time
+    assert (rig.limits.drive_V, rig.limits.force_N, rig.limits.disp_m, rig.limits.accel_m_s2) == \
+        (7.0, 130.0, 0.9e-3, 20.0)
+    assert rig.amp_gain_N_per_V == 20.0
+    assert rig.model["F_s_N"] == 10.0 and rig.model["n"] == 1.5
+
+
+def test_a_non_simulated_rig_parses(tmp_path):
+    rig = load_rig(write(tmp_path, "rig.toml", RIG))
+    assert not rig.simulated and rig.generator_url == "socket://192.0.2.10:5025"
+    assert rig.model == {}
+
+
+# --------------------------------------------------------------------------- plan errors
+
+PLAN_ERRORS = {
+    "unknown key in [plan]": (
+        edit(PLAN, 'name = "config test"', 'name = "config test"\ncolour = "red"'),
+        ["[plan]", "unknown key(s) ['colour']", "allowed", "'levels_N'", "'frequencies'"]),
+    "unknown key in [plan.control]": (
+        edit(PLAN, "settle_cycles = 4", "setle_cycles = 4"),
+        ["[plan.control]", "'setle_cycles'", "allowed", "'settle_cycles'"]),
+    "unknown top-level table": (
+        PLAN + "\n[plna]\nx = 1\n",
+        ["unknown key(s) ['plna']", "allowed: ['plan']"]),
+    "force level above 1000 N": (
+        edit(PLAN, "levels_N = [1.0, 3.0]", "levels_N = [1.0, 2000.0]"),
+        ["[plan] levels_N[1]", "must be > 0 and <= 1000", "got 2000"]),
+    "force level zero": (
+        edit(PLAN, "levels_N = [1.0, 3.0]", "levels_N = [0.0]"),
+        ["[plan] levels_N[0]", "must be > 0", "got 0"]),
+    "force level not a number": (
+        edit(PLAN, "levels_N = [1.0, 3.0]", 'levels_N = ["big"]'),
+        ["[plan] levels_N[0]", "must be a number", "'big'"]),
+    "no force levels": (
+        edit(PLAN, "levels_N = [1.0, 3.0]", "levels_N = []"),
+        ["[plan] levels_N", "non-empty list of numbers"]),
+    "force levels missing": (
+        edit(PLAN, "levels_N = [1.0, 3.0]", ""),
+        ["[plan] levels_N", "missing (required)"]),
+    "listed frequency above 1000 Hz": (
+        edit(PLAN, "list_Hz = [40.0, 80.0, 160.0]", "list_Hz = [40.0, 1500.0]"),
+        ["[plan.frequencies] list_Hz[1]", f"<= {MAX_FREQ_HZ:g}", "got 1500"]),
+    "stop frequency above 1000 Hz": (
+        edit(PLAN, "list_Hz = [40.0, 80.0, 160.0]", "start_Hz = 20.0\nstop_Hz = 1200.0\npoints = 5"),
+        ["[plan.frequencies] stop_Hz", f"<= {MAX_FREQ_HZ:g}", "got 1200"]),
+    "stop below start": (
+        edit(PLAN, "list_Hz = [40.0, 80.0, 160.0]", "start_Hz = 100.0\nstop_Hz = 50.0\npoints = 5"),
+        ["[plan.frequencies] stop_Hz", "must be >= 100", "got 50"]),
+    "fractional number of points": (
+        edit(PLAN, "list_Hz = [40.0, 80.0, 160.0]", "start_Hz = 20.0\nstop_Hz = 100.0\npoints = 2.5"),
+        ["[plan.frequencies] points", "must be an integer", "got 2.5"]),
+    "bad spacing": (
+        edit(PLAN, "list_Hz = [40.0, 80.0, 160.0]",
+             'start_Hz = 20.0\nstop_Hz = 100.0\npoints = 5\nspacing = "octave"'),
+        ["[plan.frequencies] spacing", "['log', 'linear']", "'octave'"]),
+    "list and range both given": (
+        edit(PLAN, "list_Hz = [40.0, 80.0, 160.0]", "list_Hz = [40.0, 80.0]\nstart_Hz = 20.0"),
+        ["[plan.frequencies]", "unknown key(s) ['start_Hz']", "'list_Hz'"]),
+    "repeated frequency": (
+        edit(PLAN, "list_Hz = [40.0, 80.0, 160.0]", "list_Hz = [40.0, 80.0, 40.0]"),
+        ["[plan.frequencies]", "repeated frequencies"]),
+    "bad direction": (
+        edit(PLAN, 'direction = "up"', 'direction = "sideways"'),
+        ["[plan.frequencies] direction", "['up', 'down', 'both']", "'sideways'"]),
+    "force tolerance out of range": (
+        edit(PLAN, "settle_cycles = 4", "force_tolerance = 0.9"),
+        ["[plan.control] force_tolerance", "<= 0.5", "got 0.9"]),
+    "harmonics above Nyquist at the highest frequency": (
+        edit(edit(PLAN, "settle_cycles = 4", "harmonics = 20"), "160.0]", "800.0]"),
+        ["[plan.control] harmonics", "must be <= 15", "Nyquist at 800 Hz", "got 20"]),
+    "incomplete plan limits": (
+        PLAN + "\n[plan.limits]\ndrive_V = 1.0\n",
+        ["[plan.limits] force_N", "missing (required)"]),
+    "infeasible policy": (
+        edit(PLAN, 'name = "config test"', 'name = "config test"\ninfeasible = "ignore"'),
+        ["[plan] infeasible", "['refuse', 'skip']", "'ignore'"]),
+}
+
+
+@pytest.mark.parametrize("text, fragments", PLAN_ERRORS.values(), ids=PLAN_ERRORS.keys())
+def test_plan_errors_name_the_file_the_key_and_what_is_allowed(tmp_path, text, fragments):
+    path = write(tmp_path, "my_plan.toml", text)
+    with pytest.raises(ConfigError) as err:
+        load_plan(path)
+    message = str(err.value)
+    assert message.startswith(f"{path}: ")
+    for fragment in fragments:
+        assert fragment in message
+
+
+def test_harmonics_limit_follows_the_sample_rate_and_highest_frequency(tmp_path):
+    # at 1000 Hz and 25.6 kS/s Nyquist is 12.8 kHz: harmonics up to 12 fit, 13 does not
+    base = edit(PLAN, "list_Hz = [40.0, 80.0, 160.0]", "list_Hz = [40.0, 1000.0]")
+    assert load_plan(write(tmp_path, "ok.toml", edit(base, "settle_cycles = 4", "harmonics = 12"))).harmonics == 12
+    with pytest.raises(ConfigError, match=r"harmonics: must be <= 12 .*got 13"):
+        load_plan(write(tmp_path, "bad.toml", edit(base, "settle_cycles = 4", "harmonics = 13")))
+
+
+# --------------------------------------------------------------------------- rig errors
+
+RIG_ERRORS = {
+    "missing calibration key": (
+        edit(RIG, "force_V_per_N = 0.0225\n", ""),
+        ["[rig.calibration] force_V_per_N", "missing (required)"]),
+    "model table on a real rig": (
+        RIG + "\n[rig.model]\nF_s_N = 10.0\n",
+        ["[rig.model]", "only allowed with simulated = true"]),
+    "real rig without an instrument address": (
+        edit(RIG, 'generator = "socket://192.0.2.10:5025"\n', ""),
+        ["[rig.instruments] generator", "missing (required)"]),
+    "unknown instrument": (
+        edit(RIG, '[rig.instruments]\n', '[rig.instruments]\nscope = "socket://192.0.2.13:5025"\n'),
+        ["[rig.instruments]", "unknown key(s) ['scope']", "'daq'", "'generator'", "'sensor'"]),
+    "displacement limit beyond the probe": (
+        edit(RIG, "disp_m = 0.9e-3", "disp_m = 0.05"),
+        ["[rig.limits] disp_m", "must be > 0 and <= 0.01", "got 0.05"]),
+    "drive limit missing": (
+        edit(RIG, "drive_V = 7.0\n", ""),
+        ["[rig.limits] drive_V", "missing (required)"]),
+    "simulated not a boolean": (
+        edit(RIG, "simulated = false", 'simulated = "no"'),
+        ["[rig] simulated", "must be true or false", "'no'"]),
+    "unknown model parameter on a simulated rig": (
+        edit(RIG, "simulated = false", "simulated = true") + "\n[rig.model]\nF_s = 10.0\n",
+        ["[rig.model]", "unknown rig model keys ['F_s']", "allowed", "'F_s_N'"]),
+}
+
+
+@pytest.mark.parametrize("text, fragments", RIG_ERRORS.values(), ids=RIG_ERRORS.keys())
+def test_rig_errors_name_the_file_the_key_and_what_is_allowed(tmp_path, text, fragments):
+    path = write(tmp_path, "my_rig.toml", text)
+    with pytest.raises(ConfigError) as err:
+        load_rig(path)
+    message = str(err.value)
+    assert message.startswith(f"{path}: ")
+    for fragment in fragments:
+        assert fragment in message
+
+
+@pytest.mark.parametrize("loader", [load_plan, load_rig])
+def test_bad_toml_syntax_names_the_file(tmp_path, loader):
+    path = write(tmp_path, "broken.toml", '[plan]\nlevels_N = [1.0, 3.0\nname = "x"\n')
+    with pytest.raises(ConfigError, match=rf"^{path}: not valid TOML"):
+        loader(path)
+
+
+@pytest.mark.parametrize("loader", [load_plan, load_rig])
+def test_a_missing_file_is_named(tmp_path, loader):
+    path = tmp_path / "nowhere.toml"
+    with pytest.raises(ConfigError, match=rf"^{path}: file not found"):
+        loader(path)
+
+
+def test_the_cli_reports_a_config_error_without_a_traceback(tmp_path, caplog, capsys):
+    path = write(tmp_path, "my_plan.toml", edit(PLAN, 'direction = "up"', 'direction = "sideways"'))
+    with caplog.at_level(logging.ERROR):
+        assert main(["dry-run", "--plan", str(path)]) == 2
+    assert any(str(path) in r.getMessage() and "direction" in r.getMessage() for r in caplog.records)
+    assert "Traceback" not in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- schedule
+
+def plan_with(direction: str, levels=(1.0, 3.0), freqs=(160.0, 40.0, 80.0)):
+    return parse_plan({"plan": {"levels_N": list(levels),
+                                "frequencies": {"list_Hz": list(freqs), "direction": direction}}})
+
+
+def test_the_frequency_list_is_sorted_ascending():
+    assert plan_with("up").freqs_Hz == (40.0, 80.0, 160.0)
+
+
+@pytest.mark.parametrize("direction, sweeps", [
+    ("up", [("up", [40.0, 80.0, 160.0])]),
+    ("down", [("down", [160.0, 80.0, 40.0])]),
+    ("both", [("up", [40.0, 80.0, 160.0]), ("down", [160.0, 80.0, 40.0])]),
+])
+def test_schedule_runs_each_level_in_turn_through_its_sweeps(direction, sweeps):
+    plan = plan_with(direction)
+    expected = [(level, d, f) for level in (1.0, 3.0) for d, fs in sweeps for f in fs]
+    steps = plan.schedule()
+    assert [(s.force_N, s.direction, s.freq_Hz) for s in steps] == expected
+    assert [s.index for s in steps] == list(range(len(expected)))
+    for s in steps:
+        assert plan.levels_N[s.level_index] == s.force_N
+        assert plan.freqs_Hz[s.freq_index] == s.freq_Hz
+
+
+def test_step_keys_are_unique_readable_and_sort_in_schedule_order():
+    steps = plan_with("both", levels=[0.5] * 1 + [1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0, 256.0, 512.0],
+                      freqs=[10.0 * k for k in range(1, 31)]).schedule()
+    keys = [s.key for s in steps]
+    assert len(set(keys)) == len(keys) == 11 * 30 * 2
+    # the run directory lists steps by file name: that order must be the schedule's
+    assert sorted(keys) == keys
+    s = steps[37]
+    assert s.key == f"{37:05d}-L{s.level_index:02d}-F{s.freq_index:03d}-{s.direction}"
+    assert s.key == "00037-L00-F022-down"
+
+
+def test_a_log_grid_hits_its_end_points():
+    plan = parse_plan({"plan": {"levels_N": [1.0], "frequencies": {
+        "start_Hz": 20.0, "stop_Hz": 1000.0, "points": 7, "spacing": "log"}}})
+    assert plan.freqs_Hz[0] == 20.0 and plan.freqs_Hz[-1] == 1000.0
+    assert all(math.isclose(b / a, 50 ** (1 / 6), rel_tol=1e-5) for a, b in zip(plan.freqs_Hz, plan.freqs_Hz[1:]))
+    lin = parse_plan({"plan": {"levels_N": [1.0], "frequencies": {
+        "start_Hz": 100.0, "stop_Hz": 200.0, "points": 5, "spacing": "linear"}}})
+    assert lin.freqs_Hz == (100.0, 125.0, 150.0, 175.0, 200.0)

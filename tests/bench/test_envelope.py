@@ -1,0 +1,118 @@
+"""The envelope check: `bench dry-run` and run_plan refuse a plan the rig's limits cannot
+hold, name the offending level and frequency, and nothing moves.
+
+The refused plans are infeasible by plain physics, whatever margin the estimate adds:
+30 N from an amplifier of 20 N/V needs 1.5 V (> a 1 V drive limit); 30 N on a free
+10 kg mass at 20 Hz moves it P/(m w^2) = 0.19 mm (> a 0.15 mm displacement limit).
+"""
+
+from __future__ import annotations
+
+import math
+import textwrap
+
+import pytest
+
+import bench.session
+from bench.cli import main
+from bench.config import DEFAULTS, load_plan, load_rig, parse_plan, parse_rig
+from bench.session import EnvelopeError, run_plan
+from drivers import start_twins
+from sim.rig import SimulatedRig
+
+RIG_LIMITS = dict(drive_V=7.0, force_N=130.0, disp_m=0.9e-3, accel_m_s2=20.0)   # sim_rig.toml
+
+
+def plan_toml(tmp_path, levels, freqs, infeasible="refuse", **limits) -> str:
+    text = textwrap.dedent(f"""\
+        [plan]
+        name = "envelope test"
+        infeasible = "{infeasible}"
+        levels_N = {list(levels)}
+        [plan.frequencies]
+        list_Hz = {list(freqs)}
+        """)
+    if limits:
+        text += "[plan.limits]\n" + "".join(f"{k} = {v!r}\n" for k, v in dict(RIG_LIMITS, **limits).items())
+    path = tmp_path / "plan.toml"
+    path.write_text(text)
+    return str(path)
+
+
+def test_free_mass_figures_behind_the_refused_plans():
+    # the independent facts the refusals below rest on (see the module docstring)
+    rig = load_rig(DEFAULTS / "sim_rig.toml")
+    assert 30.0 / rig.amp_gain_N_per_V == 1.5
+    assert 30.0 / (rig.expected_mass_kg * (2 * math.pi * 20.0) ** 2) > 0.15e-3
+    assert 30.0 / (rig.expected_mass_kg * (2 * math.pi * 80.0) ** 2) + 3 * rig.expected_x_s_m < 0.15e-3 / 1.25
+
+
+def test_dry_run_accepts_the_default_plan_on_the_simulated_rig(capsys):
+    assert main(["dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert "7 levels x 24 frequencies" in out
+    assert "envelope ok" in out and "REFUSED" not in out
+
+
+def test_dry_run_refuses_a_level_beyond_the_drive_limit(tmp_path, capsys):
+    plan = plan_toml(tmp_path, levels=[1.0, 30.0], freqs=[40.0, 80.0], drive_V=1.0)
+    assert main(["dry-run", "--plan", plan]) == 3
+    out = capsys.readouterr().out
+    refused = [line for line in out.splitlines() if line.startswith("REFUSED")]
+    assert len(refused) == 1
+    assert "2 of 4 steps" in refused[0]
+    assert "30 N at 40 Hz" in refused[0] and "drive" in refused[0] and "> 1 V" in refused[0]
+    # the per-level table says the small level is fine
+    level_1 = next(line for line in out.splitlines() if line.split()[:1] == ["1"])
+    assert level_1.endswith("ok")
+
+
+def test_dry_run_refuses_a_level_beyond_the_displacement_limit_at_low_frequency(tmp_path, capsys):
+    plan = plan_toml(tmp_path, levels=[1.0, 30.0], freqs=[20.0, 80.0], disp_m=0.15e-3)
+    assert main(["dry-run", "--plan", plan]) == 3
+    out = capsys.readouterr().out
+    refused = next(line for line in out.splitlines() if line.startswith("REFUSED"))
+    assert "1 of 4 steps" in refused                  # 30 N at 80 Hz is fine
+    assert "30 N at 20 Hz" in refused and "displacement" in refused and "> 0.15 mm" in refused
+
+
+def test_run_plan_refuses_before_any_twin_starts(tmp_path, mocker):
+    spy = mocker.spy(bench.session, "start_twins")
+    plan = load_plan(plan_toml(tmp_path, levels=[30.0], freqs=[20.0, 80.0], disp_m=0.15e-3))
+    out = tmp_path / "run"
+    with pytest.raises(EnvelopeError, match=r"30 N at 20 Hz: displacement"):
+        run_plan(plan, load_rig(DEFAULTS / "sim_rig.toml"), out, identify=False)
+    assert spy.call_count == 0
+    assert not out.exists()
+
+
+def test_run_plan_refuses_without_touching_a_real_rigs_generator(tmp_path):
+    # a non-simulated rig whose instruments are twins this test holds: the refused plan
+    # must not even connect (the driver's first act would be OUTP OFF / OUTP:LOAD INF)
+    with start_twins(SimulatedRig()) as twins:
+        state_before = repr(twins.generator.state)
+        rig = parse_rig({"rig": {
+            "simulated": False,
+            "instruments": {"generator": twins.generator_url, "sensor": twins.sensor_url,
+                            "daq": twins.daq_bridge_url},
+            "calibration": {"force_V_per_N": 0.0225, "accel_V_per_m_s2": 0.0102,
+                            "disp_V_per_m": 8000.0, "amp_gain_N_per_V": 20.0},
+            "limits": dict(RIG_LIMITS, drive_V=1.0)}})
+        plan = parse_plan({"plan": {"levels_N": [1.0, 30.0], "frequencies": {"list_Hz": [40.0]}}})
+        with pytest.raises(EnvelopeError, match=r"30 N at 40 Hz: drive [0-9.]+ V > 1 V"):
+            run_plan(plan, rig, tmp_path / "run", identify=False)
+        assert repr(twins.generator.state) == state_before
+        assert not twins.generator.state.output_on
+        assert twins.daq.frames_sent == 0
+        assert not (tmp_path / "run").exists()
+
+
+def test_a_plan_that_asks_to_skip_infeasible_steps_runs_the_rest(tmp_path, capsys):
+    path = plan_toml(tmp_path, levels=[1.0, 30.0], freqs=[20.0, 80.0], infeasible="skip", disp_m=0.15e-3)
+    assert main(["dry-run", "--plan", path]) == 0
+    assert "3 steps run, 1 skipped" in capsys.readouterr().out
+    plan = bench.session.check_envelope(load_plan(path), load_rig(DEFAULTS / "sim_rig.toml"))
+    assert plan.skip == ((1, 0),)                   # 30 N at 20 Hz
+    steps = plan.schedule()
+    assert [(s.force_N, s.freq_Hz) for s in steps] == [(1.0, 20.0), (1.0, 80.0), (30.0, 80.0)]
+    assert steps[-1].key == "00003-L01-F001-up"      # keys keep their place in the full schedule

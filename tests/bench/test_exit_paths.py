@@ -1,0 +1,354 @@
+"""Output off on every exit path: normal end, exception, Ctrl-C, SIGTERM, instrument
+error, lost connection, safety limit.  Each path runs against the real twins.
+
+The session starts its own twins for a simulated rig; a spy on ``start_twins`` hands the
+test the running Twins, whose SCPI model is the instrument's own view of its output.
+Faults are injected at the instrument where the twins allow it (a corrupted CAN block, a
+dropped or closed SCPI link, a DAQ that stops answering); only the errors that cannot be
+provoked from outside (an exception inside the procedure, Ctrl-C at a given moment, an
+instrument error reply to a valid command) are injected with pytest-mock.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import json
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+import bench.session
+from bench.config import DEFAULTS, load_rig, parse_plan, parse_rig
+from bench.session import run_plan
+from bench.storage import RunStore
+from drivers import ScpiError, ScpiFunctionGenerator, start_twins
+from procedures.safety import LimitExceeded, SupervisedGenerator, Supervisor
+from procedures.stepped_sine import SteppedSine
+from sim.rig import RigModel, SimulatedRig
+
+REPO = Path(__file__).resolve().parents[2]
+SIM_RIG = load_rig(DEFAULTS / "sim_rig.toml")
+FAST = dict(settle_cycles=4, min_settle_s=0.0, measure_cycles=4, control_cycles=2, ramp_s=0.0)
+FREQS = (60.0, 80.0, 100.0, 120.0)
+
+
+def small_plan(levels=(1.0,), freqs=FREQS, limits=None):
+    plan = {"name": "exit paths", "levels_N": list(levels),
+            "frequencies": {"list_Hz": list(freqs), "direction": "up"}, "control": dict(FAST)}
+    if limits:
+        plan["limits"] = limits
+    return parse_plan({"plan": plan})
+
+
+def run(out, plan=None, rig=SIM_RIG, **kw):
+    return run_plan(plan or small_plan(), rig, out, sim_seed=1, identify=False, **kw)
+
+
+def meta(out: Path) -> dict:
+    return json.loads((out / "run.json").read_text())
+
+
+def event_kinds(out: Path) -> list[str]:
+    return [e["event"] for e in RunStore(out).events()]
+
+
+def the(out: Path, kind: str) -> dict:
+    found = [e for e in RunStore(out).events() if e["event"] == kind]
+    assert len(found) == 1, f"expected one {kind!r} event, got {event_kinds(out)}"
+    return found[0]
+
+
+@pytest.fixture
+def twins_of_run(mocker):
+    """The spy's ``spy_return`` is the Twins the session started (None until it starts)."""
+    return mocker.spy(bench.session, "start_twins")
+
+
+def output_on(spy) -> bool:
+    return spy.spy_return.generator.state.output_on
+
+
+def fail_on_call(mocker, owner, name, n, exc, before=None):
+    """Let ``owner.name`` work normally except on its n-th call, which raises ``exc``."""
+    original = getattr(owner, name)
+    calls = itertools.count(1)
+
+    def side_effect(*args, **kwargs):
+        if next(calls) == n:
+            if before:
+                before()
+            raise exc
+        return original(*args, **kwargs)
+
+    return mocker.patch.object(owner, name, autospec=True, side_effect=side_effect)
+
+
+def assert_ended(out: Path, status: str, steps_done: int) -> None:
+    m = meta(out)
+    assert m["status"] == status
+    assert m["steps_done"] == steps_done and m["steps_total"] == len(FREQS)
+    assert len(RunStore(out).results()) == steps_done
+    last = RunStore(out).events()[-1]
+    assert (last["event"], last["status"]) == ("end", status)
+
+
+# --------------------------------------------------------------------------- normal end
+
+def test_normal_end_completes_with_the_output_off(tmp_path, twins_of_run):
+    on_between_steps = []
+    run(tmp_path / "run", progress=lambda done, total, note: on_between_steps.append(output_on(twins_of_run)))
+    assert on_between_steps[:-1] == [True] * (len(FREQS) - 1)      # it really was driving
+    assert not output_on(twins_of_run)
+    assert_ended(tmp_path / "run", "completed", len(FREQS))
+    assert the(tmp_path / "run", "output_off")["confirmed"] is True
+
+
+def test_each_run_log_holds_only_its_own_run(tmp_path, caplog, twins_of_run):
+    caplog.set_level(logging.INFO)            # as the bench command sets it
+    run(tmp_path / "a", plan=small_plan(freqs=(60.0,)))
+    url_a = twins_of_run.spy_return.generator_url
+    run(tmp_path / "b", plan=small_plan(freqs=(80.0,)))
+    url_b = twins_of_run.spy_return.generator_url
+    assert url_a != url_b
+    log_a = (tmp_path / "a" / "bench.log").read_text()
+    log_b = (tmp_path / "b" / "bench.log").read_text()
+    assert url_a in log_a and url_b not in log_a
+    assert url_b in log_b and url_a not in log_b
+
+
+# --------------------------------------------------------------------------- exception, Ctrl-C
+
+def test_an_exception_in_the_procedure_propagates_with_the_output_off(tmp_path, mocker, twins_of_run):
+    on_at_fault = []
+    fail_on_call(mocker, SteppedSine, "measure", 2, RuntimeError("injected fault"),
+                 before=lambda: on_at_fault.append(output_on(twins_of_run)))
+    with pytest.raises(RuntimeError, match="injected fault"):
+        run(tmp_path / "run")
+    assert on_at_fault == [True]
+    assert not output_on(twins_of_run)
+    assert_ended(tmp_path / "run", "failed", 1)
+    assert "RuntimeError: injected fault" in the(tmp_path / "run", "error")["error"]
+    assert the(tmp_path / "run", "output_off")["confirmed"] is True
+
+
+def test_ctrl_c_is_recorded_as_interrupted_with_the_output_off(tmp_path, mocker, twins_of_run):
+    on_at_fault = []
+    fail_on_call(mocker, SteppedSine, "control_force", 3, KeyboardInterrupt(),
+                 before=lambda: on_at_fault.append(output_on(twins_of_run)))
+    with pytest.raises(KeyboardInterrupt):
+        run(tmp_path / "run")
+    assert on_at_fault == [True]
+    assert not output_on(twins_of_run)
+    assert_ended(tmp_path / "run", "interrupted", 2)
+    assert the(tmp_path / "run", "interrupted")["reason"] == "Ctrl-C"
+
+
+# --------------------------------------------------------------------------- SIGTERM
+
+def rig_toml_for(twins) -> str:
+    """A non-simulated rig whose instruments are the given twins (another process's view)."""
+    return textwrap.dedent(f"""\
+        [rig]
+        name = "twins held by the test"
+        simulated = false
+        [rig.instruments]
+        generator = "{twins.generator_url}"
+        sensor = "{twins.sensor_url}"
+        daq = "{twins.daq_bridge_url}"
+        [rig.calibration]
+        force_V_per_N = 0.0225
+        accel_V_per_m_s2 = 0.0102
+        disp_V_per_m = 8000.0
+        amp_gain_N_per_V = 20.0
+        [rig.limits]
+        drive_V = 7.0
+        force_N = 130.0
+        disp_m = 0.9e-3
+        accel_m_s2 = 20.0
+        """)
+
+
+def wait_for(condition, timeout_s: float, what: str, proc=None) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if proc is not None and proc.poll() is not None:
+            pytest.fail(f"bench exited ({proc.returncode}) before {what}")
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out waiting for {what}")
+        time.sleep(0.01)
+
+
+@pytest.mark.timeout(120)
+def test_sigterm_to_bench_run_stops_cleanly_with_the_output_off(tmp_path):
+    # the twins live in this process, so their output state can be read after the kill
+    with start_twins(SimulatedRig(RigModel(seed=3))) as twins:
+        (tmp_path / "rig.toml").write_text(rig_toml_for(twins))
+        freqs = [40.0 + 10 * k for k in range(30)]          # far more steps than it will get to
+        (tmp_path / "plan.toml").write_text(textwrap.dedent(f"""\
+            [plan]
+            levels_N = [1.0]
+            [plan.frequencies]
+            list_Hz = {freqs}
+            [plan.control]
+            settle_cycles = 4
+            min_settle_s = 0.0
+            measure_cycles = 4
+            control_cycles = 2
+            ramp_s = 0.0
+            """))
+        out = tmp_path / "run"
+        with open(tmp_path / "bench.out", "wb") as log:
+            proc = subprocess.Popen(
+                [sys.executable, "-m", "bench.cli", "run", "--plan", str(tmp_path / "plan.toml"),
+                 "--rig", str(tmp_path / "rig.toml"), "--out", str(out), "--no-report"],
+                cwd=REPO, stdout=log, stderr=subprocess.STDOUT)
+            try:
+                steps = out / "steps"
+                wait_for(lambda: steps.is_dir() and any(steps.glob("*.json")) and twins.generator.state.output_on,
+                         60, "the first step with the output on", proc)
+                proc.send_signal(signal.SIGTERM)
+                rc = proc.wait(timeout=30)
+            finally:
+                if proc.poll() is None:
+                    proc.kill()
+                    proc.wait()
+        output = (tmp_path / "bench.out").read_text()
+        assert rc == 130, output
+        assert not twins.generator.state.output_on, output
+        m = meta(out)
+        assert m["status"] == "interrupted"
+        assert 1 <= m["steps_done"] < len(freqs)
+        assert the(out, "interrupted")["reason"] == f"signal {int(signal.SIGTERM)}"
+        assert the(out, "output_off")["confirmed"] is True
+        assert event_kinds(out)[-1] == "end"
+
+
+# --------------------------------------------------------------------------- instrument errors
+
+def test_an_instrument_error_reply_ends_the_run_with_the_output_off(tmp_path, mocker, twins_of_run):
+    # the generator refuses the second frequency change, as a real unit does when asked
+    # for something it cannot do
+    on_at_fault = []
+    fail_on_call(mocker, ScpiFunctionGenerator, "set_frequency", 2,
+                 ScpiError("FREQ 80", -222, "Data out of range"),
+                 before=lambda: on_at_fault.append(output_on(twins_of_run)))
+    store = run(tmp_path / "run")
+    assert store.path == tmp_path / "run"
+    assert on_at_fault == [True]
+    assert not output_on(twins_of_run)
+    assert_ended(tmp_path / "run", "instrument error", 1)
+    error = the(tmp_path / "run", "instrument_error")["error"]
+    assert "ScpiError" in error and "-222" in error and "FREQ 80" in error
+
+
+def test_a_daq_block_that_stays_corrupt_ends_the_run_with_the_output_off(tmp_path, twins_of_run):
+    def after_first_step(done, total, note):
+        if done == 1:
+            for _ in range(3):       # the block and both RESENDs lose their last data frame
+                twins_of_run.spy_return.daq.inject_fault(lambda frames: frames[:-1])
+
+    run(tmp_path / "run", progress=after_first_step)
+    assert not output_on(twins_of_run)
+    assert_ended(tmp_path / "run", "instrument error", 1)
+    error = the(tmp_path / "run", "instrument_error")["error"]
+    assert error.startswith("BlockIntegrityError") and "2 RESEND" in error
+
+
+# --------------------------------------------------------------------------- lost connection
+
+@pytest.mark.timeout(60)
+def test_a_dropped_generator_link_ends_the_run_and_the_output_is_still_switched_off(tmp_path, twins_of_run):
+    # the instrument drops its TCP connections (as on a reboot of its LAN module): the
+    # session's link is dead, but the instrument is there and must end up off
+    on_when_dropped = []
+
+    def after_first_step(done, total, note):
+        if done == 1:
+            on_when_dropped.append(output_on(twins_of_run))
+            twins_of_run.spy_return.scpi_server.drop_connections()
+
+    run(tmp_path / "run", progress=after_first_step)
+    assert on_when_dropped == [True]
+    assert_ended(tmp_path / "run", "instrument error", 1)
+    assert "ConnectionLost" in the(tmp_path / "run", "instrument_error")["error"]
+    assert not output_on(twins_of_run)
+    assert the(tmp_path / "run", "output_off")["confirmed"] is True
+
+
+@pytest.mark.timeout(60)
+def test_an_unreachable_generator_ends_the_run_and_says_the_output_is_unconfirmed(tmp_path, twins_of_run):
+    # the instrument is gone altogether: nothing can switch it off from here, and the run
+    # record must not pretend otherwise (on the real rig the amplifier interlock takes over)
+    def after_first_step(done, total, note):
+        if done == 1:
+            twins_of_run.spy_return.scpi_server.close()
+
+    run(tmp_path / "run", progress=after_first_step)
+    assert_ended(tmp_path / "run", "instrument error", 1)
+    assert "ConnectionLost" in the(tmp_path / "run", "instrument_error")["error"]
+    assert output_on(twins_of_run)                      # the truth at the instrument
+    assert the(tmp_path / "run", "output_off")["confirmed"] is False
+
+
+@pytest.mark.timeout(60)
+def test_a_silent_daq_ends_the_run_in_bounded_time_with_the_output_off(tmp_path, twins_of_run):
+    def after_first_step(done, total, note):
+        if done == 1:
+            twins_of_run.spy_return.daq.close()          # the DAQ stops answering
+
+    run(tmp_path / "run", progress=after_first_step)
+    assert_ended(tmp_path / "run", "instrument error", 1)
+    assert "InstrumentTimeout" in the(tmp_path / "run", "instrument_error")["error"]
+    assert not output_on(twins_of_run)
+    assert the(tmp_path / "run", "output_off")["confirmed"] is True
+
+
+# --------------------------------------------------------------------------- safety limit
+
+def test_a_force_limit_trip_aborts_with_the_output_off_and_latched(tmp_path, mocker, twins_of_run):
+    # The rig file underestimates the amplifier (10 N/V; the plant has 20 N/V), so the
+    # first drive of the 1 N level is twice too large and the force reaches about 2 N.
+    # The plan's 1.5 N force limit passes the envelope check (1 N + 25 % margin) and
+    # trips in practice.
+    trips = mocker.spy(Supervisor, "trip")
+    rig = parse_rig({"rig": {**_rig_dict(SIM_RIG), "calibration": {**_calibration(SIM_RIG), "amp_gain_N_per_V": 10.0}}})
+    limits = {"drive_V": 7.0, "force_N": 1.5, "disp_m": 0.9e-3, "accel_m_s2": 20.0}
+    run(tmp_path / "run", plan=small_plan(limits=limits), rig=rig)
+
+    assert not output_on(twins_of_run)
+    assert_ended(tmp_path / "run", "aborted", 0)
+    reason = the(tmp_path / "run", "abort")["reason"]
+    assert reason.startswith("force ") and "exceeds the limit 1.5" in reason
+    sup = trips.call_args.args[0]
+    assert sup.trip_record.reason == "force"
+    # the measured peak: above the limit, and no more than the plant can make from the
+    # drive asked for (2 N) plus the impedance head's noise
+    assert 1.5 < sup.trip_record.value < 2.0 + 5 * RigModel().force_noise_N
+
+    # latched: the tripped supervisor refuses to switch any generator on again, and not
+    # a single command reaches the instrument
+    with start_twins(SimulatedRig()) as fresh:
+        with ScpiFunctionGenerator(fresh.generator_url) as raw:
+            state_before = repr(fresh.generator.state)
+            with pytest.raises(LimitExceeded, match="output stays off after a trip"):
+                SupervisedGenerator(raw, sup).set_output(True)
+            assert repr(fresh.generator.state) == state_before
+            assert not raw.output_enabled()
+
+
+def _rig_dict(rig) -> dict:
+    return {"name": rig.name, "simulated": True, "calibration": _calibration(rig),
+            "limits": {"drive_V": rig.limits.drive_V, "force_N": rig.limits.force_N,
+                       "disp_m": rig.limits.disp_m, "accel_m_s2": rig.limits.accel_m_s2},
+            "model": dict(rig.model)}
+
+
+def _calibration(rig) -> dict:
+    return {"force_V_per_N": rig.force_V_per_N, "accel_V_per_m_s2": rig.accel_V_per_m_s2,
+            "disp_V_per_m": rig.disp_V_per_m, "amp_gain_N_per_V": rig.amp_gain_N_per_V}

@@ -1,0 +1,231 @@
+"""Crash safety and resume: `bench run` is killed with SIGKILL at random moments and
+continued with `bench resume` until it finishes; the result must be the plan's schedule,
+each step once, readable after every kill, and agree with an uninterrupted run.
+
+One kill/resume sequence (module fixture) feeds several tests.  Kill points are drawn
+from a seeded generator: a kill after a random number (1-5) of new steps plus a random
+delay of up to about a step (so it lands anywhere in a step: acquiring, fitting, writing),
+and one kill at a random moment of start-up (opening the instruments, the resume event).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import random
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bench.cli import _plan_toml, _rig_toml
+from bench.config import DEFAULTS, load_plan, load_rig, parse_plan, parse_rig
+from bench.session import run_plan
+from bench.storage import RunStore
+
+REPO = Path(__file__).resolve().parents[2]
+SEED = 7                      # the simulated rig's noise seed, same for every run
+KILL_SEED = 20261122          # where the kills land
+PLAN = textwrap.dedent("""\
+    [plan]
+    name = "resume test: 2 levels x 6 frequencies, both directions"
+    levels_N = [1.0, 3.0]
+    [plan.frequencies]
+    list_Hz = [40.0, 60.0, 80.0, 120.0, 160.0, 200.0]
+    direction = "both"
+    [plan.control]
+    # the default settling: 20 periods, >= 0.05 s, up to 3 extra blocks while a free
+    # vibration still dies out
+    measure_cycles = 10
+    """)
+
+# Tolerances for a resumed step against the same step of an uninterrupted run.  A resume
+# is a new process: the plant starts again from the virgin friction state (no memory of
+# the loops before the kill) and its noise generator restarts from the seed, so a step
+# measured after a resume sees other noise and a different start-up transient.
+#  - force: both runs control the force fundamental to within force_tolerance (2 %) of the
+#    target; the impedance head's noise (2 mN rms) is negligible.  Two controlled values
+#    may differ by up to 2 x 2 %; we hold them to one tolerance, 2 % (observed: < 0.05 %).
+#  - compliance |X1/F1|: displacement noise 2 nm rms over N = 10 periods x >= 128 samples
+#    gives sd(X1) = 2 nm sqrt(2/N) <= 0.08 nm, <= 0.1 % of the smallest displacement
+#    amplitude here (1 N x 7.7e-8 m/N at 200 Hz), and about 1e-3 rad of phase.  On top
+#    comes what is left of the restart's transient after the default settling: over six
+#    kill patterns the worst steps differed by 0.20 % in |C| and 0.009 rad in phase (the
+#    first steps of a sweep, right after a ramp from the virgin state).  The tolerances
+#    leave a factor of 2-5 on that: 1 % and 0.02 rad.  (Before the procedure's settle
+#    check, 20 settling periods left 0.018 rad at 120 Hz / 1 N in the uninterrupted run
+#    itself: a tolerance that fails here first suspects settling, not resuming.)
+FORCE_TOL = 0.02
+COMPLIANCE_TOL = 0.01
+PHASE_TOL_RAD = 0.02
+
+
+def bench(*args: str, log: Path) -> subprocess.Popen:
+    with open(log, "ab") as fh:
+        return subprocess.Popen([sys.executable, "-m", "bench.cli", *args], cwd=REPO,
+                                stdout=fh, stderr=subprocess.STDOUT)
+
+
+def step_files(run: Path) -> list[Path]:
+    return sorted((run / "steps").glob("*.json")) if (run / "steps").is_dir() else []
+
+
+def wait_until(condition, proc: subprocess.Popen, timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if proc.poll() is not None:
+            raise AssertionError(f"bench exited ({proc.returncode}) before {what}")
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.005)
+
+
+def snapshot(run: Path) -> dict:
+    """Everything a kill must leave readable: run.json, events, every completed step."""
+    meta = json.loads((run / "run.json").read_text())
+    events = RunStore(run).events()
+    raw_lines = (run / "events.jsonl").read_text().splitlines()
+    steps = {}
+    for path in step_files(run):
+        result = json.loads(path.read_text())
+        with np.load(path.with_suffix(".npz")) as z:
+            arrays = {k: z[k] for k in z.files}
+        assert result["key"] == path.stem
+        assert set(arrays) >= {"force_N", "accel_m_s2", "disp_m"}
+        assert all(arrays[k].shape == (result["n_samples"],) for k in ("force_N", "accel_m_s2", "disp_m"))
+        assert np.all(np.isfinite(arrays["disp_m"]))
+        steps[path.stem] = result
+    return dict(meta=meta, events=events, n_event_lines=len(raw_lines), steps=steps)
+
+
+@pytest.fixture(scope="module")
+def crash_run(tmp_path_factory):
+    base = tmp_path_factory.mktemp("resume")
+    (base / "plan.toml").write_text(PLAN)
+    run, log = base / "run", base / "bench.out"
+    rng = random.Random(KILL_SEED)
+    snapshots, kills = [], []
+    resumes = 0
+
+    def kill(proc, how: str) -> None:
+        proc.send_signal(signal.SIGKILL)
+        rc = proc.wait(timeout=30)
+        assert rc == -signal.SIGKILL, f"bench had already exited ({rc}) before the kill ({how})"
+        kills.append(how)
+        snapshots.append(snapshot(run))
+
+    # the first process, then resumes; the third process is killed during start-up
+    plan_of_kills = [("steps", rng.randint(1, 5)), ("steps", rng.randint(1, 5)),
+                     ("startup", rng.uniform(0.2, 1.0)), ("steps", rng.randint(1, 5))]
+    proc = bench("run", "--plan", str(base / "plan.toml"), "--out", str(run), "--seed", str(SEED),
+                 "--no-report", log=log)
+    try:
+        for kind, amount in plan_of_kills:
+            if kind == "steps":
+                target = len(step_files(run)) + amount
+                wait_until(lambda: len(step_files(run)) >= target, proc, 120, f"{target} steps")
+                delay = rng.uniform(0.0, 0.15)
+                time.sleep(delay)
+                kill(proc, f"after {target} steps + {delay:.3f} s")
+            else:
+                time.sleep(amount)
+                kill(proc, f"{amount:.3f} s into start-up")
+            proc = bench("resume", str(run), "--no-report", log=log)
+            resumes += 1
+        rc = proc.wait(timeout=180)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert rc == 0, log.read_text()[-3000:]
+    final = snapshot(run)
+
+    # the same plan, seed and rig without interruption, in this process
+    reference = run_plan(load_plan(base / "plan.toml"), load_rig(DEFAULTS / "sim_rig.toml"),
+                         base / "reference", sim_seed=SEED, identify=False)
+    return dict(run=run, snapshots=snapshots, kills=kills, resumes=resumes, final=final,
+                reference={r["key"]: r for r in reference.results()},
+                schedule=load_plan(base / "plan.toml").schedule(), log=log)
+
+
+def test_it_was_killed_at_least_three_times_and_then_finished(crash_run):
+    assert len(crash_run["kills"]) >= 3
+    meta = crash_run["final"]["meta"]
+    assert meta["status"] == "completed"
+    assert meta["steps_done"] == meta["steps_total"] == 24
+
+
+def test_every_completed_step_stays_readable_after_each_kill(crash_run):
+    # snapshot() already loaded every .json and .npz; here: progress was kept, never lost
+    counts = [len(s["steps"]) for s in crash_run["snapshots"]]
+    assert counts == sorted(counts) and counts[-1] < 24
+    for earlier, later in zip(crash_run["snapshots"], crash_run["snapshots"][1:] + [crash_run["final"]]):
+        for key, result in earlier["steps"].items():
+            assert later["steps"][key] == result, f"{key} changed after a resume"
+
+
+def test_the_steps_are_the_schedule_each_exactly_once(crash_run):
+    steps = crash_run["final"]["steps"]
+    schedule = crash_run["schedule"]
+    assert sorted(steps) == [s.key for s in schedule]
+    for spec in schedule:
+        r = steps[spec.key]
+        assert (r["index"], r["level_index"], r["freq_index"], r["direction"]) == \
+            (spec.index, spec.level_index, spec.freq_index, spec.direction)
+        assert (r["target_force_N"], r["freq_Hz"]) == (spec.force_N, spec.freq_Hz)
+    points = [(r["level_index"], r["freq_index"], r["direction"]) for r in steps.values()]
+    assert len(set(points)) == len(points) == 24
+
+
+def test_events_record_every_resume(crash_run):
+    events = crash_run["final"]["events"]
+    kinds = [e["event"] for e in events]
+    assert kinds[0] == "start" and kinds.count("start") == 1
+    assert kinds[-1] == "end" and events[-1]["status"] == "completed"
+    assert kinds.count("end") == 1              # no process that was killed got to "end"
+    resumes = [e for e in events if e["event"] == "resume"]
+    # a process killed during start-up may die before its resume event; every other did not
+    assert crash_run["resumes"] - 1 <= len(resumes) <= crash_run["resumes"]
+    after_kill = {len(s["steps"]) for s in crash_run["snapshots"]}
+    assert [e["done"] for e in resumes] == sorted(e["done"] for e in resumes)
+    assert all(e["done"] in after_kill for e in resumes)
+    assert resumes[-1]["done"] == len(crash_run["snapshots"][-1]["steps"])
+    # every event line is whole: a kill never left a torn line behind
+    assert crash_run["final"]["n_event_lines"] == len(events)
+
+
+def test_steps_of_the_first_process_equal_the_uninterrupted_run_exactly(crash_run):
+    # same seed, same history: nothing differs until the first kill
+    first = crash_run["snapshots"][0]["steps"]
+    assert first
+    for key, result in first.items():
+        ref = crash_run["reference"][key]
+        assert result["compliance_m_per_N"] == ref["compliance_m_per_N"], key
+        assert result["force_N"] == ref["force_N"], key
+
+
+def test_resumed_steps_agree_with_the_uninterrupted_run(crash_run):
+    ref, got = crash_run["reference"], crash_run["final"]["steps"]
+    assert sorted(ref) == sorted(got)
+    problems = []
+    for key in sorted(ref):
+        a, b = ref[key], got[key]
+        dF = abs(b["force_N"] - a["force_N"]) / a["target_force_N"]
+        dC = abs(b["compliance_abs_m_per_N"] / a["compliance_abs_m_per_N"] - 1)
+        dphi = abs(math.remainder(b["compliance_phase_rad"] - a["compliance_phase_rad"], 2 * math.pi))
+        if dF > FORCE_TOL or dC > COMPLIANCE_TOL or dphi > PHASE_TOL_RAD:
+            problems.append(f"{key}: force {100 * dF:.2f} %, |C| {100 * dC:.2f} %, phase {dphi:.4f} rad")
+    assert not problems, "\n".join(problems)
+
+
+def test_resume_rebuilds_the_plan_and_rig_from_run_json(crash_run):
+    meta = crash_run["final"]["meta"]
+    plan = load_plan(crash_run["log"].parent / "plan.toml")
+    assert parse_plan({"plan": _plan_toml(meta["plan"])}) == plan
+    assert parse_rig({"rig": _rig_toml(meta["rig"])}) == load_rig(DEFAULTS / "sim_rig.toml")
+    assert meta["sim_seed"] == SEED
