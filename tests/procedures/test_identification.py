@@ -6,7 +6,10 @@ runs on the simulated rig through the real protocols (infeasible steps skipped f
 rigs), then the final identification must land within 3 % (F_s, m) and 5 % (x_s, n).
 """
 import math
+import multiprocessing
+import os
 import tomllib
+from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import pytest
@@ -41,20 +44,26 @@ def configs(truth, guess, seed):
     return parse_plan(plan), parse_rig(rig)
 
 
+def run_rig(seed, out):
+    """One generated rig: the default plan, then the final identification."""
+    truth, guess = random_rig(seed)
+    plan, rig = configs(truth, guess, seed)
+    store = run_plan(plan, rig, out, identify=False)
+    assert store.metadata["status"] == "completed"
+    return seed, truth, identify_results(store.results(), guess).estimate
+
+
 @pytest.fixture(scope="module")
 def outcomes(tmp_path_factory):
-    out = []
-    for seed in range(N_RIGS):
-        truth, guess = random_rig(seed)
-        plan, rig = configs(truth, guess, seed)
-        store = run_plan(plan, rig, tmp_path_factory.mktemp(f"rig{seed}"), identify=False)
-        assert store.metadata["status"] == "completed"
-        est = identify_results(store.results(), guess).estimate
-        out.append((seed, truth, est))
-    return out
+    # each rig runs its own twins on ephemeral ports: one process per core
+    outs = [tmp_path_factory.mktemp(f"rig{seed}") for seed in range(N_RIGS)]
+    with ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1),
+                             mp_context=multiprocessing.get_context("spawn")) as ex:
+        return list(ex.map(run_rig, range(N_RIGS), outs))
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)   # the fixture runs ten full default plans
 def test_final_estimates_within_tolerance_on_random_rigs(outcomes):
     tol = dict(F_s_N=0.03, mass_kg=0.03, x_s_m=0.05, n=0.05)
     misses = []
@@ -67,6 +76,7 @@ def test_final_estimates_within_tolerance_on_random_rigs(outcomes):
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)
 def test_truth_inside_the_95_percent_interval_in_most_cases(outcomes):
     inside = [est.low[k] <= truth[k] <= est.high[k] for _, truth, est in outcomes for k in TRUTH_KEYS]
     assert np.mean(inside) >= 0.75, f"coverage {np.mean(inside):.2f}"
