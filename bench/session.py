@@ -235,16 +235,16 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
             if online:
                 online.preload(store.results())
 
+            progress_note = [""]       # the latest estimates, shown on the status line
+
             def record(step, res, raw):
                 store.write_step(step.key, res, raw)
                 if online:
                     est = online.update(res)
-                    if est and progress_note is not None:
+                    if est:
                         v = est["values"]
                         progress_note[0] = (f"F_s {v['F_s_N']:.3g} N x_s {v['x_s_m'] * 1e6:.3g} um "
                                             f"n {v['n']:.3g} m {v['mass_kg']:.3g} kg")
-
-            progress_note = [""]
 
             def show(done, total, note):
                 if progress:
