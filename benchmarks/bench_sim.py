@@ -8,7 +8,10 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -38,7 +41,12 @@ def main():
     print(f"machine: {cores} cores")
 
     jit = min(ns_per_step(_kernel.rk4_run, a.n, 500_000) for _ in range(3))
-    py = ns_per_step(_kernel.rk4_run.py_func, a.n, 5_000)
+    # the same code with numba off everywhere (inner calls too), in a fresh process
+    code = ("from benchmarks.bench_sim import ns_per_step; from sim import _kernel; "
+            f"print(ns_per_step(_kernel.rk4_run, {a.n}, 5000))")
+    root = Path(__file__).resolve().parents[1]
+    py = float(subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, check=True,
+                              env=dict(os.environ, NUMBA_DISABLE_JIT="1", PYTHONPATH=str(root))).stdout)
     print(f"RK4 step (4 friction evaluations): {jit:.0f} ns compiled, {py:.0f} ns plain Python "
           f"-> {py / jit:.0f}x; target <= 100 ns")
 

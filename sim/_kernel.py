@@ -29,14 +29,17 @@ from .virgin import virgin_g
 def _accel(u, v, P, k, su, sF, d, lam, kind, p, a_f, c1, k1):
     """u'' for the external force term P = gamma sin(omega t + phase)."""
     # Fast path: u has not reached the point where the present branch closes.
-    if k >= 2:
-        if d * (u - su[k - 2]) < 0.0:
-            s = (u - su[k - 1]) / lam
-            if s >= 0.0:
-                F = sF[k - 1] + lam * virgin_g(kind, s, p)
-            else:
-                F = sF[k - 1] - lam * virgin_g(kind, -s, p)
-            return a_f * (P - F) - c1 * v - k1 * u
+    if k == 0:
+        F = virgin_g(kind, u, p) if u >= 0.0 else -virgin_g(kind, -u, p)
+        return a_f * (P - F) - c1 * v - k1 * u
+    close_u = su[k - 2] if k >= 2 else -su[0]
+    if d * (u - close_u) < 0.0:
+        s = (u - su[k - 1]) / lam
+        if s >= 0.0:
+            F = sF[k - 1] + lam * virgin_g(kind, s, p)
+        else:
+            F = sF[k - 1] - lam * virgin_g(kind, -s, p)
+        return a_f * (P - F) - c1 * v - k1 * u
     F = friction(u, k, su, sF, d, lam, kind, p)
     return a_f * (P - F) - c1 * v - k1 * u
 
