@@ -125,6 +125,24 @@ def _sigterm_as_interrupt():
         signal.signal(signal.SIGTERM, old)
 
 
+@contextmanager
+def _uninterruptible(what: str):
+    """Hold Ctrl-C and SIGTERM off while ``what`` runs (switching the output off must not
+    be cut short by an impatient second Ctrl-C); they are logged, not lost silently."""
+    def handler(signum, frame):
+        log.warning("signal %d while %s: finishing that first", signum, what)
+    try:
+        old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    except ValueError:          # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
 @dataclass
 class Instruments:
     generator: ScpiFunctionGenerator
@@ -272,7 +290,8 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
             log.exception("run failed")
             raise
         finally:
-            stack.close()        # output off, then close links and twins
+            with _uninterruptible("switching the output off"):
+                stack.close()    # output off, then close links and twins
             store.finish(status, steps_done=len(store.done_keys()), steps_total=len(plan.schedule()))
             if log_handler:
                 logging.getLogger().removeHandler(log_handler)

@@ -11,9 +11,11 @@ instrument error reply to a valid command) are injected with pytest-mock.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
-import logging
 import json
+import logging
+import os
 import signal
 import subprocess
 import sys
@@ -147,6 +149,32 @@ def test_ctrl_c_is_recorded_as_interrupted_with_the_output_off(tmp_path, mocker,
     assert not output_on(twins_of_run)
     assert_ended(tmp_path / "run", "interrupted", 2)
     assert the(tmp_path / "run", "interrupted")["reason"] == "Ctrl-C"
+
+
+def test_a_second_ctrl_c_during_switch_off_does_not_cut_it_short(tmp_path, mocker, twins_of_run):
+    real = bench.session.switch_off
+    interrupted_inside = []
+
+    def impatient(gen, url):
+        os.kill(os.getpid(), signal.SIGINT)      # the technician presses Ctrl-C again
+        time.sleep(0.05)
+        interrupted_inside.append(True)          # reached only if the signal did not raise
+        return real(gen, url)
+
+    mocker.patch.object(bench.session, "switch_off", side_effect=impatient)
+    run(tmp_path / "run")
+    assert interrupted_inside == [True]
+    assert not output_on(twins_of_run)
+    assert the(tmp_path / "run", "output_off")["confirmed"] is True
+    assert_ended(tmp_path / "run", "completed", len(FREQS))
+
+
+def test_a_target_out_of_the_probe_range_stops_before_the_output_goes_on(tmp_path, twins_of_run):
+    far = dict(SIM_RIG.model, probe_standoff_m=3.0e-3)       # beyond the 0.1-2.1 mm range
+    run(tmp_path / "run", rig=dataclasses.replace(SIM_RIG, model=far))
+    assert not output_on(twins_of_run)
+    assert "target out of range" in the(tmp_path / "run", "abort")["reason"]
+    assert_ended(tmp_path / "run", "aborted", 0)
 
 
 # --------------------------------------------------------------------------- SIGTERM
