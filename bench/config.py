@@ -120,6 +120,7 @@ class Plan:
     max_extra_settle_blocks: int         # re-measure while a free vibration still decays
     limits: Limits | None                # optional, tighter than the rig's
     infeasible: str = "refuse"           # steps the limits cannot hold: "refuse" the plan or "skip" them
+    adaptive_per_sweep: int = 0          # > 0: measure only this many frequencies per sweep, chosen online
     skip: tuple[tuple[int, int], ...] = ()   # (level index, frequency index) left out
 
     def sweeps(self) -> list[tuple[str, tuple[float, ...]]]:
@@ -241,7 +242,8 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
         min_sample_rate_Hz=c.number("min_sample_rate_Hz", 25600.0, 1000, 204800),
         max_extra_settle_blocks=c.number("max_extra_settle_blocks", 3, 0, 100, integer=True),
         limits=_limits(lim) if lim.data else None,
-        infeasible=p.choice("infeasible", "refuse", ("refuse", "skip")))
+        infeasible=p.choice("infeasible", "refuse", ("refuse", "skip")),
+        adaptive_per_sweep=p.number("adaptive_per_sweep", 0, 0, 10000, integer=True))
     # every fitted harmonic must stay below Nyquist at the highest frequency (the DAQ samples
     # at >= min_sample_rate_Hz); above it harmonics alias and the fit's amplitudes are wrong
     max_harmonics = math.ceil(plan.min_sample_rate_Hz / (2 * max(plan.freqs_Hz))) - 1

@@ -268,7 +268,12 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
                 if progress:
                     progress(done, total, f"{note} | {progress_note[0]}")
 
-            proc.run(store.done_keys(), record, show)
+            choose = None
+            if plan.adaptive_per_sweep:
+                from procedures.online_id import choose_frequencies
+                choose = lambda sweep: choose_frequencies(           # noqa: E731
+                    sweep, online.current() if online else None, plan.adaptive_per_sweep)
+            proc.run(store.done_keys(), record, show, choose=choose)
             status = "completed"
             if online:
                 store.update(identification=online.final())

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import shutil
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -18,11 +19,21 @@ from bench.session import run_plan
 from procedures.online_id import history
 
 
+def steps_to_accuracy(h: list[dict], truth: dict, tol: float) -> int | None:
+    """First step count from which every estimate stays within ``tol`` of the truth."""
+    ok = [all(abs(r["values"][k] / truth[k] - 1) < tol for k in ("F_s_N", "x_s_m", "n", "mass_kg")) for r in h]
+    for i in range(len(ok)):
+        if all(ok[i:]):
+            return i + 1
+    return None
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", default="/tmp/bench_procedure")
     a = ap.parse_args()
     plan, rig = load_plan(DEFAULTS / "demo_plan.toml"), load_rig(DEFAULTS / "sim_rig.toml")
+    histories = {}
     for identify in (False, True):
         out = Path(a.out) / ("with_id" if identify else "no_id")
         shutil.rmtree(out, ignore_errors=True)
@@ -37,6 +48,7 @@ def main():
               f"({rig_time / wall:.1f}x faster than the real test; target <= 60 s wall)")
         if identify:
             h = history(out)
+            histories["fixed grid"] = (h, len(res))
             ms = np.array([r["update_s"] for r in h]) * 1e3
             print(f"  identification update per step: median {np.median(ms):.0f} ms, "
                   f"p90 {np.percentile(ms, 90):.0f} ms, max {ms.max():.0f} ms (target median <= 100 ms)")
@@ -52,6 +64,24 @@ def main():
                             abs(q["values"][k] / truth[k] - 1) < 0.05 for q in h[h.index(r):]):
                         print(f"  {k} within 5 % of the truth from step {h.index(r) + 1} on")
                         break
+
+
+    # adaptive mode: 6 frequencies per sweep chosen around the predicted resonance
+    adaptive = replace(plan, adaptive_per_sweep=6)
+    out = Path(a.out) / "adaptive"
+    shutil.rmtree(out, ignore_errors=True)
+    t = time.perf_counter()
+    store = run_plan(adaptive, rig, out)
+    wall = time.perf_counter() - t
+    histories["adaptive (6 per sweep)"] = (history(out), len(store.results()))
+    print(f"adaptive plan: {len(store.results())} steps, {wall:.1f} s wall")
+    truth = rig.model
+    for tol in (0.01, 0.002):
+        cells = []
+        for name, (h, n_steps) in histories.items():
+            k = steps_to_accuracy(h, truth, tol)
+            cells.append(f"{name}: {k if k else 'never'} of {n_steps}")
+        print(f"  steps until all four estimates stay within {100 * tol:g} % of the truth: " + "; ".join(cells))
 
 
 if __name__ == "__main__":

@@ -46,6 +46,39 @@ def identifiability(plan: Plan, rig: Rig) -> list[str]:
     return out
 
 
+def choose_frequencies(sweep: list, values: dict | None, per_sweep: int) -> list:
+    """Adaptive mode: the ``per_sweep`` steps of a sweep that say most about the friction.
+
+    Around the resonance the response depends most on x_s and n: the grid frequencies
+    closest (in log f) to the resonance the current estimate predicts at this force,
+    plus the highest one, where the mass dominates.  Above F_s (gross rolling) the
+    lowest frequencies, where the carriage rolls furthest, take the resonance's place.
+    Without an estimate yet: evenly spread over the grid.  Returned in sweep order."""
+    if per_sweep <= 0 or len(sweep) <= per_sweep:
+        return list(sweep)
+    freqs = np.array([s.freq_Hz for s in sweep])
+    if values is None:
+        pick = set(np.unique(np.round(np.linspace(0, len(sweep) - 1, per_sweep)).astype(int)).tolist())
+    else:
+        F_s, x_s, m = values["F_s_N"], values["x_s_m"], values["mass_kg"]
+        n = values["n"] if abs(values["n"] - 1) > 0.02 else 1.02
+        gamma0 = sweep[0].force_N / F_s
+        f_s = math.sqrt(F_s / (x_s * m)) / (2 * math.pi)
+        f_res = freqs.min()
+        if gamma0 < 0.95:
+            from sim.frf import find_peaks
+            from sim.shooting import frf_shooting
+            betas = np.geomspace(0.2, 6.0, 60)
+            try:
+                f_res = find_peaks(frf_shooting(betas, gamma0, n)[0])[0].beta * f_s
+            except (ValueError, ArithmeticError) as e:
+                log.warning("adaptive: no resonance predicted at %.3g N (%s)", sweep[0].force_N, e)
+        top = int(np.argmax(freqs))
+        near = [int(i) for i in np.argsort(np.abs(np.log(freqs / f_res))) if i != top]
+        pick = {top, *near[:per_sweep - 1]}
+    return [s for i, s in enumerate(sweep) if i in pick]
+
+
 class OnlineIdentification:
     def __init__(self, run_dir, rig: Rig, harmonics: int = 5, budget: int = 25):
         self.path = run_dir / "identification.jsonl"
@@ -54,6 +87,10 @@ class OnlineIdentification:
                                 harmonics=min(harmonics, MAX_HARMONICS))
         self.budget = budget
         self.update_times_s: list[float] = []
+
+    def current(self) -> dict | None:
+        """The latest estimate's values (None before the first fit)."""
+        return self.ident.estimate.values if self.ident.estimate else None
 
     def preload(self, results: list[dict]) -> None:
         """Steps already measured (resume): fitted once before new steps arrive."""

@@ -200,37 +200,53 @@ class SteppedSine:
 
     # ------------------------------------------------------------------ the test
     def run(self, done: set[str], record: Callable[[StepSpec, dict, dict], None],
-            progress: Callable[[int, int, str], None] | None = None) -> None:
-        schedule = self.plan.schedule()
-        todo = [s for s in schedule if s.key not in done]
-        total, finished = len(schedule), len(schedule) - len(todo)
+            progress: Callable[[int, int, str], None] | None = None,
+            choose: Callable[[list[StepSpec]], list[StepSpec]] | None = None) -> None:
+        """Run the schedule, skipping ``done`` keys.  ``choose`` (adaptive mode) picks,
+        at the start of each sweep, the subset of its steps to measure."""
+        sweeps: list[list[StepSpec]] = []
+        for step in self.plan.schedule():
+            if not sweeps or (step.level_index, step.direction) != (sweeps[-1][0].level_index,
+                                                                     sweeps[-1][0].direction):
+                sweeps.append([])
+            sweeps[-1].append(step)
+        per_sweep = self.plan.adaptive_per_sweep if choose else 0
+        total = sum(min(len(sw), per_sweep) if per_sweep else len(sw) for sw in sweeps)
+        finished = len(done)
         prev: StepSpec | None = None
-        for step in todo:
-            new_sweep = prev is None or (step.level_index, step.direction) != (prev.level_index, prev.direction) \
-                or step.index != prev.index + 1
-            first_vpp = step.force_N / self.drive.gain_N_per_Vpp
-            if new_sweep:
-                if self.drive.on:
-                    self.stop()
-                if self.sensor_check:
-                    self.sensor_check()
-                self.ramp(first_vpp, step.freq_Hz)
-            else:
-                self._change(freq_Hz=step.freq_Hz, vpp=first_vpp)
-            err, iterations, ok = self.control_force(step)
-            if not ok:
-                log.warning("step %s: force %.3g N not reached within %.1f %% after %d iterations "
-                            "(error %+.1f %%)", step.key, step.force_N, 100 * self.plan.force_tolerance,
-                            iterations, 100 * err)
-            result, raw = self.measure(step)
-            result.update(key=step.key, index=step.index, level_index=step.level_index,
-                          freq_index=step.freq_index, direction=step.direction,
-                          target_force_N=step.force_N, control_iterations=iterations,
-                          force_converged=ok, force_error=result["force_N"] / step.force_N - 1.0)
-            record(step, result, raw)
-            finished += 1
-            if progress:
-                progress(finished, total, f"{step.force_N:g} N {step.freq_Hz:7.1f} Hz {step.direction:4s} "
-                         f"err {100 * result['force_error']:+.1f}% THD(x) {result['disp']['thd']:.2f}")
-            prev = step
+        for sweep in sweeps:
+            for step in (choose(sweep) if choose else sweep):
+                if step.key in done:
+                    continue
+                res = self.step(step, new_sweep=prev is None or (step.level_index, step.direction)
+                                != (prev.level_index, prev.direction), record=record)
+                finished += 1
+                if progress:
+                    progress(finished, total, f"{step.force_N:g} N {step.freq_Hz:7.1f} Hz {step.direction:4s} "
+                             f"err {100 * res['force_error']:+.1f}% THD(x) {res['disp']['thd']:.2f}")
+                prev = step
         self.stop()
+
+    def step(self, step: StepSpec, *, new_sweep: bool, record) -> dict:
+        """One step: drive, control the force, settle, measure, record."""
+        first_vpp = step.force_N / self.drive.gain_N_per_Vpp
+        if new_sweep:
+            if self.drive.on:
+                self.stop()
+            if self.sensor_check:
+                self.sensor_check()
+            self.ramp(first_vpp, step.freq_Hz)
+        else:
+            self._change(freq_Hz=step.freq_Hz, vpp=first_vpp)
+        err, iterations, ok = self.control_force(step)
+        if not ok:
+            log.warning("step %s: force %.3g N not reached within %.1f %% after %d iterations "
+                        "(error %+.1f %%)", step.key, step.force_N, 100 * self.plan.force_tolerance,
+                        iterations, 100 * err)
+        result, raw = self.measure(step)
+        result.update(key=step.key, index=step.index, level_index=step.level_index,
+                      freq_index=step.freq_index, direction=step.direction,
+                      target_force_N=step.force_N, control_iterations=iterations,
+                      force_converged=ok, force_error=result["force_N"] / step.force_N - 1.0)
+        record(step, result, raw)
+        return result

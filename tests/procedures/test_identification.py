@@ -92,3 +92,24 @@ def test_identifiability_warnings_name_the_parameter():
     assert any(s.startswith("F_s, n:") for s in w) and any(s.startswith("F_s:") for s in w)
     high_band = replace(plan, freqs_Hz=(400.0, 600.0, 1000.0))   # resonance ~50 Hz never visited
     assert any(s.startswith("x_s, n:") for s in identifiability(high_band, rig))
+
+
+def test_adaptive_mode_measures_fewer_steps_and_still_pins_the_parameters(tmp_path):
+    truth = dict(F_s_N=10.0, x_s_m=10e-6, n=1.5, mass_kg=10.0)
+    guess = dict(F_s_N=7.0, x_s_m=14e-6, n=2.0, mass_kg=12.0)
+    plan, rig = configs(truth, guess, 3)
+    from dataclasses import replace
+    store = run_plan(replace(plan, adaptive_per_sweep=6), rig, tmp_path / "run")
+    results = store.results()
+    assert store.metadata["status"] == "completed"
+    assert len(results) == 6 * len(plan.levels_N)                 # 42 of 168
+    final = store.metadata["identification"]["values"]
+    for k, v in truth.items():
+        assert final[k] == pytest.approx(v, rel=0.01)
+    # below F_s the chosen steps bracket the measured compliance peak of the level
+    for li, F in enumerate(plan.levels_N):
+        if F >= 0.5 * truth["F_s_N"]:
+            continue
+        level = sorted((r for r in results if r["level_index"] == li), key=lambda r: r["freq_Hz"])
+        peak = max(range(len(level)), key=lambda i: level[i]["compliance_pp_m_per_N"])
+        assert 0 < peak < len(level) - 1, f"{F} N: peak at the edge of the chosen band"
