@@ -110,29 +110,10 @@ def versions() -> dict:
 
 
 @contextmanager
-def _sigterm_as_interrupt():
-    """SIGTERM takes the same clean exit as Ctrl-C."""
-    def handler(signum, frame):
-        raise KeyboardInterrupt(f"signal {signum}")
+def _signals(handler, *signums):
+    """Run the block with ``handler`` for ``signums`` (main thread only; elsewhere as is)."""
     try:
-        old = signal.signal(signal.SIGTERM, handler)
-    except ValueError:          # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, old)
-
-
-@contextmanager
-def _uninterruptible(what: str):
-    """Hold Ctrl-C and SIGTERM off while ``what`` runs (switching the output off must not
-    be cut short by an impatient second Ctrl-C); they are logged, not lost silently."""
-    def handler(signum, frame):
-        log.warning("signal %d while %s: finishing that first", signum, what)
-    try:
-        old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+        old = {s: signal.signal(s, handler) for s in signums}
     except ValueError:          # not the main thread
         yield
         return
@@ -141,6 +122,21 @@ def _uninterruptible(what: str):
     finally:
         for s, h in old.items():
             signal.signal(s, h)
+
+
+def _sigterm_as_interrupt():
+    """SIGTERM takes the same clean exit as Ctrl-C."""
+    def handler(signum, frame):
+        raise KeyboardInterrupt(f"signal {signum}")
+    return _signals(handler, signal.SIGTERM)
+
+
+def _uninterruptible(what: str):
+    """Hold Ctrl-C and SIGTERM off while ``what`` runs (switching the output off must not
+    be cut short by an impatient second Ctrl-C); they are logged, not lost silently."""
+    def handler(signum, frame):
+        log.warning("signal %d while %s: finishing that first", signum, what)
+    return _signals(handler, signal.SIGINT, signal.SIGTERM)
 
 
 @dataclass

@@ -101,9 +101,6 @@ class SteppedSine:
             self._acquire(freq_Hz, chunk)
             periods -= chunk
 
-    def _set_amplitude(self, vpp: float) -> None:
-        self._change(vpp=vpp)
-
     def ramp(self, target_Vpp: float, freq_Hz: float) -> None:
         """Soft change of amplitude: one small step per period over at least ramp_s and
         40 periods.  (An amplitude step dP gives a free-rolling carriage a mean velocity
@@ -120,7 +117,7 @@ class SteppedSine:
             self._change(freq_Hz=freq_Hz)
         steps = max(40, math.ceil(self.plan.ramp_s * freq_Hz))
         for k in range(1, steps + 1):
-            self._set_amplitude(start + (target_Vpp - start) * k / steps)
+            self._change(vpp=start + (target_Vpp - start) * k / steps)
             self._acquire(freq_Hz, 1)
 
     def stop(self) -> None:
@@ -148,7 +145,7 @@ class SteppedSine:
                 return err, it, True
             if F1 <= 0 or not math.isfinite(F1):
                 break
-            self._set_amplitude(self.drive.amplitude_Vpp * target / F1)
+            self._change(vpp=self.drive.amplitude_Vpp * target / F1)
         return err, it, False
 
     def _fit_block(self, block, f):

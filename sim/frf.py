@@ -160,12 +160,8 @@ def find_peaks(fr: FrequencyResponse, min_prominence: float = 0.005) -> list[Pea
     peaks = [Peak(bh, Gh, "harmonic", 1.0)]
     for i in range(ih - 1, 0, -1):
         if G[i] > G[i - 1] and G[i] >= G[i + 1]:
-            # prominence: drop to the deeper of the two neighbouring minima
-            left = G[: i + 1][::-1]
-            right = G[i:ih + 1]
-            lmin = np.minimum.accumulate(left).min()
-            rmin = right.min()
-            if G[i] - max(lmin, rmin) >= min_prominence * Gh:
+            # prominence: drop to the higher of the minima on either side
+            if G[i] - max(G[: i + 1].min(), G[i:ih + 1].min()) >= min_prominence * Gh:
                 bp, Gp = _refine(b, G, i)
                 peaks.append(Peak(bp, Gp, "superharmonic", bh / bp))
     return peaks
