@@ -15,8 +15,9 @@ import time
 
 import numpy as np
 
-from bench.config import Plan, Rig
 from sim.identify import Identifier
+
+from .plan import Plan, Rig
 
 log = logging.getLogger(__name__)
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.config import Limits
+from .plan import Limits
 
 log = logging.getLogger(__name__)
 

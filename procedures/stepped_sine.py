@@ -15,10 +15,10 @@ from typing import Callable
 
 import numpy as np
 
-from bench.config import Plan, StepSpec
 from drivers import plan_block
 
 from .analysis import HarmonicFit, fit_harmonics
+from .plan import Plan, StepSpec
 
 log = logging.getLogger(__name__)
 
