@@ -1,7 +1,7 @@
 # The two quickstart commands are `make demo` and `make test`; everything else is theirs.
 VENV ?= .venv
 PY := $(VENV)/bin/python
-DEBS := socat mbpoll
+DEBS := socat mbpoll chromium
 
 .PHONY: setup system-deps demo test bench paper
 
@@ -13,7 +13,8 @@ $(VENV)/.installed: pyproject.toml
 
 setup: $(VENV)/.installed system-deps
 
-# Test peers from Debian (pseudo-terminal pairs, an independent Modbus client).
+# Test peers from Debian (pseudo-terminal pairs, an independent Modbus client, a real
+# browser for the HTML pages).
 system-deps:
 	@missing=""; for p in $(DEBS); do command -v $$p >/dev/null || missing="$$missing $$p"; done; \
 	if [ -n "$$missing" ]; then \
