@@ -282,6 +282,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--points", type=int, default=200)
     s.add_argument("--engine", choices=("shooting", "rk4"), default="shooting")
     s.set_defaults(func=cmd_frf)
+
+    from .studies.cli import add_parsers as add_study_parsers
+    add_study_parsers(sub, Progress)
     return p
 
 

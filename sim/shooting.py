@@ -124,14 +124,29 @@ def _seed_from_rk4(p: SteadyState) -> tuple[float, float]:
     return 0.5 * (p.u_max - p.u_min), float(h.tau[i] % (2 * math.pi))
 
 
+def _linear_guess(beta: float, gamma0: float, curve) -> tuple[float, float]:
+    """(a, tau_r) of the linearised response: initial stiffness k0 (infinite for n < 1,
+    taken as 1e3), mass beta^2.  A down sweep starts far above the resonance, where this
+    is close (from rest, RK4 would ring for thousands of periods when n > 1)."""
+    k0 = curve.stiffness0 if math.isfinite(curve.stiffness0) else 1e3
+    a = gamma0 / max(abs(k0 - beta * beta), 1e-9)
+    return a, (0.5 * math.pi if k0 > beta * beta else 1.5 * math.pi)
+
+
 def frf_shooting(betas, gamma0: float, n: float = 1.5, *, integrator: Integrator | None = None,
-                 steps: int = 1000, progress=None) -> tuple[FrequencyResponse, np.ndarray]:
+                 steps: int = 1000, progress=None, direction: str = "up") -> tuple[FrequencyResponse, np.ndarray]:
     """G(beta) by shooting with continuation along the sorted grid (one core).
 
-    Returns the response (method "shooting") and a boolean array marking the points that
-    fell back to the RK4 engine.
+    ``direction="down"`` continues from the highest beta downwards, so where two steady
+    responses coexist the other branch is followed (jumps, as in a down sweep).
+    Returns the response (method "shooting", ordered by ascending beta) and a boolean
+    array marking the points that fell back to the RK4 engine.
     """
+    if direction not in ("up", "down"):
+        raise ValueError(f"direction must be 'up' or 'down', got {direction!r}")
     b = np.sort(_grid(betas))
+    if direction == "down":
+        b = b[::-1]
     it = integrator or Integrator(n=n)
     shooting_ok = abs(it.lam - 2.0) < 1e-12
     points: list[SteadyState] = []
@@ -139,6 +154,8 @@ def frf_shooting(betas, gamma0: float, n: float = 1.5, *, integrator: Integrator
     guess = None
     for i, beta in enumerate(b):
         sol = None
+        if shooting_ok and guess is None and i == 0 and direction == "down":
+            guess = _linear_guess(beta, gamma0, it.curve)
         if shooting_ok and guess is not None:
             sol = solve_half_period(beta, gamma0, it.curve, guess[0], guess[1], steps=steps)
         if sol is None:
@@ -158,4 +175,6 @@ def frf_shooting(betas, gamma0: float, n: float = 1.5, *, integrator: Integrator
                 drift_per_cycle=0.0, reversals_per_cycle=2, max_depth=2))
         if progress:
             progress(i + 1, b.size)
-    return FrequencyResponse.from_points(points, "up", "shooting"), fell_back
+    if direction == "down":
+        points, fell_back = points[::-1], fell_back[::-1].copy()
+    return FrequencyResponse.from_points(points, direction, "shooting"), fell_back

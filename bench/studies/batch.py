@@ -1,0 +1,166 @@
+"""Batch analysis: one per-source function over a lab's archive, on the study engine.
+
+Sources are run directories (holding run.json) and UFF58 files (.uff, .unv), given one by
+one or found under archive directories.  One task per source calls the per-source
+function ``fn(source: Path, out_dir: Path | None, rig: Path | None) -> dict`` (by
+default :func:`bench.analyze.analyze_source`, which writes analysis.json and a report)
+with ``out_dir = <batch>/sources/<name>``; the dict is flattened into one summary row:
+
+    <batch>/summary.parquet, summary.csv   one row per source (parameters, verdict, ...)
+    <batch>/sources/<name>/                 each source's own report
+    <batch>/study.json, parts/              the engine's manifest and parts (resumable)
+
+A source that fails is reported with its path; the others complete.  Workers read the
+sources and write the reports, so on a cluster the paths must be on a shared file system.
+"""
+
+from __future__ import annotations
+
+import csv
+import importlib
+import logging
+import re
+from pathlib import Path
+from typing import Callable
+
+import pyarrow.parquet as pq
+
+from .engine import Engine, Outcome, Study
+
+log = logging.getLogger(__name__)
+
+ANALYZE = "bench.analyze:analyze_source"
+IDENTIFY = "bench.studies.batch:identify_source"
+UFF_SUFFIXES = (".uff", ".unv")
+
+
+def find_sources(paths: list[Path]) -> list[Path]:
+    """Run directories and UFF58 files among ``paths`` and under archive directories."""
+    out: list[Path] = []
+    for p in map(Path, paths):
+        if not p.exists():
+            raise ValueError(f"{p}: no such file or directory")
+        if p.is_file() or (p / "run.json").exists():
+            out.append(p)
+            continue
+        found = sorted({q.parent for q in p.rglob("run.json")} |
+                       {q for q in p.rglob("*") if q.is_file() and q.suffix.lower() in UFF_SUFFIXES})
+        if not found:
+            raise ValueError(f"{p}: no run directories (run.json) or UFF58 files (.uff, .unv) in it")
+        out.extend(found)
+    seen, unique = set(), []
+    for s in out:
+        if s.resolve() not in seen:
+            seen.add(s.resolve())
+            unique.append(s)
+    return unique
+
+
+def _resolve(spec: str) -> Callable:
+    module, _, attr = spec.partition(":")
+    return getattr(importlib.import_module(module), attr)
+
+
+def _slug(path: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", path.strip("/"))[-120:]
+
+
+def flatten(result: dict) -> dict:
+    """One summary row from an analysis dict (analysis.json schema, or a subset of it)."""
+    row = dict(schema=result.get("schema", ""))
+    for name, p in (result.get("parameters") or {}).items():
+        for part in ("value", "low", "high"):
+            row[f"{name}_{part}"] = p.get(part) if isinstance(p, dict) else None
+    base = result.get("base") or {}
+    row["reduced_chi2"] = base.get("reduced_chi2", result.get("reduced_chi2"))
+    causes = result.get("causes")
+    row["causes"] = ",".join(c.get("id", "") for c in causes) if causes is not None else None
+    row["unexplained"] = result.get("unexplained")
+    row["verdict"] = result.get("verdict")
+    used = result.get("steps_used")
+    row["steps_used"] = len(used) if isinstance(used, list) else used
+    rejected = result.get("steps_rejected")
+    row["steps_rejected"] = len(rejected) if isinstance(rejected, list) else rejected
+    return row
+
+
+def source_task(inputs: dict, seed: int = 0) -> list[dict]:
+    """One source (a task): run the per-source function, return its summary row."""
+    fn = _resolve(inputs["function"])
+    out_dir = Path(inputs["out_dir"]) if inputs.get("out_dir") else None
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    rig = Path(inputs["rig"]) if inputs.get("rig") else None
+    result = fn(Path(inputs["source"]), out_dir, rig)
+    return [dict(source=inputs["source"], report_dir=inputs.get("out_dir"), **flatten(result))]
+
+
+def identify_source(source: Path, out_dir: Path | None = None, rig: Path | None = None) -> dict:
+    """Identification of one stored run or UFF58 file of time records, as a subset of the
+    analysis.json schema (parameters, reduced_chi2, steps_used); a per-source function
+    for batches while the full analysis is not there, and a cheap one where it is not
+    needed.  Guesses from the run's rig, else from ``rig`` (default: the simulated rig)."""
+    import json
+
+    from bench.config import DEFAULTS, load_rig
+    from bench.storage import RunStore, write_json
+    from sim.identify import identify_results
+
+    if source.is_dir():
+        store = RunStore.open(source)
+        r = store.metadata["rig"]
+        guess = dict(F_s_N=r["expected_F_s_N"], x_s_m=r["expected_x_s_m"], n=r["expected_n"],
+                     mass_kg=r["expected_mass_kg"])
+        results = store.results()
+    else:
+        from bench.export import import_uff58
+        rr = load_rig(rig or DEFAULTS / "sim_rig.toml")
+        guess = dict(F_s_N=rr.expected_F_s_N, x_s_m=rr.expected_x_s_m, n=rr.expected_n,
+                     mass_kg=rr.expected_mass_kg)
+        results = [s for s in import_uff58(source).steps if s.get("source") == "uff58-time"]
+    if not results:
+        raise ValueError(f"{source}: no steps with force, acceleration and displacement to identify from")
+    est = identify_results(results, guess).estimate
+    out = dict(schema="guideway-bench/identification/1", source=str(source),
+               parameters={k: dict(value=est.values[k], low=est.low[k], high=est.high[k]) for k in est.values},
+               reduced_chi2=est.cost, steps_used=[r.get("key", str(i)) for i, r in enumerate(results)],
+               warnings=list(est.warnings))
+    if out_dir is not None:
+        write_json(out_dir / "identification.json", out)
+        log.debug("wrote %s", json.dumps(out)[:80])
+    return out
+
+
+def analyze_batch(sources: list[Path], out_dir: Path, *, rig: Path | None = None, function: str = ANALYZE,
+                  scheduler: str | None = None, workers: int | None = None, engine: Engine | None = None,
+                  progress=None) -> Outcome:
+    """Run ``function`` ("module:name") over every source; summary.parquet + summary.csv."""
+    out_dir = Path(out_dir)
+    srcs = find_sources(sources)
+    tasks = [dict(source=str(s.resolve()), out_dir=str((out_dir / "sources" / _slug(str(s.resolve()))).resolve()),
+                  rig=str(Path(rig).resolve()) if rig else None, function=function) for s in srcs]
+    study = Study(out_dir, "batch-analysis", dict(function=function, rig=tasks[0]["rig"] if tasks else None,
+                                                  sources=[t["source"] for t in tasks]), tasks)
+    if engine is None:
+        with Engine(scheduler, workers) as eng:
+            out = study.run(source_task, eng, progress=progress)
+    else:
+        out = study.run(source_task, engine, progress=progress)
+    if out.table_path.exists():
+        table = pq.read_table(out.table_path)
+        pq.write_table(table, out_dir / "summary.parquet")
+        with open(out_dir / "summary.csv", "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(table.column_names)
+            w.writerows(zip(*(table.column(c).to_pylist() for c in table.column_names)))
+    return out
+
+
+def map_cases(fn: Callable, args: list, *, scheduler: str | None = None, workers: int | None = None,
+              progress=None) -> list:
+    """``[fn(a) for a in args]`` on the study engine (local cores or a cluster), in order.
+
+    ``fn`` must be importable on the workers (a module-level function); for example the
+    analysis benchmark's ``run_case(seed)``: ``map_cases(run_case, list(range(40)))``."""
+    with Engine(scheduler, workers) as eng:
+        return eng.map(fn, list(args), progress=progress, label=getattr(fn, "__name__", "case"))

@@ -1,0 +1,114 @@
+"""`bench study map|mc` and the batch mode of `bench analyze` (argument parsing and
+printing only; the work is in the sibling modules)."""
+
+from __future__ import annotations
+
+import logging
+import tomllib
+from pathlib import Path
+
+log = logging.getLogger(__name__)
+
+
+def _floats(text: str) -> tuple[float, ...]:
+    """"0.5,1.5" or "0.1:0.9:9" (start:stop:count, linear)."""
+    import numpy as np
+    if text.count(":") == 2:
+        a, b, k = text.split(":")
+        return tuple(float(x) for x in np.round(np.linspace(float(a), float(b), int(k)), 12))
+    try:
+        return tuple(float(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise ValueError(f"expected numbers like '0.5,1.5' or 'start:stop:count', got {text!r}") from None
+
+
+def _engine_args(s) -> None:
+    s.add_argument("--scheduler", help="run on this dask scheduler (tcp://host:port) instead of local cores")
+    s.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
+
+
+def _report(out) -> int:
+    print(f"{out.computed} tasks computed, {out.skipped} already done, {len(out.failures)} failed "
+          f"in {out.seconds:.1f} s on {out.workers} workers; table: {out.table_path}")
+    for f in out.failures:
+        print(f"FAILED {f['task']} {f['inputs'] if len(str(f['inputs'])) < 300 else f['inputs'].get('source', f['task'])}: "
+              f"{f['error']}")
+    return 1 if out.failures else 0
+
+
+def cmd_study_map(args, progress) -> int:
+    from .maps import MapSpec, compliance_map
+    spec = MapSpec(n=_floats(args.n), gamma0=_floats(args.gamma0), beta_min=args.beta_min,
+                   beta_max=args.beta_max, beta_points=args.beta_points, engine=args.engine)
+    out = compliance_map(spec, Path(args.out), scheduler=args.scheduler, workers=args.workers,
+                         progress=progress(f"map {len(spec.tasks())} rows"))
+    if (Path(args.out) / "map.png").exists():
+        print(f"figure: {Path(args.out) / 'map.png'}")
+    return _report(out)
+
+
+def cmd_study_mc(args, progress) -> int:
+    from bench.config import DEFAULTS
+
+    from .montecarlo import McSpec, identification_mc
+    plan = tomllib.loads(Path(args.plan or DEFAULTS / "demo_plan.toml").read_text())
+    rig = tomllib.loads(Path(args.rig or DEFAULTS / "sim_rig.toml").read_text())
+    spec = McSpec(plan=plan, rig=rig, samples=args.samples, spread=args.spread, n_spread=args.n_spread,
+                  noise_scale=args.noise_scale, seed=args.seed)
+    out = identification_mc(spec, Path(args.out), scheduler=args.scheduler, workers=args.workers,
+                            progress=progress(f"identification MC {spec.samples} rigs"))
+    if (Path(args.out) / "errors.png").exists():
+        print(f"figure: {Path(args.out) / 'errors.png'}")
+    return _report(out)
+
+
+def cmd_analyze_batch(args, progress) -> int:
+    from .batch import ANALYZE, IDENTIFY, analyze_batch
+    out = analyze_batch([Path(s) for s in args.sources], Path(args.out), rig=Path(args.rig) if args.rig else None,
+                        function=IDENTIFY if args.identify_only else ANALYZE, scheduler=args.scheduler,
+                        workers=args.workers, progress=progress("batch analysis"))
+    print(f"summary: {Path(args.out) / 'summary.parquet'}, {Path(args.out) / 'summary.csv'}; "
+          f"reports under {Path(args.out) / 'sources'}/")
+    return _report(out)
+
+
+def add_parsers(sub, progress) -> None:
+    """Register `study` (and `analyze`, unless another module already did) on ``sub``."""
+    s = sub.add_parser("study", help="parameter studies on all local cores or a dask cluster (resumable)")
+    ss = s.add_subparsers(dest="study", required=True)
+    m = ss.add_parser("map", help="compliance map G(beta, gamma0) for one or more n (Parquet + map.png)")
+    m.add_argument("--n", default="1.5", help="shape factors: '0.5,1.5' or 'start:stop:count'")
+    m.add_argument("--gamma0", default="0.1:0.9:9", help="force ratios P0/F_s in (0, 1)")
+    m.add_argument("--beta-min", type=float, default=0.2)
+    m.add_argument("--beta-max", type=float, default=3.0)
+    m.add_argument("--beta-points", type=int, default=200, help="log-spaced frequency ratios per row")
+    m.add_argument("--engine", choices=("shooting", "rk4"), default="shooting")
+    m.add_argument("--out", required=True, help="study directory (run again to resume)")
+    _engine_args(m)
+    m.set_defaults(func=lambda a: cmd_study_map(a, progress))
+    c = ss.add_parser("mc", help="Monte-Carlo study of identification for a plan (Parquet + errors.png)")
+    c.add_argument("--plan", help="plan TOML (default: the demo plan)")
+    c.add_argument("--rig", help="simulated rig TOML; [rig.expected] centres the random rigs")
+    c.add_argument("--samples", type=int, default=20)
+    c.add_argument("--spread", type=float, default=2.0, help="F_s, x_s, m within this factor of expected")
+    c.add_argument("--n-spread", type=float, default=0.5, help="n within +- this of expected")
+    c.add_argument("--noise-scale", type=float, default=1.0, help="multiplies the rig model's sensor noise")
+    c.add_argument("--seed", type=int, default=0, help="study seed (task seeds derive from it)")
+    c.add_argument("--out", required=True, help="study directory (run again to resume)")
+    _engine_args(c)
+    c.set_defaults(func=lambda a: cmd_study_mc(a, progress))
+    if "analyze" not in sub.choices:
+        a = sub.add_parser("analyze", help="analyse many sources (run dirs, UFF58 files, archive dirs) at once")
+        add_batch_arguments(a, progress)
+
+
+def add_batch_arguments(a, progress=None) -> None:
+    """The batch options of `bench analyze` (also for a parser defined elsewhere)."""
+    a.add_argument("sources", nargs="+", help="run directories, UFF58 files or archive directories")
+    a.add_argument("--out", required=True, help="batch directory: summary table and one report per source")
+    a.add_argument("--rig", help="rig TOML for sources that carry no rig (UFF58)")
+    a.add_argument("--identify-only", action="store_true",
+                   help="only identify F_s, x_s, n, m per source (no model-vs-measurement analysis)")
+    _engine_args(a)
+    if progress is not None:
+        a.set_defaults(func=lambda args: cmd_analyze_batch(args, progress))

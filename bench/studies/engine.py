@@ -1,0 +1,274 @@
+"""Scale-out engine: map a task function over a list of tasks on dask.distributed.
+
+A *task* is a dict of JSON-able inputs (a row of a map, one Monte-Carlo sample, one
+source).  ``fn(inputs, seed) -> list[dict]`` runs on a worker and returns rows; the
+client adds the task's inputs and the software version to every row and writes them as
+one Parquet part per task (temporary name, then rename: all or nothing):
+
+    <study>/study.json              kind, spec, software version, tasks, failures
+    <study>/parts/<task key>.parquet one task's rows
+    <study>/results.parquet         every part, concatenated, when the study ends
+
+A task's key is a hash of its inputs; a part that exists is never computed again, so an
+interrupted or failed study is resumed by running it again.  The seed of a task comes
+from the study seed and the task's inputs (never from the order or the worker), so a
+local run and a cluster run give the same numbers.
+
+Where it runs: ``scheduler=None`` starts a LocalCluster (one single-threaded worker
+process per core; the numba kernels release the GIL but the identification and the
+shooting Newton loops are Python); ``scheduler="tcp://host:port"`` connects to a running
+cluster.  Each worker compiles (or loads from numba's cache) the kernels once, in a
+worker plugin, before its first task.  Workers that die are replaced by dask, which
+reruns their tasks elsewhere; a task that raises is reported with its inputs and the
+rest goes on.  Ctrl-C cancels the pending futures and closes the cluster.
+
+Rows are computed on the workers and written by the client, so workers need no shared
+file system (the batch analysis, which reads sources and writes reports, does).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+from distributed import Client, LocalCluster, WorkerPlugin, as_completed
+
+from bench.storage import _atomic_write, now_iso
+
+log = logging.getLogger(__name__)
+
+SCHEMA = "guideway-bench/study/1"
+
+
+def software_version() -> str:
+    from importlib import metadata
+    try:
+        return f"guideway-bench {metadata.version('guideway-bench')}"
+    except metadata.PackageNotFoundError:
+        return "guideway-bench (not installed)"
+
+
+def task_key(inputs: dict) -> str:
+    """Stable id of a task: a hash of its inputs (order of keys does not matter)."""
+    blob = json.dumps(inputs, sort_keys=True, default=float).encode()
+    return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def task_seed(study_seed: int, inputs: dict) -> int:
+    """A task's random seed, from the study seed and the task's inputs alone."""
+    blob = json.dumps([int(study_seed), inputs], sort_keys=True, default=float).encode()
+    return int.from_bytes(hashlib.sha256(blob).digest()[:8], "little") >> 1
+
+
+class WarmKernels(WorkerPlugin):
+    """Compile (or load from numba's on-disk cache) the kernels once per worker."""
+
+    name = "guideway-bench-warm-kernels"
+
+    def setup(self, worker=None):
+        warm_kernels()
+
+
+def warm_kernels() -> None:
+    import numpy as np
+
+    from sim.dynamics import steady_state
+    from sim.identify import Identifier  # noqa: F401  (imports compile-cached kernels)
+    from sim.shooting import frf_shooting
+    steady_state(0.5, 1.5, 1.5, max_cycles=3)
+    frf_shooting(np.array([1.4, 1.5]), 0.5, 1.5)
+
+
+@dataclass
+class Outcome:
+    """What a study run did: rows written, tasks skipped (already done), failures."""
+
+    study_dir: Path
+    computed: int = 0
+    skipped: int = 0
+    failures: list[dict] = field(default_factory=list)
+    seconds: float = 0.0
+    workers: int = 0
+
+    @property
+    def table_path(self) -> Path:
+        return self.study_dir / "results.parquet"
+
+    def table(self) -> pa.Table:
+        return pq.read_table(self.table_path)
+
+
+class Engine:
+    """A dask client on a LocalCluster (default) or on a running scheduler.
+
+    Use as a context manager; ``workers`` is the LocalCluster's size (default: all cores).
+    """
+
+    def __init__(self, scheduler: str | None = None, workers: int | None = None, warm: bool = True):
+        self.scheduler, self.workers, self.warm = scheduler, workers, warm
+        self.cluster: LocalCluster | None = None
+        self.client: Client | None = None
+
+    def __enter__(self) -> "Engine":
+        if self.scheduler:
+            self.client = Client(self.scheduler, timeout="20s")
+        else:
+            n = self.workers or os.cpu_count() or 1
+            self.cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                        dashboard_address="127.0.0.1:0", host="127.0.0.1")
+            self.client = Client(self.cluster)
+        if self.warm:
+            self.client.register_plugin(WarmKernels())
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self.client is not None:
+            self.client.close()
+            self.client = None
+        if self.cluster is not None:
+            self.cluster.close()
+            self.cluster = None
+
+    @property
+    def n_workers(self) -> int:
+        return len(self.client.scheduler_info(n_workers=-1)["workers"]) if self.client else 0
+
+    def map(self, fn: Callable, items: list, *, progress=None, label: str = "") -> list:
+        """``[fn(item) for item in items]`` on the cluster, in order; failures raise."""
+        futures = self.client.map(fn, items, pure=False)
+        out: dict = {}
+        try:
+            for i, fut in enumerate(as_completed(futures)):
+                out[fut.key] = fut.result()
+                if progress:
+                    progress(i + 1, len(futures), label)
+        except BaseException:
+            self.client.cancel(futures)
+            raise
+        return [out[f.key] for f in futures]
+
+
+def _run_task(fn: Callable, inputs: dict, seed: int) -> list[dict]:
+    return list(fn(inputs, seed))
+
+
+def _rows_table(rows: list[dict], inputs: dict, key: str, version: str) -> pa.Table:
+    cols: dict[str, list] = {}
+    extra = {f"in_{k}": v for k, v in inputs.items() if not isinstance(v, (list, dict))}
+    extra.update(task=key, software_version=version)
+    for r in rows:
+        for k in {**r, **extra}:
+            cols.setdefault(k, [])
+    for r in rows:
+        full = {**extra, **r}
+        for k in cols:
+            cols[k].append(full.get(k))
+    return pa.table(cols)
+
+
+class Study:
+    """One study directory: its spec, its tasks, the parts done so far."""
+
+    def __init__(self, study_dir: Path, kind: str, spec: dict, tasks: list[dict], seed: int = 0):
+        self.dir = Path(study_dir)
+        self.kind, self.spec, self.seed = kind, spec, int(seed)
+        self.tasks = tasks
+        self.keys = [task_key(t) for t in tasks]
+        if len(set(self.keys)) != len(self.keys):
+            raise ValueError(f"{kind} study: two tasks have the same inputs")
+        self.parts = self.dir / "parts"
+        self.manifest = self.dir / "study.json"
+
+    def _check_or_create(self) -> dict:
+        self.parts.mkdir(parents=True, exist_ok=True)
+        if self.manifest.exists():
+            old = json.loads(self.manifest.read_text())
+            if old.get("kind") != self.kind or old.get("spec") != json.loads(json.dumps(self.spec)) \
+                    or old.get("seed") != self.seed:
+                raise ValueError(
+                    f"{self.dir} holds a different study ({old.get('kind')}, seed {old.get('seed')}, "
+                    f"spec {old.get('spec')}); use a new directory or the same inputs to resume it")
+            return old
+        return dict(schema=SCHEMA, kind=self.kind, spec=self.spec, seed=self.seed,
+                    software_version=software_version(), created=now_iso(),
+                    tasks=[dict(key=k, inputs=t) for k, t in zip(self.keys, self.tasks)], runs=[])
+
+    def done(self) -> set[str]:
+        return {p.stem for p in self.parts.glob("*.parquet")}
+
+    def _write_manifest(self, m: dict) -> None:
+        _atomic_write(self.manifest, lambda fh: fh.write(json.dumps(m, indent=1, default=float).encode()))
+
+    def run(self, fn: Callable, engine: Engine, *, progress=None) -> Outcome:
+        """Compute every task whose part is missing; returns the outcome (never raises for
+        a failed task: it is in ``outcome.failures`` and ``study.json``)."""
+        t0 = time.perf_counter()
+        manifest = self._check_or_create()
+        self._write_manifest(manifest)
+        version = software_version()
+        done = self.done()
+        todo = [(k, t) for k, t in zip(self.keys, self.tasks) if k not in done]
+        out = Outcome(self.dir, skipped=len(self.tasks) - len(todo), workers=engine.n_workers)
+        if out.skipped:
+            log.info("%s: %d of %d tasks already done, %d to compute", self.dir, out.skipped,
+                     len(self.tasks), len(todo))
+        client = engine.client
+        futures = {}
+        for k, t in todo:
+            fut = client.submit(_run_task, fn, t, task_seed(self.seed, t), key=f"{self.kind}-{k}",
+                                pure=False, retries=0)
+            futures[fut] = (k, t)
+        total, finished = len(self.tasks), out.skipped
+        if progress and finished:
+            progress(finished, total, "(resumed)")
+        try:
+            for fut in as_completed(list(futures)):
+                k, t = futures[fut]
+                try:
+                    rows = fut.result()
+                except Exception as e:  # noqa: BLE001 - one task's failure must not stop the study
+                    msg = f"{type(e).__name__}: {e}"
+                    log.error("task %s failed with inputs %s: %s", k, t, msg)
+                    out.failures.append(dict(task=k, inputs=t, error=msg))
+                else:
+                    table = _rows_table(rows, t, k, version)
+                    _atomic_write(self.parts / f"{k}.parquet", lambda fh, tb=table: pq.write_table(tb, fh))
+                    out.computed += 1
+                finished += 1
+                if progress:
+                    progress(finished, total, f"{len(out.failures)} failed" if out.failures else "")
+        except BaseException:
+            log.warning("%s: cancelling %d pending tasks", self.dir, sum(not f.done() for f in futures))
+            client.cancel(list(futures))
+            raise
+        finally:
+            out.seconds = time.perf_counter() - t0
+            manifest["runs"].append(dict(ended=now_iso(), computed=out.computed, skipped=out.skipped,
+                                         failed=len(out.failures), seconds=out.seconds,
+                                         workers=out.workers, scheduler=engine.scheduler or "local"))
+            manifest["failures"] = out.failures
+            manifest["complete"] = not out.failures and len(self.done()) == len(self.tasks)
+            self._write_manifest(manifest)
+        self.collect()
+        return out
+
+    def collect(self) -> Path:
+        """Concatenate the parts, in task order, into results.parquet."""
+        tables = [pq.read_table(self.parts / f"{k}.parquet") for k in self.keys
+                  if (self.parts / f"{k}.parquet").exists()]
+        path = self.dir / "results.parquet"
+        if tables:
+            table = pa.concat_tables(tables, promote_options="default")
+            _atomic_write(path, lambda fh: pq.write_table(table, fh))
+        return path

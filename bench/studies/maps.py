@@ -1,0 +1,105 @@
+"""Compliance maps G(beta, gamma0) of the Masing model (seed Eq. 9), for one or more n.
+
+A task is one row of a map: one (n, gamma0) and the whole beta grid, swept up and down
+with the shooting engine's continuation (:func:`sim.shooting.frf_shooting`; points
+outside its assumptions are computed with RK4), or point by point from rest with the RK4
+reference engine (``engine="rk4"``, for checks and the benchmark).  Per beta the row
+gives the compliance of both sweeps, whether they disagree (two coexisting responses: a
+jump region) and whether the beta is the harmonic or a superharmonic resonance of the up
+sweep (:func:`sim.frf.find_peaks`): the ridges of the map.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from .engine import Engine, Outcome, Study
+
+log = logging.getLogger(__name__)
+
+JUMP_RTOL = 0.02      # sweeps differing by more than this (relative) mark a jump region
+
+
+@dataclass(frozen=True)
+class MapSpec:
+    """The grid of a compliance map study."""
+
+    n: tuple[float, ...]
+    gamma0: tuple[float, ...]
+    beta_min: float = 0.2
+    beta_max: float = 3.0
+    beta_points: int = 200
+    engine: str = "shooting"
+
+    def __post_init__(self):
+        if not self.n or not self.gamma0:
+            raise ValueError("a map needs at least one n and one gamma0")
+        for n in self.n:
+            if not (n > 0 and abs(n - 1) > 1e-9):
+                raise ValueError(f"n must be > 0 and != 1, got {n!r}")
+        for g in self.gamma0:
+            if not (0 < g < 1):
+                raise ValueError(f"gamma0 must lie in (0, 1) (above 1 the carriage rolls away), got {g!r}")
+        if not (0 < self.beta_min < self.beta_max):
+            raise ValueError(f"need 0 < beta_min < beta_max, got {self.beta_min!r}, {self.beta_max!r}")
+        if self.beta_points < 3:
+            raise ValueError(f"beta_points must be >= 3, got {self.beta_points!r}")
+        if self.engine not in ("shooting", "rk4"):
+            raise ValueError(f"engine must be 'shooting' or 'rk4', got {self.engine!r}")
+
+    def betas(self) -> np.ndarray:
+        return np.geomspace(self.beta_min, self.beta_max, self.beta_points)
+
+    def tasks(self) -> list[dict]:
+        return [dict(n=float(n), gamma0=float(g), beta_min=self.beta_min, beta_max=self.beta_max,
+                     beta_points=self.beta_points, engine=self.engine)
+                for n in self.n for g in self.gamma0]
+
+    def to_dict(self) -> dict:
+        return dict(n=list(self.n), gamma0=list(self.gamma0), beta_min=self.beta_min,
+                    beta_max=self.beta_max, beta_points=self.beta_points, engine=self.engine)
+
+
+def map_row(inputs: dict, seed: int = 0) -> list[dict]:
+    """One row of the map (a task): rows of the table, one per beta."""
+    from sim.frf import find_peaks, frf_rk4
+    from sim.shooting import frf_shooting
+
+    betas = np.geomspace(inputs["beta_min"], inputs["beta_max"], int(inputs["beta_points"]))
+    n, g = inputs["n"], inputs["gamma0"]
+    if inputs.get("engine", "shooting") == "rk4":
+        up = frf_rk4(betas, g, n, workers=1)
+        down, fb_up, fb_down = up, np.ones(betas.size, bool), np.ones(betas.size, bool)
+    else:
+        up, fb_up = frf_shooting(betas, g, n, direction="up")
+        down, fb_down = frf_shooting(betas, g, n, direction="down")
+    differ = np.abs(up.G - down.G) > JUMP_RTOL * np.maximum(up.G, down.G)
+    peak = np.full(betas.size, "", dtype=object)
+    try:
+        for p in find_peaks(up):
+            peak[int(np.argmin(np.abs(np.log(betas / p.beta))))] = p.kind
+    except ValueError as e:
+        log.warning("n=%g gamma0=%g: no peaks (%s)", n, g, e)
+    return [dict(n=float(n), gamma0=float(g), beta=float(b), G_up=float(up.G[i]), G_down=float(down.G[i]),
+                 jump_region=bool(differ[i]), peak=str(peak[i]),
+                 converged=bool(up.converged[i] and down.converged[i]),
+                 rk4_fallback=bool(fb_up[i] or fb_down[i]))
+            for i, b in enumerate(betas)]
+
+
+def compliance_map(spec: MapSpec, study_dir, *, scheduler: str | None = None, workers: int | None = None,
+                   engine: Engine | None = None, progress=None, figure: bool = True) -> Outcome:
+    """Run (or resume) a map study; writes results.parquet and, with ``figure``, map.png."""
+    study = Study(study_dir, "compliance-map", spec.to_dict(), spec.tasks())
+    if engine is None:
+        with Engine(scheduler, workers) as eng:
+            out = study.run(map_row, eng, progress=progress)
+    else:
+        out = study.run(map_row, engine, progress=progress)
+    if figure and out.table_path.exists():
+        from .figures import plot_compliance_map
+        plot_compliance_map(out.table(), study.dir / "map.png")
+    return out

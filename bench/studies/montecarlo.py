@@ -1,0 +1,195 @@
+"""Monte-Carlo study of identification: how well a plan recovers F_s, x_s, n and m.
+
+Before a test a technician knows roughly what the rig is (the ``[rig.expected]`` values)
+and has a plan.  Each sample (a task) draws a rig around those values (F_s, x_s, m
+log-uniform within a factor ``spread``; n uniform within +-``n_spread``, kept 0.15 away
+from 1), a noise seed and the sensor noise of the rig scaled by ``noise_scale``; runs
+the plan on the RK4 plant :class:`sim.rig.SimulatedRig` with the real stepped-sine
+procedure (force control, ramps, settling; the plant is called in-process instead of
+through the instrument twins' wire protocols, which change nothing in the data); and
+identifies with :func:`sim.identify.identify_results` started from the expected values.
+A row per parameter gives truth, estimate, 95 % interval, relative error and whether the
+interval covers the truth.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from drivers import plan_block
+from sim.rig import SimulatedRig
+
+from .engine import Engine, Outcome, Study
+
+log = logging.getLogger(__name__)
+
+PARAMS = ("F_s_N", "x_s_m", "n", "mass_kg")
+
+
+class PlantGenerator:
+    """The function generator's settings go straight into the plant."""
+
+    def __init__(self, rig: SimulatedRig):
+        self.rig = rig
+
+    def set_frequency(self, freq_Hz: float) -> float:
+        self.rig.set_generator(freq_Hz=freq_Hz)
+        return float(freq_Hz)
+
+    def set_amplitude(self, vpp: float) -> float:
+        self.rig.set_generator(amplitude_Vpp=vpp)
+        return float(vpp)
+
+    def set_output(self, on: bool) -> None:
+        self.rig.set_generator(output_on=on)
+
+
+@dataclass
+class PlantBlock:
+    force_N: np.ndarray
+    accel_m_s2: np.ndarray
+    disp_m: np.ndarray
+    fs_Hz: float
+    t0_s: float
+    block_id: int
+    resends: int = 0
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.force_N.size)
+
+
+class PlantDaq:
+    """Blocks from the plant, volts converted with the rig's nominal sensitivities (what
+    the DAQ driver does; a gain error of the model stays in the data)."""
+
+    def __init__(self, rig: SimulatedRig):
+        self.rig = rig
+        self.blocks = 0
+
+    def acquire_samples(self, rate_Hz: float, n: int) -> PlantBlock:
+        m = self.rig.model
+        b = self.rig.run(n, rate_Hz)
+        self.blocks += 1
+        return PlantBlock(b.force_V / m.force_sens_V_per_N, b.accel_V / m.accel_sens_V_per_m_s2,
+                          b.disp_V / m.disp_sens_V_per_m, rate_Hz, b.t0_s, self.blocks)
+
+    def acquire_periods(self, freq_Hz: float, n_periods: int, min_rate_Hz: float = 25_600.0) -> PlantBlock:
+        rate, n = plan_block(freq_Hz, n_periods, min_rate_Hz)
+        return self.acquire_samples(rate, n)
+
+
+@dataclass(frozen=True)
+class McSpec:
+    """A Monte-Carlo identification study: plan and rig (parsed TOML dicts), samples."""
+
+    plan: dict
+    rig: dict
+    samples: int = 20
+    spread: float = 2.0
+    n_spread: float = 0.5
+    noise_scale: float = 1.0
+    seed: int = 0
+
+    def __post_init__(self):
+        if self.samples < 1:
+            raise ValueError(f"samples must be >= 1, got {self.samples!r}")
+        if not self.spread >= 1:
+            raise ValueError(f"spread is a factor >= 1, got {self.spread!r}")
+        if not (self.n_spread >= 0 and self.noise_scale >= 0):
+            raise ValueError("n_spread and noise_scale must be >= 0")
+        _configs(self.plan, self.rig)          # validates both now, not on a worker
+
+    def tasks(self) -> list[dict]:
+        return [dict(sample=i, plan=self.plan, rig=self.rig, spread=self.spread, n_spread=self.n_spread,
+                     noise_scale=self.noise_scale) for i in range(self.samples)]
+
+    def to_dict(self) -> dict:
+        return dict(plan=self.plan, rig=self.rig, samples=self.samples, spread=self.spread,
+                    n_spread=self.n_spread, noise_scale=self.noise_scale)
+
+
+def _configs(plan: dict, rig: dict):
+    from bench.config import parse_plan, parse_rig
+    p = parse_plan(plan)
+    r = parse_rig(rig)
+    if not r.simulated:
+        raise ValueError("a Monte-Carlo study needs a simulated rig (simulated = true, [rig.model])")
+    return replace(p, infeasible="skip"), r
+
+
+def draw_rig(expected: dict, spread: float, n_spread: float, rng: np.random.Generator) -> dict:
+    """A rig around the expected values (see the module docstring)."""
+    ls = math.log(spread)
+    truth = {k: expected[k] * math.exp(rng.uniform(-ls, ls)) for k in ("F_s_N", "x_s_m", "mass_kg")}
+    n = expected["n"] + rng.uniform(-n_spread, n_spread)
+    for _ in range(1000):
+        if n > 0.2 and abs(n - 1) >= 0.15:
+            break
+        n = expected["n"] + rng.uniform(-n_spread, n_spread)
+    else:
+        raise ValueError(f"expected n {expected['n']} +- {n_spread} leaves no n > 0.2 away from 1")
+    truth["n"] = n
+    return truth
+
+
+def simulate_plan(plan, rig, model: dict) -> list[dict]:
+    """Run ``plan`` on the RK4 plant with ``model`` (RigModel keys); the step results."""
+    from bench.session import check_envelope
+    from procedures.stepped_sine import SteppedSine
+    from sim.rig import RigModel
+
+    plan = check_envelope(plan, rig)
+    plant = SimulatedRig(RigModel.from_dict(model))
+    daq = PlantDaq(plant)
+    rest = daq.acquire_periods(100.0, 10).disp_m
+    proc = SteppedSine(plan, PlantGenerator(plant), daq, amp_gain_N_per_V=rig.amp_gain_N_per_V)
+    proc.disp_noise_floor_m = float(np.std(rest))
+    results: list[dict] = []
+    proc.run(set(), lambda step, res, raw: results.append(res))
+    return results
+
+
+def identification_sample(inputs: dict, seed: int) -> list[dict]:
+    """One Monte-Carlo sample (a task): rows per parameter."""
+    from sim.identify import identify_results
+
+    plan, rig = _configs(inputs["plan"], inputs["rig"])
+    rng = np.random.default_rng(seed)
+    expected = dict(F_s_N=rig.expected_F_s_N, x_s_m=rig.expected_x_s_m, n=rig.expected_n,
+                    mass_kg=rig.expected_mass_kg)
+    truth = draw_rig(expected, inputs["spread"], inputs["n_spread"], rng)
+    model = dict(rig.model)
+    k = inputs["noise_scale"]
+    for name, default in (("force_noise_N", 0.002), ("accel_noise_m_s2", 0.002), ("disp_noise_m", 2e-9)):
+        model[name] = k * model.get(name, default)
+    model.update(truth, seed=int(rng.integers(2 ** 31)))
+    results = simulate_plan(plan, rig, model)
+    est = identify_results(results, expected).estimate
+    rows = []
+    for p in PARAMS:
+        v, t = est.values[p], truth[p]
+        rows.append(dict(sample=int(inputs["sample"]), parameter=p, truth=t, guess=expected[p],
+                         estimate=float(v), low=float(est.low[p]), high=float(est.high[p]), rel_error=float(v / t - 1.0),
+                         covered=bool(est.low[p] <= t <= est.high[p]), rel_std=float(est.rel_std[p]),
+                         steps=len(results), reduced_chi2=float(est.cost), noise_seed=model["seed"]))
+    return rows
+
+
+def identification_mc(spec: McSpec, study_dir, *, scheduler: str | None = None, workers: int | None = None,
+                      engine: Engine | None = None, progress=None, figure: bool = True) -> Outcome:
+    """Run (or resume) a Monte-Carlo study; writes results.parquet and errors.png."""
+    study = Study(study_dir, "identification-mc", spec.to_dict(), spec.tasks(), seed=spec.seed)
+    if engine is None:
+        with Engine(scheduler, workers) as eng:
+            out = study.run(identification_sample, eng, progress=progress)
+    else:
+        out = study.run(identification_sample, engine, progress=progress)
+    if figure and out.table_path.exists():
+        from .figures import plot_identification_errors
+        plot_identification_errors(out.table(), study.dir / "errors.png")
+    return out

@@ -1,0 +1,193 @@
+"""Studies and batch analysis on a real dask cluster: a scheduler and two workers started
+with the dask command line as separate processes on loopback, against the local engine
+(a LocalCluster in this process)."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from bench.studies import Engine, MapSpec, Study, compliance_map, task_seed
+from bench.studies.batch import IDENTIFY, analyze_batch
+from bench.studies.maps import map_row
+
+DASK = Path(sys.executable).with_name("dask")
+ENV = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
+SMALL_MAP = MapSpec(n=(1.5,), gamma0=(0.3, 0.6), beta_min=0.6, beta_max=1.6, beta_points=14)
+
+
+class DaskCluster:
+    """`dask scheduler` and ``workers`` x `dask worker` (no nanny: a killed worker stays dead)."""
+
+    def __init__(self, tmp: Path, workers: int = 2):
+        self.file = tmp / "scheduler.json"
+        self.procs: list[subprocess.Popen] = []
+        self.procs.append(subprocess.Popen(
+            [str(DASK), "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+             "--scheduler-file", str(self.file)], env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        deadline = time.monotonic() + 60
+        while not self.file.exists():
+            assert time.monotonic() < deadline, "dask scheduler did not start"
+            time.sleep(0.2)
+        time.sleep(0.3)
+        self.address = json.loads(self.file.read_text())["address"]
+        assert self.address.startswith("tcp://127.0.0.1:")
+        self.workers = [subprocess.Popen(
+            [str(DASK), "worker", "--scheduler-file", str(self.file), "--host", "127.0.0.1", "--nthreads", "1",
+             "--no-nanny", "--no-dashboard", "--name", f"w{i}"], env=ENV, cwd=Path(__file__).parents[2],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for i in range(workers)]
+        self.procs += self.workers
+        from distributed import Client
+        with Client(self.address, timeout="30s") as c:
+            c.wait_for_workers(workers, timeout=60)
+
+    def close(self):
+        for p in reversed(self.procs):
+            if p.poll() is None:
+                p.terminate()
+        for p in self.procs:
+            try:
+                p.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory):
+    c = DaskCluster(tmp_path_factory.mktemp("dask"))
+    yield c
+    c.close()
+
+
+@pytest.fixture(scope="module")
+def local_map(tmp_path_factory):
+    return compliance_map(SMALL_MAP, tmp_path_factory.mktemp("local") / "map", workers=2)
+
+
+def _columns(path, names):
+    t = pq.read_table(path)
+    return {n: t.column(n).to_pylist() for n in names}
+
+
+def test_task_seed_comes_from_the_study_seed_and_the_inputs_alone():
+    a = dict(sample=3, spread=2.0)
+    assert task_seed(7, a) == task_seed(7, dict(spread=2.0, sample=3))   # key order is irrelevant
+    assert task_seed(7, a) != task_seed(8, a)
+    assert task_seed(7, a) != task_seed(7, dict(sample=4, spread=2.0))
+
+
+@pytest.mark.timeout(300)
+def test_map_on_a_cluster_gives_the_local_numbers_and_the_seed_paper_trends(cluster, local_map, tmp_path):
+    remote = compliance_map(SMALL_MAP, tmp_path / "map", scheduler=cluster.address)
+    assert remote.computed == 2 and not remote.failures and remote.workers == 2
+    cols = ("n", "gamma0", "beta", "G_up", "G_down", "peak", "jump_region")
+    assert _columns(remote.table_path, cols) == _columns(local_map.table_path, cols)   # bit for bit
+    t = _columns(remote.table_path, cols + ("software_version", "in_engine"))
+    assert set(t["software_version"]) == {"guideway-bench 0.1.0"} and set(t["in_engine"]) == {"shooting"}
+    # seed Fig. 13: the harmonic resonance falls as the force rises; seed Figs. 7-9 put
+    # it between B = 0.71 and C = 1.40 for n = 1.5 at gamma0 = 0.6
+    peaks = {g: b for g, b, k in zip(t["gamma0"], t["beta"], t["peak"]) if k == "harmonic"}
+    assert peaks[0.6] < peaks[0.3]
+    assert 0.71 < peaks[0.6] < 1.40
+    # a map point against the RK4 reference engine (independent of shooting)
+    from sim.dynamics import steady_state
+    i = t["beta"].index(min(t["beta"], key=lambda b: abs(b - 1.2)))
+    ref = steady_state(t["gamma0"][i], t["beta"][i], 1.5, rtol=1e-7).G
+    assert t["G_up"][i] == pytest.approx(ref, rel=1e-3)
+    assert (tmp_path / "map" / "map.png").stat().st_size > 10_000
+
+
+@pytest.mark.timeout(300)
+def test_resume_computes_only_the_missing_rows(cluster, local_map, tmp_path):
+    shutil.copytree(local_map.study_dir, tmp_path / "map")
+    parts = sorted((tmp_path / "map" / "parts").glob("*.parquet"))
+    parts[0].unlink()
+    again = compliance_map(SMALL_MAP, tmp_path / "map", scheduler=cluster.address)
+    assert (again.computed, again.skipped) == (1, 1)
+    cols = ("gamma0", "beta", "G_up")
+    assert _columns(again.table_path, cols) == _columns(local_map.table_path, cols)
+    with pytest.raises(ValueError, match="different study"):
+        compliance_map(MapSpec(n=(0.5,), gamma0=(0.3,)), tmp_path / "map", scheduler=cluster.address)
+
+
+@pytest.mark.timeout(300)
+def test_a_failed_task_is_reported_with_its_inputs_and_the_rest_completes(cluster, tmp_path):
+    good = SMALL_MAP.tasks()[0]
+    bad = dict(good, gamma0=-0.5)       # refused by the steady-state engine on the worker
+    study = Study(tmp_path / "s", "compliance-map", {"test": 1}, [good, bad])
+    with Engine(cluster.address) as eng:
+        out = study.run(map_row, eng)
+    assert out.computed == 1 and len(out.failures) == 1
+    assert out.failures[0]["inputs"]["gamma0"] == -0.5 and "gamma0" in out.failures[0]["error"]
+    manifest = json.loads((tmp_path / "s" / "study.json").read_text())
+    assert manifest["failures"][0]["inputs"] == bad and manifest["complete"] is False
+    assert pq.read_table(out.table_path).num_rows == good["beta_points"]
+
+
+@pytest.fixture(scope="module")
+def sources(small_run, tmp_path_factory):
+    """Two sources of the two kinds: the shared small run and its UFF58 export."""
+    from bench.export import export_run
+    paths = export_run(small_run.path, tmp_path_factory.mktemp("export"))
+    uff = next(p for p in paths if p.name == "time.uff")
+    return [small_run.path, uff]
+
+
+@pytest.mark.timeout(300)
+def test_batch_on_a_cluster_gives_the_local_summary(cluster, sources, tmp_path):
+    local = analyze_batch(sources, tmp_path / "local", function=IDENTIFY, workers=2)
+    remote = analyze_batch(sources, tmp_path / "remote", function=IDENTIFY, scheduler=cluster.address)
+    assert local.computed == remote.computed == 2 and not remote.failures
+    cols = ("source", "F_s_N_value", "x_s_m_value", "n_value", "mass_kg_value", "reduced_chi2")
+    lt, rt = _columns(tmp_path / "local" / "summary.parquet", cols), _columns(tmp_path / "remote" / "summary.parquet", cols)
+    assert lt == rt
+    # the simulated rig's truth (bench/defaults/sim_rig.toml: F_s 10 N, m 10 kg) from both sources
+    assert np.allclose(rt["F_s_N_value"], 10.0, rtol=0.05) and np.allclose(rt["mass_kg_value"], 10.0, rtol=0.05)
+    assert (tmp_path / "remote" / "summary.csv").read_text().count("\n") == 3
+    assert len(list((tmp_path / "remote" / "sources").glob("*/identification.json"))) == 2
+
+
+@pytest.mark.timeout(300)
+def test_a_broken_source_is_reported_and_the_others_complete(cluster, sources, tmp_path):
+    broken = tmp_path / "broken.uff"
+    broken.write_text("this is not a universal file\n")
+    out = analyze_batch([sources[0], broken], tmp_path / "b", function=IDENTIFY, scheduler=cluster.address)
+    assert out.computed == 1 and len(out.failures) == 1
+    assert out.failures[0]["inputs"]["source"] == str(broken.resolve())
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_a_study_completes_when_a_worker_is_killed(tmp_path):
+    c = DaskCluster(tmp_path, workers=2)
+    try:
+        spec = MapSpec(n=(1.5,), gamma0=(0.2, 0.35, 0.5, 0.65, 0.8, 0.9), beta_min=0.5, beta_max=2.0,
+                       beta_points=40)
+        result = {}
+        t = threading.Thread(target=lambda: result.update(out=compliance_map(
+            spec, tmp_path / "map", scheduler=c.address, figure=False)))
+        t.start()
+        deadline = time.monotonic() + 120
+        while not list((tmp_path / "map" / "parts").glob("*.parquet")) if (tmp_path / "map" / "parts").exists() else True:
+            assert time.monotonic() < deadline, "no task finished"
+            time.sleep(0.05)
+        c.workers[0].send_signal(signal.SIGKILL)
+        c.workers[0].wait()
+        t.join(timeout=240)
+        out = result["out"]
+        assert out.computed == 6 and not out.failures
+        assert len(list((tmp_path / "map" / "parts").glob("*.parquet"))) == 6
+        assert pq.read_table(out.table_path).num_rows == 6 * 40
+    finally:
+        c.close()
