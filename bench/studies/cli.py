@@ -22,6 +22,12 @@ def _floats(text: str) -> tuple[float, ...]:
         raise ValueError(f"expected numbers like '0.5,1.5' or 'start:stop:count', got {text!r}") from None
 
 
+def _quiet_dask() -> None:
+    """dask's own INFO lines (scheduler and nanny start/stop) would bury the progress line."""
+    for name in ("distributed", "dask"):
+        logging.getLogger(name).setLevel(max(logging.WARNING, logging.getLogger().level))
+
+
 def _engine_args(s) -> None:
     s.add_argument("--scheduler", help="run on this dask scheduler (tcp://host:port) instead of local cores")
     s.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
@@ -37,6 +43,7 @@ def _report(out) -> int:
 
 
 def cmd_study_map(args, progress) -> int:
+    _quiet_dask()
     from .maps import MapSpec, compliance_map
     spec = MapSpec(n=_floats(args.n), gamma0=_floats(args.gamma0), beta_min=args.beta_min,
                    beta_max=args.beta_max, beta_points=args.beta_points, engine=args.engine)
@@ -48,6 +55,7 @@ def cmd_study_map(args, progress) -> int:
 
 
 def cmd_study_mc(args, progress) -> int:
+    _quiet_dask()
     from bench.config import DEFAULTS
 
     from .montecarlo import McSpec, identification_mc
@@ -63,6 +71,7 @@ def cmd_study_mc(args, progress) -> int:
 
 
 def cmd_analyze_batch(args, progress) -> int:
+    _quiet_dask()
     from .batch import ANALYZE, IDENTIFY, analyze_batch
     out = analyze_batch([Path(s) for s in args.sources], Path(args.out), rig=Path(args.rig) if args.rig else None,
                         function=IDENTIFY if args.identify_only else ANALYZE, scheduler=args.scheduler,

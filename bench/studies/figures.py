@@ -98,7 +98,8 @@ def plot_identification_errors(table, path: Path) -> Path:
         ax.set_title(f"{UNITS[p]}: {e.size} rigs")
         ax.set_xlabel("estimate / truth - 1 (%)")
         ax.text(0.02, 0.97, f"median {np.median(e):+.2g} %\n|err| 95th pct {np.percentile(np.abs(e), 95):.2g} %\n"
-                f"95 % interval covers: {100 * c.mean():.0f} %", transform=ax.transAxes, va="top", fontsize=7.5)
+                f"95 % interval covers: {100 * c.mean():.0f} %", transform=ax.transAxes, va="top", fontsize=7.5,
+                bbox=dict(facecolor="white", alpha=0.8, edgecolor="none"))
     axes[0, 0].set_ylabel("rigs")
     fig.suptitle("identification errors over random rigs and noise (one plan)", fontsize=10)
     fig.tight_layout()

@@ -52,12 +52,13 @@ class DaskCluster:
             c.wait_for_workers(workers, timeout=60)
 
     def close(self):
-        for p in reversed(self.procs):
+        for p in self.procs:
             if p.poll() is None:
                 p.terminate()
+        deadline = time.monotonic() + 5
         for p in self.procs:
             try:
-                p.wait(timeout=10)
+                p.wait(timeout=max(0.1, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait()
@@ -191,3 +192,59 @@ def test_a_study_completes_when_a_worker_is_killed(tmp_path):
         assert pq.read_table(out.table_path).num_rows == 6 * 40
     finally:
         c.close()
+
+
+MC_PLAN = {"plan": {"name": "mc test plan", "levels_N": [3.0, 6.0, 30.0],
+                    "frequencies": {"start_Hz": 20.0, "stop_Hz": 1000.0, "points": 6, "direction": "up"}}}
+
+
+@pytest.mark.timeout(300)
+def test_identification_mc_on_a_cluster_matches_an_in_process_sample(cluster, tmp_path):
+    import tomllib
+
+    from bench.config import DEFAULTS
+    from bench.studies import McSpec, identification_mc
+    from bench.studies.montecarlo import identification_sample
+    rig = tomllib.loads((DEFAULTS / "sim_rig.toml").read_text())
+    spec = McSpec(plan=MC_PLAN, rig=rig, samples=2, seed=11)
+    out = identification_mc(spec, tmp_path / "mc", scheduler=cluster.address)
+    assert out.computed == 2 and not out.failures
+    t = pq.read_table(out.table_path)
+    rows = [r for r in t.to_pylist() if r["sample"] == 1]
+    inputs = spec.tasks()[1]
+    here = identification_sample(inputs, task_seed(11, inputs))      # same inputs, same seed, this process
+    assert [r["estimate"] for r in rows] == [r["estimate"] for r in here]
+    assert [r["truth"] for r in rows] == [r["truth"] for r in here]
+    # rigs really vary (truths differ between samples) and the plan pins every parameter
+    truths = {r["sample"]: r["truth"] for r in t.to_pylist() if r["parameter"] == "F_s_N"}
+    assert len(set(truths.values())) == 2
+    errors = np.abs(t.column("rel_error").to_numpy())
+    assert errors.max() < 0.02, errors
+    assert (tmp_path / "mc" / "errors.png").stat().st_size > 10_000
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_ctrl_c_cancels_the_study_closes_the_cluster_and_a_rerun_resumes(tmp_path):
+    import psutil
+    args = [str(Path(sys.executable).with_name("bench")), "study", "map", "--n", "1.5", "--gamma0", "0.2:0.9:8",
+            "--beta-min", "0.5", "--beta-max", "2", "--beta-points", "30", "--workers", "1", "--out", str(tmp_path / "m")]
+    proc = subprocess.Popen(args, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    parts = tmp_path / "m" / "parts"
+    deadline = time.monotonic() + 120
+    while not (parts.exists() and list(parts.glob("*.parquet"))):
+        assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read() if proc.poll() else "slow"
+        time.sleep(0.05)
+    children = psutil.Process(proc.pid).children(recursive=True)
+    assert children                                       # the LocalCluster's worker processes
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "cancelling" in err
+    psutil.wait_procs(children, timeout=20)
+    assert not [c for c in children if c.is_running() and c.status() != psutil.STATUS_ZOMBIE]
+    done = len(list(parts.glob("*.parquet")))
+    assert 1 <= done < 8
+    again = subprocess.run(args, env=ENV, capture_output=True, text=True, timeout=240)
+    assert again.returncode == 0, again.stderr
+    assert f"{8 - done} tasks computed, {done} already done, 0 failed" in again.stdout
