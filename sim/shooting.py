@@ -124,13 +124,18 @@ def _seed_from_rk4(p: SteadyState) -> tuple[float, float]:
     return 0.5 * (p.u_max - p.u_min), float(h.tau[i] % (2 * math.pi))
 
 
-def _linear_guess(beta: float, gamma0: float, curve) -> tuple[float, float]:
-    """(a, tau_r) of the linearised response: initial stiffness k0 (infinite for n < 1,
-    taken as 1e3), mass beta^2.  A down sweep starts far above the resonance, where this
-    is close (from rest, RK4 would ring for thousands of periods when n > 1)."""
-    k0 = curve.stiffness0 if math.isfinite(curve.stiffness0) else 1e3
-    a = gamma0 / max(abs(k0 - beta * beta), 1e-9)
-    return a, (0.5 * math.pi if k0 > beta * beta else 1.5 * math.pi)
+def _linear_guesses(beta: float, gamma0: float, curve) -> list[tuple[float, float]]:
+    """(a, tau_r) of linearised responses: with the initial stiffness k0 (n > 1), and of
+    the free mass (u = -gamma0 sin(tau) / beta^2).  A down sweep starts above the
+    resonance, where one of them is close (from rest, RK4 would ring for thousands of
+    periods when n > 1)."""
+    b2 = beta * beta
+    out = []
+    k0 = curve.stiffness0
+    if math.isfinite(k0) and abs(k0 - b2) > 1e-9:
+        out.append((gamma0 / abs(k0 - b2), 0.5 * math.pi if k0 > b2 else 1.5 * math.pi))
+    out.append((gamma0 / b2, 1.5 * math.pi))
+    return out
 
 
 def frf_shooting(betas, gamma0: float, n: float = 1.5, *, integrator: Integrator | None = None,
@@ -155,8 +160,11 @@ def frf_shooting(betas, gamma0: float, n: float = 1.5, *, integrator: Integrator
     for i, beta in enumerate(b):
         sol = None
         if shooting_ok and guess is None and i == 0 and direction == "down":
-            guess = _linear_guess(beta, gamma0, it.curve)
-        if shooting_ok and guess is not None:
+            for a0, t0 in _linear_guesses(beta, gamma0, it.curve):
+                sol = solve_half_period(beta, gamma0, it.curve, a0, t0, steps=steps)
+                if sol:
+                    break
+        elif shooting_ok and guess is not None:
             sol = solve_half_period(beta, gamma0, it.curve, guess[0], guess[1], steps=steps)
         if sol is None:
             rk = steady_state(gamma0, beta, it.n, integrator=it, history_samples=2000)

@@ -36,3 +36,21 @@ def test_lambda_other_than_2_is_left_to_rk4():
     it = Integrator(n=1.5, lam=3.0)
     _, fell_back = frf_shooting(np.linspace(0.8, 1.2, 3), 0.6, integrator=it)
     assert fell_back.all()
+
+
+@pytest.mark.parametrize("n", [1.5, 3.0])
+def test_down_sweep_agrees_with_rk4_and_starts_from_the_linear_response(n):
+    sh, fell_back = frf_shooting(BETAS, 0.6, n, direction="down")
+    assert np.all(np.diff(sh.beta) > 0) and sh.sweep == "down"     # returned in ascending beta
+    # the down sweep starts at the highest beta from the linearised response, not from an
+    # RK4 run from rest (which rings for thousands of periods when n > 1)
+    assert not fell_back[-1]
+    rk = frf_rk4(BETAS, 0.6, n, max_cycles=1500)
+    ok = rk.converged
+    rel = np.abs(sh.G[ok] - rk.G[ok]) / rk.G[ok]
+    assert rel.max() < 1e-3, f"worst beta {BETAS[ok][np.argmax(rel)]:.3f}: {rel.max():.2e}"
+
+
+def test_direction_must_be_up_or_down():
+    with pytest.raises(ValueError, match="direction"):
+        frf_shooting(BETAS, 0.6, 1.5, direction="sideways")
