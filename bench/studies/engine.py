@@ -78,13 +78,12 @@ class WarmKernels(WorkerPlugin):
 
 
 def warm_kernels() -> None:
-    import numpy as np
-
-    from sim.dynamics import steady_state
+    from sim.dynamics import FrictionState, Integrator
     from sim.identify import Identifier  # noqa: F401  (imports compile-cached kernels)
-    from sim.shooting import frf_shooting
-    steady_state(0.5, 1.5, 1.5, max_cycles=3)
-    frf_shooting(np.array([1.4, 1.5]), 0.5, 1.5)
+    from sim.shooting import solve_half_period
+    it = Integrator(n=1.5, steps_per_period=100)
+    it.run(FrictionState(), 0.5, 1.5, 1)
+    solve_half_period(1.5, 0.5, it.curve, 0.3, 4.7, steps=100, max_iter=1)
 
 
 @dataclass
