@@ -43,8 +43,11 @@ def find_sources(paths: list[Path]) -> list[Path]:
         if p.is_file() or (p / "run.json").exists():
             out.append(p)
             continue
-        found = sorted({q.parent for q in p.rglob("run.json")} |
-                       {q for q in p.rglob("*") if q.is_file() and q.suffix.lower() in UFF_SUFFIXES})
+        runs = {q.parent for q in p.rglob("run.json")}
+        # a run's own export (<run>/export/*.uff) is the same data again: the run counts
+        uffs = {q for q in p.rglob("*") if q.is_file() and q.suffix.lower() in UFF_SUFFIXES
+                and not runs.intersection(q.parents)}
+        found = sorted(runs | uffs)
         if not found:
             raise ValueError(f"{p}: no run directories (run.json) or UFF58 files (.uff, .unv) in it")
         out.extend(found)

@@ -248,3 +248,20 @@ def test_ctrl_c_cancels_the_study_closes_the_cluster_and_a_rerun_resumes(tmp_pat
     again = subprocess.run(args, env=ENV, capture_output=True, text=True, timeout=240)
     assert again.returncode == 0, again.stderr
     assert f"{8 - done} tasks computed, {done} already done, 0 failed" in again.stdout
+
+
+def test_an_archive_yields_its_runs_and_loose_uff_files_but_not_a_runs_own_export(tmp_path):
+    from bench.studies.batch import find_sources
+    for name in ("a", "b/c"):
+        (tmp_path / "lab" / name / "export").mkdir(parents=True)
+        (tmp_path / "lab" / name / "run.json").write_text("{}")
+        (tmp_path / "lab" / name / "export" / "time.uff").write_text("")
+    (tmp_path / "lab" / "old.unv").write_text("")
+    (tmp_path / "lab" / "notes.txt").write_text("")
+    found = find_sources([tmp_path / "lab"])
+    assert sorted(p.relative_to(tmp_path / "lab").as_posix() for p in found) == ["a", "b/c", "old.unv"]
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(ValueError, match="no run directories"):
+        find_sources([tmp_path / "empty"])
+    with pytest.raises(ValueError, match="no such file"):
+        find_sources([tmp_path / "missing"])
