@@ -265,3 +265,17 @@ def test_an_archive_yields_its_runs_and_loose_uff_files_but_not_a_runs_own_expor
         find_sources([tmp_path / "empty"])
     with pytest.raises(ValueError, match="no such file"):
         find_sources([tmp_path / "missing"])
+
+
+@pytest.mark.timeout(300)
+def test_bench_analyze_over_sources_prints_the_summary_and_exits_1_on_a_failed_source(cluster, sources, tmp_path,
+                                                                                      capsys):
+    from bench.cli import main
+    assert main(["analyze", *map(str, sources), "--identify-only", "--scheduler", cluster.address,
+                 "--out", str(tmp_path / "a")]) == 0
+    assert "2 tasks computed, 0 already done, 0 failed" in capsys.readouterr().out
+    (tmp_path / "bad.uff").write_text("garbage\n")
+    assert main(["analyze", str(sources[0]), str(tmp_path / "bad.uff"), "--identify-only",
+                 "--scheduler", cluster.address, "--out", str(tmp_path / "b")]) == 1
+    out = capsys.readouterr().out
+    assert "FAILED" in out and "bad.uff" in out
