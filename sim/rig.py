@@ -18,7 +18,9 @@ plain kernel (:mod:`sim._kernel`), one with any of them the 2-DOF kernel
 
 Time is virtual: it advances only when :meth:`SimulatedRig.run` is asked for samples
 (by the DAQ twin), so simulated tests run faster than real time; noise comes from a
-seeded generator, so a run is reproducible.
+seeded generator, so a run is reproducible, and is reseeded from (seed, step key) when the
+procedure marks a step's measurement (:meth:`SimulatedRig.mark_step`), so a step's noise
+does not depend on what ran before it.
 
 Sensors: impedance-head force (V/N), accelerometer (V/(m/s^2)), eddy-current probe
 (V/m about a stand-off gap).  Each has Gaussian noise and clips at +-10 V; the DAQ twin
@@ -30,6 +32,7 @@ modelled as a limit on the force amplitude (the drive stays sinusoidal).
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import math
 import threading
@@ -164,6 +167,14 @@ class SimulatedRig:
                 self.gen.offset_V = float(offset_V)
             if output_on is not None:
                 self.gen.output_on = bool(output_on)
+
+    def mark_step(self, key: str) -> None:
+        """A step's measurement starts: reseed the sensor noise from (seed, key), so a step
+        gets the same noise whatever ran before it (a resumed run stores what an
+        uninterrupted one does).  Sent by the SCPI twin's ``SIM:STEP``."""
+        digest = hashlib.sha256(str(key).encode()).digest()
+        self._rng = np.random.default_rng([self.model.seed, int.from_bytes(digest[:8], "little")])
+        log.debug("plant noise reseeded for step %s", key)
 
     def drive_force(self) -> tuple[float, float]:
         """(amplitude, static part) of the shaker force in N for the present settings."""
