@@ -60,6 +60,9 @@ def warm_up() -> float:
                          Path(tmp) / "run", identify=True, warm_up=False)
         if store.metadata["status"] != "completed":
             raise RuntimeError(f"warm-up run ended {store.metadata['status']!r}")
-    STAMP.parent.mkdir(exist_ok=True)
-    STAMP.write_text(repr(newest))
+    try:
+        STAMP.parent.mkdir(exist_ok=True)
+        STAMP.write_text(repr(newest))
+    except OSError as e:         # a read-only install: numba caches elsewhere or not at all
+        log.warning("could not write the warm-up stamp %s: %s", STAMP, e)
     return time.perf_counter() - t0
