@@ -185,7 +185,11 @@ def test_a_study_completes_when_a_worker_is_killed(tmp_path):
             time.sleep(0.05)
         c.workers[0].send_signal(signal.SIGKILL)
         c.workers[0].wait()
+        assert len(list((tmp_path / "map" / "parts").glob("*.parquet"))) < 6    # killed mid-study
         t.join(timeout=240)
+        from distributed import Client
+        with Client(c.address) as client:
+            assert len(client.scheduler_info(n_workers=-1)["workers"]) == 1      # it stayed dead
         out = result["out"]
         assert out.computed == 6 and not out.failures
         assert len(list((tmp_path / "map" / "parts").glob("*.parquet"))) == 6
