@@ -22,10 +22,16 @@ def _floats(text: str) -> tuple[float, ...]:
         raise ValueError(f"expected numbers like '0.5,1.5' or 'start:stop:count', got {text!r}") from None
 
 
+def _dask_info(record: logging.LogRecord) -> bool:
+    return not (record.name.split(".")[0] in ("distributed", "dask", "tornado") and record.levelno < logging.WARNING)
+
+
 def _quiet_dask() -> None:
-    """dask's own INFO lines (scheduler and nanny start/stop) would bury the progress line."""
-    for name in ("distributed", "dask"):
-        logging.getLogger(name).setLevel(max(logging.WARNING, logging.getLogger().level))
+    """dask's own INFO lines (scheduler and nanny start/stop) would bury the progress line
+    (dask sets its loggers' levels itself, so filter them at the application's handlers)."""
+    if logging.getLogger().level > logging.DEBUG:
+        for h in logging.getLogger().handlers:
+            h.addFilter(_dask_info)
 
 
 def _engine_args(s) -> None:

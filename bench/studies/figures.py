@@ -50,8 +50,9 @@ def plot_compliance_map(table, path: Path) -> Path:
         for kind, colour, marker in (("harmonic", "white", "o"), ("superharmonic", "cyan", ".")):
             gi, bi = np.nonzero(g["peak"] == kind)
             if gi.size:
+                # one harmonic resonance per row: join them into the ridge line
                 ax.plot(betas[bi], gammas[gi], marker, color=colour, ms=3 if kind == "harmonic" else 2.5,
-                        ls="none", label=f"{kind} resonance")
+                        ls="-" if kind == "harmonic" else "none", lw=1, label=f"{kind} resonance")
         jump = g["jump_region"].astype(bool)
         if jump.any():
             ax.contourf(betas, gammas, jump.astype(float), levels=[0.5, 1.5], colors="none", hatches=["///"])
