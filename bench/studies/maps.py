@@ -2,8 +2,10 @@
 
 A task is one row of a map: one (n, gamma0) and the whole beta grid, swept up and down
 with the shooting engine's continuation (:func:`sim.shooting.frf_shooting`; points
-outside its assumptions are computed with RK4), or point by point from rest with the RK4
-reference engine (``engine="rk4"``, for checks and the benchmark).  Per beta the row
+outside its assumptions are computed with RK4), or with the seed's RK4 sweeps, each point
+warm-started from the previous one (``engine="rk4"``: slow, the reference for jumps,
+since shooting also finds unstable orbits; a continuation cannot pass a fold, though, so
+it does leave a branch where the branch ends).  Per beta the row
 gives the compliance of both sweeps, whether they disagree (two coexisting responses: a
 jump region) and whether the beta is the harmonic or a superharmonic resonance of the up
 sweep (:func:`sim.frf.find_peaks`): the ridges of the map.
@@ -65,14 +67,16 @@ class MapSpec:
 
 def map_row(inputs: dict, seed: int = 0) -> list[dict]:
     """One row of the map (a task): rows of the table, one per beta."""
-    from sim.frf import find_peaks, frf_rk4
+    from sim.frf import find_peaks, sweep_up_down
     from sim.shooting import frf_shooting
 
     betas = np.geomspace(inputs["beta_min"], inputs["beta_max"], int(inputs["beta_points"]))
     n, g = inputs["n"], inputs["gamma0"]
     if inputs.get("engine", "shooting") == "rk4":
-        up = frf_rk4(betas, g, n, workers=1)
-        down, fb_up, fb_down = up, np.ones(betas.size, bool), np.ones(betas.size, bool)
+        # the seed's method: RK4 sweeps, each point warm-started from the previous one
+        # (the reference for jumps: shooting finds orbits whatever their stability)
+        up, down, _ = sweep_up_down(betas, g, n)
+        fb_up = fb_down = np.ones(betas.size, bool)
     else:
         up, fb_up = frf_shooting(betas, g, n, direction="up")
         down, fb_down = frf_shooting(betas, g, n, direction="down")

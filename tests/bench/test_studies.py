@@ -283,3 +283,15 @@ def test_bench_analyze_over_sources_prints_the_summary_and_exits_1_on_a_failed_s
                  "--scheduler", cluster.address, "--out", str(tmp_path / "b")]) == 1
     out = capsys.readouterr().out
     assert "FAILED" in out and "bad.uff" in out
+
+
+def test_a_map_row_agrees_with_the_seeds_rk4_sweeps_up_and_down():
+    # the reference for jumps: RK4 sweeps warm-started point to point (engine "rk4")
+    row = dict(n=1.5, gamma0=0.6, beta_min=0.6, beta_max=1.6, beta_points=8)
+    sh = map_row(dict(row, engine="shooting"))
+    rk = map_row(dict(row, engine="rk4"))
+    for key in ("G_up", "G_down"):
+        a, b = np.array([r[key] for r in sh]), np.array([r[key] for r in rk])
+        assert np.max(np.abs(a / b - 1)) < 1e-3, key
+    assert not any(r["jump_region"] for r in sh + rk)
+    assert [r["peak"] for r in sh] == [r["peak"] for r in rk]
