@@ -295,3 +295,11 @@ def test_a_map_row_agrees_with_the_seeds_rk4_sweeps_up_and_down():
         assert np.max(np.abs(a / b - 1)) < 1e-3, key
     assert not any(r["jump_region"] for r in sh + rk)
     assert [r["peak"] for r in sh] == [r["peak"] for r in rk]
+
+
+def test_map_cases_runs_a_function_over_arguments_on_the_cluster_in_order(cluster):
+    from bench.studies import map_cases
+    seen = []
+    assert map_cases(abs, [-3, 2, -1, 0], scheduler=cluster.address,
+                     progress=lambda done, total, note: seen.append((done, total))) == [3, 2, 1, 0]
+    assert seen[-1] == (4, 4)
