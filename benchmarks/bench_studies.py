@@ -74,7 +74,7 @@ def main():
         eng.map(abs, list(range(len(tasks))))
         t_dask = time.perf_counter() - t
         print(f"per-task overhead, 2 workers, {len(tasks)} trivial tasks: {1e3 * t_triv / len(tasks):.1f} ms/task "
-              f"through the study engine (submit, gather, one fsynced Parquet part), of which dask alone "
+              f"through the study engine (submit, gather, one Parquet part), of which dask alone "
               f"{1e3 * t_dask / len(tasks):.1f} ms/task")
 
     # -- scaling 1 -> 2 workers on the same rows (clusters started outside the timing)

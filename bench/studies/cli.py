@@ -76,8 +76,19 @@ def cmd_study_mc(args, progress) -> int:
     return _report(out)
 
 
+def is_batch(args) -> bool:
+    """`bench analyze` in batch mode: several sources, an archive directory (one without
+    run.json) or an engine option."""
+    if len(args.sources) != 1 or getattr(args, "scheduler", None) or getattr(args, "workers", None):
+        return True
+    p = Path(args.sources[0])
+    return p.is_dir() and not (p / "run.json").exists()
+
+
 def cmd_analyze_batch(args, progress) -> int:
     _quiet_dask()
+    if not args.out:
+        raise ValueError("analysing several sources needs --out DIR (the summary table and one report per source)")
     from .batch import ANALYZE, IDENTIFY, analyze_batch
     out = analyze_batch([Path(s) for s in args.sources], Path(args.out), rig=Path(args.rig) if args.rig else None,
                         function=IDENTIFY if args.identify_only else ANALYZE, scheduler=args.scheduler,

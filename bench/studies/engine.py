@@ -3,7 +3,8 @@
 A *task* is a dict of JSON-able inputs (a row of a map, one Monte-Carlo sample, one
 source).  ``fn(inputs, seed) -> list[dict]`` runs on a worker and returns rows; the
 client adds the task's inputs and the software version to every row and writes them as
-one Parquet part per task (temporary name, then rename: all or nothing):
+one Parquet part per task (temporary name, then rename: all or nothing; no fsync, a part
+lost to a power cut is recomputed):
 
     <study>/study.json              kind, spec, software version, tasks, failures
     <study>/parts/<task key>.parquet one task's rows
@@ -111,21 +112,30 @@ class Engine:
     Use as a context manager; ``workers`` is the LocalCluster's size (default: all cores).
     """
 
-    def __init__(self, scheduler: str | None = None, workers: int | None = None, warm: bool = True):
+    def __init__(self, scheduler: str | None = None, workers: int | None = None, warm: bool = True,
+                 connect_timeout_s: float = 20.0):
         self.scheduler, self.workers, self.warm = scheduler, workers, warm
+        self.connect_timeout_s = connect_timeout_s
         self.cluster: LocalCluster | None = None
         self.client: Client | None = None
 
     def __enter__(self) -> "Engine":
-        if self.scheduler:
-            self.client = Client(self.scheduler, timeout="20s")
-        else:
-            n = self.workers or os.cpu_count() or 1
-            self.cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                        dashboard_address="127.0.0.1:0", host="127.0.0.1")
-            self.client = Client(self.cluster)
-        if self.warm:
-            self.client.register_plugin(WarmKernels())
+        try:
+            if self.scheduler:
+                try:
+                    self.client = Client(self.scheduler, timeout=f"{self.connect_timeout_s}s")
+                except OSError as e:
+                    raise ValueError(f"cannot reach the dask scheduler at {self.scheduler}: {e}") from e
+            else:
+                n = self.workers or os.cpu_count() or 1
+                self.cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                            dashboard_address="127.0.0.1:0", host="127.0.0.1")
+                self.client = Client(self.cluster)
+            if self.warm:
+                self.client.register_plugin(WarmKernels())
+        except BaseException:          # Ctrl-C or a failure while starting: no stray workers
+            self.close()
+            raise
         return self
 
     def __exit__(self, *exc) -> None:
@@ -174,6 +184,18 @@ def _rows_table(rows: list[dict], inputs: dict, key: str, version: str) -> pa.Ta
         for k in cols:
             cols[k].append(full.get(k))
     return pa.table(cols)
+
+
+def _write_part(path: Path, table: pa.Table) -> None:
+    """All or nothing (temporary name, then rename), without fsync: a part lost to a power
+    cut is only recomputed, and fsync would cost more than dask's own per-task overhead."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        pq.write_table(table, tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 class Study:
@@ -241,8 +263,7 @@ class Study:
                     log.error("task %s failed with inputs %s: %s", k, t, msg)
                     out.failures.append(dict(task=k, inputs=t, error=msg))
                 else:
-                    table = _rows_table(rows, t, k, version)
-                    _atomic_write(self.parts / f"{k}.parquet", lambda fh, tb=table: pq.write_table(tb, fh))
+                    _write_part(self.parts / f"{k}.parquet", _rows_table(rows, t, k, version))
                     out.computed += 1
                 finished += 1
                 if progress:

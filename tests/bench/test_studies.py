@@ -303,3 +303,13 @@ def test_map_cases_runs_a_function_over_arguments_on_the_cluster_in_order(cluste
     assert map_cases(abs, [-3, 2, -1, 0], scheduler=cluster.address,
                      progress=lambda done, total, note: seen.append((done, total))) == [3, 2, 1, 0]
     assert seen[-1] == (4, 4)
+
+
+def test_a_scheduler_that_does_not_answer_is_a_clear_error(tmp_path):
+    import socket
+    with socket.socket() as s:              # a free loopback port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    with pytest.raises(ValueError, match=f"cannot reach the dask scheduler at tcp://127.0.0.1:{port}"):
+        with Engine(f"tcp://127.0.0.1:{port}", connect_timeout_s=2):
+            pass
