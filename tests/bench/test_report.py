@@ -9,7 +9,7 @@ import shutil
 import numpy as np
 import pytest
 
-from bench.report import (ID_PARAMS, UNSETTLED_RESIDUAL, identification_data, plot_identification, residual_ratio,
+from bench.reports import (ID_PARAMS, UNSETTLED_RESIDUAL, identification_data, plot_identification, residual_ratio,
                           write_report)
 from bench.storage import RunStore
 from sim.rig import RigModel
