@@ -446,5 +446,18 @@ def plot_analysis_residuals(steps) -> Figure:
     ax_h.set(xlabel="harmonic", ylabel="base model residual (relative)",
              title="base model residual per harmonic (dots: steps, coloured by level)")
     ax_h.grid(True, which="both", alpha=0.3)
+    for ax in (ax_f, ax_l, ax_h):
+        _plain_log_y(ax)
     fig.suptitle("Residuals of the base model")
     return fig
+
+
+def _plain_log_y(ax) -> None:
+    """Plain numbers (2, 5, 10, 0.01) on a log y axis of errors and residuals."""
+    from matplotlib.ticker import FuncFormatter, NullFormatter
+    if ax.yaxis.get_scale() != "log":
+        return
+    lo, hi = ax.get_ylim()
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.yaxis.set_minor_formatter(FuncFormatter(lambda v, _: f"{v:g}" if f"{v:e}"[0] in "25" else "")
+                                 if lo > 0 and hi / lo < 100 else NullFormatter())

@@ -39,6 +39,7 @@ h3 { font-size: 1.05rem; margin-bottom: 0.3rem; }
 table { border-collapse: collapse; margin: 0.5rem 0 1rem; font-size: 0.92rem; }
 th, td { border: 1px solid #bbb; padding: 0.25rem 0.55rem; text-align: left; vertical-align: top; }
 th { background: #f0f0f0; }
+caption { text-align: left; caption-side: top; font-size: 0.9rem; color: #333; padding-bottom: 0.2rem; }
 td.num { text-align: right; font-variant-numeric: tabular-nums; }
 figure { margin: 1rem 0; }
 figure img { max-width: 100%; height: auto; border: 1px solid #ddd; }
@@ -107,7 +108,7 @@ def _causes(a: AnalysisData) -> str:
                    if rows else "<p>No parameters given.</p>")
         out.append(f"<p>Gain: held-out prediction error {_pct(c.heldout_error_before)} without it, "
                    f"{_pct(c.heldout_error_after)} with it; change of the information criterion "
-                   f"&Delta;BIC = {_num(c.delta_bic, '.3g')} (negative favours the cause).</p>")
+                   f"&Delta;BIC = {_num(c.delta_bic)} (negative favours the cause).</p>")
     return "".join(out) + "</section>"
 
 
@@ -181,7 +182,7 @@ def _candidates(a: AnalysisData) -> str:
     if not a.candidates:
         out.append("<p>No candidate scores in the analysis.</p>")
     else:
-        rows = [[f"<code>{escape(c.id)}</code>", _num(c.delta_bic, ".3g"), _pct(c.heldout_error),
+        rows = [[f"<code>{escape(c.id)}</code>", _num(c.delta_bic), _pct(c.heldout_error),
                  "<strong>yes</strong>" if c.named else "no"]
                 for c in sorted(a.candidates, key=lambda c: (not c.named, _sort_key(c.delta_bic)))]
         out.append(_table(["candidate", "\u0394BIC", "held-out error", "named"], rows, {1, 2},
