@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from bench.reports import (ID_PARAMS, UNSETTLED_RESIDUAL, identification_data, plot_identification, residual_ratio,
-                          write_report)
+                           write_analysis_html, write_report)
 from bench.storage import RunStore
 from sim.rig import RigModel
 from sim.shooting import frf_shooting
@@ -295,3 +295,39 @@ def test_run_without_steps_gives_a_report_without_plots(run_dir, tmp_path):
     text = write_report(run).read_text()
     assert "No step was completed" in text
     assert not (run / "report" / "compliance.png").exists()
+
+
+# ---------------------------------------------------------------------------- analysis section
+
+
+def test_report_has_no_analysis_section_before_bench_analyze(report):
+    assert "## Analysis" not in report.read_text()
+
+
+def test_report_includes_the_analysis_when_bench_analyze_wrote_it(run_dir, tmp_path, analysis_example):
+    run = _copy(run_dir, tmp_path)
+    (run / "analysis").mkdir()
+    (run / "analysis" / "analysis.json").write_text(json.dumps(analysis_example))
+    write_analysis_html(dict(analysis_example, steps=[], loops=[]), run / "analysis" / "analysis.html")
+    report = write_report(run)
+    section = _section(report.read_text(), "Analysis: what the model gets wrong")
+    assert f"> {analysis_example['verdict']}" in section
+    (cause,) = analysis_example["causes"]
+    row = _rows(section, [f"{cause['label']} (`{cause['id']}`)"])[f"{cause['label']} (`{cause['id']}`)"]
+    c = cause["parameters"]["c"]
+    assert row[1] == f"c = {c['value']:.4g} N s/m [{c['low']:.4g}, {c['high']:.4g}]"
+    assert float(row[2].split()[0]) == pytest.approx(100 * cause["gain"]["heldout_error_before"], rel=1e-2)
+    assert float(row[3].split()[0]) == pytest.approx(100 * cause["gain"]["heldout_error_after"], rel=1e-2)
+    link = "../analysis/analysis.html"
+    assert f"[analysis.html]({link})" in section and (report.parent / link).is_file()
+    assert f"steps used: {len(analysis_example['steps_used'])}, rejected: 1" in section
+
+
+def test_unreadable_analysis_is_named_in_the_report_not_fatal(run_dir, tmp_path):
+    run = _copy(run_dir, tmp_path)
+    (run / "analysis").mkdir()
+    (run / "analysis" / "analysis.json").write_text('{"verdict": "trunc')
+    text = write_report(run).read_text()
+    section = _section(text, "Analysis: what the model gets wrong")
+    assert "cannot be shown" in section and "analysis.json cannot be read" in section
+    assert (run / "report" / "compliance.png").is_file()
