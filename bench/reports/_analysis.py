@@ -139,9 +139,12 @@ def _step(d: dict) -> StepFRF:
         part = d.get(model)
         if isinstance(part, dict):
             frf[model] = {q: _complex(part[q]) for q in FRF_QUANTITIES if q in part}
+    level_N, freq_Hz = _float(d.get("level_N")), _float(d.get("freq_Hz"))
+    if not (level_N > 0 and freq_Hz > 0 and math.isfinite(level_N) and math.isfinite(freq_Hz)):
+        raise ValueError(f"step {d['key']!r}: level_N {d.get('level_N')!r} and freq_Hz {d.get('freq_Hz')!r} "
+                         "must be finite and > 0")
     res = np.asarray([_float(x) for x in d.get("residual_by_harmonic") or []], dtype=float)
-    return StepFRF(str(d["key"]), _float(d.get("level_N")), _float(d.get("freq_Hz")), str(d.get("direction") or ""),
-                   frf, res)
+    return StepFRF(str(d["key"]), level_N, freq_Hz, str(d.get("direction") or ""), frf, res)
 
 
 def _loop(d: dict) -> Loop:

@@ -304,7 +304,8 @@ def plot_identification(ident: IdentificationData, title: str, level_starts: lis
 
 # ---------------------------------------------------------------------------- analysis page
 
-MODEL_STYLE = {"base": dict(ls="--", lw=1.3), "final": dict(ls="-", lw=1.8)}
+MODEL_STYLE = {"base": dict(ls="--", lw=1.3), "final": dict(ls="-", lw=1.6)}
+MODEL_COLOUR = {"base": "C1", "final": "C0"}
 MODEL_LABEL = {"base": "base model (Masing)", "final": "final model (with the causes named)"}
 FRF_LABEL = {"compliance": ("compliance |x/P|  (m/N)", "phase of x/P  (deg)"),
              "accelerance": ("accelerance |a/P|  (m/s^2 per N)", "phase of a/P  (deg)")}
@@ -323,47 +324,44 @@ def _level_name(steps) -> str:
 
 
 def _phase(values: np.ndarray, quantity: str) -> np.ndarray:
-    deg = np.degrees(np.angle(values))
     if quantity == "compliance":        # spring 0, mass -180: no wrap in between
-        return phase_deg(np.radians(deg + 90.0))
-    return (deg + 90.0) % 360.0 - 90.0  # accelerance: mass 0, spring 180
+        return phase_deg(np.angle(values))
+    return (np.degrees(np.angle(values)) + 90.0) % 360.0 - 90.0    # accelerance: mass 0, spring 180
 
 
 def plot_analysis_frf(steps, quantity: str) -> Figure:
-    """Magnitude and phase of one first-harmonic FRF against frequency, one colour per force
+    """Magnitude and phase of one first-harmonic FRF against frequency, one row per force
     level: measured (markers), base model (dashed), final model (solid)."""
-    fig = Figure(figsize=(10, 7.5), layout="constrained")
-    ax_mag, ax_ph = fig.subplots(2, 1, sharex=True, height_ratios=(3, 2))
-    groups = _group_levels(steps)
-    colours = level_colours([float(np.median([s.level_N for s in g])) for g in groups.values()] or [1.0])
+    groups = sorted(_group_levels(steps).values(), key=lambda g: np.median([s.level_N for s in g]))
+    fig = Figure(figsize=(10, 1.0 + 2.4 * max(len(groups), 1)), layout="constrained")
+    axes = fig.subplots(max(len(groups), 1), 2, sharex=True, squeeze=False)
     models_drawn = set()
-    for g in groups.values():
-        colour = colours[float(np.median([s.level_N for s in g]))]
+    for (ax_mag, ax_ph), g in zip(axes, groups):
         for direction in sorted({s.direction for s in g}):
             run = sorted((s for s in g if s.direction == direction), key=lambda s: s.freq_Hz)
             f = np.array([s.freq_Hz for s in run])
-            marker = DIRECTION_MARKER.get(direction, "o")
             meas = np.array([s.get("measured", quantity) for s in run])
-            ax_mag.plot(f, np.abs(meas), ls="none", marker=marker, mfc="none", mec=colour, ms=6)
-            ax_ph.plot(f, _phase(meas, quantity), ls="none", marker=marker, mfc="none", mec=colour, ms=6)
+            style = dict(ls="none", marker=DIRECTION_MARKER.get(direction, "o"), mfc="none", mec="k", ms=6)
+            ax_mag.plot(f, np.abs(meas), **style)
+            ax_ph.plot(f, _phase(meas, quantity), **style)
             for model in ("base", "final"):
                 v = np.array([s.get(model, quantity) for s in run])
                 if np.isfinite(v).any():
                     models_drawn.add(model)
-                    ax_mag.plot(f, np.abs(v), color=colour, **MODEL_STYLE[model])
-                    ax_ph.plot(f, _phase(v, quantity), color=colour, **MODEL_STYLE[model])
-    mag_label, phase_label = FRF_LABEL[quantity]
-    ax_mag.set(xscale="log", yscale="log", ylabel=mag_label)
-    ax_ph.set(xscale="log", xlabel="frequency (Hz)", ylabel=phase_label)
-    ax_ph.set_yticks([-270, -180, -90, 0, 90] if quantity == "compliance" else [-90, 0, 90, 180, 270])
-    for ax in (ax_mag, ax_ph):
-        ax.grid(True, which="both", alpha=0.3)
-    handles = [Line2D([], [], color=c, lw=2, label=f"{lv:.3g} N") for lv, c in sorted(colours.items())]
-    handles.append(Line2D([], [], color="0.3", marker="o", mfc="none", ls="none", label="measured"))
-    handles += [Line2D([], [], color="0.3", label=MODEL_LABEL[m], **MODEL_STYLE[m]) for m in ("base", "final")
-                if m in models_drawn]
-    ax_mag.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False,
-                  title="force level", title_fontsize=8)
+                    ax_mag.plot(f, np.abs(v), color=MODEL_COLOUR[model], **MODEL_STYLE[model])
+                    ax_ph.plot(f, _phase(v, quantity), color=MODEL_COLOUR[model], **MODEL_STYLE[model])
+        mag_label, phase_label = FRF_LABEL[quantity]
+        ax_mag.set(xscale="log", yscale="log", ylabel=mag_label)
+        ax_ph.set(xscale="log", ylabel=phase_label)
+        ax_mag.set_title(f"force level {_level_name(g)}", loc="left", fontsize=10)
+        for ax in (ax_mag, ax_ph):
+            ax.grid(True, which="both", alpha=0.3)
+    for ax in axes[-1]:
+        ax.set_xlabel("frequency (Hz)")
+    handles = [Line2D([], [], color="k", marker="o", mfc="none", ls="none", label="measured")]
+    handles += [Line2D([], [], color=MODEL_COLOUR[m], label=MODEL_LABEL[m], **MODEL_STYLE[m])
+                for m in ("base", "final") if m in models_drawn]
+    fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=9, frameon=False)
     fig.suptitle(f"{quantity.capitalize()}: measured and simulated, per force level")
     return fig
 
@@ -375,8 +373,8 @@ def plot_analysis_loops(loops) -> Figure:
     fig = Figure(figsize=(10, 3.6 * rows + 0.6), layout="constrained")
     axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False).ravel())
     style = {"meas": dict(color="k", lw=2.2, label="measured (P - m a)"),
-             "base": dict(color="C1", lw=1.3, ls="--", label=MODEL_LABEL["base"]),
-             "final": dict(color="C0", lw=1.3, label=MODEL_LABEL["final"])}
+             "base": dict(color=MODEL_COLOUR["base"], label=MODEL_LABEL["base"], **MODEL_STYLE["base"]),
+             "final": dict(color=MODEL_COLOUR["final"], label=MODEL_LABEL["final"], **MODEL_STYLE["final"])}
     for ax, loop in zip(axes, loops):
         x_um = 1e6 * loop.disp_m
         for name in ("meas", "base", "final"):
@@ -387,7 +385,7 @@ def plot_analysis_loops(loops) -> Figure:
         ax.grid(True, alpha=0.3)
     for ax in axes[len(loops):]:
         ax.set_axis_off()
-    handles = [Line2D([], [], **{k: v for k, v in style[n].items()}) for n in ("meas", "base", "final")
+    handles = [Line2D([], [], **style[n]) for n in ("meas", "base", "final")
                if any(n in lp.friction_N for lp in loops)]
     if handles:
         fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=8, frameon=False)

@@ -155,8 +155,9 @@ def _figures(a: AnalysisData) -> str:
             out.append(_figure(figures.plot_analysis_frf(a.steps, q),
                                f"{q.capitalize()} ({what}) magnitude and phase against frequency for each force "
                                f"level ({span}): measured points, base model dashed, final model solid.",
-                               f"First-harmonic {q} ({what}), measured (markers) and simulated with the base "
-                               "Masing model (dashed) and the final model (solid), one colour per force level."))
+                               f"First-harmonic {q} ({what}), one row per force level: measured (circles), "
+                               "simulated with the base Masing model (dashed) and with the final model, which "
+                               "adds the causes named (solid)."))
     if a.loops:
         out.append("<h3>Hysteresis loops</h3>")
         out.append(_figure(figures.plot_analysis_loops(a.loops),
