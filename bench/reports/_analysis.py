@@ -73,6 +73,13 @@ class Loop:
     key: str
     disp_m: np.ndarray
     friction_N: dict[str, np.ndarray]        # "meas" / "base" / "final" -> force (N), same length as disp_m
+    level_N: float = math.nan                # optional
+    freq_Hz: float = math.nan                # optional
+
+    @property
+    def title(self) -> str:
+        where = ", ".join(f"{v:.3g} {u}" for v, u in ((self.level_N, "N"), (self.freq_Hz, "Hz")) if math.isfinite(v))
+        return f"{self.key} ({where})" if where else self.key
 
 
 @dataclass
@@ -85,6 +92,8 @@ class AnalysisData:
     base_parameters: dict[str, Interval] = field(default_factory=dict)
     base_reduced_chi2: float = math.nan
     base_diagnostics: dict = field(default_factory=dict)
+    base_heldout_error: float = math.nan      # optional: held-out error of the base model
+    final_reduced_chi2: float = math.nan      # optional: "final": {"reduced_chi2": ...}
     causes: list[Cause] = field(default_factory=list)
     candidates: list[Candidate] = field(default_factory=list)
     steps_used: list[str] = field(default_factory=list)
@@ -157,7 +166,7 @@ def _loop(d: dict) -> Loop:
             if f.shape != x.shape:
                 raise ValueError(f"friction_{name}_N has {f.size} points, disp_m {x.size}")
             forces[name] = f
-    return Loop(str(d.get("key", "?")), x, forces)
+    return Loop(str(d.get("key", "?")), x, forces, _float(d.get("level_N")), _float(d.get("freq_Hz")))
 
 
 def _items(a: AnalysisData, d: dict, key: str, parse) -> list:
@@ -195,6 +204,8 @@ def analysis_data(d: dict) -> AnalysisData:
     base = d.get("base") if isinstance(d.get("base"), dict) else {}
     a.base_reduced_chi2 = _float(base.get("reduced_chi2"))
     a.base_diagnostics = base.get("diagnostics") if isinstance(base.get("diagnostics"), dict) else {}
+    a.base_heldout_error = _float(base.get("heldout_error"))
+    a.final_reduced_chi2 = _float((d.get("final") if isinstance(d.get("final"), dict) else {}).get("reduced_chi2"))
     a.causes = _items(a, d, "causes", _cause)
     a.candidates = _items(a, d, "candidates", _candidate)
     a.steps_used = [str(k) for k in d.get("steps_used") or []]

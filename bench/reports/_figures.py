@@ -344,8 +344,11 @@ def plot_analysis_frf(steps, quantity: str) -> Figure:
             style = dict(ls="none", marker=DIRECTION_MARKER.get(direction, "o"), mfc="none", mec="k", ms=6)
             ax_mag.plot(f, np.abs(meas), **style)
             ax_ph.plot(f, _phase(meas, quantity), **style)
+            base = np.array([s.get("base", quantity) for s in run])
             for model in ("base", "final"):
                 v = np.array([s.get(model, quantity) for s in run])
+                if model == "final" and np.allclose(v, base, rtol=1e-9, atol=0, equal_nan=True):
+                    continue        # no cause named: the final model is the base model
                 if np.isfinite(v).any():
                     models_drawn.add(model)
                     ax_mag.plot(f, np.abs(v), color=MODEL_COLOUR[model], **MODEL_STYLE[model])
@@ -368,25 +371,29 @@ def plot_analysis_frf(steps, quantity: str) -> Figure:
 
 def plot_analysis_loops(loops) -> Figure:
     """Friction force against displacement over one period, measured vs the models."""
-    cols = min(3, max(1, len(loops)))
+    cols = 2 if len(loops) == 4 else min(3, max(1, len(loops)))
     rows = math.ceil(len(loops) / cols) if loops else 1
     fig = Figure(figsize=(10, 3.6 * rows + 0.6), layout="constrained")
     axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False).ravel())
     style = {"meas": dict(color="k", lw=2.2, label="measured (P - m a)"),
              "base": dict(color=MODEL_COLOUR["base"], label=MODEL_LABEL["base"], **MODEL_STYLE["base"]),
              "final": dict(color=MODEL_COLOUR["final"], label=MODEL_LABEL["final"], **MODEL_STYLE["final"])}
+    drawn = set()
     for ax, loop in zip(axes, loops):
         x_um = 1e6 * loop.disp_m
+        f = loop.friction_N
         for name in ("meas", "base", "final"):
-            if name in loop.friction_N:
-                ax.plot(np.append(x_um, x_um[:1]), np.append(loop.friction_N[name], loop.friction_N[name][:1]),
-                        **style[name])
-        ax.set(xlabel="displacement (um)", ylabel="friction force (N)", title=loop.key)
+            if name == "final" and "base" in f and "final" in f and np.allclose(f["final"], f["base"], rtol=1e-9,
+                                                                                  atol=0):
+                continue            # no cause named: the final model is the base model
+            if name in f:
+                drawn.add(name)
+                ax.plot(np.append(x_um, x_um[:1]), np.append(f[name], f[name][:1]), **style[name])
+        ax.set(xlabel="displacement (um)", ylabel="friction force (N)", title=loop.title)
         ax.grid(True, alpha=0.3)
     for ax in axes[len(loops):]:
         ax.set_axis_off()
-    handles = [Line2D([], [], **style[n]) for n in ("meas", "base", "final")
-               if any(n in lp.friction_N for lp in loops)]
+    handles = [Line2D([], [], **style[n]) for n in ("meas", "base", "final") if n in drawn]
     if handles:
         fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=8, frameon=False)
     fig.suptitle("Hysteresis loops over one period: measured and modelled friction")

@@ -115,35 +115,47 @@ def _causes(a: AnalysisData) -> str:
 def _parameters(a: AnalysisData) -> str:
     out = ['<section aria-labelledby="params-h"><h2 id="params-h">Friction and mass parameters</h2>']
     head = ["parameter", "unit", "value", "95 % low", "95 % high"]
-    if a.parameters:
+    same = not a.causes and a.parameters == a.base_parameters
+    if a.parameters and not same:
         out.append(_table(head, [_param_row(k, p) for k, p in a.parameters.items()], {2, 3, 4},
                           "final model" + ("" if a.causes else " (the base model: no cause named)")))
     if a.base_parameters:
         out.append(_table(head, [_param_row(k, p) for k, p in a.base_parameters.items()], {2, 3, 4},
-                          "base model (Masing friction and mass only)"))
+                          "base model (Masing friction and mass only)"
+                          + (", which is the final model: no cause named" if same else "")))
     if not (a.parameters or a.base_parameters):
         out.append("<p>No parameters in the analysis.</p>")
-    out.append(f"<p>Base model reduced chi-square: {_num(a.base_reduced_chi2, '.3g')} "
-               "(about 1 when the residual is the measurement noise).</p>")
+    fit = [f"base model {_num(a.base_reduced_chi2, '.4g')}"]
+    if math.isfinite(a.final_reduced_chi2) and a.causes:
+        fit.append(f"final model {_num(a.final_reduced_chi2, '.4g')}")
+    out.append(f"<p>Reduced chi-square: {', '.join(fit)} (about 1 when the residual is the measurement noise)."
+               + (f" Held-out error of the base model: {_pct(a.base_heldout_error)}."
+                  if math.isfinite(a.base_heldout_error) else "") + "</p>")
     if a.base_diagnostics:
-        items = "".join(f"<li><code>{escape(str(k))}</code>: {escape(_plain(v))}</li>"
-                        for k, v in a.base_diagnostics.items())
-        out.append(f"<p>Residual diagnostics of the base model:</p><ul>{items}</ul>")
+        out.append(f"<p>Residual diagnostics of the base model:</p>{_nested(a.base_diagnostics)}")
     return "".join(out) + "</section>"
 
 
-def _plain(v) -> str:
+def _nested(v) -> str:
+    """Diagnostics of any shape: objects and lists of texts as nested lists, numbers inline."""
+    if isinstance(v, dict):
+        return "<ul>" + "".join(f"<li><code>{escape(str(k))}</code>: {_nested(x)}</li>" for k, x in v.items()) \
+            + "</ul>"
+    if isinstance(v, (list, tuple)):
+        if not v:
+            return "none"
+        if all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+            return escape(", ".join(_num(float(x)) for x in v))
+        return "<ul>" + "".join(f"<li>{_nested(x)}</li>" for x in v) + "</ul>"
     if isinstance(v, float):
         return _num(v)
-    if isinstance(v, (list, tuple)):
-        return ", ".join(_plain(x) for x in v)
-    if isinstance(v, dict):
-        return "; ".join(f"{k}: {_plain(x)}" for k, x in v.items())
-    return str(v)
+    return escape(str(v))
 
 
 def _figures(a: AnalysisData) -> str:
     out = ['<section aria-labelledby="figs-h"><h2 id="figs-h">Model against measurement</h2>']
+    final = ("the final model, which adds the causes named (solid)" if a.causes else
+             "no cause is named, so the final model is the base model")
     if not a.steps:
         out.append("<p>No per-step data in the analysis: no frequency response or residual figures.</p>")
     else:
@@ -156,15 +168,14 @@ def _figures(a: AnalysisData) -> str:
                                f"{q.capitalize()} ({what}) magnitude and phase against frequency for each force "
                                f"level ({span}): measured points, base model dashed, final model solid.",
                                f"First-harmonic {q} ({what}), one row per force level: measured (circles), "
-                               "simulated with the base Masing model (dashed) and with the final model, which "
-                               "adds the causes named (solid)."))
+                               f"simulated with the base Masing model (dashed); {final}."))
     if a.loops:
         out.append("<h3>Hysteresis loops</h3>")
         out.append(_figure(figures.plot_analysis_loops(a.loops),
                            f"Friction force against displacement over one period at {len(a.loops)} chosen steps "
                            f"({', '.join(lp.key for lp in a.loops)}): measured, base model and final model.",
                            "Friction force P - m a against displacement over one period: measured (black), base "
-                           "model (dashed), final model (solid). The loop area is the energy dissipated per cycle."))
+                           f"model (dashed); {final}. The loop area is the energy dissipated per cycle."))
     else:
         out.append("<p>No hysteresis loops in the analysis.</p>")
     if a.steps:

@@ -213,7 +213,8 @@ def build_example() -> dict:
     loops = []
     for key in (keys[2], keys[len(FREQS) + 2], keys[-4]):
         i = keys.index(key)
-        loops.append({"key": key, "disp_m": synthesize(Xh[i:i + 1], LOOP_POINTS)[0].tolist(),
+        loops.append({"key": key, "level_N": levels[i], "freq_Hz": steps[i].freq_Hz,
+                      "disp_m": synthesize(Xh[i:i + 1], LOOP_POINTS)[0].tolist(),
                       "friction_meas_N": synthesize((Ph - m * Ah)[i:i + 1], LOOP_POINTS)[0].tolist(),
                       "friction_base_N": synthesize(F_base[i:i + 1], LOOP_POINTS)[0].tolist(),
                       "friction_final_N": synthesize(F_final[i:i + 1], LOOP_POINTS)[0].tolist()})
@@ -232,7 +233,8 @@ def build_example() -> dict:
                  f"{next(iter(c['parameters'].values())).get('unit', '')}".rstrip() for c in named]
         verdict = (f"The Masing model alone misses the measured response by {100 * base_err:.2g} % (held-out, "
                    f"first harmonic). The data are explained by {' and '.join(parts)}; the out-of-sample "
-                   f"error falls from {100 * base_err:.2g} % to {100 * named[-1]['gain']['heldout_error_after']:.2g} %.")
+                   f"error falls from {100 * base_err:.2g} % to "
+                   f"{100 * named[-1]['gain']['heldout_error_after']:.2g} %.")
     else:
         verdict = "The Masing model explains the data within the noise; no cause is named."
     if unexplained:

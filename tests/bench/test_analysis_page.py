@@ -131,9 +131,20 @@ def test_loop_figure_draws_each_chosen_step(analysis_example):
     a = analysis_data(analysis_example)
     fig = plot_analysis_loops(a.loops)
     titles = [ax.get_title() for ax in fig.axes if ax.get_lines()]
-    assert titles == [lp["key"] for lp in analysis_example["loops"]]
+    assert titles == [f"{lp['key']} ({lp['level_N']:.3g} N, {lp['freq_Hz']:.3g} Hz)"
+                      for lp in analysis_example["loops"]]
     meas = fig.axes[0].get_lines()[0]
     assert np.allclose(meas.get_xdata()[:-1], 1e6 * np.array(analysis_example["loops"][0]["disp_m"]))
+
+
+def test_final_model_equal_to_the_base_is_not_drawn_twice(analysis_example):
+    d = _variant(analysis_example, causes=[],
+                 steps=[dict(s, final=s["base"]) for s in analysis_example["steps"]],
+                 loops=[dict(lp, friction_final_N=lp["friction_base_N"]) for lp in analysis_example["loops"]])
+    a = analysis_data(d)
+    for fig in (plot_analysis_frf(a.steps, "accelerance"), plot_analysis_loops(a.loops)):
+        labels = [t.get_text() for t in fig.legends[0].get_texts()]
+        assert labels[-1] == "base model (Masing)", labels
 
 
 @needs_chromium
