@@ -325,9 +325,11 @@ def test_report_includes_the_analysis_when_bench_analyze_wrote_it(run_dir, tmp_p
 
 def test_unreadable_analysis_is_named_in_the_report_not_fatal(run_dir, tmp_path):
     run = _copy(run_dir, tmp_path)
+    for p in (run / "steps").glob("*"):      # no plots: this test is about the text
+        p.unlink()
     (run / "analysis").mkdir()
     (run / "analysis" / "analysis.json").write_text('{"verdict": "trunc')
     text = write_report(run).read_text()
     section = _section(text, "Analysis: what the model gets wrong")
     assert "cannot be shown" in section and "analysis.json cannot be read" in section
-    assert (run / "report" / "compliance.png").is_file()
+    assert "## Identification of F_s, x_s, n and m" in text      # the rest of the report is there
