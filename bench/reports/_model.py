@@ -57,8 +57,10 @@ def _model_effects(model) -> list[str]:
     """Rig effects the dimensionless engine leaves out, when switched on."""
     names = {"viscous_N_s_per_m": "viscous damping", "spring_N_per_m": "linear spring",
              "disp_delay_s": "displacement-channel delay", "force_gain_error": "force gain error",
-             "accel_gain_error": "acceleration gain error", "disp_gain_error": "displacement gain error"}
-    return [f"{label} ({k} = {getattr(model, k):g})" for k, label in names.items() if getattr(model, k)]
+             "accel_gain_error": "acceleration gain error", "disp_gain_error": "displacement gain error",
+             "friction_alpha": "speed-dependent friction", "pitch_inertia_kg_m2": "pitching mode",
+             "cubic_spring_N_per_m3": "cubic spring"}
+    return [f"{label} ({k} = {getattr(model, k):g})" for k, label in names.items() if getattr(model, k, 0)]
 
 
 def model_comparison(meta: dict, results: list[dict]) -> ModelComparison | None:

@@ -333,3 +333,22 @@ def test_unreadable_analysis_is_named_in_the_report_not_fatal(run_dir, tmp_path)
     section = _section(text, "Analysis: what the model gets wrong")
     assert "cannot be shown" in section and "analysis.json cannot be read" in section
     assert "## Identification of F_s, x_s, n and m" in text      # the rest of the report is there
+
+
+def test_every_plant_effect_the_engine_leaves_out_is_named_in_the_model_notes():
+    """The shooting engine is the plain Masing model: a simulated rig with any optional effect
+    on must say so next to the comparison, or a difference would read as an engine error."""
+    from dataclasses import fields
+
+    from bench.reports._model import _model_effects
+    companions = {      # parameters only meaningful with a main one
+        "friction_alpha": dict(friction_v_ref_m_per_s=0.01),
+        "pitch_inertia_kg_m2": dict(pitch_stiffness_N_m_per_rad=1e4, pitch_damping_N_m_s_per_rad=1.0,
+                                    drive_height_m=0.05, cg_height_m=0.03)}
+    sub_parameters = {k for c in companions.values() for k in c}
+    effects = [f.name for f in fields(RigModel) if f.default == 0.0 and f.name not in sub_parameters
+               and f.name != "seed"]
+    assert len(effects) >= 9
+    for name in effects:
+        notes = _model_effects(RigModel(**{name: 0.01}, **companions.get(name, {})))
+        assert len(notes) == 1 and name in notes[0], name
