@@ -47,8 +47,9 @@ class Cause:
 class Candidate:
     id: str
     delta_bic: float
-    heldout_error: float
+    heldout_error: float                     # NaN when not computed (a candidate that failed the BIC gate)
     named: bool
+    round: int | None = None                 # optional: the forward-selection round it was tried in
 
 
 @dataclass(frozen=True)
@@ -139,7 +140,9 @@ def _cause(d: dict) -> Cause:
 
 
 def _candidate(d: dict) -> Candidate:
-    return Candidate(str(d["id"]), _float(d.get("delta_bic")), _float(d.get("heldout_error")), bool(d.get("named")))
+    rnd = d.get("round")
+    return Candidate(str(d["id"]), _float(d.get("delta_bic")), _float(d.get("heldout_error")), bool(d.get("named")),
+                     None if rnd is None else int(rnd))
 
 
 def _step(d: dict) -> StepFRF:

@@ -448,7 +448,7 @@ def plot_analysis_residuals(steps) -> Figure:
     else:
         ax_h.text(0.5, 0.5, "no residual per harmonic in the analysis", ha="center", va="center",
                   transform=ax_h.transAxes)
-    ax_h.set(xlabel="harmonic", ylabel="base model residual (relative)",
+    ax_h.set(xlabel="harmonic", ylabel="base model residual",
              title="base model residual per harmonic (dots: steps, coloured by level)")
     ax_h.grid(True, which="both", alpha=0.3)
     for ax in (ax_f, ax_l, ax_h):

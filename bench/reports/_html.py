@@ -194,13 +194,20 @@ def _candidates(a: AnalysisData) -> str:
     if not a.candidates:
         out.append("<p>No candidate scores in the analysis.</p>")
     else:
-        rows = [[f"<code>{escape(c.id)}</code>", _num(c.delta_bic), _pct(c.heldout_error),
-                 "<strong>yes</strong>" if c.named else "no"]
-                for c in sorted(a.candidates, key=lambda c: (not c.named, _sort_key(c.delta_bic)))]
-        out.append(_table(["candidate", "\u0394BIC", "held-out error", "named"], rows, {1, 2},
-                          "Every candidate extension fitted; \u0394BIC against the base model (negative favours "
-                          "the candidate), held-out error of compliance and accelerance on steps left out of "
-                          "the fit."))
+        rounds = any(c.round is not None for c in a.candidates)
+        ordered = sorted(a.candidates, key=lambda c: (c.round if c.round is not None else 0, not c.named,
+                                                      _sort_key(c.delta_bic)))
+        rows = [([str(c.round) if c.round is not None else "-"] if rounds else [])
+                + [f"<code>{escape(c.id)}</code>", _num(c.delta_bic),
+                   _pct(c.heldout_error) if math.isfinite(c.heldout_error) else "not computed",
+                   "<strong>yes</strong>" if c.named else "no"] for c in ordered]
+        head = (["round"] if rounds else []) + ["candidate", "\u0394BIC", "held-out error", "named"]
+        out.append(_table(head, rows, {int(rounds) + 1, int(rounds) + 2},
+                          "Every candidate extension fitted"
+                          + (", round by round of the forward selection (each round against the model so far)"
+                             if rounds else "") + "; \u0394BIC against the model without it (negative favours "
+                          "the candidate), held-out error of compliance and accelerance on steps left out of the "
+                          "fit."))
     return "".join(out) + "</section>"
 
 

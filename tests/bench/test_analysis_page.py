@@ -111,6 +111,7 @@ def test_page_lists_every_candidate_and_rejected_step(page, analysis_example):
     text = page.read_text()
     section = text.split("Candidates tried</h2>")[1].split("</table>")[0]
     rows = re.findall(r"<tr><td><code>(\w+)</code></td>.*?<td>(<strong>yes</strong>|no)</td></tr>", section)
+    assert len(rows) == len(analysis_example["candidates"])
     assert {r[0] for r in rows} == {c["id"] for c in analysis_example["candidates"]}
     assert {r[0] for r in rows if r[1] != "no"} == {c["id"] for c in analysis_example["candidates"] if c["named"]}
     for r in analysis_example["steps_rejected"]:
@@ -229,3 +230,16 @@ def test_non_finite_values_show_as_not_available(analysis_example, tmp_path):
     text = write_analysis_html(d, tmp_path / "a.html").read_text()
     assert "&Delta;BIC = n/a" in text
     assert '<td>n</td><td>-</td><td class="num">0.46</td><td class="num">n/a</td><td class="num">n/a</td>' in text
+
+
+def test_candidates_of_several_selection_rounds_are_shown_by_round(analysis_example, tmp_path):
+    first = [dict(c, round=1, heldout_error=c["heldout_error"] if c["named"] else None)
+             for c in analysis_example["candidates"]]
+    second = [dict(c, round=2, named=False) for c in analysis_example["candidates"] if not c["named"]]
+    d = _variant(analysis_example, candidates=first + second, steps=[], loops=[])
+    text = write_analysis_html(d, tmp_path / "a.html").read_text()
+    section = text.split("Candidates tried</h2>")[1].split("</table>")[0]
+    rows = re.findall(r"<tr><td>(\d)</td><td><code>(\w+)</code></td><td[^>]*>[^<]*</td><td[^>]*>([^<]*)</td>", section)
+    assert [r[0] for r in rows] == ["1"] * len(first) + ["2"] * len(second)
+    assert rows[0][1] == analysis_example["causes"][0]["id"]        # the named one leads its round
+    assert sum(r[2] == "not computed" for r in rows) == len(first) - 1
