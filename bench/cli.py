@@ -117,7 +117,7 @@ def _run(args, resume: bool) -> int:
     meta = store.metadata
     print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/")
     if meta["status"] == "completed" and not getattr(args, "no_report", False):
-        from .report import write_report
+        from .reports import write_report
         print(f"report: {write_report(out)}")
     return 0 if meta["status"] == "completed" else 4
 
@@ -166,7 +166,7 @@ def cmd_demo(args) -> int:
 
 
 def cmd_report(args) -> int:
-    from .report import write_report
+    from .reports import write_report
     print(f"report: {write_report(Path(args.run))}")
     return 0
 
