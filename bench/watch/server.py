@@ -107,6 +107,9 @@ class WatchServer(ThreadingHTTPServer):
             self._thread.join(timeout=5)
         self.server_close()
 
+    def __exit__(self, *exc) -> None:
+        self.close()
+
 
 class _Handler(BaseHTTPRequestHandler):
     server: WatchServer
