@@ -181,6 +181,7 @@ class RunReader:
             "rig": meta.get("rig", {}).get("name", ""),
             "simulated": bool(meta.get("rig", {}).get("simulated")),
             "status": status,
+            "levels_N": list(plan.levels_N) if plan else [],
             "started": meta.get("started"),
             "ended": meta.get("ended") if status != "running" else None,
             "stop_pending": (self.path / STOP_FILE).exists(),
