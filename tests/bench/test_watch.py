@@ -248,3 +248,56 @@ def test_the_page_shows_a_running_test_and_its_stop_button_stops_it_safely(tmp_p
             ["stop requested by the watch page (127.0.0.1)"]
         assert [e["confirmed"] for e in events if e["event"] == "output_off"] == [True]
         assert events[-1]["event"] == "end" and events[-1]["status"] == "interrupted"
+
+
+# --------------------------------------------------------------------------- bench watch, another process
+
+
+@pytest.mark.timeout(120)
+def test_bench_watch_follows_a_run_in_another_process_through_a_stop_and_a_resume(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    with open(tmp_path / "watch.out", "wb") as log:
+        proc = subprocess.Popen([sys.executable, "-m", "bench.cli", "watch", str(out)], cwd=REPO,
+                                stdout=log, stderr=subprocess.STDOUT)
+    try:
+        def url():
+            m = re.search(rb"watch: (http://\S+)", (tmp_path / "watch.out").read_bytes())
+            return m.group(1).decode() if m else None
+        wait_for(url, 30, "the watch URL", proc)
+        base, token = url().split("?token=")
+        assert base.startswith("http://127.0.0.1:")
+        assert listening_addresses(int(base.rsplit(":", 1)[1].strip("/"))) == {LOOPBACK_HEX}
+
+        def state():
+            with urllib.request.urlopen(base + "api/state", timeout=5) as r:
+                return json.loads(r.read())
+        assert state()["status"] == "waiting"
+
+        seen = []
+
+        def stop_from_the_page(done, total, note):
+            seen.append(state()["progress"]["done"])
+            if done == 2:
+                req = urllib.request.Request(base + "api/stop", method="POST", headers={"X-Stop-Token": token})
+                with urllib.request.urlopen(req, timeout=5) as r:
+                    assert r.status == 202
+
+        plan, rig = small_plan(freqs=(60.0, 80.0, 100.0, 120.0)), load_rig(DEFAULTS / "sim_rig.toml")
+        with pytest.raises(KeyboardInterrupt):
+            run_plan(plan, rig, out, sim_seed=1, identify=False, progress=stop_from_the_page)
+        assert seen == [1, 2]                  # each step visible as soon as it is stored
+        s = state()
+        assert (s["status"], s["progress"]["done"], s["progress"]["total"]) == ("interrupted", 2, 4)
+        assert sum(len(c["freq_Hz"]) for c in s["compliance"]) == 2
+
+        run_plan(plan, rig, out, resume=True, sim_seed=1, identify=False)
+        s = state()
+        assert (s["status"], s["progress"]["done"]) == ("completed", 4)
+        assert [e["event"] for e in s["events"]].count("resume") == 1
+        assert sum(len(c["freq_Hz"]) for c in s["compliance"]) == 4
+        assert proc.poll() is None             # the page outlives the runs it shows
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=10)
+    assert proc.returncode == 0
