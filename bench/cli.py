@@ -125,29 +125,34 @@ def _start_watch(run_dir: Path, args):
     """The watch page beside the run (``--watch``), served from a thread of this process."""
     if not getattr(args, "watch", False):
         return None
-    from .watch import serve
-    server = serve(run_dir, args.watch_host, args.watch_port)
+    server = _watch_server(run_dir, args.watch_host, args.watch_port).start()
     print(f"watch: {server.url}", flush=True)
     return server
 
 
+def _watch_server(run_dir: Path, host: str, port: int):
+    from .watch import WatchServer
+    try:
+        return WatchServer(run_dir, host, port)
+    except OSError as e:       # port taken, no such interface, privileged port
+        raise ValueError(f"cannot serve the watch page on {host}:{port}: {e}") from e
+
+
 def cmd_watch(args) -> int:
     """Serve the live page of a run directory until Ctrl-C."""
-    from .watch import WatchServer
     run_dir = Path(args.run)
     if not run_dir.is_dir():
         raise ValueError(f"{run_dir}: no such run directory")
     if not (run_dir / "run.json").is_file():
         log.warning("%s has no run.json yet: the page waits for the run to start", run_dir)
-    server = WatchServer(run_dir, args.host, args.port)
+    server = _watch_server(run_dir, args.host, args.port)
     print(f"watch: {server.url}  (Ctrl-C ends the page, not the run)", flush=True)
     try:
         server.serve_forever()
     except KeyboardInterrupt:
         pass
     finally:
-        server.closing.set()
-        server.server_close()
+        server.close()         # open pages get the last state and a goodbye
     return 0
 
 
