@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import platform
 import signal
+import socket
 import sys
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, replace
@@ -222,6 +224,7 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
         store = RunStore.create(out, {"plan": plan.to_dict(), "rig": rig.to_dict(), "versions": versions(),
                                       "sim_seed": sim_seed, "identifiability_warnings": warnings})
     stop_request.clear(store.path)      # a request left from an earlier session is not for this one
+    store.update(process={"pid": os.getpid(), "host": socket.gethostname()})   # watch: is it still alive?
     log_handler = _log_to(store.path / "bench.log")
     status = "failed"
     sup = None

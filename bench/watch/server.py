@@ -168,9 +168,10 @@ class _Handler(BaseHTTPRequestHandler):
                         "wrong" if given else "no")
             return self._send_json(HTTPStatus.FORBIDDEN, {"error": "a valid stop token is needed "
                                                           "(the one printed with the page's URL)"})
-        status = self.server.reader.snapshot().get("status")
-        if status != "running":
-            return self._send_json(HTTPStatus.CONFLICT, {"error": f"the run is not running (status: {status})"})
+        state = self.server.reader.snapshot()
+        if state.get("status") != "running" or state.get("process_gone"):
+            shown = "process gone" if state.get("process_gone") else state.get("status")
+            return self._send_json(HTTPStatus.CONFLICT, {"error": f"the run is not running ({shown})"})
         req = stop.request_stop(self.server.run_dir, by=f"the watch page ({self.client_address[0]})")
         self._send_json(HTTPStatus.ACCEPTED, {"requested": req})
 

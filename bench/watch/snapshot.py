@@ -19,6 +19,7 @@ import json
 import logging
 import math
 import os
+import socket
 import threading
 from datetime import datetime
 from pathlib import Path
@@ -76,6 +77,20 @@ def _time(s: str | None) -> float | None:
         return datetime.fromisoformat(s).timestamp()
     except (TypeError, ValueError):
         return None
+
+
+def _process_gone(process: dict | None) -> bool:
+    """True if run.json names a process on this host that no longer exists (kill -9, a
+    crash): the run says "running" but nobody runs it.  Unknown (another host, no record): False."""
+    if not isinstance(process, dict) or process.get("host") != socket.gethostname():
+        return False
+    try:
+        os.kill(int(process["pid"]), 0)
+    except ProcessLookupError:
+        return True
+    except (PermissionError, KeyError, TypeError, ValueError):
+        return False
+    return False
 
 
 def plan_of(meta: dict) -> Plan | None:
@@ -185,6 +200,7 @@ class RunReader:
             "started": meta.get("started"),
             "ended": meta.get("ended") if status != "running" else None,
             "stop_pending": (self.path / STOP_FILE).exists(),
+            "process_gone": status == "running" and _process_gone(meta.get("process")),
             "progress": self._progress(plan, results, events, status),
             "last_step": _step_summary(results[-1]) if results else None,
             "next_step": self._next(plan, results) if status == "running" else None,

@@ -9,8 +9,10 @@ what the run says about it), opens the page in headless Chromium and presses the
 from __future__ import annotations
 
 import json
+import os
 import re
 import signal
+import socket
 import subprocess
 import sys
 import textwrap
@@ -133,6 +135,22 @@ def test_the_reader_waits_for_a_run_that_has_not_started_and_skips_a_torn_event_
     state = reader.snapshot()
     assert state["status"] == "running" and [e["event"] for e in state["events"]] == ["start"]
     assert state["progress"]["done"] == 0 and state["next_step"]["key"].startswith("00000-")
+
+
+def test_a_running_run_whose_process_is_gone_is_shown_stalled_and_cannot_be_stopped(tmp_path, small_run):
+    gone = subprocess.Popen(["true"])
+    gone.wait()                                   # its pid now names no process
+    run = tmp_path / "run"
+    run.mkdir()
+    meta = dict(small_run.metadata, status="running", process={"pid": gone.pid, "host": socket.gethostname()})
+    (run / "run.json").write_text(json.dumps(meta))
+    assert RunReader(run).snapshot()["process_gone"] is True
+    with serve(run) as server:
+        code, body = post_stop(server, server.token)
+    assert code == 409 and "process gone" in body["error"]
+    meta["process"]["pid"] = os.getpid()          # alive
+    (run / "run.json").write_text(json.dumps(meta))
+    assert RunReader(run).snapshot()["process_gone"] is False
 
 
 # --------------------------------------------------------------------------- the session's side
