@@ -249,6 +249,7 @@ def test_the_page_shows_a_running_test_and_its_stop_button_stops_it_safely(tmp_p
                                              " && document.getElementById('status').textContent", 10,
                                              "the page to show the run interrupted")
                     assert final == "interrupted"
+                    assert "stop requested by the watch page" in browser.js("document.getElementById('events').textContent")
                     shown = browser.js(points)
             finally:
                 if proc.poll() is None:
