@@ -79,20 +79,6 @@ def _time(s: str | None) -> float | None:
         return None
 
 
-def _process_gone(process: dict | None) -> bool:
-    """True if run.json names a process on this host that no longer exists (kill -9, a
-    crash): the run says "running" but nobody runs it.  Unknown (another host, no record): False."""
-    if not isinstance(process, dict) or process.get("host") != socket.gethostname():
-        return False
-    try:
-        os.kill(int(process["pid"]), 0)
-    except ProcessLookupError:
-        return True
-    except (PermissionError, KeyError, TypeError, ValueError):
-        return False
-    return False
-
-
 def plan_of(meta: dict) -> Plan | None:
     """The stored plan as a :class:`Plan` (None if run.json does not hold a usable one)."""
     try:
@@ -139,6 +125,9 @@ class RunReader:
         self._lock = threading.Lock()
         self._steps: dict[str, dict] = {}         # file name -> result (step files never change)
         self._step_mtime: dict[str, float] = {}
+        self._cached: dict = {}
+        self._cached_sig: tuple | None = None
+        self._process: dict | None = None
         self._events = _Tail(self.path / "events.jsonl")
         self._ident = _Tail(self.path / "identification.jsonl")
         self._log = _Tail(self.path / "bench.log", keep=lambda ln: " WARNING " in ln or " ERROR " in ln,
@@ -159,6 +148,21 @@ class RunReader:
             sig.append(0)
         return tuple(sig)
 
+    def _process_gone(self) -> bool:
+        """True if run.json names a process on this host that no longer exists (kill -9, a
+        crash): the run says "running" but nobody runs it.  Unknown (another host, no
+        record): False."""
+        process = self._process
+        if not isinstance(process, dict) or process.get("host") != socket.gethostname():
+            return False
+        try:
+            os.kill(int(process["pid"]), 0)
+        except ProcessLookupError:
+            return True
+        except (PermissionError, KeyError, TypeError, ValueError):
+            return False
+        return False
+
     def _read_steps(self) -> list[dict]:
         steps_dir = self.path / "steps"
         try:
@@ -175,8 +179,15 @@ class RunReader:
         return [self._steps[k] for k in sorted(self._steps)]
 
     def snapshot(self) -> dict:
+        """The state; recomputed only when :meth:`signature` changed (several pages, one read)."""
         with self._lock:
-            return self._snapshot()
+            sig = self.signature()
+            if sig != self._cached_sig:
+                self._cached, self._cached_sig = self._snapshot(), sig
+            state = dict(self._cached)
+        if state.get("status") == "running":     # a process can die without touching a file
+            state["process_gone"] = self._process_gone()
+        return state
 
     def _snapshot(self) -> dict:
         try:
@@ -190,6 +201,7 @@ class RunReader:
         ident = _jsonl(self._ident.read())
         plan = plan_of(meta)
         status = meta.get("status", "unknown")
+        self._process = meta.get("process")
         return {
             "run_dir": str(self.path),
             "name": meta.get("plan", {}).get("name", ""),
@@ -200,7 +212,7 @@ class RunReader:
             "started": meta.get("started"),
             "ended": meta.get("ended") if status != "running" else None,
             "stop_pending": (self.path / STOP_FILE).exists(),
-            "process_gone": status == "running" and _process_gone(meta.get("process")),
+            "process_gone": False,       # filled in by snapshot()
             "progress": self._progress(plan, results, events, status),
             "last_step": _step_summary(results[-1]) if results else None,
             "next_step": self._next(plan, results) if status == "running" else None,
