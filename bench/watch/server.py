@@ -172,7 +172,12 @@ class _Handler(BaseHTTPRequestHandler):
         if state.get("status") != "running" or state.get("process_gone"):
             shown = "process gone" if state.get("process_gone") else state.get("status")
             return self._send_json(HTTPStatus.CONFLICT, {"error": f"the run is not running ({shown})"})
-        req = stop.request_stop(self.server.run_dir, by=f"the watch page ({self.client_address[0]})")
+        try:
+            req = stop.request_stop(self.server.run_dir, by=f"the watch page ({self.client_address[0]})")
+        except OSError as e:
+            log.error("could not write the stop request into %s: %s", self.server.run_dir, e)
+            return self._send_json(HTTPStatus.INTERNAL_SERVER_ERROR,
+                                   {"error": f"could not write the stop request: {e}; use Ctrl-C in the run's terminal"})
         self._send_json(HTTPStatus.ACCEPTED, {"requested": req})
 
     def _stream(self) -> None:
