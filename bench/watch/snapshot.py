@@ -8,8 +8,8 @@ later) so that polling every fraction of a second costs little, and it works who
 writes the directory: this process, another one, a resumed run, or nobody any more.
 
 Progress: steps done against the plan's schedule (adaptive plans: the chosen number per
-sweep); the ETA is the mean time per step since the latest start or resume times the steps
-left.  The "next" step is the first of the schedule not yet done (in adaptive mode the
+sweep); the ETA is the mean time per step since the first step after the latest start or
+resume (set-up is not counted, as on the terminal's progress line) times the steps left.  The "next" step is the first of the schedule not yet done (in adaptive mode the
 procedure may skip it).
 """
 
@@ -228,10 +228,13 @@ class RunReader:
         total = steps_total(plan) if plan else None
         starts = [_time(e.get("time")) for e in events if e.get("event") in ("start", "resume")]
         t_start = starts[-1] if starts and starts[-1] else None
-        since = [self._step_mtime[n] for n in self._steps if t_start and self._step_mtime[n] >= t_start]
+        since = sorted(self._step_mtime[n] for n in self._steps if t_start and self._step_mtime[n] >= t_start)
         eta_s = per_step_s = None
-        if since and t_start:
-            per_step_s = (max(since) - t_start) / len(since)
+        if len(since) >= 2:              # from the first step on: set-up is not a step
+            per_step_s = (since[-1] - since[0]) / (len(since) - 1)
+        elif since and t_start:
+            per_step_s = since[0] - t_start
+        if per_step_s is not None:
             if total is not None and status == "running":
                 eta_s = max(0.0, per_step_s * (total - done))
         return dict(done=done, total=total, fraction=(done / total if total else None),

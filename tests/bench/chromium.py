@@ -33,9 +33,9 @@ class Browser:
              f"--window-size={width},{height}", "--no-first-run", "--disable-extensions", "about:blank"],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr)
         self._id, self._buf, self.session = 0, b"", None
-        targets = self.send("Target.getTargets")["targetInfos"]
-        page = next(t for t in targets if t["type"] == "page")
-        self.session = self.send("Target.attachToTarget", targetId=page["targetId"], flatten=True)["sessionId"]
+        page = self.send("Target.createTarget", url="about:blank")["targetId"]     # ours, whatever else starts
+        self.session = self.send("Target.attachToTarget", targetId=page, flatten=True)["sessionId"]
+        self.send("Emulation.setDeviceMetricsOverride", width=width, height=height, deviceScaleFactor=1, mobile=False)
         self.send("Page.enable")
         self.send("Runtime.enable")
 
