@@ -220,6 +220,25 @@ def test_a_stop_request_left_from_an_earlier_session_does_not_stop_a_resume(tmp_
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (make setup)")
+def test_the_stop_button_works_only_with_the_token_and_while_the_run_runs(tmp_path, small_run):
+    run = tmp_path / "run"
+    run.mkdir()
+    meta = dict(small_run.metadata, status="running", process={"pid": os.getpid(), "host": socket.gethostname()})
+    (run / "run.json").write_text(json.dumps(meta))
+    enabled = "document.getElementById('status').textContent !== 'connecting' && !document.getElementById('stop').disabled"
+    with serve(run) as server, Browser() as browser:
+        browser.goto(server.url.split("?")[0])                     # no token: read-only
+        browser.wait_for("document.getElementById('status').textContent === 'running'", 30, "the page")
+        assert browser.js(enabled) is False
+        browser.goto(server.url)
+        browser.wait_for(enabled, 30, "the stop button enabled with the token")
+        (run / "run.json").write_text(json.dumps(dict(meta, status="completed")))   # the run ends
+        browser.wait_for("document.getElementById('status').textContent === 'completed'", 30, "the end")
+        assert browser.js(enabled) is False
+    assert not (run / STOP_FILE).exists()
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (make setup)")
 @pytest.mark.timeout(240)        # about 15 s; the waits are long for a machine under heavy load
 def test_the_page_shows_a_running_test_and_its_stop_button_stops_it_safely(tmp_path):
     with start_twins(SimulatedRig(RigModel(seed=5))) as twins:
