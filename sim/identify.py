@@ -423,8 +423,9 @@ def _n(n: float) -> float:
     return 1.0 + 1e-6 if abs(n - 1.0) < 1e-6 else n
 
 
-def identify_results(results: list[dict], guess: dict, harmonics: int = 9) -> Identifier:
-    """Offline identification from stored step results (or imported UFF58 data)."""
+def identify_results(results: list, guess: dict, harmonics: int = 9) -> Identifier:
+    """Offline identification from stored step results (dicts) or :class:`StepHarmonics`
+    (e.g. ``bench.sources`` steps' ``harmonics``)."""
     ident = Identifier(guess, harmonics)
     for r in results:
         ident.add(r)
