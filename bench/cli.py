@@ -233,32 +233,28 @@ def cmd_identify(args) -> int:
     from sim.identify import identify_results
 
     from .config import DEFAULTS, load_rig, parse_rig
+    from .sources import load_source
     from .storage import RunStore
 
     source = Path(args.source)
-    store = None
-    if source.is_dir():
-        store = RunStore.open(source)
-        meta = store.metadata
-        rig = parse_rig({"rig": _rig_toml(meta["rig"])}, f"{source}/run.json")
-        results = store.results()
-        harmonics = min(meta["plan"]["harmonics"], MAX_HARMONICS)
+    src = load_source(source)
+    if src.kind == "run":
+        rig = parse_rig({"rig": _rig_toml(src.metadata["rig"])}, f"{source}/run.json")
     else:
-        from .export import import_uff58
         rig = load_rig(Path(args.rig) if args.rig else DEFAULTS / "sim_rig.toml")
-        results = [s for s in import_uff58(source).steps if s.get("source") == "uff58-time"]
-        harmonics = MAX_HARMONICS
-    if not results:
+    for r in src.rejected:
+        print(f"step {r.step} rejected: {r.reason}")
+    if not src.steps:
         raise ValueError(f"{source}: no steps with force, acceleration and displacement to identify from")
     guess = dict(F_s_N=rig.expected_F_s_N, x_s_m=rig.expected_x_s_m, n=rig.expected_n,
                  mass_kg=rig.expected_mass_kg)
-    est = identify_results(results, guess, harmonics).estimate
-    if store:
-        store.update(identification=est.as_dict())
+    est = identify_results([s.harmonics for s in src.steps], guess, MAX_HARMONICS).estimate
+    if src.kind == "run":
+        RunStore.open(source).update(identification=est.as_dict())
     print(f"{'parameter':>10} {'estimate':>12} {'95 % interval':>28}")
     for k, v in est.values.items():
         print(f"{k:>10} {v:12.5g} [{est.low[k]:12.5g}, {est.high[k]:12.5g}]")
-    print(f"{len(results)} steps, reduced chi^2 {est.cost:.3g}")
+    print(f"{len(src.steps)} steps ({len(src.rejected)} rejected), reduced chi^2 {est.cost:.3g}")
     for w in est.warnings:
         print(f"warning: {w}")
     return 0

@@ -264,14 +264,14 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
                 progress.restart(len(store.done_keys()))     # the ETA counts steps from here
             online = OnlineIdentification(store.path, rig, plan.harmonics) if identify else None
             if online:
-                online.preload(store.results())
+                online.preload(store.results(), store.raw)
 
             progress_note = [""]       # the latest estimates, shown on the status line
 
             def record(step, res, raw):
                 store.write_step(step.key, res, raw)
                 if online:
-                    est = online.update(res)
+                    est = online.update(res, raw)
                     if est:
                         v = est["values"]
                         progress_note[0] = (f"F_s {v['F_s_N']:.3g} N x_s {v['x_s_m'] * 1e6:.3g} um "
