@@ -99,38 +99,35 @@ def source_task(inputs: dict, seed: int = 0) -> list[dict]:
 
 
 def identify_source(source: Path, out_dir: Path | None = None, rig: Path | None = None) -> dict:
-    """Identification of one stored run or UFF58 file of time records, as a subset of the
-    analysis.json schema (parameters, reduced_chi2, steps_used); a per-source function
-    for batches while the full analysis is not there, and a cheap one where it is not
-    needed.  Guesses from the run's rig, else from ``rig`` (default: the simulated rig)."""
-    import json
-
+    """Identification of one run directory or UFF58 file (:func:`bench.sources.load_source`,
+    :func:`sim.identify.identify_results`) as a subset of the analysis.json schema
+    (parameters, reduced_chi2, steps_used, steps_rejected): a cheap per-source function
+    where the full analysis is not needed.  Guesses from the run's rig, else from ``rig``
+    (default: the simulated rig's file); writes identification.json into ``out_dir``."""
     from bench.config import DEFAULTS, load_rig
-    from bench.storage import RunStore, write_json
+    from bench.sources import load_source
+    from bench.storage import write_json
+    from procedures.online_id import MAX_HARMONICS
     from sim.identify import identify_results
 
-    if source.is_dir():
-        store = RunStore.open(source)
-        r = store.metadata["rig"]
-        guess = dict(F_s_N=r["expected_F_s_N"], x_s_m=r["expected_x_s_m"], n=r["expected_n"],
-                     mass_kg=r["expected_mass_kg"])
-        results = store.results()
+    src = load_source(source)
+    if src.kind == "run":
+        r = src.metadata["rig"]
+        guess = {k: r[f"expected_{k}"] for k in ("F_s_N", "x_s_m", "n", "mass_kg")}
     else:
-        from bench.export import import_uff58
         rr = load_rig(rig or DEFAULTS / "sim_rig.toml")
         guess = dict(F_s_N=rr.expected_F_s_N, x_s_m=rr.expected_x_s_m, n=rr.expected_n,
                      mass_kg=rr.expected_mass_kg)
-        results = [s for s in import_uff58(source).steps if s.get("source") == "uff58-time"]
-    if not results:
+    if not src.steps:
         raise ValueError(f"{source}: no steps with force, acceleration and displacement to identify from")
-    est = identify_results(results, guess).estimate
-    out = dict(schema="guideway-bench/identification/1", source=str(source),
+    est = identify_results([s.harmonics for s in src.steps], guess, MAX_HARMONICS).estimate
+    out = dict(schema="guideway-bench/identification/1", source=str(source), kind=src.kind,
                parameters={k: dict(value=est.values[k], low=est.low[k], high=est.high[k]) for k in est.values},
-               reduced_chi2=est.cost, steps_used=[r.get("key", str(i)) for i, r in enumerate(results)],
+               reduced_chi2=est.cost, steps_used=[s.key for s in src.steps],
+               steps_rejected=[dict(step=r.step, reason=r.reason) for r in src.rejected],
                warnings=list(est.warnings))
     if out_dir is not None:
-        write_json(out_dir / "identification.json", out)
-        log.debug("wrote %s", json.dumps(out)[:80])
+        write_json(Path(out_dir) / "identification.json", out)
     return out
 
 
