@@ -173,7 +173,7 @@ def identification_sample(inputs: dict, seed: int) -> list[dict]:
     rows = []
     for p in PARAMS:
         v, t = est.values[p], truth[p]
-        rows.append(dict(sample=int(inputs["sample"]), parameter=p, truth=t, guess=expected[p],
+        rows.append(dict(sample=int(inputs["sample"]), plan=plan.name, parameter=p, truth=t, guess=expected[p],
                          estimate=float(v), low=float(est.low[p]), high=float(est.high[p]), rel_error=float(v / t - 1.0),
                          covered=bool(est.low[p] <= t <= est.high[p]), rel_std=float(est.rel_std[p]),
                          steps=len(results), reduced_chi2=float(est.cost), noise_seed=model["seed"]))
