@@ -78,8 +78,8 @@ def cmd_study_mc(args, progress) -> int:
 
 def is_batch(args) -> bool:
     """`bench analyze` in batch mode: several sources, an archive directory (one without
-    run.json) or an engine option."""
-    if len(args.sources) != 1 or getattr(args, "scheduler", None) or getattr(args, "workers", None):
+    run.json), an engine option or --identify-only."""
+    if len(args.sources) != 1 or any(getattr(args, k, None) for k in ("scheduler", "workers", "identify_only")):
         return True
     p = Path(args.sources[0])
     return p.is_dir() and not (p / "run.json").exists()
@@ -129,12 +129,17 @@ def add_parsers(sub, progress) -> None:
 
 
 def add_batch_arguments(a, progress=None) -> None:
-    """The batch options of `bench analyze` (also for a parser defined elsewhere)."""
+    """`bench analyze SOURCES... --out DIR` when no single-source `analyze` exists."""
     a.add_argument("sources", nargs="+", help="run directories, UFF58 files or archive directories")
     a.add_argument("--out", required=True, help="batch directory: summary table and one report per source")
     a.add_argument("--rig", help="rig TOML for sources that carry no rig (UFF58)")
+    add_batch_options(a)
+    if progress is not None:
+        a.set_defaults(func=lambda args: cmd_analyze_batch(args, progress))
+
+
+def add_batch_options(a) -> None:
+    """The options that only the batch mode of `bench analyze` has."""
     a.add_argument("--identify-only", action="store_true",
                    help="only identify F_s, x_s, n, m per source (no model-vs-measurement analysis)")
     _engine_args(a)
-    if progress is not None:
-        a.set_defaults(func=lambda args: cmd_analyze_batch(args, progress))
