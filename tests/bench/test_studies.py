@@ -217,8 +217,10 @@ def test_identification_mc_on_a_cluster_matches_an_in_process_sample(cluster, tm
     rows = [r for r in t.to_pylist() if r["sample"] == 1]
     inputs = spec.tasks()[1]
     here = identification_sample(inputs, task_seed(11, inputs))      # same inputs, same seed, this process
-    assert [r["estimate"] for r in rows] == [r["estimate"] for r in here]
-    assert [r["truth"] for r in rows] == [r["truth"] for r in here]
+    assert [r["truth"] for r in rows] == [r["truth"] for r in here]        # same draws, bit for bit
+    # this process's BLAS may run multi-threaded (workers run single-threaded), which can
+    # change the last bits of a least-squares solve
+    assert [r["estimate"] for r in rows] == pytest.approx([r["estimate"] for r in here], rel=1e-9)
     # rigs really vary (truths differ between samples) and the plan pins every parameter
     truths = {r["sample"]: r["truth"] for r in t.to_pylist() if r["parameter"] == "F_s_N"}
     assert len(set(truths.values())) == 2
