@@ -17,11 +17,17 @@ class Progress:
     def __init__(self, label: str, stream=sys.stderr):
         self.label, self.stream, self.t0 = label, stream, time.monotonic()
         self.tty = stream.isatty()
+        self.t_start, self.done0 = self.t0, 0
+
+    def restart(self, done: int = 0) -> None:
+        """Count the ETA from now and from ``done`` steps (set-up and resumed steps excluded)."""
+        self.t_start, self.done0 = time.monotonic(), done
 
     def __call__(self, done: int, total: int, note: str = "") -> None:
         frac = done / max(total, 1)
-        el = time.monotonic() - self.t0
-        eta = el / frac - el if frac > 0 else float("nan")
+        now = time.monotonic()
+        el = now - self.t0
+        eta = (now - self.t_start) / (done - self.done0) * (total - done) if done > self.done0 else float("nan")
         bar = "#" * int(30 * frac)
         line = f"{self.label} [{bar:<30}] {done}/{total} {el:5.1f}s eta {eta:5.1f}s {note}"
         if self.tty:
@@ -107,13 +113,60 @@ def _run(args, resume: bool) -> int:
     else:
         plan, rig = _load_configs(args)
         out, seed = Path(args.out), args.seed
-    store = run_plan(plan, rig, out, resume=resume, progress=Progress("stepped sine"), sim_seed=seed)
+    watch = _start_watch(out, args)
+    try:
+        store = run_plan(plan, rig, out, resume=resume, progress=Progress("stepped sine"), sim_seed=seed)
+    finally:
+        if watch:
+            watch.close()
     meta = store.metadata
     print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/")
     if meta["status"] == "completed" and not getattr(args, "no_report", False):
-        from .report import write_report
+        from .reports import write_report
         print(f"report: {write_report(out)}")
     return 0 if meta["status"] == "completed" else 4
+
+
+def _start_watch(run_dir: Path, args):
+    """The watch page beside the run (``--watch``), served from a thread of this process."""
+    if not getattr(args, "watch", False):
+        return None
+    server = _watch_server(run_dir, args.watch_host, args.watch_port).start()
+    print(f"watch: {server.url}", flush=True)
+    return server
+
+
+def _watch_server(run_dir: Path, host: str, port: int):
+    from .watch import WatchServer
+    try:
+        return WatchServer(run_dir, host, port)
+    except OSError as e:       # port taken, no such interface, privileged port
+        raise ValueError(f"cannot serve the watch page on {host}:{port}: {e}") from e
+
+
+def cmd_watch(args) -> int:
+    """Serve the live page of a run directory until Ctrl-C."""
+    run_dir = Path(args.run)
+    if not run_dir.is_dir():
+        raise ValueError(f"{run_dir}: no such run directory")
+    if not (run_dir / "run.json").is_file():
+        log.warning("%s has no run.json yet: the page waits for the run to start", run_dir)
+    server = _watch_server(run_dir, args.host, args.port)
+    print(f"watch: {server.url}  (Ctrl-C ends the page, not the run)", flush=True)
+    try:
+        server.serve_forever()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.close()         # open pages get the last state and a goodbye
+    return 0
+
+
+def _add_watch_options(s) -> None:
+    s.add_argument("--watch", action="store_true", help="serve the live page of the run (URL printed)")
+    s.add_argument("--watch-port", type=int, default=0, help="port of the page (default: any free one)")
+    s.add_argument("--watch-host", default="127.0.0.1",
+                   help="interface of the page (default 127.0.0.1; others only when given)")
 
 
 def _plan_toml(p: dict) -> dict:
@@ -160,7 +213,7 @@ def cmd_demo(args) -> int:
 
 
 def cmd_report(args) -> int:
-    from .report import write_report
+    from .reports import write_report
     print(f"report: {write_report(Path(args.run))}")
     return 0
 
@@ -207,6 +260,15 @@ def cmd_identify(args) -> int:
     return 0
 
 
+def cmd_warmup(args) -> int:
+    from .warmup import warm_up
+    if not args.verbose:
+        logging.getLogger().setLevel(logging.ERROR)     # the warm-up run's chatter is noise here
+    print("compiling the simulation kernels (once per machine and change of sim/) ...", flush=True)
+    print(f"kernels compiled and cached in {warm_up():.0f} s")
+    return 0
+
+
 def cmd_twins(args) -> int:
     from drivers import run_standalone
     from sim.rig import RigModel, SimulatedRig
@@ -231,6 +293,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("demo", help="the main job: the default plan on the simulated rig, with its report")
     s.add_argument("--out", default="out/demo")
+    _add_watch_options(s)
     s.set_defaults(func=cmd_demo)
 
     for name, func, hlp in (("run", cmd_run, "run a stepped-sine plan on a rig"),
@@ -242,12 +305,20 @@ def build_parser() -> argparse.ArgumentParser:
             s.add_argument("--out", required=True, help="new run directory")
             s.add_argument("--seed", type=int, help="noise seed of a simulated rig")
             s.add_argument("--no-report", action="store_true")
+            _add_watch_options(s)
         s.set_defaults(func=func)
 
     s = sub.add_parser("resume", help="continue an interrupted run without repeating completed steps")
     s.add_argument("run")
     s.add_argument("--no-report", action="store_true")
+    _add_watch_options(s)
     s.set_defaults(func=cmd_resume)
+
+    s = sub.add_parser("watch", help="serve a live page of a run directory (running, resumed or finished)")
+    s.add_argument("run")
+    s.add_argument("--port", type=int, default=0, help="port (default: any free one)")
+    s.add_argument("--host", default="127.0.0.1", help="interface (default 127.0.0.1; others only when given)")
+    s.set_defaults(func=cmd_watch)
 
     s = sub.add_parser("report", help="(re)write the report of a run directory")
     s.add_argument("run")
@@ -269,6 +340,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--host", default="127.0.0.1")
     s.add_argument("--serial", action="store_true", help="also serve SCPI and Modbus RTU on pty pairs")
     s.set_defaults(func=cmd_twins)
+
+    s = sub.add_parser("warmup", help="compile and cache the simulation kernels (make setup runs it)")
+    s.set_defaults(func=cmd_warmup)
 
     s = sub.add_parser("frf", help="compliance G(beta) of the model at one force level (CSV to stdout)")
     s.add_argument("--gamma0", type=float, default=0.6)

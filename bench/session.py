@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import platform
 import signal
+import socket
 import sys
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, replace
@@ -27,6 +29,7 @@ from procedures.stepped_sine import SteppedSine
 
 from .config import Plan, Rig
 from .storage import RunStore
+from .watch import stop as stop_request
 
 log = logging.getLogger(__name__)
 
@@ -206,9 +209,17 @@ def open_instruments(rig: Rig, stack: ExitStack, *, sim_seed: int | None = None,
 
 
 def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=None,
-             sim_seed: int | None = None, identify: bool = True) -> RunStore:
-    """Run (or resume) ``plan`` on ``rig`` into the run directory ``out``."""
+             sim_seed: int | None = None, identify: bool = True, warm_up: bool = True) -> RunStore:
+    """Run (or resume) ``plan`` on ``rig`` into the run directory ``out``.
+
+    A simulated rig whose kernels are not compiled yet is warmed up first (``warm_up``),
+    with a one-line notice, so compiling never counts in the progress line's ETA."""
     plan = check_envelope(plan, rig)
+    if rig.simulated and warm_up:
+        from .warmup import kernels_warm, warm_up as compile_kernels
+        if not kernels_warm():
+            log.warning("compiling the simulation kernels (first run only; `make setup` does it ahead)")
+            log.info("kernels compiled in %.0f s", compile_kernels())
     warnings = identifiability(plan, rig)
     for w in warnings:
         log.warning("identifiability: %s", w)
@@ -220,15 +231,19 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
     else:
         store = RunStore.create(out, {"plan": plan.to_dict(), "rig": rig.to_dict(), "versions": versions(),
                                       "sim_seed": sim_seed, "identifiability_warnings": warnings})
+    stop_request.clear(store.path)      # a request left from an earlier session is not for this one
+    store.update(process={"pid": os.getpid(), "host": socket.gethostname()})   # watch: is it still alive?
     log_handler = _log_to(store.path / "bench.log")
     status = "failed"
+    sup = None
     with ExitStack() as stack, _sigterm_as_interrupt():
         try:
             ins = open_instruments(rig, stack, sim_seed=sim_seed,
                                    on_output_off=lambda ok: store.event("output_off", confirmed=ok))
             store.update(identities=ins.identities)
             sup = Supervisor(limits, ins.generator)
-            gen, daq = SupervisedGenerator(ins.generator, sup), SupervisedDaq(ins.daq, sup)
+            gen = SupervisedGenerator(ins.generator, sup)
+            daq = stop_request.StopOnRequest(SupervisedDaq(ins.daq, sup), store.path)
 
             def sensor_check() -> dict:
                 reading = ins.sensor.read_gap()
@@ -245,6 +260,8 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
             proc = SteppedSine(plan, gen, daq, amp_gain_N_per_V=rig.amp_gain_N_per_V,
                                sensor_check=sensor_check)
             proc.disp_noise_floor_m = float(np.std(rest))
+            if progress and hasattr(progress, "restart"):
+                progress.restart(len(store.done_keys()))     # the ETA counts steps from here
             online = OnlineIdentification(store.path, rig, plan.harmonics) if identify else None
             if online:
                 online.preload(store.results(), store.raw)
@@ -280,6 +297,10 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
         except KeyboardInterrupt as e:
             status = "interrupted"
             store.event("interrupted", reason=str(e) or "Ctrl-C")
+            if sup is not None:
+                with _uninterruptible("ramping down"):
+                    sup.shutdown()       # ramp down; the output is switched off below
+            stop_request.clear(store.path)
             log.warning("interrupted; resume with: bench resume %s", store.path)
             raise
         except InstrumentError as e:
