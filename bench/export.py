@@ -131,8 +131,7 @@ def frf_datasets(meta: dict, results: list[dict]) -> list[dict]:
 def time_datasets(store: RunStore, meta: dict, results: list[dict]) -> list[dict]:
     """Force, acceleration and displacement of each step's measured block."""
     out = []
-    for r in results:
-        raw = store.raw(r["key"])
+    for r, raw in store.with_raw(results):
         fs = float(raw["fs_Hz"])
         t0 = float(raw["t0_s"])
         for ch, (sdt, unit, rk) in CHANNELS.items():
