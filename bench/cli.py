@@ -64,6 +64,8 @@ def cmd_frf(args) -> int:
     from sim.frf import find_peaks, frf_rk4
     from sim.shooting import frf_shooting
 
+    if args.points < 1:
+        raise ValueError(f"--points must be >= 1, got {args.points}")
     betas = np.linspace(args.beta_min, args.beta_max, args.points)
     prog = Progress(f"FRF gamma0={args.gamma0} n={args.n} ({args.engine})")
     if args.engine == "shooting":
@@ -199,6 +201,8 @@ def cmd_identify(args) -> int:
     from .storage import RunStore
 
     source = Path(args.source)
+    if not source.exists():
+        raise FileNotFoundError(2, "no such file or directory (expected a run directory or a UFF58 file)", str(source))
     store = None
     if source.is_dir():
         store = RunStore.open(source)
@@ -344,16 +348,18 @@ def _with_debug(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     return p
 
 
-def _exit_code(e: BaseException) -> ExitCode:
-    from drivers import InstrumentError
-    from procedures.safety import LimitExceeded
+def _is(e: BaseException, module: str, name: str) -> bool:
+    """isinstance without importing: a module that raised ``e`` is loaded already."""
+    cls = getattr(sys.modules.get(module), name, None)
+    return cls is not None and isinstance(e, cls)
 
-    from .session import EnvelopeError
+
+def _exit_code(e: BaseException) -> ExitCode:
     if isinstance(e, KeyboardInterrupt):
         return ExitCode.INTERRUPTED
-    if isinstance(e, (LimitExceeded, EnvelopeError)):
+    if _is(e, "procedures.safety", "LimitExceeded") or _is(e, "bench.session", "EnvelopeError"):
         return ExitCode.LIMIT
-    if isinstance(e, InstrumentError):
+    if _is(e, "drivers._errors", "InstrumentError"):
         return ExitCode.FAILURE
     if isinstance(e, (ValueError, FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError,
                       PermissionError, UnicodeDecodeError)):
@@ -369,7 +375,7 @@ def _one_line(e: BaseException) -> str:
         return f"{where}: {e.strerror}" if where else e.strerror
     text = str(e).strip().splitlines()
     first = text[0] if text else ""
-    if isinstance(e, (ValueError, KeyboardInterrupt)) and first:
+    if _exit_code(e) in (ExitCode.USAGE, ExitCode.LIMIT) and first:
         return first
     return f"{type(e).__name__}: {first}" if first else type(e).__name__
 
