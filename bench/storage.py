@@ -208,6 +208,8 @@ class RunStore:
         plain["integrity"] = {"json_sha256": _sha256(_canonical(plain)), "npz_sha256": _sha256(npz),
                               "npz_bytes": len(npz)}
         write_json(self.steps_dir / f"{key}.json", plain)
+        st = (self.steps_dir / f"{key}.npz").stat()
+        self._npz_ok[key] = (st.st_mtime_ns, st.st_size, plain["integrity"]["npz_sha256"])   # just written
 
     # ------------------------------------------------------------------ steps: reading
     def _step_files(self) -> list[Path]:
