@@ -203,6 +203,9 @@ def main() -> None:
     t0 = time.perf_counter()
     try:
         store = run_plan(plan, rig, out / "run", identify=a.identify)
+    except KeyboardInterrupt:             # Ctrl-C: the figures so far are still printed
+        from bench.storage import RunStore
+        store = RunStore.open(out / "run")
     finally:
         wall = time.perf_counter() - t0
         sampler.stop.set()
