@@ -112,6 +112,7 @@ def _load_run(path: Path) -> Source:
         results = store.results()
     except (OSError, ValueError) as e:         # json.JSONDecodeError is a ValueError
         raise ValueError(f"{path}: cannot read the run's metadata or step results: {e}") from e
+    src.rejected += [Rejected(p.key or p.path.name, f"damaged: {p}") for p in store.problems]
     for r in results:
         key = str(r.get("key", "?"))
         try:
