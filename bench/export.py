@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.records import estimate_frequency
+
 from .storage import RunStore
 
 log = logging.getLogger(__name__)
@@ -213,12 +215,6 @@ def _frf_steps(ds: dict, n_fn: int) -> list[dict]:
     return out
 
 
-def _estimate_freq(x: np.ndarray, fs: float) -> float:
-    spec = np.abs(np.fft.rfft((x - x.mean()) * np.hanning(x.size)))
-    k = int(np.argmax(spec[1:])) + 1
-    return k * fs / x.size
-
-
 def step_from_signals(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float, harmonics: int = 5) -> dict:
     """The measured fields of a step result, computed as procedures.stepped_sine does."""
     from procedures.analysis import fit_harmonics
@@ -264,7 +260,7 @@ def _time_steps(records: list[dict]) -> UffImport:
         x = np.asarray(f0["x"], float)
         fs = float(tags["fs"]) if "fs" in tags else 1.0 / float(f0.get("abscissa_inc") or (x[1] - x[0]))
         sig = {ch: np.asarray(chans[ch]["data"], float) for ch in CHANNELS}
-        freq = float(tags["f"]) if "f" in tags else _estimate_freq(sig["force"], fs)
+        freq = float(tags["f"]) if "f" in tags else estimate_frequency(sig["force"], fs, sig["accel"], sig["disp"])
         step = step_from_signals(sig["force"], sig["accel"], sig["disp"], fs, freq, int(tags.get("harmonics", 5)))
         key = tags.get("step", f"uff-{n:05d}")
         km = re.match(r"(\d+)-L(\d+)-F(\d+)-(\w+)$", key)
@@ -281,7 +277,9 @@ def _time_steps(records: list[dict]) -> UffImport:
 
 
 def import_uff58(path: Path) -> UffImport:
-    """Read FRFs (function type 4) and time records (type 1) of dataset 58 from ``path``."""
+    """Read FRFs (function type 4) and time records (type 1) of dataset 58 from ``path``
+    as step-result dicts (for reports).  Identification and analysis read time records
+    through :func:`bench.sources.load_source` (every harmonic, rejections with reasons)."""
     import pyuff
 
     uff = pyuff.UFF(str(path))
