@@ -22,9 +22,8 @@ import numpy as np
 import pytest
 
 from bench.sources import load_source
-from sim.identify import identify_results
+from sim.identify import StepHarmonics, identify_results
 from sim.records import analyse_records
-from sim.identify import StepHarmonics
 from sim.synthetic import clean_model, generate, issue_grid, random_rig
 
 KEYS = ("F_s_N", "x_s_m", "n", "mass_kg")
