@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.records import estimate_frequency
+
 from .storage import RunStore
 
 log = logging.getLogger(__name__)
@@ -212,12 +214,6 @@ def _frf_steps(ds: dict, n_fn: int) -> list[dict]:
     return out
 
 
-def _estimate_freq(x: np.ndarray, fs: float) -> float:
-    spec = np.abs(np.fft.rfft((x - x.mean()) * np.hanning(x.size)))
-    k = int(np.argmax(spec[1:])) + 1
-    return k * fs / x.size
-
-
 def step_from_signals(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float, harmonics: int = 5) -> dict:
     """The measured fields of a step result, computed as procedures.stepped_sine does."""
     from procedures.analysis import fit_harmonics
@@ -247,7 +243,7 @@ def _time_step(tags: dict, chans: dict) -> tuple[float, dict, float, dict]:
     if not (math.isfinite(fs) and fs > 0) or len({v.size for v in sig.values()}) != 1 or sig["force"].size < 8 \
             or not all(np.all(np.isfinite(v)) for v in sig.values()):
         raise ValueError(f"sample rate {fs!r} Hz, lengths {[v.size for v in sig.values()]}, or non-finite samples")
-    freq = float(tags["f"]) if "f" in tags else _estimate_freq(sig["force"], fs)
+    freq = float(tags["f"]) if "f" in tags else estimate_frequency(sig["force"], fs, sig["accel"], sig["disp"])
     if not (math.isfinite(freq) and 0 < freq < fs / 2):
         raise ValueError(f"frequency {freq!r} Hz not within (0, fs/2)")
     step = step_from_signals(sig["force"], sig["accel"], sig["disp"], fs, freq, int(tags.get("harmonics", 5)))
@@ -295,7 +291,9 @@ def _time_steps(records: list[dict]) -> UffImport:
 
 
 def import_uff58(path: Path) -> UffImport:
-    """Read FRFs (function type 4) and time records (type 1) of dataset 58 from ``path``."""
+    """Read FRFs (function type 4) and time records (type 1) of dataset 58 from ``path``
+    as step-result dicts (for reports).  Identification and analysis read time records
+    through :func:`bench.sources.load_source` (every harmonic, rejections with reasons)."""
     import pyuff
 
     try:

@@ -53,7 +53,7 @@ def main() -> None:
             print(f"{kind:5s} n={truth['n']:.2f} chi2 {est.cost:5.2f} " + " ".join(
                 f"{k} {100 * err[k]:+.3f}%{'' if inside[k] else '!'}" for k in KEYS)
                 + f"  rejected {rejected}  {dt:.0f} s", flush=True)
-    for kind in ("plant", "uff", "all"):
+    for kind in ("plant", "uff58", "all"):
         sel = [r for r in rows if kind == "all" or r[0] == kind]
         if not sel:
             continue
