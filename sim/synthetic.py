@@ -24,9 +24,6 @@ from .rig import RigModel, SimulatedRig
 
 log = logging.getLogger(__name__)
 
-RESOLUTION_FACTOR = 16
-
-
 @dataclass(frozen=True)
 class Noise:
     """Sensor noise (standard deviation per sample), relative to the rig or the step."""
@@ -76,43 +73,18 @@ def clean_model(F_s_N: float, x_s_m: float, n: float, mass_kg: float, seed: int 
                     accel_noise_m_s2=0.0, disp_noise_m=0.0, amp_force_limit_N=1e6, seed=seed, **effects)
 
 
-def plant_resolution(model: RigModel, level_N: float) -> int:
-    """RK4 steps per (assumed) natural period that resolve the motion at this force.
-
-    The plant sizes its time step for a small-amplitude stiffness of 10 F_s/x_s when n < 1
-    (where the initial stiffness is infinite).  At small force the loop's secant stiffness
-    g(u)/u is far higher (about 200 F_s/x_s at 0.1 F_s for n = 0.36) and the turn at each
-    reversal is singular: with the default resolution the plant's acceleration and the
-    second derivative of its displacement then disagree by up to 30 % at the fundamental.
-    This raises the resolution in proportion to the secant natural frequency (x16 for
-    the reversals), which brings the disagreement to about 1e-4."""
-    n = model.n
-    if n >= 1:
-        return model.steps_per_period
-    gamma = min(level_N / model.F_s_N, 0.99)
-    lo, hi = 0.0, 1.0                    # virgin curve g(u) = (u^n - n u)/(1 - n) = gamma
-    for _ in range(60):
-        u = 0.5 * (lo + hi)
-        lo, hi = (u, hi) if (u ** n - n * u) / (1 - n) < gamma else (lo, u)
-    ratio = math.sqrt(gamma / max(u, 1e-12) / 10.0)
-    return int(max(model.steps_per_period, math.ceil(model.steps_per_period * (RESOLUTION_FACTOR * ratio if ratio > 1 else 1.0))))
-
-
 def samples_per_period(freq_Hz: float, min_rate_Hz: float) -> int:
     return max(32, math.ceil(min_rate_Hz / freq_Hz - 1e-9))
 
 
 def generate(model: RigModel, levels_N, freqs_Hz, *, settle: int = 25, measure: int = 8,
-             noise: Noise | None = Noise(), min_rate_Hz: float = 25_600.0, seed: int = 0,
-             resolve: bool = True) -> list[SyntheticStep]:
+             noise: Noise | None = Noise(), min_rate_Hz: float = 25_600.0, seed: int = 0) -> list[SyntheticStep]:
     """Up-sweeps through ``freqs_Hz`` at each of ``levels_N``; one :class:`SyntheticStep` per
-    step.  ``resolve`` raises the plant's resolution where n < 1 needs it (see
-    :func:`plant_resolution`)."""
+    step."""
     rng = np.random.default_rng(seed)
     out = []
     for li, level in enumerate(levels_N):
-        rig = SimulatedRig(replace(model, seed=model.seed + li,
-                                   steps_per_period=plant_resolution(model, level) if resolve else model.steps_per_period))
+        rig = SimulatedRig(replace(model, seed=model.seed + li))
         vpp = 2.0 * level / model.amp_gain_N_per_V
         rig.set_generator(amplitude_Vpp=vpp, output_on=True)
         for fi, f in enumerate(sorted(freqs_Hz)):
