@@ -180,6 +180,7 @@ def measure_steps(model: RigModel, levels_N, freqs_Hz, *, settle_periods: int = 
             # their own periods: settle longer above the resonance
             settle = int(settle_periods * max(1.0, f / f_mid))
             rig.run(settle * SETTLE_SAMPLES_PER_PERIOD, f * SETTLE_SAMPLES_PER_PERIOD)
+            rig.run(2 * M, fs)     # the plant's delay line restarts when the sample rate changes
             b = rig.run(measure_periods * M, fs)
             g = (1 + model.force_gain_error, 1 + model.accel_gain_error, 1 + model.disp_gain_error)
             force = b.force_V / model.force_sens_V_per_N
