@@ -21,7 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..identify import Identifier, synthesize
+from ..identify import Identifier
+from .models import synthesize
 from .fit import Fit, Weights, fit, whitened
 from .gain import frf, heldout_error
 from .models import BASE_PARAMS, EFFECTS, Data, Model

@@ -36,7 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..identify import Identifier, analyse, synthesize
+from ..identify import _loop_friction, analyse
+from ..masing import LAMBDA_MASING
 
 BASE_PARAMS = ("F_s_N", "x_s_m", "n", "mass_kg")
 
@@ -83,6 +84,32 @@ class Data:
         return Data(*(getattr(self, f)[mask] for f in ("omega", "P", "A", "X", "sP", "sA", "sX", "level")))
 
 
+def synthesize(C: np.ndarray, M: int) -> np.ndarray:
+    """Rows of samples of sum_k Im(C_k exp(i k w t)) over one period (as
+    :func:`sim.identify.synthesize`, by inverse FFT: no BLAS call, which under a loaded
+    machine's multi-threaded OpenBLAS costs 40x more than the arithmetic)."""
+    Z = np.zeros((C.shape[0], M // 2 + 1), complex)
+    Z[:, 1:C.shape[1] + 1] = -0.5j * M * C
+    return np.fft.irfft(Z, n=M, axis=1)
+
+
+def masing_samples(F_s: float, x_s: float, n: float, x: np.ndarray) -> np.ndarray:
+    """Masing friction (N) along each row of displacement samples ``x`` (one period, m): the
+    steady loop after virgin loading to the period's largest value (as sim.identify)."""
+    M = x.shape[1]
+    centre = 0.5 * (x.max(axis=1) + x.min(axis=1))
+    u = (x - centre[:, None]) / x_s
+    start = np.argmax(u, axis=1)
+    rows = np.arange(u.shape[0])[:, None]
+    idx = (start[:, None] + np.arange(M)[None, :]) % M
+    path = u[rows, idx]
+    out = np.empty_like(path)
+    _loop_friction(path, path[:, 0].copy(), LAMBDA_MASING, np.array([n]), out)
+    F = np.empty_like(out)
+    F[rows, idx] = out
+    return F_s * F
+
+
 class Model:
     """Base Masing model plus a set of effects; parameters as one flat vector.
 
@@ -95,8 +122,7 @@ class Model:
             raise ValueError(f"unknown effects {unknown}; catalog: {CATALOG}")
         self.effects = tuple(effects)
         self.M = points_per_period
-        self._masing = Identifier(dict(F_s_N=1.0, x_s_m=1.0, n=1.5, mass_kg=1.0), harmonics,
-                                  points_per_period=points_per_period)
+        self.K = harmonics
         self.slices = {}
         i = len(BASE_PARAMS)
         for e in self.effects:
@@ -117,23 +143,17 @@ class Model:
 
     def extend(self, theta: np.ndarray, effect: str, init: np.ndarray) -> tuple["Model", np.ndarray]:
         """This model with one more effect, and the parameter vector warm-started from ``theta``."""
-        m = Model(self.effects + (effect,), self._masing.K, self.M)
+        m = Model(self.effects + (effect,), self.K, self.M)
         return m, np.concatenate([theta, init])
 
     # ------------------------------------------------------------------ physics
     def _masing_friction(self, F_s, x_s, n, x_true, Omega, beta):
         if abs(n - 1.0) < 1e-6:
             n = 1.0 + 1e-6
-        if beta == 0.0:
-            return self._masing.model_friction(F_s, x_s, n, x_true)
-        # time domain: all harmonics of the Masing loop, times (1 + beta |v|)
-        K = x_true.shape[1]
-        Kf = self.M // 2 - 1
-        Xpad = np.zeros((x_true.shape[0], Kf), complex)
-        Xpad[:, :K] = x_true
-        F = synthesize(self._masing.model_friction(F_s, x_s, n, Xpad), self.M)
-        v = synthesize(1j * Omega * x_true, self.M)
-        return analyse(F * (1.0 + beta * np.abs(v)), K)
+        F = masing_samples(F_s, x_s, n, synthesize(x_true, self.M))
+        if beta != 0.0:       # friction level rising with speed: F (1 + beta |v|)
+            F = F * (1.0 + beta * np.abs(synthesize(1j * Omega * x_true, self.M)))
+        return analyse(F, x_true.shape[1])
 
     def terms(self, theta: np.ndarray, d: Data, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(G, A_pred) for force harmonics ``P`` (the measured ones, or a trial)."""
