@@ -36,3 +36,4 @@ bench: setup
 	$(PY) benchmarks/bench_sim.py
 	$(PY) benchmarks/bench_drivers.py
 	$(PY) benchmarks/bench_procedure.py
+	$(PY) benchmarks/bench_analysis.py

@@ -89,6 +89,14 @@ def base_fit(steps, d: Data, guess: dict | None, harmonics: int) -> tuple[Fit, W
     return fit(Model((), d.X.shape[1]), theta, d, W, max_nfev=200), W
 
 
+def interval_text(value: float, low: float, high: float, unit: str = "", signed: bool = False) -> str:
+    """'41 N s/m (95 %: 37 to 45 N s/m)' with just enough digits to tell the bounds apart."""
+    width = abs(high - low)
+    digits = 3 if width == 0 or value == 0 else max(2, min(8, int(math.ceil(math.log10(abs(value) / width))) + 2))
+    f = (lambda x: f"{x:+.{digits}g}") if signed else (lambda x: f"{x:.{digits}g}")
+    return f"{f(value)}{unit} (95 %: {f(low)} to {f(high)}{unit})"
+
+
 @dataclass
 class Analysis:
     steps: list
@@ -192,8 +200,8 @@ class Analysis:
 
         def iv(name, fmt, scale=1.0, unit=""):
             q = p[name]
-            return (f"{q['value'] * scale:{fmt}}{unit} (95 %: {q['low'] * scale:{fmt}} to "
-                    f"{q['high'] * scale:{fmt}}{unit})")
+            return interval_text(q["value"] * scale, q["low"] * scale, q["high"] * scale, unit,
+                                 signed="+" in fmt)
         if c.id == "viscous_damping":
             return (f"viscous damping c = {iv('c', '.3g', unit=' N s/m')}, an equivalent damping ratio of "
                     f"{100 * p['damping_ratio_at_resonance']['value']:.1f} % at the friction resonance")
