@@ -11,7 +11,12 @@ $(VENV)/.installed: pyproject.toml
 	$(PY) -m pip install -q -e '.[test]'
 	touch $@
 
-setup: $(VENV)/.installed system-deps
+setup: $(VENV)/.installed system-deps $(VENV)/.kernels
+
+# numba compiles the kernels on first use (~45 s); do it here, not in the first run
+$(VENV)/.kernels: $(VENV)/.installed $(wildcard sim/*.py)
+	$(VENV)/bin/bench warmup
+	touch $@
 
 # Test peers from Debian (pseudo-terminal pairs, an independent Modbus client, a real
 # browser for the HTML pages).

@@ -17,11 +17,17 @@ class Progress:
     def __init__(self, label: str, stream=sys.stderr):
         self.label, self.stream, self.t0 = label, stream, time.monotonic()
         self.tty = stream.isatty()
+        self.t_start, self.done0 = self.t0, 0
+
+    def restart(self, done: int = 0) -> None:
+        """Count the ETA from now and from ``done`` steps (set-up and resumed steps excluded)."""
+        self.t_start, self.done0 = time.monotonic(), done
 
     def __call__(self, done: int, total: int, note: str = "") -> None:
         frac = done / max(total, 1)
-        el = time.monotonic() - self.t0
-        eta = el / frac - el if frac > 0 else float("nan")
+        now = time.monotonic()
+        el = now - self.t0
+        eta = (now - self.t_start) / (done - self.done0) * (total - done) if done > self.done0 else float("nan")
         bar = "#" * int(30 * frac)
         line = f"{self.label} [{bar:<30}] {done}/{total} {el:5.1f}s eta {eta:5.1f}s {note}"
         if self.tty:
@@ -223,6 +229,15 @@ def cmd_analyze(args) -> int:
     return 0
 
 
+def cmd_warmup(args) -> int:
+    from .warmup import warm_up
+    if not args.verbose:
+        logging.getLogger().setLevel(logging.ERROR)     # the warm-up run's chatter is noise here
+    print("compiling the simulation kernels (once per machine and change of sim/) ...", flush=True)
+    print(f"kernels compiled and cached in {warm_up():.0f} s")
+    return 0
+
+
 def cmd_twins(args) -> int:
     from drivers import run_standalone
     from sim.rig import RigModel, SimulatedRig
@@ -292,6 +307,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--host", default="127.0.0.1")
     s.add_argument("--serial", action="store_true", help="also serve SCPI and Modbus RTU on pty pairs")
     s.set_defaults(func=cmd_twins)
+
+    s = sub.add_parser("warmup", help="compile and cache the simulation kernels (make setup runs it)")
+    s.set_defaults(func=cmd_warmup)
 
     s = sub.add_parser("frf", help="compliance G(beta) of the model at one force level (CSV to stdout)")
     s.add_argument("--gamma0", type=float, default=0.6)

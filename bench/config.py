@@ -168,6 +168,62 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
     return plan
 
 
+# [rig.model]: sim.rig.RigModel's parameters, key -> (unit, low, high, low open, integer).
+# Ranges are what a real carriage rig can have; cross-field rules (n != 1, J > m e^2, ...)
+# are the model's own and reach the user through the same error.
+MODEL_SCHEMA = {
+    "F_s_N": ("N", 0, 1e4, True, False),
+    "x_s_m": ("m", 0, 1e-2, True, False),
+    "n": ("1", 0, 10, True, False),
+    "mass_kg": ("kg", 0, 1e4, True, False),
+    "amp_gain_N_per_V": ("N/V", 0, 1e4, True, False),
+    "amp_force_limit_N": ("N", 0, 1e4, True, False),
+    "force_sens_V_per_N": ("V/N", 0, 100, True, False),
+    "accel_sens_V_per_m_s2": ("V/(m/s^2)", 0, 100, True, False),
+    "disp_sens_V_per_m": ("V/m", 0, 1e7, True, False),
+    "probe_standoff_m": ("m", 0, 0.1, False, False),
+    "force_noise_N": ("N", 0, 1e3, False, False),
+    "accel_noise_m_s2": ("m/s^2", 0, 1e4, False, False),
+    "disp_noise_m": ("m", 0, 1e-2, False, False),
+    "viscous_N_s_per_m": ("N s/m", 0, 1e6, False, False),
+    "spring_N_per_m": ("N/m", 0, 1e9, False, False),
+    "disp_delay_s": ("s", 0, 0.1, False, False),
+    "force_gain_error": ("relative", -0.5, 0.5, False, False),
+    "accel_gain_error": ("relative", -0.5, 0.5, False, False),
+    "disp_gain_error": ("relative", -0.5, 0.5, False, False),
+    "friction_alpha": ("1", 0, 100, False, False),
+    "friction_v_ref_m_per_s": ("m/s", 0, 10, False, False),
+    "pitch_inertia_kg_m2": ("kg m^2", 0, 1e3, False, False),
+    "pitch_stiffness_N_m_per_rad": ("N m/rad", 0, 1e9, False, False),
+    "pitch_damping_N_m_s_per_rad": ("N m s/rad", 0, 1e6, False, False),
+    "drive_height_m": ("m", 0, 10, False, False),
+    "cg_height_m": ("m", 0, 10, False, False),
+    "cubic_spring_N_per_m3": ("N/m^3", 0, 1e20, False, False),
+    "steps_per_period": ("steps", 20, 1e5, False, True),
+    "seed": ("", 0, 2**63 - 1, False, True),
+}
+
+
+def _check_model(sec: _Section) -> None:
+    """Each [rig.model] key against its unit and range, then the model's own rules."""
+    from sim.rig import RigModel
+
+    unknown = sorted(set(sec.data) - set(MODEL_SCHEMA))
+    if unknown:
+        raise ConfigError(f"{sec.source}: [rig.model] unknown rig model keys {unknown}; "
+                          f"allowed: {sorted(MODEL_SCHEMA)}")
+    for key in sec.data:
+        unit, lo, hi, lo_open, integer = MODEL_SCHEMA[key]
+        try:
+            sec.number(key, None, lo, hi, lo_open=lo_open, integer=integer)
+        except ConfigError as e:
+            raise ConfigError(f"{e} (unit: {unit})" if unit else str(e)) from None
+    try:
+        RigModel.from_dict(sec.data)
+    except (TypeError, ValueError) as e:
+        raise ConfigError(f"{sec.source}: [rig.model] {e}") from None
+
+
 def load_rig(path: Path) -> Rig:
     return parse_rig(_load(path), str(path))
 
@@ -200,11 +256,7 @@ def parse_rig(data: dict, source: str = "rig") -> Rig:
     if rig.model and not simulated:
         raise ConfigError(f"{source}: [rig.model] is only allowed with simulated = true")
     if simulated:
-        from sim.rig import RigModel
-        try:
-            RigModel.from_dict(rig.model)
-        except (TypeError, ValueError) as e:
-            raise ConfigError(f"{source}: [rig.model] {e}") from None
+        _check_model(r.table("model"))
     cal.done()
     exp.done()
     r.done()

@@ -206,9 +206,17 @@ def open_instruments(rig: Rig, stack: ExitStack, *, sim_seed: int | None = None,
 
 
 def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=None,
-             sim_seed: int | None = None, identify: bool = True) -> RunStore:
-    """Run (or resume) ``plan`` on ``rig`` into the run directory ``out``."""
+             sim_seed: int | None = None, identify: bool = True, warm_up: bool = True) -> RunStore:
+    """Run (or resume) ``plan`` on ``rig`` into the run directory ``out``.
+
+    A simulated rig whose kernels are not compiled yet is warmed up first (``warm_up``),
+    with a one-line notice, so compiling never counts in the progress line's ETA."""
     plan = check_envelope(plan, rig)
+    if rig.simulated and warm_up:
+        from .warmup import kernels_warm, warm_up as compile_kernels
+        if not kernels_warm():
+            log.warning("compiling the simulation kernels (first run only; `make setup` does it ahead)")
+            log.info("kernels compiled in %.0f s", compile_kernels())
     warnings = identifiability(plan, rig)
     for w in warnings:
         log.warning("identifiability: %s", w)
@@ -245,6 +253,8 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
             proc = SteppedSine(plan, gen, daq, amp_gain_N_per_V=rig.amp_gain_N_per_V,
                                sensor_check=sensor_check)
             proc.disp_noise_floor_m = float(np.std(rest))
+            if progress and hasattr(progress, "restart"):
+                progress.restart(len(store.done_keys()))     # the ETA counts steps from here
             online = OnlineIdentification(store.path, rig, plan.harmonics) if identify else None
             if online:
                 online.preload(store.results())

@@ -131,6 +131,33 @@ def bench_rig(repeats: int = 5) -> None:
               f"p95 {_percentile(times, 95) * 1e3:.1f} ms ({1.0 / wall:.0f}x real time)")
 
 
+# every effect of decision 0013 on: pitching mode (~200 Hz), velocity-dependent friction,
+# cubic spring, viscous damping and a linear spring (bench/defaults/sim_rig_pitch.toml + more)
+ALL_EFFECTS = dict(friction_alpha=0.5, friction_v_ref_m_per_s=5e-3, pitch_inertia_kg_m2=0.3,
+                   pitch_stiffness_N_m_per_rad=3e5, pitch_damping_N_m_s_per_rad=10.0,
+                   drive_height_m=0.2, cg_height_m=0.1, cubic_spring_N_per_m3=1e14,
+                   viscous_N_s_per_m=20.0, spring_N_per_m=1e5)
+
+
+def bench_rig_effects(repeats: int = 5, freq_Hz: float = 1000.0) -> None:
+    """Rig generation per simulated second at 1 kHz: plain plant vs every effect on."""
+    walls = {}
+    for name, model in (("plain", _MODEL), ("all effects", RigModel(**ALL_EFFECTS))):
+        rig = SimulatedRig(model)
+        rig.set_generator(freq_Hz=freq_Hz, amplitude_Vpp=DRIVE_VPP, output_on=True)
+        rig.run(16, FS_HZ)            # compile (or load the cache) outside the timing
+        times = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            rig.run(N_SAMPLES, FS_HZ)
+            times.append(time.perf_counter() - t0)
+        walls[name] = statistics.median(times)
+    print(f"rig generation per simulated second at {freq_Hz:g} Hz, 25.6 kS/s: plain "
+          f"{walls['plain'] * 1e3:.0f} ms, pitching mode + every effect on "
+          f"{walls['all effects'] * 1e3:.0f} ms ({walls['all effects'] / walls['plain']:.2f}x the plain "
+          f"plant; target <= 1 s)")
+
+
 def main() -> None:
     print(f"plant kernel JIT compilation (first rig.run of the process): "
           f"{_warm_up_kernel():.1f} s")
@@ -138,6 +165,7 @@ def main() -> None:
     bench_decode()
     bench_block_over_virtual_bus()
     bench_rig()
+    bench_rig_effects()
 
 
 if __name__ == "__main__":

@@ -35,6 +35,8 @@ import serial
 from ._errors import ConnectionLost, InstrumentTimeout, ProtocolError, SafetyInterlock, ScpiError
 from ._interfaces import Identity
 
+TWIN_MARK = "guideway-bench twin"     # in the *IDN? firmware field of the simulated generator
+
 log = logging.getLogger(__name__)
 
 MAX_ERRORS_DRAINED = 32
@@ -56,6 +58,7 @@ class ScpiFunctionGenerator:
         self.url = url
         self.timeout_s = timeout_s
         self.drive_limit_V = drive_limit_V
+        self._twin: bool | None = None
         try:
             self._port = serial.serial_for_url(url, baudrate=baudrate, timeout=timeout_s,
                                                write_timeout=timeout_s)
@@ -138,6 +141,19 @@ class ScpiFunctionGenerator:
         if len(parts) != 4:
             raise ProtocolError(f"'*IDN?': expected 4 fields, got {reply!r}")
         return Identity(*parts)
+
+    def is_twin(self) -> bool:
+        """True when the instrument is the project's simulated twin (by its *IDN? answer)."""
+        if self._twin is None:
+            self._twin = TWIN_MARK in self.query("*IDN?")
+        return self._twin
+
+    def mark_step(self, key: str) -> None:
+        """Tell a simulated rig that step ``key`` starts its measurement (twin-only
+        ``SIM:STEP``, decision record 0013: the plant's noise is reseeded from its seed and
+        the key).  A real instrument is never sent it."""
+        if self.is_twin():
+            self.command(f'SIM:STEP "{key}"')
 
     def output_enabled(self) -> bool:
         reply = self.query("OUTP?")

@@ -14,6 +14,7 @@ open-circuit value, so a driver that forgets ``OUTP:LOAD INF`` drives twice the 
 from __future__ import annotations
 
 import collections
+import contextlib
 import logging
 import math
 import threading
@@ -38,6 +39,7 @@ INF_LOAD = 9.9e37
 ERRORS = {
     -100: "Command error",
     -104: "Data type error",
+    -108: "Parameter not allowed",
     -109: "Missing parameter",
     -113: "Undefined header",
     -221: "Settings conflict",
@@ -83,6 +85,9 @@ class ScpiGeneratorModel:
             (HeaderPattern("?SOURce VOLTage RANGe AUTO"), self._range_auto),
             (HeaderPattern("OUTPut ?STATe"), self._output),
             (HeaderPattern("OUTPut LOAD"), self._load),
+            (HeaderPattern("?SOURce APPLy SINusoid"), self._apply_sine),
+            (HeaderPattern("?SOURce APPLy"), self._apply_query),
+            (HeaderPattern("SIMulation STEP"), self._sim_step),
         ]
         self._common: dict[str, Callable[[ProgramUnit], str | None]] = {
             "*IDN": self._idn, "*OPC": self._opc, "*CLS": self._cls, "*RST": self._rst,
@@ -324,6 +329,53 @@ class ScpiGeneratorModel:
             return "1" if self.state.output_on else "0"
         self.state.output_on = parse_bool(unit.argument)
         self._push_to_rig()
+        return None
+
+    def _apply_sine(self, unit: ProgramUnit) -> str | None:
+        """APPLy:SINusoid [<freq>[,<ampl>[,<offset>]]]: function, frequency, amplitude and
+        offset in one command (omitted or DEF = the defaults 1 kHz, 0.1 Vpp, 0 V; MIN/MAX
+        as in FREQ/VOLT/VOLT:OFFS), then the output on, as on the 33500 series."""
+        if unit.is_query:
+            return self._apply_query(unit)
+        args = [a.strip() for a in unit.argument.split(",")] if unit.argument.strip() else []
+        if len(args) > 3:
+            self.push_error(-108, f"APPLy:SIN takes at most 3 parameters, got {len(args)}")
+            return None
+        args += ["DEF"] * (3 - len(args))
+        for arg in args:          # all parameters parse before anything changes
+            parse_number(arg or "DEF")
+        with self._rig.lock if self._rig is not None else contextlib.nullcontext():
+            self.state.function = "SIN"
+            self.state.offset_V = 0.0     # the new offset is then fitted to the new amplitude
+            for handler, arg in ((self._frequency, args[0]), (self._amplitude, args[1]),
+                                 (self._offset, args[2])):
+                handler(ProgramUnit((), False, False, arg or "DEF", unit.text))
+            self.state.output_on = True
+            self._push_to_rig()
+        return None
+
+    def _apply_query(self, unit: ProgramUnit) -> str | None:
+        """APPLy? -> "SIN <freq>,<ampl>,<offset>" (quoted, as the 33500 series answers)."""
+        if not unit.is_query:
+            self.push_error(-109, "APPLy needs a function, e.g. APPLy:SINusoid")
+            return None
+        s = self.state
+        return '"' + f"{s.function} " + ",".join(f"{v:+.15E}" for v in (s.freq_Hz, s.amplitude_Vpp, s.offset_V)) + '"'
+
+    def _sim_step(self, unit: ProgramUnit) -> str | None:
+        """Twin only: SIMulation:STEP "<key>" tells the plant a new step starts (noise reseeded
+        from the rig seed and the key, see decision record 0013).  Real instruments answer
+        -113; the driver sends it only to a twin."""
+        if unit.is_query:
+            self.push_error(-113, "SIM:STEP has no query")
+            return None
+        key = unit.argument.strip().strip('"').strip("'")
+        if not key:
+            self.push_error(-109, "SIM:STEP needs a step key")
+            return None
+        if self._rig is not None and hasattr(self._rig, "mark_step"):
+            with self._rig.lock:
+                self._rig.mark_step(key)
         return None
 
     def _load(self, unit: ProgramUnit) -> str | None:

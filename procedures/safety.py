@@ -106,6 +106,12 @@ class SupervisedGenerator:
         self._gen.safe_off()
         self._sup.amplitude_Vpp = 0.0
 
+    def mark_step(self, key: str) -> None:
+        """Simulated rigs only (the driver sends nothing to a real one): see decision 0013."""
+        mark = getattr(self._gen, "mark_step", None)
+        if mark:
+            mark(key)
+
 
 class SupervisedDaq:
     """The DAQ as the procedure sees it: every block is checked before it is returned."""

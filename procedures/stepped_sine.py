@@ -163,6 +163,9 @@ class SteppedSine:
         f = step.freq_Hz
         periods = max(self.plan.measure_cycles, math.ceil(self.plan.min_measure_s * f))
         self._wait(f, self.plan.min_settle_s, min_periods=self.plan.settle_cycles)
+        mark = getattr(self.gen, "mark_step", None)
+        if mark:                      # a simulated rig reseeds its noise here (decision 0013)
+            mark(step.key)
         block = self._acquire(f, periods)
         fits = self._fit_block(block, f)
         extra = 0
@@ -212,17 +215,38 @@ class SteppedSine:
         finished = len(done)
         prev: StepSpec | None = None
         for sweep in sweeps:
+            before: StepSpec | None = None          # the step measured before, in this sweep
             for step in (choose(sweep) if choose else sweep):
                 if step.key in done:
+                    before = step
                     continue
-                res = self.step(step, new_sweep=prev is None or (step.level_index, step.direction)
-                                != (prev.level_index, prev.direction), record=record)
+                new_sweep = prev is None or (step.level_index, step.direction) != (prev.level_index, prev.direction)
+                if new_sweep and before is not None:
+                    # resuming inside a sweep: come from the step before, as the sweep would
+                    # have (a nonlinear rig keeps the branch its history put it on)
+                    self.approach(before)
+                    new_sweep = False
+                res = self.step(step, new_sweep=new_sweep, record=record)
+                before = step
                 finished += 1
                 if progress:
                     progress(finished, total, f"{step.force_N:g} N {step.freq_Hz:7.1f} Hz {step.direction:4s} "
                              f"err {100 * res['force_error']:+.1f}% THD(x) {res['disp']['thd']:.2f}")
                 prev = step
         self.stop()
+
+    def approach(self, step: StepSpec) -> None:
+        """Drive ``step`` (already measured) as its sweep did: ramp, control, settle for its
+        measurement's length, without recording.  The next step then starts from the state
+        an uninterrupted sweep leaves it."""
+        if self.drive.on:
+            self.stop()
+        if self.sensor_check:
+            self.sensor_check()
+        self.ramp(step.force_N / self.drive.gain_N_per_Vpp, step.freq_Hz)
+        self.control_force(step)
+        periods = max(self.plan.measure_cycles, math.ceil(self.plan.min_measure_s * step.freq_Hz))
+        self._wait(step.freq_Hz, self.plan.min_settle_s, min_periods=self.plan.settle_cycles + periods)
 
     def step(self, step: StepSpec, *, new_sweep: bool, record) -> dict:
         """One step: drive, control the force, settle, measure, record."""

@@ -5,19 +5,34 @@
 
     m x'' = -F_Masing(x) - c x' - k x + P(t)
 
+With the optional effects of :mod:`sim.plant_effects` on (velocity-dependent friction, a
+pitching mode, a cubic spring) the plant becomes
+
+    m x'' + m e th'' = P - F_Masing(x) (1 + alpha |x'| / v_ref) - c x' - k x - k3 x^3
+    m e x'' + J th'' = h P - k_th th - c_th th'
+
+and the accelerometer (at the drive point, height h) reads x'' + h th'' while the
+eddy-current probe reads the feed displacement x.  A plant with none of them on runs the
+plain kernel (:mod:`sim._kernel`), one with any of them the 2-DOF kernel
+(:mod:`sim._plant_kernel`).
+
 Time is virtual: it advances only when :meth:`SimulatedRig.run` is asked for samples
 (by the DAQ twin), so simulated tests run faster than real time; noise comes from a
-seeded generator, so a run is reproducible.
+seeded generator, so a run is reproducible, and is reseeded from (seed, step key) when the
+procedure marks a step's measurement (:meth:`SimulatedRig.mark_step`), so a step's noise
+does not depend on what ran before it.
 
 Sensors: impedance-head force (V/N), accelerometer (V/(m/s^2)), eddy-current probe
 (V/m about a stand-off gap).  Each has Gaussian noise and clips at +-10 V; the DAQ twin
 quantises.  Optional effects (all off by default): viscous damping, a linear spring,
-a displacement-channel delay and sensor gain errors.  The amplifier's saturation is
+a displacement-channel delay, sensor gain errors, velocity-dependent friction, the
+pitching mode and a hardening cubic spring.  The amplifier's saturation is
 modelled as a limit on the force amplitude (the drive stays sinusoidal).
 """
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import math
 import threading
@@ -25,7 +40,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from . import _kernel
+from . import _kernel, _plant_kernel, plant_effects
 from .dynamics import FrictionState
 from .masing import LAMBDA_MASING
 from .virgin import SakaiCurve, check_positive_finite
@@ -59,6 +74,14 @@ class RigModel:
     force_gain_error: float = 0.0           # relative, e.g. 0.02 = reads 2 % high
     accel_gain_error: float = 0.0
     disp_gain_error: float = 0.0
+    friction_alpha: float = 0.0             # F = F_Masing(x) (1 + alpha |v| / v_ref)
+    friction_v_ref_m_per_s: float = 0.0
+    pitch_inertia_kg_m2: float = 0.0        # J about the guideway contact line; 0 = no pitch
+    pitch_stiffness_N_m_per_rad: float = 0.0
+    pitch_damping_N_m_s_per_rad: float = 0.0
+    drive_height_m: float = 0.0             # h: shaker force and accelerometer above the guideway
+    cg_height_m: float = 0.0                # e: centre of gravity above the guideway
+    cubic_spring_N_per_m3: float = 0.0      # hardening spring k3 x^3
     steps_per_period: int = 400             # RK4 resolution of the drive period (minimum)
     seed: int = 0
 
@@ -72,6 +95,7 @@ class RigModel:
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
         SakaiCurve(self.n)  # validates n
+        plant_effects.validate(self)
 
     @classmethod
     def from_dict(cls, d: dict) -> "RigModel":
@@ -114,6 +138,9 @@ class SimulatedRig:
         self.lock = threading.RLock()
         self.curve = SakaiCurve(self.model.n)
         self.state = FrictionState()
+        self.pitch_rad = 0.0            # pitch angle and rate (2-DOF plant only)
+        self.pitch_rate_rad_s = 0.0
+        self._coef = plant_effects.coefficients(self.model)
         self.gen = _Generator()
         self._t = 0.0
         self._phase = 0.0
@@ -140,6 +167,14 @@ class SimulatedRig:
                 self.gen.offset_V = float(offset_V)
             if output_on is not None:
                 self.gen.output_on = bool(output_on)
+
+    def mark_step(self, key: str) -> None:
+        """A step's measurement starts: reseed the sensor noise from (seed, key), so a step
+        gets the same noise whatever ran before it (a resumed run stores what an
+        uninterrupted one does).  Sent by the SCPI twin's ``SIM:STEP``."""
+        digest = hashlib.sha256(str(key).encode()).digest()
+        self._rng = np.random.default_rng([self.model.seed, int.from_bytes(digest[:8], "little")])
+        log.debug("plant noise reseeded for step %s", key)
 
     def drive_force(self) -> tuple[float, float]:
         """(amplitude, static part) of the shaker force in N for the present settings."""
@@ -169,19 +204,27 @@ class SimulatedRig:
         omega = 2 * math.pi * self.gen.freq_Hz
         # Resolve the drive period and the friction's small-amplitude natural period.
         k0 = self.curve.stiffness0 if math.isfinite(self.curve.stiffness0) else 10.0
-        f_nat = m.omega_s * math.sqrt(k0 + m.spring_N_per_m * m.x_s_m / m.F_s_N) / (2 * math.pi)
+        f_nat = plant_effects.highest_linear_frequency_Hz(m, k0 * m.F_s_N / m.x_s_m + m.spring_N_per_m)
         f_res = max(self.gen.freq_Hz, f_nat)
         sub = max(1, math.ceil(m.steps_per_period * f_res / fs))
         h = 1.0 / (fs * sub)
-        rec = np.empty((n, 5))
-        (st.u, st.v, st.k, st.d, st.su, st.sF, *_rest) = _kernel.rk4_run(
-            st.u, st.v, 0.0, st.k, st.d, st.su, st.sF, LAMBDA_MASING, self.curve.kind, self.curve.params,
-            m.omega_s ** 2, P_amp / m.F_s_N, omega, self._phase, P_dc / m.F_s_N,
-            m.viscous_N_s_per_m / m.mass_kg, m.spring_N_per_m / m.mass_kg,
-            h, n * sub, sub, rec)
+        if self._coef is None:
+            rec = np.empty((n, 5))
+            (st.u, st.v, st.k, st.d, st.su, st.sF, *_rest) = _kernel.rk4_run(
+                st.u, st.v, 0.0, st.k, st.d, st.su, st.sF, LAMBDA_MASING, self.curve.kind, self.curve.params,
+                m.omega_s ** 2, P_amp / m.F_s_N, omega, self._phase, P_dc / m.F_s_N,
+                m.viscous_N_s_per_m / m.mass_kg, m.spring_N_per_m / m.mass_kg,
+                h, n * sub, sub, rec)
+            accel = rec[:, 3] * m.x_s_m
+        else:
+            rec = np.empty((n, 6))
+            (st.u, st.v, self.pitch_rad, self.pitch_rate_rad_s, st.k, st.d, st.su, st.sF) = _plant_kernel.plant_run(
+                st.u, st.v, self.pitch_rad, self.pitch_rate_rad_s, 0.0, st.k, st.d, st.su, st.sF,
+                LAMBDA_MASING, self.curve.kind, self.curve.params, P_amp / m.F_s_N, omega, self._phase,
+                P_dc / m.F_s_N, self._coef, h, n * sub, sub, rec)
+            accel = rec[:, 3] * m.x_s_m + m.drive_height_m * rec[:, 4]
         t_rel = np.arange(n) / fs
         force = P_amp * np.sin(omega * t_rel + self._phase) + P_dc
-        accel = rec[:, 3] * m.x_s_m
         disp = rec[:, 1] * m.x_s_m
         if m.disp_delay_s > 0:
             disp = self._delayed(disp, fs)

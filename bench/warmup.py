@@ -1,0 +1,68 @@
+"""Compile the simulation kernels ahead of the first run (``bench warmup``, run by ``make setup``).
+
+numba compiles a kernel on its first call and caches the machine code beside the source
+(``sim/__pycache__``), so only the very first run on a machine pays for it (about 45 s on
+two cores).  The warm-up pays it during set-up instead: it drives the plain plant and the
+plant with every effect on, and runs a two-step plan through the twins with online
+identification, so every kernel the bench calls is compiled and cached.  A stamp records
+the newest ``sim/*.py`` it compiled; :func:`kernels_warm` compares against it, so a run can
+say "compiling the simulation kernels (first run only)" when the cache will be rebuilt.
+"""
+
+from __future__ import annotations
+
+import logging
+import tempfile
+import time
+from pathlib import Path
+
+log = logging.getLogger(__name__)
+
+SIM_DIR = Path(__file__).resolve().parents[1] / "sim"
+STAMP = SIM_DIR / "__pycache__" / "kernels.warm"
+
+_PLAN = {"plan": {"name": "warm-up", "levels_N": [1.0],
+                  "frequencies": {"list_Hz": [150.0, 200.0], "direction": "up"},
+                  "control": {"settle_cycles": 2, "measure_cycles": 4, "ramp_s": 0.0,
+                              "max_extra_settle_blocks": 0}}}
+
+
+def _newest_source() -> float:
+    return max(p.stat().st_mtime for p in SIM_DIR.glob("*.py"))
+
+
+def kernels_warm() -> bool:
+    """True when a warm-up compiled the present sim/ sources (the cache will load)."""
+    try:
+        return float(STAMP.read_text()) >= _newest_source()
+    except (OSError, ValueError):
+        return False
+
+
+def warm_up() -> float:
+    """Compile and cache every kernel; returns the seconds it took."""
+    from sim.rig import RigModel, SimulatedRig
+
+    from .config import DEFAULTS, load_rig, parse_plan
+    from .session import run_plan
+
+    t0 = time.perf_counter()
+    newest = _newest_source()
+    effects = dict(friction_alpha=0.1, friction_v_ref_m_per_s=1e-2, pitch_inertia_kg_m2=0.3,
+                   pitch_stiffness_N_m_per_rad=3e5, cg_height_m=0.1, drive_height_m=0.2,
+                   cubic_spring_N_per_m3=1e12)
+    for model in (RigModel(), RigModel(**effects)):
+        rig = SimulatedRig(model)
+        rig.set_generator(freq_Hz=100.0, amplitude_Vpp=0.2, output_on=True)
+        rig.run(256, 25600.0)
+    with tempfile.TemporaryDirectory(prefix="bench-warmup-") as tmp:
+        store = run_plan(parse_plan(_PLAN, "warm-up plan"), load_rig(DEFAULTS / "sim_rig.toml"),
+                         Path(tmp) / "run", identify=True, warm_up=False)
+        if store.metadata["status"] != "completed":
+            raise RuntimeError(f"warm-up run ended {store.metadata['status']!r}")
+    try:
+        STAMP.parent.mkdir(exist_ok=True)
+        STAMP.write_text(repr(newest))
+    except OSError as e:         # a read-only install: numba caches elsewhere or not at all
+        log.warning("could not write the warm-up stamp %s: %s", STAMP, e)
+    return time.perf_counter() - t0

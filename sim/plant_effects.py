@@ -1,0 +1,106 @@
+"""The rig's optional effects beyond the Masing model, as coefficients for the plant kernel.
+
+Fields of :class:`sim.rig.RigModel` (SI units, all 0 = off):
+
+- velocity-dependent rolling friction, F = F_Masing(x) * (1 + alpha |x'| / v_ref):
+  ``friction_alpha`` (dimensionless), ``friction_v_ref_m_per_s`` (m/s);
+- a pitching mode of carriage and column about the guideway contact line:
+  ``pitch_inertia_kg_m2`` (J), ``pitch_stiffness_N_m_per_rad`` (k_th),
+  ``pitch_damping_N_m_s_per_rad`` (c_th), ``drive_height_m`` (h, where the shaker force
+  acts and the impedance head's accelerometer sits), ``cg_height_m`` (e, inertial coupling
+  m e).  Off when J = 0.  Equations (:mod:`sim._plant_kernel`):
+
+      m x'' + m e th'' = P - F(x, x') - c x' - k x - k3 x^3
+      m e x'' + J th'' = h P - k_th th - c_th th'
+
+  the accelerometer reads x'' + h th'', the eddy-current probe reads x.  The mass matrix
+  is positive definite when J > m e^2 (a column's J about the contact line is its J about
+  the centre of gravity plus m e^2, so every real carriage satisfies it).
+- a hardening spring k3 x^3: ``cubic_spring_N_per_m3``.
+
+:func:`coefficients` turns a model into the kernel's coefficient array (``None`` when
+none of these effects is on: the rig then keeps the plain, faster kernel), and
+:func:`highest_linear_frequency_Hz` gives the fastest linearised mode, which the rig's
+step size must resolve.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+
+from ._plant_kernel import N_COEF
+
+log = logging.getLogger(__name__)
+
+EFFECT_FIELDS = ("friction_alpha", "friction_v_ref_m_per_s", "pitch_inertia_kg_m2",
+                 "pitch_stiffness_N_m_per_rad", "pitch_damping_N_m_s_per_rad",
+                 "drive_height_m", "cg_height_m", "cubic_spring_N_per_m3")
+
+
+def validate(model) -> None:
+    """Raise ValueError naming the field when an effect's parameters are not physical."""
+    for name in EFFECT_FIELDS:
+        v = getattr(model, name)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
+            raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+    if model.friction_alpha > 0 and model.friction_v_ref_m_per_s <= 0:
+        raise ValueError(f"friction_v_ref_m_per_s must be > 0 when friction_alpha > 0, "
+                         f"got {model.friction_v_ref_m_per_s!r}")
+    if pitch_on(model):
+        if model.pitch_stiffness_N_m_per_rad <= 0:
+            raise ValueError(f"pitch_stiffness_N_m_per_rad must be > 0 when the pitch is on "
+                             f"(pitch_inertia_kg_m2 > 0), got {model.pitch_stiffness_N_m_per_rad!r}")
+        m_e2 = model.mass_kg * model.cg_height_m ** 2
+        if model.pitch_inertia_kg_m2 <= m_e2:
+            raise ValueError(f"pitch_inertia_kg_m2 must be > mass_kg * cg_height_m^2 = {m_e2:g} "
+                             f"(positive-definite mass matrix), got {model.pitch_inertia_kg_m2!r}")
+
+
+def pitch_on(model) -> bool:
+    return model.pitch_inertia_kg_m2 > 0
+
+
+def any_on(model) -> bool:
+    return model.friction_alpha > 0 or model.cubic_spring_N_per_m3 > 0 or pitch_on(model)
+
+
+def mass_matrix(model) -> np.ndarray:
+    """[[m, m e], [m e, J]] (kg, kg m, kg m^2)."""
+    m, e = model.mass_kg, model.cg_height_m
+    return np.array([[m, m * e], [m * e, model.pitch_inertia_kg_m2]])
+
+
+def coefficients(model) -> np.ndarray | None:
+    """The kernel's coefficient array (layout in :mod:`sim._plant_kernel`), or None."""
+    if not any_on(model):
+        return None
+    F_s, x_s, m = model.F_s_N, model.x_s_m, model.mass_kg
+    c = np.zeros(N_COEF)
+    if pitch_on(model):
+        inv = np.linalg.inv(mass_matrix(model))
+        c[0], c[1] = F_s / x_s * inv[0, 0], F_s / x_s * inv[0, 1]
+        c[2], c[3] = F_s * inv[1, 0], F_s * inv[1, 1]
+        c[8] = model.drive_height_m
+        c[9] = model.pitch_stiffness_N_m_per_rad / F_s
+        c[10] = model.pitch_damping_N_m_s_per_rad / F_s
+    else:
+        c[0] = F_s / (x_s * m)
+    c[4] = model.viscous_N_s_per_m * x_s / F_s
+    c[5] = model.spring_N_per_m * x_s / F_s
+    c[6] = model.cubic_spring_N_per_m3 * x_s ** 3 / F_s
+    if model.friction_alpha > 0:
+        c[7] = model.friction_alpha * x_s / model.friction_v_ref_m_per_s
+    return c
+
+
+def highest_linear_frequency_Hz(model, feed_stiffness_N_per_m: float) -> float:
+    """Highest natural frequency (Hz) of the undamped linearised plant whose feed
+    stiffness is ``feed_stiffness_N_per_m`` (friction tangent plus springs)."""
+    if not pitch_on(model):
+        return math.sqrt(feed_stiffness_N_per_m / model.mass_kg) / (2 * math.pi)
+    K = np.diag([feed_stiffness_N_per_m, model.pitch_stiffness_N_m_per_rad])
+    w2 = np.linalg.eigvals(np.linalg.solve(mass_matrix(model), K)).real
+    return math.sqrt(max(w2.max(), 0.0)) / (2 * math.pi)
