@@ -105,6 +105,14 @@ def summarise(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+def _progress(row: dict) -> dict:
+    """Print a case's outcome as it arrives (stderr), pass the row on."""
+    if not row["skipped"]:
+        print(f"case {row['seed']:3d} {row['kind']:28s} n={row['n']:.2f} named={','.join(row['named']) or '-':30s} "
+              f"unexplained={row['unexplained']!s:5s} analysis {row['t_analysis_s']:.1f} s", file=sys.stderr, flush=True)
+    return row
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", type=int, default=56)
@@ -116,9 +124,9 @@ def main(argv=None) -> int:
     if args.workers > 1:
         from concurrent.futures import ProcessPoolExecutor
         with ProcessPoolExecutor(args.workers) as ex:
-            rows = list(ex.map(run_case, seeds))
+            rows = list(map(_progress, ex.map(run_case, seeds)))
     else:
-        rows = list(map(run_case, seeds))
+        rows = list(map(_progress, map(run_case, seeds)))
     print(f"bench_analysis: {args.cases} cases in {time.perf_counter() - t0:.0f} s ({args.workers} worker(s))")
     print(summarise(rows))
     if args.json:

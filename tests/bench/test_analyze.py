@@ -65,3 +65,30 @@ def test_analyze_names_the_cause_in_a_foreign_uff_file_and_writes_the_schema(ana
 
 def test_analyze_of_a_missing_source_is_a_clear_error(tmp_path, capsys):
     assert main(["analyze", str(tmp_path / "nope.uff")]) == 2
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(900)
+def test_analyze_a_run_made_through_the_twins_names_the_viscous_damping(tmp_path):
+    """A real run (SCPI, CAN FD, Modbus twins) on a rig with viscous damping (5 % of critical
+    at the 50 Hz friction resonance), then `bench analyze RUN` with the run's own rig."""
+    import tomllib
+
+    from bench.config import DEFAULTS, parse_plan, parse_rig
+    from bench.session import run_plan
+
+    plan = tomllib.loads((DEFAULTS / "demo_plan.toml").read_text())
+    plan["plan"]["levels_N"] = [1.0, 3.0, 6.0, 8.5]
+    plan["plan"]["frequencies"] = dict(list_Hz=[15.0, 22.0, 32.0, 42.0, 50.0, 60.0, 80.0, 110.0, 150.0],
+                                       direction="up")
+    plan["plan"]["infeasible"] = "skip"
+    rig = tomllib.loads((DEFAULTS / "sim_rig.toml").read_text())
+    rig["rig"]["model"].update(viscous_N_s_per_m=314.0, seed=7)
+    run = tmp_path / "run"
+    store = run_plan(parse_plan(plan), parse_rig(rig), run, identify=False)
+    assert store.metadata["status"] == "completed"
+    assert main(["analyze", str(run)]) == 0
+    d = json.loads((run / "analysis" / "analysis.json").read_text())
+    assert [c["id"] for c in d["causes"]][:1] == ["viscous_damping"], d["verdict"]
+    assert d["causes"][0]["parameters"]["c"]["value"] == pytest.approx(314.0, rel=0.1)
+    assert len(d["steps_used"]) == len(store.results())
