@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from sim.discrepancy import analyze_steps  # noqa: E402
-from sim.discrepancy.cases import CATALOG, make_case, plant_supports  # noqa: E402
+from sim.discrepancy.cases import CATALOG, make_case, plant_supports, truth_size  # noqa: E402
 from sim.identify import Identifier  # noqa: E402
 
 KINDS = ("clean",) + CATALOG
@@ -59,11 +59,20 @@ def run_case(seed: int) -> dict:
     t_an = time.perf_counter() - t0
     named = a.causes
     first = a.selection.named[0] if a.selection.named else None
+    size_error = covered = None
+    if kind in named:
+        name, truth = truth_size(case, kind)
+        if name:
+            c = next(c for c in a.selection.named if c.id == kind)
+            p = a.cause_parameters(kind, c.fit)[name]
+            size_error = p["value"] / truth - 1
+            covered = bool(p["low"] <= truth <= p["high"])
     return dict(seed=seed, kind=kind, skipped=False, n=case.rig["n"], steps=len(case.steps), named=named,
                 unexplained=a.unexplained, detected=kind in named, wrong=[c for c in named if c != kind],
                 heldout_before=a.selection.heldout_base,
                 heldout_after=(a.selection.named[-1].heldout_error if first else a.selection.heldout_base),
                 base_chi2=a.base.reduced_chi2, final_chi2=a.final.reduced_chi2,
+                size_error=size_error, interval_covers_truth=covered,
                 t_generate_s=t_gen, t_analysis_s=t_an, t_identify_s=t_ref)
 
 
@@ -97,6 +106,11 @@ def summarise(rows: list[dict]) -> str:
     if det:
         out.append(f"median held-out error (detected cases): {100 * np.median([r['heldout_before'] for r in det]):.2f} % "
                    f"-> {100 * np.median([r['heldout_after'] for r in det]):.3f} %")
+    sized = [r for r in det if r.get("size_error") is not None]
+    if sized:
+        out.append(f"effect size (c, k, delay, gain, alpha): median |error| "
+                   f"{100 * np.median([abs(r['size_error']) for r in sized]):.2f} %, 95 % interval covers the "
+                   f"truth in {sum(r['interval_covers_truth'] for r in sized)} of {len(sized)}")
     ta = np.array([r["t_analysis_s"] for r in rows])
     tr = np.array([r["t_identify_s"] for r in rows])
     tg = np.array([r["t_generate_s"] for r in rows])

@@ -93,6 +93,24 @@ class Case:
         return tuple(e for e in self.effects if e in CATALOG)
 
 
+def truth_size(case: "Case", effect: str) -> tuple[str | None, float | None]:
+    """(parameter name in the analysis' cause parameters, its true value) for the effects
+    whose reported size maps one to one onto the plant's settings; (None, None) otherwise."""
+    fx = case.effects[effect]
+    if effect == "viscous_damping":
+        return "c", fx["viscous_N_s_per_m"]
+    if effect == "linear_spring":
+        return "k", fx["spring_N_per_m"]
+    if effect == "sensor_delay":
+        return "delay", fx["disp_delay_s"]
+    if effect == "sensor_gain_error":   # displacement scale relative to the accelerometer
+        return "gain_error", (1 + fx.get("disp_gain_error", 0.0)) / (1 + fx.get("accel_gain_error", 0.0)) - 1
+    if effect == "velocity_dependent_friction":
+        w_res = 2 * math.pi * case.f_res_Hz
+        return "alpha", fx["friction_alpha"] * (w_res * case.rig["x_s_m"]) / fx["friction_v_ref_m_per_s"]
+    return None, None
+
+
 def random_rig(rng: np.random.Generator) -> dict:
     """F_s 2-40 N, x_s 2-100 um (log-uniform), n 0.35-3 at least 0.2 from 1, m 2-40 kg."""
     n = rng.uniform(0.35, 3.0)

@@ -42,13 +42,13 @@ class Weights:
     @classmethod
     def from_data(cls, d: Data, mass_kg: float, rel_floor: float = 1e-5) -> "Weights":
         Om = d.Omega
-        k = np.abs(d.P[:, 0] - mass_kg * d.A[:, 0]) / np.maximum(np.abs(d.X[:, 0]), 1e-300)
+        k = (np.abs(d.P[:, 0] - mass_kg * d.A[:, 0]) / np.maximum(np.abs(d.X[:, 0]), 1e-300))[:, None]
         sP = np.maximum(d.sP, rel_floor * np.abs(d.P[:, 0]))[:, None]
         sA = np.maximum(d.sA, rel_floor * np.abs(d.A[:, 0]))[:, None]
         sX = np.maximum(d.sX, rel_floor * np.abs(d.X[:, 0]))[:, None]
-        var_F = sP ** 2 + (mass_kg * sA) ** 2 + (k[:, None] * sX) ** 2 + 0 * Om
+        var_F = np.broadcast_to(sP ** 2 + (mass_kg * sA) ** 2 + (k * sX) ** 2, Om.shape)
         var_K = sA ** 2 + Om ** 4 * sX ** 2
-        c = -mass_kg * sA ** 2 - k[:, None] * Om ** 2 * sX ** 2 + 0 * Om
+        c = -mass_kg * sA ** 2 - k * Om ** 2 * sX ** 2
         return cls(np.sqrt(var_F), c, np.sqrt(np.maximum(var_K - c ** 2 / var_F, 1e-300)))
 
     def subset(self, mask: np.ndarray) -> "Weights":

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from sim.discrepancy import CATALOG, analyze_steps
-from sim.discrepancy.cases import make_case, plant_supports
+from sim.discrepancy.cases import make_case, plant_supports, truth_size
 
 # one seed per cause (the seeds only fix the random rig and strength; n below 1 and above 1)
 SEEDS = {"viscous_damping": 5, "linear_spring": 6, "sensor_delay": 7, "sensor_gain_error": 8,
@@ -28,20 +28,6 @@ def needs_plant(effect):
     return pytest.mark.skipif(not plant_supports(effect), reason=f"the plant has no {effect} yet (contract 1)")
 
 
-def truth_value(case, effect):
-    """The effect's size in the units the analysis reports it, from the plant's settings."""
-    fx, rig = case.effects[effect], case.rig
-    if effect == "viscous_damping":
-        return "c", fx["viscous_N_s_per_m"]
-    if effect == "linear_spring":
-        return "k", fx["spring_N_per_m"]
-    if effect == "sensor_delay":
-        return "delay", fx["disp_delay_s"]
-    if effect == "sensor_gain_error":   # displacement scale relative to the accelerometer
-        return "gain_error", (1 + fx.get("disp_gain_error", 0.0)) / (1 + fx.get("accel_gain_error", 0.0)) - 1
-    return None, None
-
-
 @pytest.mark.slow
 @pytest.mark.timeout(300)
 @pytest.mark.parametrize("effect", CATALOG)
@@ -52,7 +38,7 @@ def test_each_hidden_cause_is_named_with_its_size(effect):
     a = analyse(case, SEEDS[effect])
     assert a.causes[:1] == [effect], a.verdict()
     d = a.to_dict()
-    name, truth = truth_value(case, effect)
+    name, truth = truth_size(case, effect)
     if name:
         p = d["causes"][0]["parameters"][name]
         # the 95 % interval covers the plant's value, or the estimate is within 2 % of it
