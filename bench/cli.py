@@ -113,13 +113,60 @@ def _run(args, resume: bool) -> int:
     else:
         plan, rig = _load_configs(args)
         out, seed = Path(args.out), args.seed
-    store = run_plan(plan, rig, out, resume=resume, progress=Progress("stepped sine"), sim_seed=seed)
+    watch = _start_watch(out, args)
+    try:
+        store = run_plan(plan, rig, out, resume=resume, progress=Progress("stepped sine"), sim_seed=seed)
+    finally:
+        if watch:
+            watch.close()
     meta = store.metadata
     print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/")
     if meta["status"] == "completed" and not getattr(args, "no_report", False):
-        from .report import write_report
+        from .reports import write_report
         print(f"report: {write_report(out)}")
     return 0 if meta["status"] == "completed" else 4
+
+
+def _start_watch(run_dir: Path, args):
+    """The watch page beside the run (``--watch``), served from a thread of this process."""
+    if not getattr(args, "watch", False):
+        return None
+    server = _watch_server(run_dir, args.watch_host, args.watch_port).start()
+    print(f"watch: {server.url}", flush=True)
+    return server
+
+
+def _watch_server(run_dir: Path, host: str, port: int):
+    from .watch import WatchServer
+    try:
+        return WatchServer(run_dir, host, port)
+    except OSError as e:       # port taken, no such interface, privileged port
+        raise ValueError(f"cannot serve the watch page on {host}:{port}: {e}") from e
+
+
+def cmd_watch(args) -> int:
+    """Serve the live page of a run directory until Ctrl-C."""
+    run_dir = Path(args.run)
+    if not run_dir.is_dir():
+        raise ValueError(f"{run_dir}: no such run directory")
+    if not (run_dir / "run.json").is_file():
+        log.warning("%s has no run.json yet: the page waits for the run to start", run_dir)
+    server = _watch_server(run_dir, args.host, args.port)
+    print(f"watch: {server.url}  (Ctrl-C ends the page, not the run)", flush=True)
+    try:
+        server.serve_forever()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.close()         # open pages get the last state and a goodbye
+    return 0
+
+
+def _add_watch_options(s) -> None:
+    s.add_argument("--watch", action="store_true", help="serve the live page of the run (URL printed)")
+    s.add_argument("--watch-port", type=int, default=0, help="port of the page (default: any free one)")
+    s.add_argument("--watch-host", default="127.0.0.1",
+                   help="interface of the page (default 127.0.0.1; others only when given)")
 
 
 def _plan_toml(p: dict) -> dict:
@@ -166,7 +213,7 @@ def cmd_demo(args) -> int:
 
 
 def cmd_report(args) -> int:
-    from .report import write_report
+    from .reports import write_report
     print(f"report: {write_report(Path(args.run))}")
     return 0
 
@@ -186,32 +233,28 @@ def cmd_identify(args) -> int:
     from sim.identify import identify_results
 
     from .config import DEFAULTS, load_rig, parse_rig
+    from .sources import load_source
     from .storage import RunStore
 
     source = Path(args.source)
-    store = None
-    if source.is_dir():
-        store = RunStore.open(source)
-        meta = store.metadata
-        rig = parse_rig({"rig": _rig_toml(meta["rig"])}, f"{source}/run.json")
-        results = store.results()
-        harmonics = min(meta["plan"]["harmonics"], MAX_HARMONICS)
+    src = load_source(source)
+    if src.kind == "run":
+        rig = parse_rig({"rig": _rig_toml(src.metadata["rig"])}, f"{source}/run.json")
     else:
-        from .export import import_uff58
         rig = load_rig(Path(args.rig) if args.rig else DEFAULTS / "sim_rig.toml")
-        results = [s for s in import_uff58(source).steps if s.get("source") == "uff58-time"]
-        harmonics = MAX_HARMONICS
-    if not results:
+    for r in src.rejected:
+        print(f"step {r.step} rejected: {r.reason}")
+    if not src.steps:
         raise ValueError(f"{source}: no steps with force, acceleration and displacement to identify from")
     guess = dict(F_s_N=rig.expected_F_s_N, x_s_m=rig.expected_x_s_m, n=rig.expected_n,
                  mass_kg=rig.expected_mass_kg)
-    est = identify_results(results, guess, harmonics).estimate
-    if store:
-        store.update(identification=est.as_dict())
+    est = identify_results([s.harmonics for s in src.steps], guess, MAX_HARMONICS).estimate
+    if src.kind == "run":
+        RunStore.open(source).update(identification=est.as_dict())
     print(f"{'parameter':>10} {'estimate':>12} {'95 % interval':>28}")
     for k, v in est.values.items():
         print(f"{k:>10} {v:12.5g} [{est.low[k]:12.5g}, {est.high[k]:12.5g}]")
-    print(f"{len(results)} steps, reduced chi^2 {est.cost:.3g}")
+    print(f"{len(src.steps)} steps ({len(src.rejected)} rejected), reduced chi^2 {est.cost:.3g}")
     for w in est.warnings:
         print(f"warning: {w}")
     return 0
@@ -262,6 +305,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("demo", help="the main job: the default plan on the simulated rig, with its report")
     s.add_argument("--out", default="out/demo")
+    _add_watch_options(s)
     s.set_defaults(func=cmd_demo)
 
     for name, func, hlp in (("run", cmd_run, "run a stepped-sine plan on a rig"),
@@ -273,12 +317,20 @@ def build_parser() -> argparse.ArgumentParser:
             s.add_argument("--out", required=True, help="new run directory")
             s.add_argument("--seed", type=int, help="noise seed of a simulated rig")
             s.add_argument("--no-report", action="store_true")
+            _add_watch_options(s)
         s.set_defaults(func=func)
 
     s = sub.add_parser("resume", help="continue an interrupted run without repeating completed steps")
     s.add_argument("run")
     s.add_argument("--no-report", action="store_true")
+    _add_watch_options(s)
     s.set_defaults(func=cmd_resume)
+
+    s = sub.add_parser("watch", help="serve a live page of a run directory (running, resumed or finished)")
+    s.add_argument("run")
+    s.add_argument("--port", type=int, default=0, help="port (default: any free one)")
+    s.add_argument("--host", default="127.0.0.1", help="interface (default 127.0.0.1; others only when given)")
+    s.set_defaults(func=cmd_watch)
 
     s = sub.add_parser("report", help="(re)write the report of a run directory")
     s.add_argument("run")

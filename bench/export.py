@@ -131,7 +131,7 @@ def frf_datasets(meta: dict, results: list[dict]) -> list[dict]:
 def time_datasets(store: RunStore, meta: dict, results: list[dict]) -> list[dict]:
     """Force, acceleration and displacement of each step's measured block."""
     out = []
-    for r in results:
+    for case, r in enumerate(results, start=1):
         raw = store.raw(r["key"])
         fs = float(raw["fs_Hz"])
         t0 = float(raw["t0_s"])
@@ -146,6 +146,7 @@ def time_datasets(store: RunStore, meta: dict, results: list[dict]) -> list[dict
                 id5=_tags(f=f"{r['freq_Hz']:.10g}", fs=f"{fs:.10g}", t0=f"{t0:.10g}",
                           harmonics=len(r[ch]["amplitude"])),
                 abscissa=(SDT_TIME, "s"), ordinate=(sdt, unit)))
+            out[-1]["load_case_id"] = case          # one load case per step (docs/uff58-input.md)
     return out
 
 

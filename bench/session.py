@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import platform
 import signal
+import socket
 import sys
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, replace
@@ -27,6 +29,7 @@ from procedures.stepped_sine import SteppedSine
 
 from .config import Plan, Rig
 from .storage import RunStore
+from .watch import stop as stop_request
 
 log = logging.getLogger(__name__)
 
@@ -228,15 +231,19 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
     else:
         store = RunStore.create(out, {"plan": plan.to_dict(), "rig": rig.to_dict(), "versions": versions(),
                                       "sim_seed": sim_seed, "identifiability_warnings": warnings})
+    stop_request.clear(store.path)      # a request left from an earlier session is not for this one
+    store.update(process={"pid": os.getpid(), "host": socket.gethostname()})   # watch: is it still alive?
     log_handler = _log_to(store.path / "bench.log")
     status = "failed"
+    sup = None
     with ExitStack() as stack, _sigterm_as_interrupt():
         try:
             ins = open_instruments(rig, stack, sim_seed=sim_seed,
                                    on_output_off=lambda ok: store.event("output_off", confirmed=ok))
             store.update(identities=ins.identities)
             sup = Supervisor(limits, ins.generator)
-            gen, daq = SupervisedGenerator(ins.generator, sup), SupervisedDaq(ins.daq, sup)
+            gen = SupervisedGenerator(ins.generator, sup)
+            daq = stop_request.StopOnRequest(SupervisedDaq(ins.daq, sup), store.path)
 
             def sensor_check() -> dict:
                 reading = ins.sensor.read_gap()
@@ -257,14 +264,14 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
                 progress.restart(len(store.done_keys()))     # the ETA counts steps from here
             online = OnlineIdentification(store.path, rig, plan.harmonics) if identify else None
             if online:
-                online.preload(store.results())
+                online.preload(store.results(), store.raw)
 
             progress_note = [""]       # the latest estimates, shown on the status line
 
             def record(step, res, raw):
                 store.write_step(step.key, res, raw)
                 if online:
-                    est = online.update(res)
+                    est = online.update(res, raw)
                     if est:
                         v = est["values"]
                         progress_note[0] = (f"F_s {v['F_s_N']:.3g} N x_s {v['x_s_m'] * 1e6:.3g} um "
@@ -290,6 +297,10 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
         except KeyboardInterrupt as e:
             status = "interrupted"
             store.event("interrupted", reason=str(e) or "Ctrl-C")
+            if sup is not None:
+                with _uninterruptible("ramping down"):
+                    sup.shutdown()       # ramp down; the output is switched off below
+            stop_request.clear(store.path)
             log.warning("interrupted; resume with: bench resume %s", store.path)
             raise
         except InstrumentError as e:

@@ -15,13 +15,15 @@ import time
 
 import numpy as np
 
-from sim.identify import Identifier
+from sim.identify import Identifier, StepHarmonics
+from sim.records import analyse_records
 
 from .plan import Plan, Rig
 
 log = logging.getLogger(__name__)
 
 MAX_HARMONICS = 9     # on a small-n rig 9 harmonics gave x_s within 1 %, 5 within 2 %
+REWEIGHT_BUDGET = 4   # stale errors-in-variables weights refreshed per update (speed)
 
 
 def identifiability(plan: Plan, rig: Rig) -> list[str]:
@@ -80,6 +82,16 @@ def choose_frequencies(sweep: list, values: dict | None, per_sweep: int) -> list
     return [s for i, s in enumerate(sweep) if i in pick]
 
 
+def step_harmonics(result: dict, raw: dict | None = None) -> StepHarmonics:
+    """A step for the identifier: from its raw block when there is one (every harmonic the
+    block holds, noise from the scatter of its periods), else from the stored fits."""
+    if raw is None:
+        return StepHarmonics.from_result(result)
+    rec = analyse_records(raw["force_N"], raw["accel_m_s2"], raw["disp_m"], float(raw["fs_Hz"]),
+                          result["freq_Hz"])
+    return StepHarmonics.from_records(rec)
+
+
 class OnlineIdentification:
     def __init__(self, run_dir, rig: Rig, harmonics: int = 5, budget: int = 25):
         self.path = run_dir / "identification.jsonl"
@@ -93,18 +105,21 @@ class OnlineIdentification:
         """The latest estimate's values (None before the first fit)."""
         return self.ident.estimate.values if self.ident.estimate else None
 
-    def preload(self, results: list[dict]) -> None:
-        """Steps already measured (resume): fitted once before new steps arrive."""
+    def preload(self, results: list[dict], raw_of=None) -> None:
+        """Steps already measured (resume): fitted once before new steps arrive.
+        ``raw_of(key)`` gives a step's raw block (for every harmonic it holds)."""
         for r in results:
-            self.ident.add(r)
+            self.ident.add(step_harmonics(r, raw_of(r["key"]) if raw_of else None))
         if results:
             self.ident.fit(max_nfev=200)
 
-    def update(self, result: dict) -> dict | None:
+    def update(self, result: dict, raw: dict | None = None) -> dict | None:
+        """Add a step (with its raw block when there is one) and refit."""
         t = time.perf_counter()
-        self.ident.add(result)
         try:
-            est = self.ident.fit(max_nfev=self.budget)
+            self.ident.add(step_harmonics(result, raw))
+            est = self.ident.fit(max_nfev=self.budget, reweight_rounds=0, reweight_budget=REWEIGHT_BUDGET,
+                                     tol=1e-5)
         except Exception as e:  # noqa: BLE001 - identification must never stop a test
             log.warning("identification update failed after step %s: %s", result.get("key"), e)
             return None

@@ -1,18 +1,34 @@
 """Identification of the friction parameters (F_s, x_s, n) and the moving mass m from
 stepped-sine steps, in the harmonic domain.
 
-Per step the measured friction force is P(t) - m a(t).  Its harmonics (from the
-least-squares fits the procedure stores) are compared with the harmonics of the Masing
-friction computed along the measured displacement, reconstructed from its own harmonics
-over one period.  Both sides are band-limited to the same harmonics, so the sharp turns of
-the model at reversals (n < 1) cost nothing that the measurement could not show.
+Per step the measured friction force is P(t) - m a(t).  Its first K harmonics are compared
+with the harmonics of the Masing friction computed along the displacement of the period.
+What that displacement is decides everything for n < 1: the model's friction turns with
+infinite stiffness at a reversal, so the friction along a displacement rebuilt from a few
+harmonics is not the friction along the true one (on the issue-9 rig, n = 0.46, nine
+harmonics left residuals of 80 noise standard deviations on clean data; 120 were needed).
+So the displacement is rebuilt from every harmonic the records hold (up to 200): each
+harmonic is the inverse-variance mean of the probe's x_k and the accelerometer's
+-a_k / (k w)^2 (:func:`displacement_harmonics`); the probe carries the low harmonics, the
+accelerometer the high ones the probe's noise buries.  The rebuilt period is sampled at
+POINTS_PER_PERIOD points, turning points lifted to their parabolic vertex, and the friction
+harmonics follow by FFT.
 
 The steady loop is built by virgin loading to the period's largest displacement and one
 period from there: for a two-reversal loop this is the symmetric Masing loop, and inner
 loops (VRAR orbits) follow the memory rules on their own.
 
+Noise (errors in variables): each residual's variance is the force's, plus the
+acceleration's (through m a and through the rebuilt displacement), plus the displacement's
+propagated through the model by central differences of one standard deviation per
+harmonic (the model is not differentiable at a reversal; the noise's own scale is the
+honest step).  These weights depend on (F_s, x_s, n): they are computed at the current
+estimate and refreshed when it moves.  No floors: the reduced chi-square of clean data is
+about 1.  Standard errors of the harmonics come with the steps (``sim.records`` estimates
+them from the scatter of the periods).
+
 Weighted least squares (scipy.optimize.least_squares) in log-parameters; intervals from
-the Jacobian, scaled by the reduced chi-square.
+the Jacobian, scaled by max(1, reduced chi-square).
 """
 
 from __future__ import annotations
@@ -30,7 +46,12 @@ from .virgin import CURVE_SAKAI
 
 log = logging.getLogger(__name__)
 
-POINTS_PER_PERIOD = 256
+POINTS_PER_PERIOD = 1024
+KINEMATIC_FLOOR = 1e-3  # a / x'' mismatch always allowed (relative, at the fundamental)
+FD_STEP = 1e-6          # forward-difference step of log x_s and n
+EIV_HARMONICS = 8       # harmonics of X propagated one by one into the weights
+TAIL_DRAWS = 6          # random-sign draws for the rest
+REWEIGHT_STEP = 0.02    # refresh a step's weights when a (log) parameter moved this much
 PARAMS = ("F_s_N", "x_s_m", "n", "mass_kg")
 N_BOUNDS = (0.1, 6.0)
 # A weak prior at the guess (a factor 4 on F_s, x_s, m; 1.5 on n): it keeps the first
@@ -59,6 +80,15 @@ class StepHarmonics:
         return cls(freq_Hz=r["freq_Hz"], force=c(r["force"]), accel=c(r["accel"]), disp=c(r["disp"]),
                    sigma_force=r["force"]["noise_rms"] * scale, sigma_accel=r["accel"]["noise_rms"] * scale,
                    sigma_disp=r["disp"]["noise_rms"] * scale)
+
+
+    @classmethod
+    def from_records(cls, rec) -> "StepHarmonics":
+        """From a :class:`sim.records.PeriodicRecords` (every harmonic the records hold)."""
+        c = rec.channels
+        return cls(freq_Hz=rec.freq_Hz, force=c["force"].harmonics, accel=c["accel"].harmonics,
+                   disp=c["disp"].harmonics, sigma_force=c["force"].sigma, sigma_accel=c["accel"].sigma,
+                   sigma_disp=c["disp"].sigma)
 
 
 @dataclass(frozen=True)
@@ -100,6 +130,70 @@ def _loop_friction(paths, tops, lam, p, out):
             prev = u
 
 
+def displacement_harmonics(step: StepHarmonics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The displacement's harmonics rebuilt from both motion channels.
+
+    A rigid carriage has x_k = -a_k / (k w)^2.  Each harmonic is the inverse-variance
+    weighted mean of the displacement channel and the acceleration channel so divided:
+    the probe carries the low harmonics, the accelerometer the high ones that the probe's
+    noise buries (a sharp reversal for n < 1 needs dozens of harmonics).  How far the
+    double integral of the acceleration can be trusted is measured on the step itself:
+    the mismatch of the two channels at the fundamental beyond their noise, relative to the
+    fundamental (at least KINEMATIC_FLOOR), is taken as an error of the acceleration of that
+    size in every harmonic (so eps |x_1| / k^2 in displacement) and added to the
+    acceleration channel's variance.  Returns (X, weight of the displacement channel, variance of one
+    real/imag part of X)."""
+    K = min(step.disp.size, step.accel.size)
+    k = np.arange(1, K + 1)
+    w = 2 * np.pi * step.freq_Hz
+    XA = -step.accel[:K] / (k * w) ** 2
+    sD, sA1 = float(step.sigma_disp), float(step.sigma_accel) / w ** 2
+    D1 = abs(step.disp[0])
+    mismatch = abs(XA[0] - step.disp[0]) - 2.0 * math.sqrt(2.0) * math.hypot(sD, sA1)
+    eps = max(KINEMATIC_FLOOR, mismatch / D1) if D1 > 0 else 1.0
+    vD = np.full(K, sD ** 2)
+    vA = (float(step.sigma_accel) / (k * w) ** 2) ** 2 + (eps * D1 / k ** 2) ** 2 / 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        wD = np.where(vD + vA > 0, vA / (vD + vA), 1.0)
+    X = wD * step.disp[:K] + (1 - wD) * XA
+    return X, wD, wD ** 2 * vD + (1 - wD) ** 2 * vA
+
+
+def _paths(X: np.ndarray, M: int) -> tuple[np.ndarray, np.ndarray]:
+    """Periods of the displacement (rows of M samples) from rows of harmonics X, each
+    centred between its extremes and rotated to start at its largest value; every turning
+    point is lifted to the vertex of the parabola through it and its neighbours (the
+    reversal's true extent).  Returns (paths, rotations)."""
+    X = np.atleast_2d(X)
+    spec = np.zeros((X.shape[0], M // 2 + 1), complex)
+    K = min(X.shape[1], M // 2 - 1)
+    spec[:, 1:K + 1] = -1j * X[:, :K] * (M / 2)
+    x = np.fft.irfft(spec, M, axis=1)
+    starts = np.argmax(x, axis=1)
+    x = x[np.arange(x.shape[0])[:, None], (starts[:, None] + np.arange(M)[None, :]) % M]
+    prev, nxt = np.roll(x, 1, axis=1), np.roll(x, -1, axis=1)
+    turn = ((x - prev) * (nxt - x) <= 0) & (x != prev)
+    den = prev - 2 * x + nxt
+    with np.errstate(divide="ignore", invalid="ignore"):
+        vertex = x - 0.125 * (nxt - prev) ** 2 / den
+    x = np.where(turn & (den != 0), vertex, x)
+    x -= 0.5 * (x.max(axis=1) + x.min(axis=1))[:, None]
+    return x, starts
+
+
+def _friction_harmonics(paths: np.ndarray, starts: np.ndarray, x_s: float, n: float, lam: float,
+                        K: int) -> np.ndarray:
+    """Harmonics 1..K of the dimensionless Masing friction along rows of ``paths`` (m)."""
+    u = paths / x_s
+    out = np.empty_like(u)
+    _loop_friction(u, u[:, 0].copy(), lam, np.array([n]), out)
+    M = u.shape[1]
+    k = np.arange(1, K + 1)
+    spec = np.fft.rfft(out, axis=1)[:, 1:K + 1] * (2.0 / M)
+    # undo the rotation: sample j of the path is sample j + start of the period
+    return 1j * spec * np.exp(-2j * np.pi * np.outer(starts, k) / M)
+
+
 def synthesize(C: np.ndarray, M: int) -> np.ndarray:
     """Rows of samples of sum_k Im(C_k exp(i k w t)) over one period (C: steps x K)."""
     k = np.arange(1, C.shape[1] + 1)
@@ -114,6 +208,22 @@ def analyse(samples: np.ndarray, K: int) -> np.ndarray:
     return 1j * spec[:, 1:K + 1]
 
 
+@dataclass
+class _Prepared:
+    """What a step contributes to the fit, computed once (parameter-free parts) or
+    refreshed when the estimate moves (the errors-in-variables weights)."""
+
+    step: StepHarmonics
+    X: np.ndarray
+    wD: np.ndarray
+    vA: np.ndarray        # variance of the acceleration-derived displacement (per part)
+    path: np.ndarray
+    start: int
+    sig_re: np.ndarray | None = None
+    sig_im: np.ndarray | None = None
+    theta: np.ndarray | None = None
+
+
 class Identifier:
     """Accumulates steps and fits (F_s, x_s, n, m); warm-started from the last fit."""
 
@@ -123,6 +233,8 @@ class Identifier:
         self.lam = lam
         self.M = points_per_period
         self.steps: list[StepHarmonics] = []
+        self._prep: list[_Prepared] = []
+        self._cache = None
         self.theta = np.log([guess["F_s_N"], guess["x_s_m"], 1.0, guess["mass_kg"]])
         self.theta[2] = guess["n"]
         self.theta_prior = self.theta.copy()
@@ -133,55 +245,152 @@ class Identifier:
     def add(self, step: StepHarmonics | dict) -> None:
         if isinstance(step, dict):
             step = StepHarmonics.from_result(step)
+        X, wD, vX = displacement_harmonics(step)
+        paths, starts = _paths(X, self.M)
         self.steps.append(step)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            vA = np.where(wD < 1, (vX - wD ** 2 * float(step.sigma_disp) ** 2) / (1 - wD) ** 2, 0.0)
+        self._prep.append(_Prepared(step, X, wD, vA, paths[0], int(starts[0])))
 
     # ------------------------------------------------------------------ model
-    def model_friction(self, F_s: float, x_s: float, n: float, X: np.ndarray) -> np.ndarray:
-        """Harmonics of the Masing friction (N) along the displacement harmonics X (m)."""
-        x = synthesize(X, self.M)
-        centre = 0.5 * (x.max(axis=1) + x.min(axis=1))
-        u = (x - centre[:, None]) / x_s
-        start = np.argmax(u, axis=1)
-        rows = np.arange(u.shape[0])[:, None]
-        idx = (start[:, None] + np.arange(self.M)[None, :]) % self.M
-        path = u[rows, idx]
-        out = np.empty_like(path)
-        _loop_friction(path, path[:, 0].copy(), self.lam, np.array([n]), out)
-        F = np.empty_like(out)
-        F[rows, idx] = out
-        return F_s * analyse(F, X.shape[1])
+    def model_friction(self, F_s: float, x_s: float, n: float, X: np.ndarray, harmonics: int | None = None) -> np.ndarray:
+        """Harmonics (N) of the Masing friction along the displacement harmonics X (m, steps x Kx)."""
+        paths, starts = _paths(X, self.M)
+        return F_s * _friction_harmonics(paths, starts, x_s, n, self.lam, harmonics or np.atleast_2d(X).shape[1])
 
-    def _residual(self, th, X, P, A, wF, wA, wX):
-        F_s, x_s, n, m = math.exp(th[0]), math.exp(th[1]), th[2], math.exp(th[3])
-        if abs(n - 1.0) < 1e-6:
-            n = 1.0 + 1e-6
-        meas = P - m * A
-        # displacement noise enters through the friction's stiffness (errors in variables):
-        # a step whose displacement is buried in noise says little about the friction
-        k_eff = np.abs(meas[:, 0]) / np.maximum(np.abs(X[:, 0]), 1e-300)
-        sigma = np.sqrt(wF ** 2 + (m * wA) ** 2 + (k_eff * wX) ** 2)[:, None]
-        r = (meas - self.model_friction(F_s, x_s, n, X)) / sigma
+    def _weights(self, p: _Prepared, F_s: float, x_s: float, n: float, m: float, K: int) -> None:
+        """Standard deviations of the real and imaginary residual of each harmonic.
+
+        Independent noise sources: the force's harmonics; the acceleration's (directly
+        through m a, and through the displacement rebuilt from it); the displacement's
+        (and the kinematic mismatch allowed to the acceleration-derived part).  The
+        friction's response to harmonic j of the rebuilt displacement is a central
+        difference of the model over one standard deviation of that harmonic (the model is
+        not differentiable at a reversal for n < 1; the noise's own scale is the honest
+        step), for each part of the first EIV_HARMONICS harmonics; the rest act together
+        through TAIL_DRAWS random-sign perturbations (their summed variance, unbiased)."""
+        s = p.step
+        w = 2 * np.pi * s.freq_Hz
+        sD, sA, sP = float(s.sigma_disp), float(s.sigma_accel), float(s.sigma_force)
+        k = np.arange(1, p.X.size + 1)
+        vAn = (sA / (k * w) ** 2) ** 2                       # accel noise in X units
+        sdX = np.sqrt(p.wD ** 2 * sD ** 2 + (1 - p.wD) ** 2 * p.vA)
+        var_re = np.full(K, sP ** 2) + (m * sA) ** 2          # force; accel's direct term
+        var_im = var_re.copy()
+        live = np.flatnonzero(sdX[:EIV_HARMONICS] > 0)
+        rng = np.random.default_rng(len(self._prep))
+        tail = np.arange(EIV_HARMONICS, p.X.size)
+        signs = rng.choice([-1.0, 1.0], size=(TAIL_DRAWS, tail.size)) + 1j * rng.choice(
+            [-1.0, 1.0], size=(TAIL_DRAWS, tail.size)) if tail.size else np.zeros((0, 0))
+        deltas = [np.zeros(p.X.size, complex) for _ in range(2 * live.size + signs.shape[0])]
+        for i, j in enumerate(live):
+            deltas[2 * i][j] = sdX[j]
+            deltas[2 * i + 1][j] = 1j * sdX[j]
+        for r in range(signs.shape[0]):
+            deltas[2 * live.size + r][tail] = signs[r] * sdX[tail]
+        if deltas:
+            D = np.array(deltas)
+            F = F_s * _friction_harmonics(*_paths(np.concatenate([p.X + D, p.X - D]), self.M), x_s, n, self.lam, K)
+            resp = (F[:len(D)] - F[len(D):]) / 2                # response to one sd (per row)
+            for i, j in enumerate(live):
+                for part, unit in ((0, 1.0), (1, 1j)):
+                    d = resp[2 * i + part] / sdX[j]             # dF/d(part of X_j)
+                    # probe noise, kinematic mismatch, accelerometer noise (with m a)
+                    e_D = -d * p.wD[j] * sD
+                    e_K = d * (1 - p.wD[j]) * math.sqrt(max(p.vA[j] - vAn[j], 0.0))
+                    e_A = (d * (1 - p.wD[j]) * math.sqrt(vAn[j])).astype(complex)
+                    if j < K:   # the direct term is counted above; here only its correlation
+                        e_A[j] -= m * sA * unit
+                        var_re[j] -= (m * sA * unit).real ** 2
+                        var_im[j] -= (m * sA * unit).imag ** 2
+                    for e in (e_D, e_K, e_A):
+                        var_re += e.real ** 2
+                        var_im += e.imag ** 2
+            if signs.shape[0]:
+                t = resp[2 * live.size:]
+                var_re += np.mean(t.real ** 2, axis=0)
+                var_im += np.mean(t.imag ** 2, axis=0)
+        tiny = 1e-12 * max(abs(s.force[0]), 1e-300)    # numerical safety only
+        p.sig_re = np.sqrt(np.maximum(var_re, tiny ** 2))
+        p.sig_im = np.sqrt(np.maximum(var_im, tiny ** 2))
+
+    def _refresh_weights(self, th: np.ndarray, K: int, force: bool = False, budget: int | None = None) -> None:
+        """Recompute the weights of steps whose weights were computed far from ``th``
+        (all with ``force``); at most ``budget`` of them, the stalest first."""
+        F_s, x_s, n, m = math.exp(th[0]), math.exp(th[1]), _n(th[2]), math.exp(th[3])
+        def stale(p):
+            if p.theta is None or p.sig_re.size != K:
+                return np.inf
+            return float(np.max(np.abs(p.theta - th)))
+        todo = [p for p in self._prep if force or stale(p) > REWEIGHT_STEP]
+        if budget is not None:
+            todo = sorted(todo, key=stale, reverse=True)[:max(budget, sum(p.theta is None for p in todo))]
+        for p in todo:
+            self._weights(p, F_s, x_s, n, m, K)
+            p.theta = th.copy()
+
+    def _model(self, th, paths, starts, K) -> np.ndarray:
+        """Friction harmonics per F_s (cached for the Jacobian at the same point)."""
+        key = (th[1], th[2])
+        if self._cache is None or self._cache[0] != key:
+            self._cache = (key, _friction_harmonics(paths, starts, math.exp(th[1]), _n(th[2]), self.lam, K))
+        return self._cache[1]
+
+    def _residual(self, th, paths, starts, P, A, sig_re, sig_im, K):
+        F_s, m = math.exp(th[0]), math.exp(th[3])
+        r = P - m * A - F_s * self._model(th, paths, starts, K)
         prior = (th - self.theta_prior) / PRIOR_SIGMA
-        return np.concatenate([r.real.ravel(), r.imag.ravel(), prior])
+        return np.concatenate([(r.real / sig_re).ravel(), (r.imag / sig_im).ravel(), prior])
+
+    def _jacobian(self, th, paths, starts, P, A, sig_re, sig_im, K):
+        """F_s and m enter linearly (analytic columns); x_s and n by forward differences."""
+        F_s, m = math.exp(th[0]), math.exp(th[3])
+        phi = self._model(th, paths, starts, K)
+        cols = [-F_s * phi, None, None, -m * A]
+        for i in (1, 2):
+            h = FD_STEP * max(1.0, abs(th[i]))
+            tp = th.copy()
+            tp[i] += h
+            self._cache = None
+            cols[i] = -F_s * (_friction_harmonics(paths, starts, math.exp(tp[1]), _n(tp[2]), self.lam, K) - phi) / h
+        self._cache = ((th[1], th[2]), phi)
+        J = np.empty((2 * P.size + 4, 4))
+        for i, c in enumerate(cols):
+            J[:P.size, i] = (c.real / sig_re).ravel()
+            J[P.size:2 * P.size, i] = (c.imag / sig_im).ravel()
+        J[2 * P.size:] = np.diag(1.0 / PRIOR_SIGMA)
+        return J
 
     # ------------------------------------------------------------------ fit
-    def fit(self, max_nfev: int = 60) -> Estimate:
+    def fit(self, max_nfev: int = 60, reweight_rounds: int = 2, reweight_budget: int | None = None,
+            tol: float = 1e-8) -> Estimate:
+        """Weighted least squares; the errors-in-variables weights are refreshed at the new
+        estimate and the fit repeated (at most ``reweight_rounds`` times) while it moves.
+        ``reweight_budget`` caps how many stale weights one call refreshes (online use;
+        new steps always get theirs); ``tol`` is least_squares' ftol and xtol."""
         if not self.steps:
             raise ValueError("no steps to identify from")
         # only harmonics every step measured (a missing one is not a zero)
         K = min([self.K] + [min(s.disp.size, s.force.size, s.accel.size) for s in self.steps])
-        X = np.array([s.disp[:K] for s in self.steps])
+        paths = np.array([p.path for p in self._prep])
+        starts = np.array([p.start for p in self._prep])
         P = np.array([s.force[:K] for s in self.steps])
         A = np.array([s.accel[:K] for s in self.steps])
-        # noise floor: 0.1 % of each step's force, so near-noiseless data stays well posed
-        wF = np.array([max(s.sigma_force, 1e-3 * abs(s.force[0])) for s in self.steps])
-        wA = np.array([max(s.sigma_accel, 1e-3 * abs(s.accel[0])) for s in self.steps])
-        wX = np.array([max(s.sigma_disp, 1e-3 * abs(s.disp[0])) for s in self.steps])
         lo = [-np.inf, -np.inf, N_BOUNDS[0], -np.inf]
         hi = [np.inf, np.inf, N_BOUNDS[1], np.inf]
-        th0 = np.clip(self.theta, np.array(lo) + 1e-9, np.array(hi) - 1e-9)
-        res = least_squares(self._residual, th0, args=(X, P, A, wF, wA, wX), bounds=(lo, hi),
-                            x_scale=np.array([0.1, 0.1, 0.1, 0.1]), max_nfev=max_nfev, method="trf")
+        th = np.clip(self.theta, np.array(lo) + 1e-9, np.array(hi) - 1e-9)
+        for rnd in range(reweight_rounds + 1):
+            self._refresh_weights(th, K, force=rnd > 0, budget=reweight_budget)
+            sig_re = np.array([p.sig_re for p in self._prep])
+            sig_im = np.array([p.sig_im for p in self._prep])
+            self._cache = None
+            res = least_squares(self._residual, th, jac=self._jacobian, args=(paths, starts, P, A, sig_re, sig_im, K),
+                                bounds=(lo, hi), x_scale=np.array([0.1, 0.1, 0.1, 0.1]),
+                                max_nfev=max_nfev, method="trf", ftol=tol, xtol=tol)
+            moved = np.max(np.abs(res.x - th))
+            th = res.x
+            if moved < REWEIGHT_STEP:
+                break
         self.theta = res.x
         data = res.fun[:-4]                       # without the prior's rows
         dof = max(1, data.size - res.x.size)
@@ -210,8 +419,13 @@ class Identifier:
         return self.estimate
 
 
-def identify_results(results: list[dict], guess: dict, harmonics: int = 9) -> Identifier:
-    """Offline identification from stored step results (or imported UFF58 data)."""
+def _n(n: float) -> float:
+    return 1.0 + 1e-6 if abs(n - 1.0) < 1e-6 else n
+
+
+def identify_results(results: list, guess: dict, harmonics: int = 9) -> Identifier:
+    """Offline identification from stored step results (dicts) or :class:`StepHarmonics`
+    (e.g. ``bench.sources`` steps' ``harmonics``)."""
     ident = Identifier(guess, harmonics)
     for r in results:
         ident.add(r)

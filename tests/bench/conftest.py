@@ -27,3 +27,10 @@ def small_run(tmp_path_factory):
     store = run_plan(load_plan(tmp / "plan.toml"), load_rig(DEFAULTS / "sim_rig.toml"), tmp / "run")
     assert store.metadata["status"] == "completed"
     return store
+
+
+@pytest.fixture(scope="session")
+def analysis_example():
+    """An analysis dict computed from the rig's physics (tests/bench/analysis_example.py)."""
+    from .analysis_example import build_example
+    return build_example()

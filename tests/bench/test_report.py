@@ -9,8 +9,8 @@ import shutil
 import numpy as np
 import pytest
 
-from bench.report import (ID_PARAMS, UNSETTLED_RESIDUAL, identification_data, plot_identification, residual_ratio,
-                          write_report)
+from bench.reports import (ID_PARAMS, UNSETTLED_RESIDUAL, identification_data, plot_identification, residual_ratio,
+                           write_analysis_html, write_report)
 from bench.storage import RunStore
 from sim.rig import RigModel
 from sim.shooting import frf_shooting
@@ -295,3 +295,60 @@ def test_run_without_steps_gives_a_report_without_plots(run_dir, tmp_path):
     text = write_report(run).read_text()
     assert "No step was completed" in text
     assert not (run / "report" / "compliance.png").exists()
+
+
+# ---------------------------------------------------------------------------- analysis section
+
+
+def test_report_has_no_analysis_section_before_bench_analyze(report):
+    assert "## Analysis" not in report.read_text()
+
+
+def test_report_includes_the_analysis_when_bench_analyze_wrote_it(run_dir, tmp_path, analysis_example):
+    run = _copy(run_dir, tmp_path)
+    (run / "analysis").mkdir()
+    (run / "analysis" / "analysis.json").write_text(json.dumps(analysis_example))
+    write_analysis_html(dict(analysis_example, steps=[], loops=[]), run / "analysis" / "analysis.html")
+    report = write_report(run)
+    section = _section(report.read_text(), "Analysis: what the model gets wrong")
+    assert f"> {analysis_example['verdict']}" in section
+    (cause,) = analysis_example["causes"]
+    row = _rows(section, [f"{cause['label']} (`{cause['id']}`)"])[f"{cause['label']} (`{cause['id']}`)"]
+    c = cause["parameters"]["c"]
+    assert row[1] == f"c = {c['value']:.4g} N s/m [{c['low']:.4g}, {c['high']:.4g}]"
+    assert float(row[2].split()[0]) == pytest.approx(100 * cause["gain"]["heldout_error_before"], rel=1e-2)
+    assert float(row[3].split()[0]) == pytest.approx(100 * cause["gain"]["heldout_error_after"], rel=1e-2)
+    link = "../analysis/analysis.html"
+    assert f"[analysis.html]({link})" in section and (report.parent / link).is_file()
+    assert f"steps used: {len(analysis_example['steps_used'])}, rejected: 1" in section
+
+
+def test_unreadable_analysis_is_named_in_the_report_not_fatal(run_dir, tmp_path):
+    run = _copy(run_dir, tmp_path)
+    for p in (run / "steps").glob("*"):      # no plots: this test is about the text
+        p.unlink()
+    (run / "analysis").mkdir()
+    (run / "analysis" / "analysis.json").write_text('{"verdict": "trunc')
+    text = write_report(run).read_text()
+    section = _section(text, "Analysis: what the model gets wrong")
+    assert "cannot be shown" in section and "analysis.json cannot be read" in section
+    assert "## Identification of F_s, x_s, n and m" in text      # the rest of the report is there
+
+
+def test_every_plant_effect_the_engine_leaves_out_is_named_in_the_model_notes():
+    """The shooting engine is the plain Masing model: a simulated rig with any optional effect
+    on must say so next to the comparison, or a difference would read as an engine error."""
+    from dataclasses import fields
+
+    from bench.reports._model import _model_effects
+    companions = {      # parameters only meaningful with a main one
+        "friction_alpha": dict(friction_v_ref_m_per_s=0.01),
+        "pitch_inertia_kg_m2": dict(pitch_stiffness_N_m_per_rad=1e4, pitch_damping_N_m_s_per_rad=1.0,
+                                    drive_height_m=0.05, cg_height_m=0.03)}
+    sub_parameters = {k for c in companions.values() for k in c}
+    effects = [f.name for f in fields(RigModel) if f.default == 0.0 and f.name not in sub_parameters
+               and f.name != "seed"]
+    assert len(effects) >= 9
+    for name in effects:
+        notes = _model_effects(RigModel(**{name: 0.01}, **companions.get(name, {})))
+        assert len(notes) == 1 and name in notes[0], name

@@ -1,0 +1,331 @@
+"""The run report in Markdown: ``<run>/report/report.md`` and its PNG plots.
+
+    <run>/report/report.md                what ran, on what, and what came out
+    <run>/report/compliance.png           |X1/F1|, compliance_pp (x_max - x_min)/(2 F1) and phase vs frequency
+    <run>/report/accelerance.png          |A1/F1| vs frequency
+    <run>/report/quality.png              THD of displacement, force error, residual
+    <run>/report/resonance.png            harmonic resonance frequency and compliance vs force
+    <run>/report/model_vs_measurement.png simulated rigs only: the sim/ engine's prediction
+    <run>/report/identification.png       online estimates of F_s, x_s, n, m vs steps completed
+
+Works on partial runs (interrupted, aborted): whatever steps are stored are shown.  When
+``bench analyze`` has written ``<run>/analysis/analysis.json``, an analysis section gives
+its verdict and causes and links to ``analysis.html``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+
+from . import _figures as figures
+from ._analysis import analysis_data
+from ._identification import ID_PARAMS, IdentificationData, determined_from, finite, steps_of
+from ._run import ANALYSIS_HTML, RunData, load_run
+from ._steps import UNSETTLED_RESIDUAL, pp_source, residual_ratio
+
+log = logging.getLogger(__name__)
+
+
+def _num(v, scale: float = 1.0) -> str:
+    v = finite(v)
+    if math.isnan(v):
+        return "n/a"
+    v *= scale
+    return "unbounded" if abs(v) > 1e100 else f"{v:.4g}"
+
+
+def identification_md(ident: IdentificationData, plotted: bool) -> list[str]:
+    md = ["## Identification of F_s, x_s, n and m", ""]
+    est = ident.latest
+    if ident.unknown is not None:
+        md += [f"run.json holds an identification entry this report cannot read: `{ident.unknown!r}`", ""]
+    if est is None:
+        md += ["No identification data: this run has no `identification.jsonl` and no `identification` in "
+               "`run.json` (run without online identification, or before it existed). "
+               "`bench identify <run>` fits the stored steps offline.", ""]
+    else:
+        md += ["After every step the friction (Masing, F_s, x_s, n) and the moving mass m are refitted to the "
+               "harmonics of all steps so far (procedures.online_id, warm-started); at the end a full fit over "
+               "all steps is stored in run.json."
+               + (" identification.png shows the estimates." if plotted else ""), ""]
+        if est is ident.final:
+            src = f"final fit over {est.get('steps_used', '?')} steps (run.json)"
+        else:
+            src = (f"last online estimate, after step {est.get('step', '?')} ({est.get('steps_used', '?')} steps); "
+                   "there is no final fit (the run did not complete)")
+        md += [f"Estimate: {src}.", ""]
+        head = ["parameter", "unit", "estimate", "95 % low", "95 % high", "rel. std. error"]
+        if ident.truth:
+            head += ["truth (rig model)", "error", "truth in interval"]
+        rows = []
+        for p in ID_PARAMS:
+            get = {k: (est.get(k) or {}).get(p.key) for k in ("values", "low", "high", "rel_std")}
+            row = [p.label, p.unit or "-", _num(get["values"], p.scale), _num(get["low"], p.scale),
+                   _num(get["high"], p.scale), _pct(finite(get["rel_std"])).lstrip("+")]
+            if ident.truth:
+                t, v = ident.truth[p.key], finite(get["values"])
+                lo, hi = finite(get["low"]), finite(get["high"])
+                row += [_num(t, p.scale), _pct(v / t - 1.0),
+                        "n/a" if math.isnan(lo) or math.isnan(hi) else ("yes" if lo <= t <= hi else "**no**")]
+            rows.append(row)
+        md += _table(head, rows) + [""]
+        times = [finite(h.get("update_s")) * 1e3 for h in ident.history]
+        times = [t for t in times if math.isfinite(t)]
+        med = finite((ident.final or {}).get("update_ms_median"))
+        mx = finite((ident.final or {}).get("update_ms_max"))
+        if math.isnan(med) and times:
+            med, mx = float(np.median(times)), float(np.max(times))
+        md.append(f"- online update time per step: median {med:.3g} ms, max {mx:.3g} ms"
+                  if math.isfinite(med) else "- online update time: n/a (no online updates stored)")
+        md.append(f"- reduced chi^2: {_num(est.get('reduced_chi2'))} (about 1 when the residual is the "
+                  "measurement noise the fit assumes; intervals are never scaled below it)")
+        first = determined_from(ident.history)
+        if ident.history:
+            md.append(f"- every parameter's relative standard error below 10 % from step {first} of "
+                      f"{int(steps_of(ident.history)[-1])} on" if first is not None else
+                      "- the last online estimate still has a parameter with a relative standard error of 10 % "
+                      "or more")
+        warnings = est.get("warnings") or []
+        md.append("- fit warnings: " + ("none" if not warnings else ""))
+        md += [f"  - {w}" for w in warnings]
+    md.append("- identifiability warnings (from the plan and the rig's expected parameters, before the run): "
+              + ("none" if not ident.identifiability else ""))
+    md += [f"  - {w}" for w in ident.identifiability]
+    return md + [""]
+
+
+# ---------------------------------------------------------------------------- analysis
+
+
+def analysis_md(run: RunData) -> list[str]:
+    """The analysis section, when ``bench analyze`` has written ``<run>/analysis/analysis.json``."""
+    if run.analysis is None and run.analysis_error is None:
+        return []
+    md = ["## Analysis: what the model gets wrong", ""]
+    if run.analysis is None:
+        return md + [f"The analysis cannot be shown: {run.analysis_error}", ""]
+    a = analysis_data(run.analysis)
+    page = run.path / ANALYSIS_HTML
+    link = f"[analysis.html](../{ANALYSIS_HTML.as_posix()})"
+    md += ["> " + (a.verdict or "The analysis gives no verdict."), ""]
+    if a.unexplained:
+        md += ["**Unexplained:** structure remains in the residuals that no candidate cause explains.", ""]
+    if a.causes:
+        md += _table(["cause", "parameters (95 %)", "held-out error before", "after", "delta BIC"],
+                     [[f"{c.label} (`{c.id}`)",
+                       "; ".join(f"{k} = {_num(p.value)} {p.unit}".rstrip() + f" [{_num(p.low)}, {_num(p.high)}]"
+                                 for k, p in c.parameters.items()) or "-",
+                       _pct_abs(c.heldout_error_before), _pct_abs(c.heldout_error_after), _num(c.delta_bic)]
+                      for c in a.causes])
+    else:
+        md.append("No cause named.")
+    md += ["", f"- steps used: {len(a.steps_used)}, rejected: {len(a.steps_rejected)}; candidates tried: "
+           f"{len(a.candidates)}"]
+    md.append(f"- figures, candidate scores and rejected steps: {link}" if page.is_file() else
+              f"- the analysis page `{ANALYSIS_HTML}` is missing: `bench analyze {run.path}` writes it")
+    md += [f"- could not be read: {p}" for p in a.problems]
+    return md + [""]
+
+
+def _pct_abs(x: float) -> str:
+    return "n/a" if not math.isfinite(x) else f"{100 * x:.3g} %"
+
+
+# ---------------------------------------------------------------------------- markdown
+
+
+def _pct(x: float) -> str:
+    return "n/a" if not math.isfinite(x) else f"{100 * x:+.2f} %"
+
+
+def _table(header: list[str], rows: list[list]) -> list[str]:
+    out = ["| " + " | ".join(header) + " |", "| " + " | ".join("---" for _ in header) + " |"]
+    out += ["| " + " | ".join(str(c).replace("|", "\\|").replace("\n", " ") for c in row) + " |" for row in rows]
+    return out
+
+
+def _level_starts(history: list[dict], results: list[dict]) -> list[tuple[float, float]]:
+    """(steps completed, level N) where the online history first meets each new force level."""
+    level_of = {r["key"]: r["target_force_N"] for r in results}
+    out, last = [], None
+    for x, h in zip(steps_of(history), history):
+        level = level_of.get(h.get("step"))
+        if level is not None and level != last:
+            out.append((float(x), float(level)))
+            last = level
+    return out
+
+
+def write_report(run_dir: Path) -> Path:
+    """Write ``<run>/report/`` (plots and report.md); returns the path of report.md."""
+    run = load_run(Path(run_dir))
+    out = run.path / "report"
+    out.mkdir(exist_ok=True)
+    md = _header_md(run)
+    if not run.results:
+        md += ["## Results", "", "No step was completed, so there is nothing to plot.", ""]
+        md += analysis_md(run)
+        md += identification_md(run.ident, plotted=False)
+    else:
+        files = _write_figures(run, out)
+        md += _results_md(run, out, files)
+    path = out / "report.md"
+    path.write_text("\n".join(md) + "\n")
+    log.info("report written to %s", path)
+    return path
+
+
+def _header_md(run: RunData) -> list[str]:
+    meta, plan, rig, levels_N = run.meta, run.plan, run.rig, run.levels_N
+
+    md = [f"# Stepped-sine report: {plan.get('name', '?')}", ""]
+    md += _table(["", ""], [
+        ["run directory", f"`{run.path}`"],
+        ["plan", plan.get("name", "?")],
+        ["rig", f"{rig.get('name', '?')}{' (simulated)' if rig.get('simulated') else ''}"],
+        ["status", f"**{meta.get('status', '?')}**"],
+        ["steps done / total", f"{meta.get('steps_done', len(run.results))} / {meta.get('steps_total', '?')}"],
+        ["started / ended (UTC)", f"{meta.get('started', '?')} / {meta.get('ended', '?')}"],
+        ["levels (N)", ", ".join(f"{v:g}" for v in levels_N)],
+        ["frequencies", f"{len(plan.get('freqs_Hz', []))} from {min(plan.get('freqs_Hz', [math.nan])):g} to "
+                        f"{max(plan.get('freqs_Hz', [math.nan])):g} Hz, direction {plan.get('direction', '?')}"],
+    ])
+    md += ["", "## Instruments", ""]
+    ids = meta.get("identities") or {}
+    md += _table(["instrument", "identity"], [[k, ", ".join(f"{a}: {b}" for a, b in v.items())
+                                               if isinstance(v, dict) else v] for k, v in ids.items()]) \
+        if ids else ["(no identities stored: the instruments were never opened)"]
+    md += ["", "## Software", ""]
+    md += _table(["package", "version"], [[k, v] for k, v in (meta.get("versions") or {}).items()])
+    md += ["", "## Interruptions and aborts", ""]
+    notable = run.notable_events
+    if notable:
+        md += _table(["time (UTC)", "event", "details"],
+                     [[e.get("time", ""), e.get("event", ""),
+                       "; ".join(f"{k}={v}" for k, v in e.items() if k not in ("time", "event"))] for e in notable])
+    else:
+        md.append("none (events.jsonl records only start, sensor checks, output off and end)")
+    md.append("")
+    return md
+
+
+def _write_figures(run: RunData, out: Path) -> list[tuple[str, str]]:
+    """Save the run's PNG plots into ``out``; returns (file name, what it shows) for each."""
+    results, series, title = run.results, run.series, run.title
+    colours = figures.level_colours(sorted({s.level_N for s in series}) or [1.0])
+    save = figures.save_png
+    files: list[tuple[str, str]] = []
+    save(figures.plot_compliance(series, colours, title, run.legacy), out / "compliance.png")
+    files.append(("compliance.png", "compliance vs frequency, log-log, one colour per force level, "
+                  "solid = up sweep, dashed = down sweep. Top: |X1/F1| from the fundamentals of the harmonic "
+                  "fits; middle: compliance_pp = (x_max - x_min)/(2 F1), the seed's Eq. 9 in SI, from "
+                  f"{pp_source(results)}; bottom: phase of X1/F1 in degrees (0 = spring-like, -180 = mass-like)."))
+    save(figures.plot_accelerance(series, colours, title, run.rig.get("expected_mass_kg")), out / "accelerance.png")
+    files.append(("accelerance.png", "|A1/F1| vs frequency per level; it tends to 1/m above the friction "
+                  "resonance (dotted line: the rig file's expected mass)."))
+    save(figures.plot_quality(series, colours, title, run.plan.get("force_tolerance")), out / "quality.png")
+    files.append(("quality.png", "THD of the displacement (friction nonlinearity), force-control error "
+                  "of the fundamental with the tolerance, and the displacement residual after the harmonic fit "
+                  "relative to the fundamental (noise and non-periodic motion such as an unsettled free vibration; "
+                  f"steps above {100 * UNSETTLED_RESIDUAL:g} % are flagged)."))
+
+    save(figures.plot_resonance(run.resonances, title), out / "resonance.png")
+    files.append(("resonance.png", "frequency and compliance_pp of the largest compliance_pp per level "
+                  "(the harmonic resonance) against force; the seed's result is that the frequency falls "
+                  "as the force rises."))
+    if run.comparison:
+        save(figures.plot_model(series, colours, title, run.comparison), out / "model_vs_measurement.png")
+        files.append(("model_vs_measurement.png", "simulated rig only: the sim/ engine's compliance_pp for "
+                      "the rig's true parameters (lines) over the measured compliance_pp (markers), and the "
+                      "relative differences (flagged steps marked)."))
+    ident = run.ident
+    if ident.history:
+        save(figures.plot_identification(ident, title, _level_starts(ident.history, results)),
+             out / "identification.png")
+        files.append(("identification.png", "online identification: the estimate of F_s, x_s, n and m after "
+                      "each step with its 95 % interval (band)"
+                      + (", the final fit (star) and the rig model's truth (dashed)" if ident.truth
+                         else " and the final fit (star)") + "; dotted: the first step of each force level."))
+    return files
+
+
+def _results_md(run: RunData, out: Path, files: list[tuple[str, str]]) -> list[str]:
+    results, legacy, res, cmp = run.results, run.legacy, run.resonances, run.comparison
+    md = [f"Model comparison failed: {run.comparison_error}", ""] if run.comparison_error else []
+    md += ["## Files", "", f"All in `{out}/` (raw data: `{run.path}/steps/`; "
+           f"CSV and UFF: `bench export {run.path}`).", ""]
+    md += _table(["file", "what it shows"], [[f"[{n}]({n})", d] for n, d in files])
+    md += [""]
+
+    md += ["## Harmonic resonance per level", "",
+           "The step of largest compliance_pp (x_max - x_min)/(2 F1) at each level, either sweep direction "
+           "(grid maximum: its accuracy is the grid spacing)."]
+    if legacy:
+        md += ["", f"compliance_pp of this run is from {pp_source(results)}."]
+    rows = []
+    for r in res:
+        row = [f"{r.level_N:g}", f"{r.freq_Hz:.4g}{' (grid edge)' if r.at_grid_edge else ''}",
+               f"{r.compliance_pp_m_per_N:.4g}", r.direction]
+        if cmp:
+            row += [f"{r.model_freq_Hz:.4g}", f"{r.model_compliance_pp_m_per_N:.4g}"]
+        rows.append(row)
+    head = ["level (N)", "resonance (Hz)", "compliance_pp (m/N)", "sweep"]
+    if cmp:
+        head += ["model resonance (Hz)", "model compliance_pp (m/N)"]
+    md += [""] + _table(head, rows) + [""]
+    inner = [r for r in res if not r.at_grid_edge]
+    if len(inner) >= 2:
+        falls = all(b.freq_Hz <= a.freq_Hz for a, b in zip(inner, inner[1:]))
+        md.append(f"Resonance frequency {'falls' if falls else 'does not fall monotonically'} as the force rises "
+                  f"({inner[0].freq_Hz:.4g} Hz at {inner[0].level_N:g} N to {inner[-1].freq_Hz:.4g} Hz at "
+                  f"{inner[-1].level_N:g} N; the seed: it falls).")
+        md.append("")
+
+    if cmp:
+        p = cmp.params
+        md += ["## Model vs measurement (simulated rig)", "",
+               f"Rig model (true parameters, defaults filled in): F_s = {p['F_s_N']:g} N, x_s = {p['x_s_m']:g} m, "
+               f"n = {p['n']:g}, m = {p['mass_kg']:g} kg.", ""]
+        md += [f"- {n}" for n in cmp.engine_notes]
+        md += ["- relative difference = measured / model - 1 of the stored compliance_pp (from "
+               f"{pp_source(results)}), over all steps; max = the value of largest magnitude.",
+               f"- flagged: steps whose displacement residual is above {100 * UNSETTLED_RESIDUAL:g} % of the "
+               "fundamental (see quality.png and the steps needing attention).", ""]
+        md += _table(["level (N)", "gamma0", "steps (flagged)", "median", "max", "max, unflagged steps", "notes"],
+                     [[f"{c.level_N:g}", f"{c.gamma0:.3g}", f"{c.n_steps} ({c.n_flagged})", _pct(c.median),
+                       _pct(c.max), _pct(c.max_unflagged), "; ".join(c.notes) or "ok"] for c in cmp.levels])
+        md.append("")
+
+    md += analysis_md(run)
+    md += identification_md(run.ident, plotted=bool(run.ident.history))
+
+    md += ["## Steps needing attention", ""]
+    failed = [r for r in results if not r.get("force_converged", True)]
+    if failed:
+        md.append("Force control did not reach the tolerance:")
+        md.append("")
+        md += _table(["step", "level (N)", "freq (Hz)", "force error", "iterations"],
+                     [[r["key"], f"{r['target_force_N']:g}", f"{r['freq_Hz']:g}", _pct(r["force_error"]),
+                       r["control_iterations"]] for r in failed])
+    else:
+        md.append("Force control reached the tolerance at every step.")
+    caveat = ("compliance_pp of these steps, from the raw record, is biased high; |X1/F1| much less affected"
+              if legacy else "the record is not only the steady periodic response; the harmonic fit, from which "
+              "compliance_pp and |X1/F1| come, rejects most of it, but treat these steps with care")
+    md += ["", f"Displacement residual above {100 * UNSETTLED_RESIDUAL:g} % of the fundamental (noise or "
+           f"non-periodic motion such as an unsettled free vibration; {caveat}):", ""]
+    rows = []
+    for s in run.series:
+        bad = [st for st in s.steps if residual_ratio(st) > UNSETTLED_RESIDUAL]
+        if bad:
+            worst = max(bad, key=residual_ratio)
+            rows.append([f"{s.level_N:g}", s.direction, f"{len(bad)} / {len(s.steps)}",
+                         ", ".join(f"{st['freq_Hz']:.4g}" for st in bad),
+                         f"{100 * residual_ratio(worst):.3g} % at {worst['freq_Hz']:.4g} Hz"])
+    md += _table(["level (N)", "sweep", "steps", "frequencies (Hz)", "worst"], rows) if rows else ["none"]
+    md.append("")
+    return md

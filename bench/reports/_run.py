@@ -1,0 +1,123 @@
+"""The run, read once: a typed record of what a run directory holds, for the renderers.
+
+``load_run`` reads run.json, the steps, the events, the identification history and, if
+present, ``analysis/analysis.json``; it groups the steps into sweeps (one force level, one
+direction) and, for a simulated rig, computes the model comparison.  Nothing here draws
+or formats: figures and renderers work from :class:`RunData` alone.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+
+from ..storage import RunStore
+from ._identification import IdentificationData, identification_data
+from ._model import ModelComparison, model_comparison
+from ._steps import Series, legacy_pp, series_of
+
+log = logging.getLogger(__name__)
+
+ROUTINE_EVENTS = {"start", "end", "sensor", "output_off"}
+ANALYSIS_JSON = Path("analysis") / "analysis.json"
+ANALYSIS_HTML = Path("analysis") / "analysis.html"
+
+
+@dataclass
+class Resonance:
+    level_N: float
+    freq_Hz: float
+    compliance_pp_m_per_N: float
+    direction: str
+    at_grid_edge: bool
+    model_freq_Hz: float = math.nan
+    model_compliance_pp_m_per_N: float = math.nan
+
+
+def resonances(series: list[Series], comparison: ModelComparison | None) -> list[Resonance]:
+    """Per level: the step of largest compliance_pp (either sweep direction)."""
+    out = []
+    for level in sorted({s.level_N for s in series}):
+        steps = [st for s in series if s.level_N == level for st in s.steps]
+        best = max(steps, key=lambda st: st["compliance_pp_m_per_N"])
+        fs = sorted({st["freq_Hz"] for st in steps})
+        r = Resonance(level, best["freq_Hz"], best["compliance_pp_m_per_N"], best["direction"],
+                      best["freq_Hz"] in (fs[0], fs[-1]))
+        if comparison and level in comparison.curves:
+            r.model_freq_Hz, r.model_compliance_pp_m_per_N = comparison.resonance(level)
+        out.append(r)
+    return out
+
+
+@dataclass
+class RunData:
+    """Everything the run report shows, read and computed once."""
+
+    path: Path
+    meta: dict
+    results: list[dict]
+    events: list[dict]
+    levels_N: list[float]
+    series: list[Series]
+    ident: IdentificationData
+    comparison: ModelComparison | None        # simulated rig with a stored model only
+    comparison_error: str | None              # why the comparison failed, if it did
+    resonances: list[Resonance]
+    analysis: dict | None                     # analysis/analysis.json, when `bench analyze` wrote it
+    analysis_error: str | None                # why analysis.json could not be read, if so
+
+    @property
+    def plan(self) -> dict:
+        return self.meta.get("plan") or {}
+
+    @property
+    def rig(self) -> dict:
+        return self.meta.get("rig") or {}
+
+    @property
+    def title(self) -> str:
+        return f"{self.plan.get('name', '?')} on {self.rig.get('name', '?')}"
+
+    @property
+    def legacy(self) -> bool:
+        return legacy_pp(self.results)
+
+    @property
+    def notable_events(self) -> list[dict]:
+        return [e for e in self.events if e.get("event") not in ROUTINE_EVENTS]
+
+
+def _analysis(run_dir: Path) -> tuple[dict | None, str | None]:
+    path = run_dir / ANALYSIS_JSON
+    if not path.is_file():
+        return None, None
+    try:
+        d = json.loads(path.read_text())
+        if not isinstance(d, dict):
+            raise ValueError(f"expected a JSON object, got {type(d).__name__}")
+        return d, None
+    except (OSError, ValueError) as e:      # the report must come out; say why the analysis is missing
+        log.warning("cannot read %s: %s", path, e)
+        return None, f"{path} cannot be read: {e}"
+
+
+def load_run(run_dir: Path) -> RunData:
+    store = RunStore.open(Path(run_dir))
+    meta, results, events = store.metadata, store.results(), store.events()
+    plan, rig = meta.get("plan") or {}, meta.get("rig") or {}
+    levels_N = plan.get("levels_N") or sorted({r["target_force_N"] for r in results})
+    series = series_of(results, levels_N)
+    cmp, cmp_error = None, None
+    if results and rig.get("simulated") and rig.get("model"):
+        try:
+            cmp = model_comparison(meta, results)
+        except Exception as e:
+            log.warning("model comparison failed: %s", e)
+            cmp_error = f"{type(e).__name__}: {e}"
+    analysis, analysis_error = _analysis(store.path)
+    return RunData(store.path, meta, results, events, list(levels_N), series, identification_data(store.path, meta),
+                   cmp, cmp_error, resonances(series, cmp) if results else [], analysis, analysis_error)

@@ -1,0 +1,263 @@
+"""Measured steps from a run directory or a UFF58 file of time records (contract 2).
+
+    load_source(path) -> Source(path, kind "run" | "uff58", steps, rejected)
+
+Every step is analysed from its time records, the same way for both kinds
+(:func:`sim.records.analyse_records`): harmonics up to Nyquist (at most 200) over the
+largest whole number of periods, the noise from the scatter of the periods, the
+one-period averaged records (for loop plots), and a periodicity score.
+
+- Run directory (``bench run``): the step results and raw blocks are read through
+  :mod:`bench.storage`; the frequency is the generator's, the level the plan's.
+- UFF58 file (the convention of docs/uff58-input.md): function type 1, one load case per
+  step, three records per step with ordinate specific data types 13 (force, N),
+  12 (acceleration, m/s^2) and 8 (displacement, m), abscissa increment 1/fs.  No tags
+  needed: the frequency is estimated from the force record and the level is the measured
+  force amplitude.  ``bench export`` tags (``bench step=... f=...``) are used when present.
+
+A step whose records are missing, inconsistent (lengths, sample rates), non-finite, too
+short, or not periodic enough (harmonics or offset changing between the two halves of the
+record by more than DRIFT_LIMIT standard errors) is rejected with a reason, never
+silently dropped.  An unreadable file raises ValueError naming the record.  Nothing is
+written: the user's files are left as they are.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from sim.identify import StepHarmonics
+from sim.records import analyse_records
+
+from .storage import RunStore
+
+log = logging.getLogger(__name__)
+
+DRIFT_LIMIT = 10.0          # standard errors between the halves of a record
+SDT = {13: "force", 12: "accel", 8: "disp"}      # UFF58 record 8 ordinate specific data type
+SDT_NAME = {13: "force (type 13)", 12: "acceleration (type 12)", 8: "displacement (type 8)"}
+FUNC_TIME = 1
+TAG = "bench"
+
+
+@dataclass
+class MeasuredStep:
+    key: str
+    level_N: float              # force amplitude: the plan's, or measured when untagged
+    freq_Hz: float
+    harmonics: StepHarmonics
+    fs_Hz: float
+    force_N: np.ndarray         # one period, averaged over the record's periods
+    accel_m_s2: np.ndarray
+    disp_m: np.ndarray
+    direction: str = ""         # "up", "down", or "" when unknown
+    periods: int = 0
+    drift_sigma: float = 0.0
+
+
+@dataclass
+class Rejected:
+    step: str
+    reason: str
+
+
+@dataclass
+class Source:
+    path: Path
+    kind: str                   # "run" | "uff58"
+    steps: list[MeasuredStep] = field(default_factory=list)
+    rejected: list[Rejected] = field(default_factory=list)
+    metadata: dict = field(default_factory=dict)   # run.json for a run
+
+
+def load_source(path: Path) -> Source:
+    """Steps of a run directory or of a UFF58 file of time records."""
+    path = Path(path)
+    if path.is_dir():
+        return _load_run(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: no such run directory or file")
+    return _load_uff(path)
+
+
+def measured_step(key: str, force, accel, disp, fs_Hz: float, freq_Hz: float | None = None,
+                  level_N: float | None = None, direction: str = "") -> MeasuredStep:
+    """One step from its three records; ValueError names what is wrong with them."""
+    rec = analyse_records(force, accel, disp, fs_Hz, freq_Hz)
+    if rec.drift_sigma > DRIFT_LIMIT:
+        raise ValueError(f"not periodic enough: {rec.drift_detail} changes by {rec.drift_sigma:.0f} "
+                         f"standard errors between the two halves of the record (limit {DRIFT_LIMIT:g})")
+    h = StepHarmonics.from_records(rec)
+    c = rec.channels
+    level = float(abs(h.force[0])) if level_N is None or not math.isfinite(level_N) else float(level_N)
+    return MeasuredStep(key=key, level_N=level, freq_Hz=rec.freq_Hz, harmonics=h, fs_Hz=rec.fs_Hz,
+                        force_N=c["force"].mean_period, accel_m_s2=c["accel"].mean_period,
+                        disp_m=c["disp"].mean_period, direction=direction, periods=rec.periods,
+                        drift_sigma=rec.drift_sigma)
+
+
+# ---------------------------------------------------------------------------- run directories
+
+
+def _load_run(path: Path) -> Source:
+    store = RunStore.open(path)
+    src = Source(path=path, kind="run", metadata=store.metadata)
+    for r in store.results():
+        key = str(r.get("key", "?"))
+        try:
+            raw = store.raw(key)
+        except Exception as e:  # noqa: BLE001 - a damaged block rejects its step, not the run
+            src.rejected.append(Rejected(key, f"raw block unreadable: {type(e).__name__}: {e}"))
+            continue
+        missing = [k for k in ("force_N", "accel_m_s2", "disp_m", "fs_Hz") if k not in raw]
+        if missing:
+            src.rejected.append(Rejected(key, f"raw block lacks {', '.join(missing)}"))
+            continue
+        try:
+            src.steps.append(measured_step(key, raw["force_N"], raw["accel_m_s2"], raw["disp_m"],
+                                           float(raw["fs_Hz"]), float(r["freq_Hz"]),
+                                           r.get("target_force_N"), r.get("direction", "")))
+        except (ValueError, KeyError, TypeError) as e:
+            src.rejected.append(Rejected(key, str(e)))
+    _log_rejections(src)
+    return src
+
+
+# ---------------------------------------------------------------------------- UFF58
+
+
+def _tags(ds: dict) -> dict[str, str]:
+    out = {}
+    for line in (ds.get("id4", ""), ds.get("id5", "")):
+        words = str(line or "").split()
+        if words and words[0] == TAG:
+            out.update(w.split("=", 1) for w in words[1:] if "=" in w)
+    return out
+
+
+def _read_uff(path: Path) -> list[dict]:
+    import pyuff
+
+    try:
+        uff = pyuff.UFF(str(path))
+        types = [int(t) for t in uff.get_set_types()]
+    except Exception as e:  # noqa: BLE001 - pyuff raises many kinds
+        raise ValueError(f"{path}: not a readable universal file ({type(e).__name__}: {e})") from e
+    out = []
+    for i, t in enumerate(types):
+        if t != 58:
+            continue
+        try:
+            ds = uff.read_sets(i)
+        except Exception as e:  # noqa: BLE001
+            raise ValueError(f"{path}: record {i + 1} of the file (dataset 58) cannot be read: "
+                             f"{type(e).__name__}: {e}") from e
+        ds["_record"] = i + 1
+        out.append(ds)
+    if not out:
+        raise ValueError(f"{path}: no dataset 58 in the file (dataset types: {sorted(set(types))})")
+    return out
+
+
+def _group(records: list[dict]) -> list[tuple[str, list[dict]]]:
+    """Records of one step: by load case when the file numbers them, else by our step
+    tag, else consecutive runs of force/acceleration/displacement."""
+    cases = {int(ds.get("load_case_id", 0) or 0) for ds in records}
+    groups: dict[str, list[dict]] = {}
+    if len(cases) > 1:
+        for ds in records:
+            groups.setdefault(f"LC{int(ds.get('load_case_id', 0) or 0):04d}", []).append(ds)
+        return list(groups.items())
+    out: list[tuple[str, list[dict]]] = []
+    for ds in records:
+        tag = _tags(ds).get("step")
+        sdt = int(ds.get("ordinate_spec_data_type", -1))
+        last = out[-1] if out else None
+        new = (last is None or (tag is not None and last[0] != tag)
+               or any(int(d.get("ordinate_spec_data_type", -1)) == sdt for d in last[1]))
+        if new:
+            out.append((tag or f"uff-{len(out):05d}", []))
+        out[-1][1].append(ds)
+    return out
+
+
+def _fs(ds: dict, tags: dict) -> float:
+    if "fs" in tags:
+        return float(tags["fs"])
+    inc = ds.get("abscissa_inc")
+    if not inc:
+        x = np.asarray(ds.get("x", []), float)
+        inc = x[1] - x[0] if x.size > 1 else 0.0
+    return 1.0 / float(inc) if inc and float(inc) > 0 else math.nan
+
+
+def _uff_step(key: str, recs: list[dict]) -> MeasuredStep:
+    by = {}
+    for ds in recs:
+        sdt = int(ds.get("ordinate_spec_data_type", -1))
+        if sdt not in SDT:
+            raise ValueError(f"record {ds['_record']}: ordinate data type {sdt} is not force (13), "
+                             f"acceleration (12) or displacement (8)")
+        if sdt in by:
+            raise ValueError(f"two {SDT_NAME[sdt]} records (file records {by[sdt]['_record']} and {ds['_record']})")
+        by[sdt] = ds
+    missing = [SDT_NAME[t] for t in SDT if t not in by]
+    if missing:
+        raise ValueError(f"missing record(s): {', '.join(missing)}")
+    for ds in by.values():
+        if int(ds.get("abscissa_spacing", 1)) != 1:
+            raise ValueError(f"record {ds['_record']}: uneven abscissa spacing (need a constant 1/fs)")
+    tags = {}
+    for ds in by.values():
+        tags.update(_tags(ds))
+    data = {SDT[t]: np.asarray(by[t]["data"]) for t in SDT}
+    for name, x in data.items():
+        if np.iscomplexobj(x):
+            raise ValueError(f"{name} record holds complex values (need a real time record)")
+    sizes = {name: x.size for name, x in data.items()}
+    if len(set(sizes.values())) != 1:
+        raise ValueError(f"records of different lengths: {sizes}")
+    rates = {SDT[t]: _fs(by[t], tags) for t in SDT}
+    fs = rates["force"]
+    if not (math.isfinite(fs) and fs > 0):
+        raise ValueError("no valid abscissa increment (sample rate) on the force record")
+    if any(not (abs(r / fs - 1) < 1e-6) for r in rates.values()):
+        raise ValueError(f"records at different sample rates: { {k: f'{v:.6g} S/s' for k, v in rates.items()} }")
+    for name, x in data.items():
+        if not np.all(np.isfinite(x)):
+            raise ValueError(f"non-finite values in the {name} record")
+    freq = float(tags["f"]) if "f" in tags else None
+    level = float(tags["level"]) if "level" in tags else None
+    direction = tags.get("dir", "")
+    if not direction:
+        m = re.search(r"-(up|down)$", key)
+        direction = m.group(1) if m else ""
+    return measured_step(key, data["force"].astype(float), data["accel"].astype(float),
+                         data["disp"].astype(float), fs, freq, level, direction)
+
+
+def _load_uff(path: Path) -> Source:
+    records = _read_uff(path)
+    times = [ds for ds in records if int(ds.get("func_type", -1)) == FUNC_TIME]
+    if len(times) < len(records):
+        log.info("%s: %d dataset-58 functions not of type 1 (time response) ignored",
+                 path, len(records) - len(times))
+    src = Source(path=path, kind="uff58")
+    for key, recs in _group(times):
+        try:
+            src.steps.append(_uff_step(key, recs))
+        except ValueError as e:
+            src.rejected.append(Rejected(key, str(e)))
+    _log_rejections(src)
+    return src
+
+
+def _log_rejections(src: Source) -> None:
+    for r in src.rejected:
+        log.warning("%s: step %s rejected: %s", src.path, r.step, r.reason)

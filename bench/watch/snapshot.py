@@ -1,0 +1,293 @@
+"""What the watch page shows, read from the run directory alone.
+
+The run directory is the one source of truth (see bench/storage.py): ``run.json`` (plan,
+status), ``steps/<key>.json`` (one per completed step, never rewritten), the append-only
+``identification.jsonl`` and ``events.jsonl``, and ``bench.log``.  :class:`RunReader` reads
+them incrementally (a step file once, the logs from where it stopped, a torn last line
+later) so that polling every fraction of a second costs little, and it works whoever
+writes the directory: this process, another one, a resumed run, or nobody any more.
+
+Progress: steps done against the plan's schedule (adaptive plans: the chosen number per
+sweep); the ETA is the mean time per step since the first step after the latest start or
+resume (set-up is not counted, as on the terminal's progress line) times the steps left.  The "next" step is the first of the schedule not yet done (in adaptive mode the
+procedure may skip it).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import socket
+import threading
+from datetime import datetime
+from pathlib import Path
+
+from procedures.plan import Limits, Plan
+
+from .stop import STOP_FILE
+
+log = logging.getLogger(__name__)
+
+LOG_LINES_KEPT = 40           # warnings and errors from bench.log shown on the page
+QUIET_EVENTS = {"sensor"}     # frequent, routine: counted, not listed
+
+
+class _Tail:
+    """Complete lines appended to a file since the last read (a torn last line waits);
+    only those ``keep`` accepts, at most ``max_lines`` of the latest."""
+
+    def __init__(self, path: Path, keep=None, max_lines: int | None = None):
+        self.path, self.offset, self.lines = path, 0, []
+        self.keep, self.max_lines = keep, max_lines
+
+    def read(self) -> list[str]:
+        try:
+            size = self.path.stat().st_size
+        except FileNotFoundError:
+            return self.lines
+        if size < self.offset:          # replaced (a new run in the same place): start over
+            self.offset, self.lines = 0, []
+        if size > self.offset:
+            with open(self.path, "rb") as fh:
+                fh.seek(self.offset)
+                chunk = fh.read(size - self.offset)
+            end = chunk.rfind(b"\n") + 1
+            self.offset += end
+            new = chunk[:end].decode(errors="replace").splitlines()
+            self.lines.extend(ln for ln in new if self.keep is None or self.keep(ln))
+            if self.max_lines is not None:
+                del self.lines[:-self.max_lines]
+        return self.lines
+
+
+def _jsonl(lines: list[str]) -> list[dict]:
+    out = []
+    for line in lines:
+        try:
+            out.append(json.loads(line))
+        except json.JSONDecodeError:
+            pass
+    return out
+
+
+def _time(s: str | None) -> float | None:
+    try:
+        return datetime.fromisoformat(s).timestamp()
+    except (TypeError, ValueError):
+        return None
+
+
+def plan_of(meta: dict) -> Plan | None:
+    """The stored plan as a :class:`Plan` (None if run.json does not hold a usable one)."""
+    try:
+        p = dict(meta["plan"])
+        p["levels_N"] = tuple(p["levels_N"])
+        p["freqs_Hz"] = tuple(p["freqs_Hz"])
+        p["skip"] = tuple(tuple(x) for x in p.get("skip", ()))
+        p["limits"] = Limits(**p["limits"]) if p.get("limits") else None
+        return Plan(**p)
+    except (KeyError, TypeError, ValueError) as e:
+        log.debug("no usable plan in run.json: %s", e)
+        return None
+
+
+def steps_total(plan: Plan) -> int:
+    """Steps the procedure will measure (adaptive mode: the chosen number per sweep)."""
+    sweeps: dict[tuple[int, str], int] = {}
+    for s in plan.schedule():
+        sweeps[(s.level_index, s.direction)] = sweeps.get((s.level_index, s.direction), 0) + 1
+    k = plan.adaptive_per_sweep
+    return sum(min(n, k) if k else n for n in sweeps.values())
+
+
+def _phase_deg(phase_rad: float) -> float:
+    """Phase in (-270, 90] degrees: a compliance lags by 0 to 180 degrees, so the mass
+    line near -180 does not flip between -179 and +179 with the noise."""
+    deg = math.degrees(phase_rad)
+    return deg - 360.0 if deg > 90.0 else deg
+
+
+def _step_summary(r: dict) -> dict:
+    return dict(key=r.get("key"), level_N=r.get("target_force_N"), freq_Hz=r.get("freq_Hz"),
+                direction=r.get("direction"), force_N=r.get("force_N"), force_error=r.get("force_error"),
+                control_iterations=r.get("control_iterations"), force_converged=r.get("force_converged"),
+                thd_force=r.get("force", {}).get("thd"), thd_accel=r.get("accel", {}).get("thd"),
+                thd_disp=r.get("disp", {}).get("thd"), drive_Vpp=r.get("drive_Vpp"))
+
+
+class RunReader:
+    """Incremental, thread-safe reader of one run directory."""
+
+    def __init__(self, run_dir: Path):
+        self.path = Path(run_dir)
+        self._lock = threading.Lock()
+        self._steps: dict[str, dict] = {}         # file name -> result (step files never change)
+        self._step_mtime: dict[str, float] = {}
+        self._cached: dict = {}
+        self._cached_sig: tuple | None = None
+        self._process: dict | None = None
+        self._events = _Tail(self.path / "events.jsonl")
+        self._ident = _Tail(self.path / "identification.jsonl")
+        self._log = _Tail(self.path / "bench.log", keep=lambda ln: " WARNING " in ln or " ERROR " in ln,
+                          max_lines=LOG_LINES_KEPT)
+
+    def signature(self) -> tuple:
+        """Changes whenever anything the page shows may have changed (cheap: stats only)."""
+        sig = []
+        for name in ("run.json", "events.jsonl", "identification.jsonl", "bench.log", STOP_FILE):
+            try:
+                st = (self.path / name).stat()
+                sig.append((st.st_mtime_ns, st.st_size))
+            except FileNotFoundError:
+                sig.append(None)
+        try:
+            sig.append(sum(1 for e in os.scandir(self.path / "steps") if e.name.endswith(".json")))
+        except FileNotFoundError:
+            sig.append(0)
+        return tuple(sig)
+
+    def _process_gone(self) -> bool:
+        """True if run.json names a process on this host that no longer exists (kill -9, a
+        crash): the run says "running" but nobody runs it.  Unknown (another host, no
+        record): False."""
+        process = self._process
+        if not isinstance(process, dict) or process.get("host") != socket.gethostname():
+            return False
+        try:
+            os.kill(int(process["pid"]), 0)
+        except ProcessLookupError:
+            return True
+        except (PermissionError, KeyError, TypeError, ValueError):
+            return False
+        return False
+
+    def _read_steps(self) -> list[dict]:
+        steps_dir = self.path / "steps"
+        try:
+            entries = [e for e in os.scandir(steps_dir) if e.name.endswith(".json") and not e.name.startswith(".")]
+        except FileNotFoundError:
+            return []
+        for e in entries:
+            if e.name not in self._steps:
+                try:
+                    self._steps[e.name] = json.loads(Path(e.path).read_text())
+                    self._step_mtime[e.name] = e.stat().st_mtime
+                except (OSError, ValueError) as exc:     # renamed into place, so only if damaged
+                    log.warning("cannot read step %s: %s", e.path, exc)
+        return [self._steps[k] for k in sorted(self._steps)]
+
+    def snapshot(self) -> dict:
+        """The state; recomputed only when :meth:`signature` changed (several pages, one read)."""
+        with self._lock:
+            sig = self.signature()
+            if sig != self._cached_sig:
+                self._cached, self._cached_sig = self._snapshot(), sig
+            state = dict(self._cached)
+        if state.get("status") == "running":     # a process can die without touching a file
+            state["process_gone"] = self._process_gone()
+        return state
+
+    def _snapshot(self) -> dict:
+        try:
+            meta = json.loads((self.path / "run.json").read_text())
+        except FileNotFoundError:
+            return {"run_dir": str(self.path), "status": "waiting", "message": "no run.json yet: waiting for the run to start"}
+        except ValueError as e:
+            return {"run_dir": str(self.path), "status": "unreadable", "message": f"run.json: {e}"}
+        results = self._read_steps()
+        events = _jsonl(self._events.read())
+        ident = _jsonl(self._ident.read())
+        plan = plan_of(meta)
+        status = meta.get("status", "unknown")
+        self._process = meta.get("process")
+        return {
+            "run_dir": str(self.path),
+            "name": meta.get("plan", {}).get("name", ""),
+            "rig": meta.get("rig", {}).get("name", ""),
+            "simulated": bool(meta.get("rig", {}).get("simulated")),
+            "status": status,
+            "levels_N": list(plan.levels_N) if plan else [],
+            "started": meta.get("started"),
+            "ended": meta.get("ended") if status != "running" else None,
+            "stop_pending": (self.path / STOP_FILE).exists(),
+            "process_gone": False,       # filled in by snapshot()
+            "progress": self._progress(plan, results, events, status),
+            "last_step": _step_summary(results[-1]) if results else None,
+            "next_step": self._next(plan, results) if status == "running" else None,
+            "compliance": self._compliance(plan, results),
+            "identification": self._identification(ident, results, meta),
+            "events": [e for e in events if e.get("event") not in QUIET_EVENTS],
+            "quiet_events": sum(1 for e in events if e.get("event") in QUIET_EVENTS),
+            "warnings": self._warnings(meta, results),
+        }
+
+    def _progress(self, plan: Plan | None, results: list[dict], events: list[dict], status: str) -> dict:
+        done = len(results)
+        total = steps_total(plan) if plan else None
+        starts = [_time(e.get("time")) for e in events if e.get("event") in ("start", "resume")]
+        t_start = starts[-1] if starts and starts[-1] else None
+        since = sorted(self._step_mtime[n] for n in self._steps if t_start and self._step_mtime[n] >= t_start)
+        eta_s = per_step_s = None
+        if len(since) >= 2:              # from the first step on: set-up is not a step
+            per_step_s = (since[-1] - since[0]) / (len(since) - 1)
+        elif since and t_start:
+            per_step_s = since[0] - t_start
+        if per_step_s is not None:
+            if total is not None and status == "running":
+                eta_s = max(0.0, per_step_s * (total - done))
+        return dict(done=done, total=total, fraction=(done / total if total else None),
+                    started_s=t_start, per_step_s=per_step_s, eta_s=eta_s)
+
+    @staticmethod
+    def _next(plan: Plan | None, results: list[dict]) -> dict | None:
+        if plan is None:
+            return None
+        done = {r.get("key") for r in results}
+        for s in plan.schedule():
+            if s.key not in done:
+                return dict(key=s.key, level_N=s.force_N, freq_Hz=s.freq_Hz, direction=s.direction)
+        return None
+
+    @staticmethod
+    def _compliance(plan: Plan | None, results: list[dict]) -> list[dict]:
+        """One series per (force level, direction), sorted by frequency."""
+        groups: dict[tuple[int, str], list[dict]] = {}
+        for r in results:
+            if "compliance_abs_m_per_N" in r:
+                groups.setdefault((r.get("level_index", 0), r.get("direction", "")), []).append(r)
+        out = []
+        for (li, d), rs in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1] != "up")):
+            rs.sort(key=lambda r: r["freq_Hz"])
+            level = plan.levels_N[li] if plan and li < len(plan.levels_N) else rs[0].get("target_force_N")
+            out.append(dict(level_index=li, level_N=level, direction=d, key=[r.get("key") for r in rs],
+                            freq_Hz=[r["freq_Hz"] for r in rs],
+                            abs_m_per_N=[r["compliance_abs_m_per_N"] for r in rs],
+                            phase_deg=[_phase_deg(r["compliance_phase_rad"]) for r in rs],
+                            converged=[bool(r.get("force_converged", True)) for r in rs]))
+        return out
+
+    @staticmethod
+    def _identification(ident: list[dict], results: list[dict], meta: dict) -> dict:
+        order = {r.get("key"): i + 1 for i, r in enumerate(sorted(results, key=lambda r: r.get("key", "")))}
+        history = [dict(step=h.get("step"), steps_done=order.get(h.get("step"), h.get("steps_used")),
+                        values=h.get("values"), low=h.get("low"), high=h.get("high"),
+                        reduced_chi2=h.get("reduced_chi2"))
+                   for h in ident if isinstance(h.get("values"), dict)]
+        latest_warnings = ident[-1].get("warnings", []) if ident else []
+        final = meta.get("identification")
+        if not (isinstance(final, dict) and isinstance(final.get("values"), dict)):
+            final = None if not isinstance(final, dict) else {"error": final.get("error", "unusable result")}
+        expected = {k: meta.get("rig", {}).get(f"expected_{k}") for k in ("F_s_N", "x_s_m", "n", "mass_kg")}
+        return dict(history=history, latest_warnings=latest_warnings, final=final, expected=expected)
+
+    def _warnings(self, meta: dict, results: list[dict]) -> list[dict]:
+        out = [dict(source="plan", text=w) for w in meta.get("identifiability_warnings", [])]
+        for r in results:
+            if r.get("force_converged") is False:
+                out.append(dict(source="step", text=f"{r.get('key')}: force {r.get('target_force_N'):g} N not reached "
+                                                    f"(error {100 * (r.get('force_error') or 0):+.1f} %, "
+                                                    f"{r.get('control_iterations')} iterations)"))
+        out += [dict(source="log", text=ln) for ln in self._log.read()]
+        return out
