@@ -30,12 +30,18 @@ def default_out_dir(source: Path) -> Path:
 
 
 def one_period(x: np.ndarray, fs_Hz: float, freq_Hz: float, points: int = 256) -> np.ndarray:
-    """A record folded onto one period of ``freq_Hz`` and averaged in ``points`` phase bins."""
+    """A record folded onto one period of ``freq_Hz`` and averaged in phase bins (at most
+    ``points``, at most the samples per period; a bin no sample fell in is interpolated)."""
+    points = max(8, min(points, int(fs_Hz / freq_Hz)))
     phase = (np.arange(x.size) * freq_Hz / fs_Hz) % 1.0
     b = np.minimum((phase * points).astype(int), points - 1)
     count = np.bincount(b, minlength=points)
     out = np.bincount(b, weights=x, minlength=points) / np.maximum(count, 1)
-    return np.where(count > 0, out, np.nan)
+    filled = count > 0
+    if not filled.all():
+        i = np.arange(points)
+        out = np.interp(i, i[filled], out[filled], period=points)
+    return out
 
 
 @dataclass(frozen=True)

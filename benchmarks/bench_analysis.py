@@ -55,7 +55,13 @@ def run_case(seed: int) -> dict:
     ident.fit(max_nfev=200)
     t_ref = time.perf_counter() - t0
     t0 = time.perf_counter()
-    a = analyze_steps(case.steps, guess)
+    try:
+        a = analyze_steps(case.steps, guess)
+    except Exception as e:          # a failure is a result: count it, keep going
+        return dict(seed=seed, kind=kind, skipped=False, failed=f"{type(e).__name__}: {e}", n=case.rig["n"],
+                    steps=len(case.steps), named=[], unexplained=False, detected=False, wrong=[],
+                    heldout_before=np.nan, heldout_after=np.nan, base_chi2=np.nan, final_chi2=np.nan,
+                    t_generate_s=t_gen, t_analysis_s=time.perf_counter() - t0, t_identify_s=t_ref)
     t_an = time.perf_counter() - t0
     named = a.causes
     first = a.selection.named[0] if a.selection.named else None
@@ -79,6 +85,9 @@ def run_case(seed: int) -> dict:
 def summarise(rows: list[dict]) -> str:
     rows = [r for r in rows if not r["skipped"]]
     out = []
+    failed = [r for r in rows if r.get("failed")]
+    if failed:
+        out.append(f"analysis failed in {len(failed)} case(s): " + "; ".join(f"{r['seed']}: {r['failed']}" for r in failed))
     out.append(f"{'cause':30s} {'cases':>5s} {'named':>6s} {'rate':>6s} {'n<1':>7s} {'wrong':>6s} {'unexpl':>6s}")
     eff = [r for r in rows if r["kind"] != "clean"]
     for kind in CATALOG:

@@ -33,6 +33,8 @@ log = logging.getLogger(__name__)
 SCHEMA = "guideway-bench/analysis/1"
 LEVEL_GAP = 1.15
 LOOPS = 4
+FRICTION_HARMONICS = 20     # displacement harmonics the friction is computed along (probe noise
+                            # buries more; a reversal for n < 1 needs more than the residuals' 9)
 PARAM_KEYS = dict(F_s_N="F_s_N", x_s_m="x_s_m", n="n", mass_kg="m_kg")
 
 
@@ -49,16 +51,20 @@ def level_groups(levels_N: np.ndarray) -> np.ndarray:
     return group
 
 
-def data_from_steps(steps) -> Data:
+def data_from_steps(steps, harmonics: int = 9, friction_harmonics: int = FRICTION_HARMONICS) -> Data:
+    """Arrays of the first ``harmonics`` harmonics (the residuals), and up to
+    ``friction_harmonics`` of the displacement (the friction along it)."""
     if not steps:
         raise ValueError("no steps to analyse")
-    K = min(min(s.harmonics.force.size, s.harmonics.accel.size, s.harmonics.disp.size) for s in steps)
     H = [s.harmonics for s in steps]
+    K = min([harmonics] + [min(h.force.size, h.accel.size, h.disp.size) for h in H])
+    Kx = max(K, min([friction_harmonics] + [h.disp.size for h in H]))
     return Data(omega=np.array([2 * math.pi * h.freq_Hz for h in H]),
                 P=np.array([h.force[:K] for h in H]), A=np.array([h.accel[:K] for h in H]),
                 X=np.array([h.disp[:K] for h in H]), sP=np.array([h.sigma_force for h in H]),
                 sA=np.array([h.sigma_accel for h in H]), sX=np.array([h.sigma_disp for h in H]),
-                level=level_groups(np.array([float(s.level_N) for s in steps])))
+                level=level_groups(np.array([float(s.level_N) for s in steps])),
+                Xf=np.array([h.disp[:Kx] for h in H]) if Kx > K else None)
 
 
 def guess_from_data(d: Data) -> dict:
@@ -311,8 +317,7 @@ def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, sourc
     ``guess``: rough F_s_N, x_s_m, n, mass_kg (e.g. a rig file's expected values); None
     estimates them from the data."""
     steps = list(steps)
-    d = data_from_steps(steps)
-    d = Data(d.omega, d.P[:, :harmonics], d.A[:, :harmonics], d.X[:, :harmonics], d.sP, d.sA, d.sX, d.level)
+    d = data_from_steps(steps, harmonics)
     if np.unique(d.level).size < 2:
         raise ValueError("need steps at two force levels at least (held-out checks leave one level out)")
     base, W = base_fit(steps, d, guess, harmonics)

@@ -28,6 +28,7 @@ from .models import Data, Model
 log = logging.getLogger(__name__)
 
 N_BOUNDS = (0.1, 6.0)
+F_P_BOUNDS_HZ = (1e-2, 1e6)
 Z95 = 1.959964
 
 
@@ -107,6 +108,7 @@ def bounds(model: Model) -> tuple[np.ndarray, np.ndarray]:
     lo[2], hi[2] = N_BOUNDS
     for e, sl in model.slices.items():
         if e == "second_mode":        # log f_p, zeta, a, r
+            lo[sl.start], hi[sl.start] = math.log(F_P_BOUNDS_HZ[0]), math.log(F_P_BOUNDS_HZ[1])
             lo[sl.start + 1], hi[sl.start + 1] = 1e-4, 0.5
             lo[sl.start + 2] = 0.0
         if e == "sensor_gain_error":

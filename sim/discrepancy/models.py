@@ -75,13 +75,19 @@ class Data:
     sA: np.ndarray
     sX: np.ndarray
     level: np.ndarray     # force-level group of each step (for leave-one-level-out)
+    Xf: np.ndarray | None = None   # more displacement harmonics (>= K) for the friction
 
     @property
     def Omega(self) -> np.ndarray:
         return self.omega[:, None] * np.arange(1, self.X.shape[1] + 1)
 
+    @property
+    def X_friction(self) -> np.ndarray:
+        return self.X if self.Xf is None else self.Xf
+
     def subset(self, mask: np.ndarray) -> "Data":
-        return Data(*(getattr(self, f)[mask] for f in ("omega", "P", "A", "X", "sP", "sA", "sX", "level")))
+        return Data(*(getattr(self, f)[mask] for f in ("omega", "P", "A", "X", "sP", "sA", "sX", "level")),
+                    Xf=None if self.Xf is None else self.Xf[mask])
 
 
 def synthesize(C: np.ndarray, M: int) -> np.ndarray:
@@ -147,25 +153,33 @@ class Model:
         return m, np.concatenate([theta, init])
 
     # ------------------------------------------------------------------ physics
-    def _masing_friction(self, F_s, x_s, n, x_true, Omega, beta):
-        if abs(n - 1.0) < 1e-6:
-            n = 1.0 + 1e-6
-        F = masing_samples(F_s, x_s, n, synthesize(x_true, self.M))
+    def _sensor(self, v: dict, X: np.ndarray, Om: np.ndarray) -> np.ndarray:
+        """The true displacement harmonics behind the probe's (delay and gain undone)."""
+        if "sensor_delay" in self.effects:
+            X = X * np.exp(1j * Om * v["sensor_delay.delay"])
+        if "sensor_gain_error" in self.effects:
+            X = X / (1.0 + v["sensor_gain_error.gain"])
+        return X
+
+    def _friction(self, v: dict, d: Data) -> np.ndarray:
+        """Harmonics 1..K of the friction along the displacement rebuilt from all the
+        harmonics at hand (a reversal for n < 1 needs more than K of them)."""
+        Xf = d.X_friction
+        Om = d.omega[:, None] * np.arange(1, Xf.shape[1] + 1)
+        x = self._sensor(v, Xf, Om)
+        n = v["n"] if abs(v["n"] - 1.0) >= 1e-6 else 1.0 + 1e-6
+        F = masing_samples(v["F_s_N"], v["x_s_m"], n, synthesize(x, self.M))
+        beta = v.get("velocity_dependent_friction.beta", 0.0)
         if beta != 0.0:       # friction level rising with speed: F (1 + beta |v|)
-            F = F * (1.0 + beta * np.abs(synthesize(1j * Omega * x_true, self.M)))
-        return analyse(F, x_true.shape[1])
+            F = F * (1.0 + beta * np.abs(synthesize(1j * Om * x, self.M)))
+        return analyse(F, d.X.shape[1])
 
     def terms(self, theta: np.ndarray, d: Data, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(G, A_pred) for force harmonics ``P`` (the measured ones, or a trial)."""
         v = self.values(theta)
         Om = d.Omega
-        x = d.X
-        if "sensor_delay" in self.effects:
-            x = x * np.exp(1j * Om * v["sensor_delay.delay"])
-        if "sensor_gain_error" in self.effects:
-            x = x / (1.0 + v["sensor_gain_error.gain"])
-        beta = v.get("velocity_dependent_friction.beta", 0.0)
-        G = self._masing_friction(v["F_s_N"], v["x_s_m"], v["n"], x, Om, beta)
+        x = self._sensor(v, d.X, Om)
+        G = self._friction(v, d)
         if "viscous_damping" in self.effects:
             G = G + 1j * Om * v["viscous_damping.c"] * x
         if "linear_spring" in self.effects:

@@ -141,7 +141,7 @@ def select(base: Fit, d: Data, W: Weights, catalog: tuple[str, ...] = CATALOG, m
             model, th0 = current.model.extend(current.theta, e, init_effect(e, current, d, W))
             try:
                 f = fit(model, th0, d, W)
-            except (ValueError, np.linalg.LinAlgError) as exc:
+            except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
                 log.warning("candidate %s did not fit: %s", e, exc)
                 continue
             dbic = (f.chi2 - current.chi2) / phi + (f.model.size - current.model.size) * math.log(f.n_data)
