@@ -60,6 +60,7 @@ def test_analyze_names_the_cause_in_a_foreign_uff_file_and_writes_the_schema(ana
     err = lambda which: np.median([abs(complex(*s[which]["compliance"]) / complex(*s["measured"]["compliance"]) - 1)
                                    for s in d["steps"]])
     assert err("final") < err("base")
+    assert (out.parent / "analysis.html").stat().st_size > 0             # bench.reports renders the page
     assert hashlib.sha256(src.read_bytes()).hexdigest() == digest      # nothing the user gave is modified
 
 
