@@ -3,7 +3,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 DEBS := socat mbpoll chromium
 
-.PHONY: setup system-deps demo test bench paper
+.PHONY: setup system-deps demo test bench paper soak
 
 $(VENV)/.installed: pyproject.toml
 	python3 -m venv $(VENV)
@@ -42,3 +42,10 @@ bench: setup
 	$(PY) benchmarks/bench_drivers.py
 	$(PY) benchmarks/bench_procedure.py
 	$(PY) benchmarks/bench_analysis.py
+	$(PY) benchmarks/bench_identification.py
+
+# Soak test (by hand, not in `make test`): 2000 steps, ~3 h of rig time, twins hammered by
+# other clients; prints memory, open files, latencies. SOAK_PROFILE=short for a quick one.
+SOAK_PROFILE ?= full
+soak: setup
+	$(PY) benchmarks/soak.py --profile $(SOAK_PROFILE) --out out/soak

@@ -1,4 +1,11 @@
-"""Command line: `bench <command>`.  The application configures logging; libraries don't."""
+"""Command line: `bench <command>`.  The application configures logging; libraries don't.
+
+Exit codes (docs/reliability.md): 0 done; 1 runtime failure (an instrument error, a failed
+run, `bench check` found problems, an unexpected error); 2 usage or configuration error
+(a bad argument, file or value: the message names it); 3 stopped by a limit (a plan the
+rig's limits refuse, or a run aborted by the safety supervisor); 130 interrupted (Ctrl-C,
+SIGTERM).  Errors are one line on stderr; `--debug` adds the traceback.
+"""
 
 from __future__ import annotations
 
@@ -6,9 +13,18 @@ import argparse
 import logging
 import sys
 import time
+from enum import IntEnum
 from pathlib import Path
 
 log = logging.getLogger(__name__)
+
+
+class ExitCode(IntEnum):
+    OK = 0
+    FAILURE = 1          # runtime failure; `bench check` found problems
+    USAGE = 2            # bad argument, file or value
+    LIMIT = 3            # refused or aborted by a limit
+    INTERRUPTED = 130    # Ctrl-C or SIGTERM
 
 
 class Progress:
@@ -54,6 +70,8 @@ def cmd_frf(args) -> int:
     from sim.frf import find_peaks, frf_rk4
     from sim.shooting import frf_shooting
 
+    if args.points < 1:
+        raise ValueError(f"--points must be >= 1, got {args.points}")
     betas = np.linspace(args.beta_min, args.beta_max, args.points)
     prog = Progress(f"FRF gamma0={args.gamma0} n={args.n} ({args.engine})")
     if args.engine == "shooting":
@@ -89,7 +107,7 @@ def cmd_dry_run(args) -> int:
         runnable = check_envelope(plan, rig)
     except EnvelopeError as e:
         print(f"REFUSED: {str(e).splitlines()[0]}")
-        return 3
+        return ExitCode.LIMIT
     if runnable.skip:
         print(f"envelope: {len(runnable.schedule())} steps run, {len(steps) - len(runnable.schedule())} "
               f"skipped (infeasible = \"skip\")")
@@ -124,7 +142,7 @@ def _run(args, resume: bool) -> int:
     if meta["status"] == "completed" and not getattr(args, "no_report", False):
         from .reports import write_report
         print(f"report: {write_report(out)}")
-    return 0 if meta["status"] == "completed" else 4
+    return {"completed": ExitCode.OK, "aborted": ExitCode.LIMIT}.get(meta["status"], ExitCode.FAILURE)
 
 
 def _start_watch(run_dir: Path, args):
@@ -237,6 +255,8 @@ def cmd_identify(args) -> int:
     from .storage import RunStore
 
     source = Path(args.source)
+    if not source.exists():
+        raise FileNotFoundError(2, "no such file or directory (expected a run directory or a UFF58 file)", str(source))
     src = load_source(source)
     if src.kind == "run":
         rig = parse_rig({"rig": _rig_toml(src.metadata["rig"])}, f"{source}/run.json")
@@ -272,6 +292,26 @@ def cmd_analyze(args) -> int:
     return 0
 
 
+def cmd_check(args) -> int:
+    """Verify a run directory: every problem on one line, exit 1 if there is any."""
+    from .storage import RunStore
+
+    store = RunStore(Path(args.run))
+    if not store.path.is_dir():
+        RunStore.open(store.path)             # raises the one-line usage error
+    problems = store.check()
+    n = len(store._step_files())
+    for p in problems:
+        print(f"{p.kind:>9}  {p}")
+    good = n - len({p.key for p in problems if p.key and p.kind != "unknown" and
+                    (store.steps_dir / f"{p.key}.json").exists()})
+    print(f"{store.path}: {n} step result files, {good} intact; "
+          f"{len(problems)} problem{'s' if len(problems) != 1 else ''}"
+          + (f" (bench resume {store.path} measures damaged steps again, keeping their files in damaged/)"
+             if any(p.key and p.kind != "unknown" for p in problems) else ""))
+    return ExitCode.FAILURE if problems else ExitCode.OK
+
+
 def cmd_warmup(args) -> int:
     from .warmup import warm_up
     if not args.verbose:
@@ -293,9 +333,17 @@ def cmd_twins(args) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """Usage errors in one line, naming the command, the problem and where to look."""
+
+    def error(self, message):
+        self.exit(ExitCode.USAGE, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="bench", description=__doc__)
+    p = _Parser(prog="bench", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    p.add_argument("--debug", action="store_true", help="show the traceback of an error")
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("paper", help="redraw the seed paper's numerical figures (PNG + CSV)")
@@ -371,21 +419,73 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--points", type=int, default=200)
     s.add_argument("--engine", choices=("shooting", "rk4"), default="shooting")
     s.set_defaults(func=cmd_frf)
+
+    s = sub.add_parser("check", help="verify a run directory: list missing, truncated, damaged and unknown steps")
+    s.add_argument("run")
+    s.set_defaults(func=cmd_check)
+    return _with_debug(p)
+
+
+def _with_debug(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """``--debug`` after any subcommand too (every subcommand, whoever added it)."""
+    for action in p._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for s in action.choices.values():
+                if "--debug" not in s._option_string_actions:
+                    s.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                                   help="show the traceback of an error")
     return p
 
 
+def _is(e: BaseException, module: str, name: str) -> bool:
+    """isinstance without importing: a module that raised ``e`` is loaded already."""
+    cls = getattr(sys.modules.get(module), name, None)
+    return cls is not None and isinstance(e, cls)
+
+
+def _exit_code(e: BaseException) -> ExitCode:
+    if isinstance(e, KeyboardInterrupt):
+        return ExitCode.INTERRUPTED
+    if _is(e, "procedures.safety", "LimitExceeded") or _is(e, "bench.session", "EnvelopeError"):
+        return ExitCode.LIMIT
+    if _is(e, "drivers._errors", "InstrumentError"):
+        return ExitCode.FAILURE
+    if isinstance(e, (ValueError, FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError,
+                      PermissionError, UnicodeDecodeError)):
+        return ExitCode.USAGE
+    return ExitCode.FAILURE
+
+
+def _one_line(e: BaseException) -> str:
+    if isinstance(e, KeyboardInterrupt):
+        return f"interrupted{f' ({e})' if str(e) else ''}"
+    if isinstance(e, OSError) and e.strerror:
+        where = " -> ".join(str(f) for f in (e.filename, e.filename2) if f is not None)
+        return f"{where}: {e.strerror}" if where else e.strerror
+    text = str(e).strip().splitlines()
+    first = text[0] if text else ""
+    if _exit_code(e) in (ExitCode.USAGE, ExitCode.LIMIT) and first:
+        return first
+    return f"{type(e).__name__}: {first}" if first else type(e).__name__
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as e:               # usage error or --help: argparse has printed it
+        return int(e.code or 0)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
-        return args.func(args)
-    except ValueError as e:  # bad input: say what is wrong, no traceback
-        log.error("%s", e)
-        return 2
-    except KeyboardInterrupt:
-        log.error("interrupted")
-        return 130
+        return int(args.func(args))
+    except (Exception, KeyboardInterrupt) as e:   # one line, a documented code; --debug: traceback
+        code = _exit_code(e)
+        if args.debug:
+            log.exception("bench %s failed", args.command)
+        print(f"bench {args.command}: {'error: ' if code != ExitCode.INTERRUPTED else ''}{_one_line(e)}"
+              + ("" if args.debug or code == ExitCode.INTERRUPTED else " (--debug shows the traceback)"),
+              file=sys.stderr)
+        return code
 
 
 if __name__ == "__main__":

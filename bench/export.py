@@ -131,8 +131,7 @@ def frf_datasets(meta: dict, results: list[dict]) -> list[dict]:
 def time_datasets(store: RunStore, meta: dict, results: list[dict]) -> list[dict]:
     """Force, acceleration and displacement of each step's measured block."""
     out = []
-    for case, r in enumerate(results, start=1):
-        raw = store.raw(r["key"])
+    for case, (r, raw) in enumerate(store.with_raw(results), start=1):
         fs = float(raw["fs_Hz"])
         t0 = float(raw["t0_s"])
         for ch, (sdt, unit, rk) in CHANNELS.items():
@@ -239,6 +238,22 @@ def step_from_signals(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float,
                 fs_Hz=float(fs_Hz), n_samples=int(np.size(force_N)), **summary)
 
 
+def _time_step(tags: dict, chans: dict) -> tuple[float, dict, float, dict]:
+    """Sample rate, signals, frequency and step result of one step's three records."""
+    f0 = chans["force"]
+    x = np.asarray(f0["x"], float)
+    fs = float(tags["fs"]) if "fs" in tags else 1.0 / float(f0.get("abscissa_inc") or (x[1] - x[0]))
+    sig = {ch: np.asarray(chans[ch]["data"], float) for ch in CHANNELS}
+    if not (math.isfinite(fs) and fs > 0) or len({v.size for v in sig.values()}) != 1 or sig["force"].size < 8 \
+            or not all(np.all(np.isfinite(v)) for v in sig.values()):
+        raise ValueError(f"sample rate {fs!r} Hz, lengths {[v.size for v in sig.values()]}, or non-finite samples")
+    freq = float(tags["f"]) if "f" in tags else _estimate_freq(sig["force"], fs)
+    if not (math.isfinite(freq) and 0 < freq < fs / 2):
+        raise ValueError(f"frequency {freq!r} Hz not within (0, fs/2)")
+    step = step_from_signals(sig["force"], sig["accel"], sig["disp"], fs, freq, int(tags.get("harmonics", 5)))
+    return fs, sig, freq, step
+
+
 def _time_steps(records: list[dict]) -> UffImport:
     """Group time records into steps (by our step tag, else consecutive force/accel/disp)."""
     by_sdt = {v[0]: k for k, v in CHANNELS.items()}
@@ -260,12 +275,11 @@ def _time_steps(records: list[dict]) -> UffImport:
         if missing:
             log.warning("time records %s: missing channel(s) %s; skipped", tags.get("step", n), sorted(missing))
             continue
-        f0 = chans["force"]
-        x = np.asarray(f0["x"], float)
-        fs = float(tags["fs"]) if "fs" in tags else 1.0 / float(f0.get("abscissa_inc") or (x[1] - x[0]))
-        sig = {ch: np.asarray(chans[ch]["data"], float) for ch in CHANNELS}
-        freq = float(tags["f"]) if "f" in tags else _estimate_freq(sig["force"], fs)
-        step = step_from_signals(sig["force"], sig["accel"], sig["disp"], fs, freq, int(tags.get("harmonics", 5)))
+        try:
+            fs, sig, freq, step = _time_step(tags, chans)
+        except (KeyError, ValueError, TypeError, IndexError, ZeroDivisionError, np.linalg.LinAlgError) as e:
+            log.warning("time records %s: unusable (%s: %s); skipped", tags.get("step", n), type(e).__name__, e)
+            continue
         key = tags.get("step", f"uff-{n:05d}")
         km = re.match(r"(\d+)-L(\d+)-F(\d+)-(\w+)$", key)
         level = float(tags["level"]) if "level" in tags else step["force_N"]
@@ -284,18 +298,32 @@ def import_uff58(path: Path) -> UffImport:
     """Read FRFs (function type 4) and time records (type 1) of dataset 58 from ``path``."""
     import pyuff
 
-    uff = pyuff.UFF(str(path))
-    types = list(uff.get_set_types())
+    try:
+        uff = pyuff.UFF(str(path))
+        types = list(uff.get_set_types())
+    except Exception as e:  # noqa: BLE001 - pyuff raises bare Exception and others
+        raise ValueError(f"{path}: not a readable UFF file ({type(e).__name__}: {e})") from None
     idx = [i for i, t in enumerate(types) if int(t) == 58]
     if not idx:
         raise ValueError(f"{path}: no dataset 58 in the file (types: {sorted(set(int(t) for t in types))})")
-    sets = uff.read_sets(idx)
-    sets = [sets] if isinstance(sets, dict) else sets
+    sets = []
+    for i in idx:                     # one at a time: a damaged record costs only itself
+        try:
+            ds = uff.read_sets(i)
+            int(ds["func_type"])
+            sets.append(ds)
+        except Exception as e:  # noqa: BLE001
+            log.warning("%s: dataset #%d unreadable (%s: %s); skipped", path, i + 1, type(e).__name__, e)
+    if not sets:
+        raise ValueError(f"{path}: none of the {len(idx)} dataset-58 records is readable")
     out = UffImport()
     frfs = [d for d in sets if int(d["func_type"]) == FUNC_FRF]
     times = [d for d in sets if int(d["func_type"]) == FUNC_TIME]
     for n, ds in enumerate(frfs):
-        out.steps.extend(_frf_steps(ds, n))
+        try:
+            out.steps.extend(_frf_steps(ds, n))
+        except (KeyError, ValueError, TypeError, IndexError) as e:
+            log.warning("%s: FRF record %d unusable (%s: %s); skipped", path, n + 1, type(e).__name__, e)
     t = _time_steps(times)
     out.steps.extend(t.steps)
     out.raw.update(t.raw)

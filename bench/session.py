@@ -226,6 +226,7 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
     limits = tightest(rig.limits, plan.limits)
     if resume:
         store = RunStore.open(out)
+        store.set_aside_damaged()        # damaged steps are measured again, their files kept
         store.event("resume", done=len(store.done_keys()))
         store.update(status="running")
     else:

@@ -107,8 +107,13 @@ def measured_step(key: str, force, accel, disp, fs_Hz: float, freq_Hz: float | N
 
 def _load_run(path: Path) -> Source:
     store = RunStore.open(path)
-    src = Source(path=path, kind="run", metadata=store.metadata)
-    for r in store.results():
+    try:
+        src = Source(path=path, kind="run", metadata=store.metadata)
+        results = store.results()
+    except (OSError, ValueError) as e:         # json.JSONDecodeError is a ValueError
+        raise ValueError(f"{path}: cannot read the run's metadata or step results: {e}") from e
+    src.rejected += [Rejected(p.key or p.path.name, f"damaged: {p}") for p in store.problems]
+    for r in results:
         key = str(r.get("key", "?"))
         try:
             raw = store.raw(key)

@@ -9,14 +9,27 @@
 A step counts as done when its .json exists; the .npz is written first, so a .json never
 points at a missing block.  A kill -9 at any moment leaves every completed step readable;
 a torn last line of events.jsonl is skipped on reading.
+
+Damage from outside (a full disk, an interrupted copy, a flipped bit, a file deleted by
+hand) is found by checksums: each step's .json carries ``integrity`` = the SHA-256 of its
+own content (canonical JSON of everything else in it) and the SHA-256 and size of its
+.npz.  Every reader goes through :meth:`RunStore.results` / :meth:`RunStore.raw`, which
+skip a damaged or half-missing step with a warning naming the file and why, and carry on;
+:meth:`RunStore.check` lists every problem; :meth:`RunStore.set_aside_damaged` moves a
+damaged step's files to ``<run>/damaged/<time>/`` (never deleting) so that resume measures
+it again.  Steps written before checksums existed are read with the structural checks only.
 """
 
 from __future__ import annotations
 
+import hashlib
+import io
 import json
 import logging
 import os
 import tempfile
+import zipfile
+from dataclasses import dataclass, fields
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -69,10 +82,50 @@ def write_json(path: Path, obj) -> None:
     _atomic_write(path, lambda fh: fh.write(data))
 
 
+def _sha256(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def _canonical(obj) -> bytes:
+    """The bytes a step's ``json_sha256`` covers: key order and spacing do not matter
+    (Python's float repr survives a JSON round trip exactly)."""
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=_json_default).encode()
+
+
+class RunDirError(ValueError):
+    """The directory is not a readable run directory (missing, or run.json damaged)."""
+
+
+class DamagedStep(ValueError):
+    """A completed step's files are missing, truncated or fail their checksum."""
+
+    def __init__(self, problem: "StepProblem"):
+        super().__init__(str(problem))
+        self.problem = problem
+
+
+@dataclass(frozen=True)
+class StepProblem:
+    """One problem of a run directory, found by :meth:`RunStore.check` or a reader."""
+
+    key: str          # the step key ("" for a file that is not a step)
+    path: Path        # the file concerned
+    kind: str         # one of PROBLEM_KINDS
+    reason: str       # plain language
+
+    def __str__(self) -> str:
+        return f"{self.path}: {self.reason}"
+
+
+PROBLEM_KINDS = ("missing", "truncated", "corrupt", "checksum", "unknown")
+
+
 class RunStore:
     def __init__(self, path: Path):
         self.path = Path(path)
         self.steps_dir = self.path / "steps"
+        self.problems: list[StepProblem] = []     # damaged steps met by the last results()
+        self._npz_ok: dict[str, tuple] = {}        # key -> stamp of a block already verified
 
     # ------------------------------------------------------------------ life cycle
     @classmethod
@@ -90,13 +143,27 @@ class RunStore:
     @classmethod
     def open(cls, path: Path) -> "RunStore":
         store = cls(path)
+        if not store.path.exists():
+            raise RunDirError(f"{path}: no such directory (expected a run directory made by 'bench run')")
         if not (store.path / "run.json").is_file():
-            raise FileNotFoundError(f"{path} is not a run directory (no run.json)")
+            raise RunDirError(f"{path}: not a run directory (no run.json; expected a directory made by 'bench run')")
+        store.metadata   # noqa: B018 - a damaged run.json is named now, not deep inside a reader
         return store
 
     @property
     def metadata(self) -> dict:
-        return json.loads((self.path / "run.json").read_text())
+        p = self.path / "run.json"
+        try:
+            meta = json.loads(p.read_bytes())
+        except FileNotFoundError:
+            raise RunDirError(f"{p}: missing (not a run directory?)") from None
+        except json.JSONDecodeError as e:
+            raise RunDirError(f"{p}: damaged ({_json_reason(e)})") from None
+        except UnicodeDecodeError:
+            raise RunDirError(f"{p}: damaged (not text)") from None
+        if not isinstance(meta, dict):
+            raise RunDirError(f"{p}: damaged (a JSON object was expected, found {type(meta).__name__})")
+        return meta
 
     def update(self, **fields) -> None:
         write_json(self.path / "run.json", dict(self.metadata, **fields))
@@ -118,25 +185,215 @@ class RunStore:
         p = self.path / "events.jsonl"
         if not p.exists():
             return out
-        for line in p.read_text().splitlines():
+        for n, line in enumerate(p.read_bytes().decode(errors="replace").splitlines(), 1):
             try:
-                out.append(json.loads(line))
+                e = json.loads(line)
             except json.JSONDecodeError:
-                log.warning("skipping a torn line in %s", p)
+                log.warning("%s: line %d damaged (torn or not JSON); skipped", p, n)
+                continue
+            if isinstance(e, dict):
+                out.append(e)
+            else:
+                log.warning("%s: line %d is not an event object; skipped", p, n)
         return out
 
-    # ------------------------------------------------------------------ steps
-    def done_keys(self) -> set[str]:
-        return {p.stem for p in self.steps_dir.glob("*.json")}
-
+    # ------------------------------------------------------------------ steps: writing
     def write_step(self, key: str, result: dict, raw: dict[str, np.ndarray]) -> None:
-        _atomic_write(self.steps_dir / f"{key}.npz", lambda fh: np.savez(fh, **raw))
-        write_json(self.steps_dir / f"{key}.json", result)
+        buf = io.BytesIO()
+        np.savez(buf, **raw)
+        npz = buf.getvalue()
+        _atomic_write(self.steps_dir / f"{key}.npz", lambda fh: fh.write(npz))
+        plain = json.loads(json.dumps(result, default=_json_default))    # what a reader will see
+        plain.pop("integrity", None)
+        plain["integrity"] = {"json_sha256": _sha256(_canonical(plain)), "npz_sha256": _sha256(npz),
+                              "npz_bytes": len(npz)}
+        write_json(self.steps_dir / f"{key}.json", plain)
+        st = (self.steps_dir / f"{key}.npz").stat()
+        self._npz_ok[key] = (st.st_mtime_ns, st.st_size, plain["integrity"]["npz_sha256"])   # just written
 
-    def results(self) -> list[dict]:
-        """Completed steps' results, in schedule order."""
-        return [json.loads(p.read_text()) for p in sorted(self.steps_dir.glob("*.json"))]
+    # ------------------------------------------------------------------ steps: reading
+    def _step_files(self) -> list[Path]:
+        return sorted(self.steps_dir.glob("*.json")) if self.steps_dir.is_dir() else []
+
+    def verify_step(self, key: str) -> dict:
+        """The step's result after checking both its files (JSON content, the .npz's size
+        and checksum); raises :class:`DamagedStep` naming the file and why."""
+        jp, zp = self.steps_dir / f"{key}.json", self.steps_dir / f"{key}.npz"
+        result, integrity = _read_step_json(jp, key)
+        try:
+            stamp = (zp.stat().st_mtime_ns, zp.stat().st_size, (integrity or {}).get("npz_sha256"))
+        except FileNotFoundError:
+            stamp = None
+        if stamp is None or self._npz_ok.get(key) != stamp:   # hash each block once per store
+            _check_npz(zp, key, integrity)
+            self._npz_ok[key] = stamp
+        return result
+
+    def done_keys(self) -> set[str]:
+        """Keys of the completed steps whose files are intact (a damaged step is not done)."""
+        return {r["key"] for r in self.results(warn=False)}
+
+    def results(self, *, warn: bool = True) -> list[dict]:
+        """Completed steps' results, in schedule order; a damaged or half-missing step is
+        skipped with a warning naming the file and why (and listed in ``self.problems``)."""
+        out, self.problems = [], []
+        for p in self._step_files():
+            try:
+                out.append(self.verify_step(p.stem))
+            except DamagedStep as e:
+                self.problems.append(e.problem)
+                if warn:
+                    log.warning("skipping step %s: %s", p.stem, e)
+        return out
 
     def raw(self, key: str) -> dict[str, np.ndarray]:
-        with np.load(self.steps_dir / f"{key}.npz") as z:
-            return {k: z[k] for k in z.files}
+        """The step's raw block; raises :class:`DamagedStep` if its files are damaged."""
+        self.verify_step(key)
+        zp = self.steps_dir / f"{key}.npz"
+        try:
+            with np.load(zp) as z:
+                return {k: z[k] for k in z.files}
+        except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as e:
+            raise DamagedStep(StepProblem(key, zp, "corrupt", f"unreadable ({type(e).__name__}: {e})")) from None
+
+    def with_raw(self, results: list[dict]):
+        """(result, raw block) of each given step whose block reads; damaged ones are
+        skipped with a warning naming the file."""
+        for r in results:
+            try:
+                yield r, self.raw(r["key"])
+            except DamagedStep as e:
+                log.warning("skipping step %s: %s", r["key"], e)
+
+    # ------------------------------------------------------------------ checking and repair
+    def check(self) -> list[StepProblem]:
+        """Every problem of the run directory: damaged run.json or steps (missing, truncated,
+        corrupt, checksum mismatch) and step files the plan does not know."""
+        problems: list[StepProblem] = []
+        try:
+            meta = self.metadata
+        except RunDirError as e:
+            problems.append(StepProblem("", self.path / "run.json", "corrupt", str(e).split(": ", 1)[-1]))
+            meta = None
+        known = planned_keys(meta) if meta else None
+        if not self.steps_dir.is_dir():
+            problems.append(StepProblem("", self.steps_dir, "missing", "no steps/ directory"))
+            return problems
+        jsons = {p.stem for p in self._step_files()}
+        for key in sorted(jsons):
+            try:
+                self.verify_step(key)
+                raw = self.raw(key)
+                if not {"force_N", "accel_m_s2", "disp_m"} <= set(raw):
+                    problems.append(StepProblem(key, self.steps_dir / f"{key}.npz", "corrupt",
+                                                f"raw block lacks {sorted({'force_N', 'accel_m_s2', 'disp_m'} - set(raw))}"))
+            except DamagedStep as e:
+                problems.append(e.problem)
+            if known is not None and key not in known:
+                problems.append(StepProblem(key, self.steps_dir / f"{key}.json", "unknown",
+                                            "a step the run's plan does not know"))
+        for p in sorted(self.steps_dir.iterdir()):
+            if p.name.startswith(".") and p.name.endswith(".tmp"):
+                continue       # a write cut short by a kill: harmless, replaced on resume
+            if p.suffix == ".npz" and p.stem in jsons:
+                continue
+            if p.suffix == ".json":
+                continue
+            if p.suffix == ".npz":
+                if known is not None and p.stem not in known:
+                    problems.append(StepProblem(p.stem, p, "unknown", "a step the run's plan does not know"))
+                # else: a block whose result was never written (kill -9): resume measures it
+                continue
+            problems.append(StepProblem("", p, "unknown", "not a step file"))
+        return problems
+
+    def set_aside_damaged(self) -> list[StepProblem]:
+        """Move the files of every damaged step to ``<run>/damaged/<time>/`` (so that resume
+        measures those steps again) and record it; returns the problems found."""
+        damaged = [pr for pr in self.check() if pr.key and pr.kind != "unknown"]
+        if not damaged:
+            return []
+        dest = self.path / "damaged" / now_iso().replace(":", "-")
+        dest.mkdir(parents=True, exist_ok=True)
+        for pr in damaged:
+            for p in (self.steps_dir / f"{pr.key}.json", self.steps_dir / f"{pr.key}.npz"):
+                if p.exists():
+                    os.replace(p, dest / p.name)
+            self._npz_ok.pop(pr.key, None)
+            log.warning("step %s damaged (%s): files moved to %s; it will be measured again", pr.key, pr, dest)
+            self.event("damaged_step", step=pr.key, problem=pr.kind, reason=str(pr), moved_to=str(dest))
+        _fsync_dir(self.steps_dir)
+        return damaged
+
+
+def _json_reason(e: json.JSONDecodeError) -> str:
+    cut = "truncated: " if e.pos >= len(e.doc.rstrip()) - 1 or e.msg.startswith("Unterminated") else ""
+    return f"{cut}not valid JSON ({e.msg} at line {e.lineno} column {e.colno}, file of {len(e.doc)} characters)"
+
+
+def _read_step_json(path: Path, key: str) -> tuple[dict, dict | None]:
+    def bad(kind, reason):
+        return DamagedStep(StepProblem(key, path, kind, reason))
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise bad("missing", "missing (the step's result file)") from None
+    except OSError as e:
+        raise bad("corrupt", f"unreadable ({e.strerror})") from None
+    if not data.strip():
+        raise bad("truncated", "empty (truncated to 0 bytes)")
+    try:
+        obj = json.loads(data.decode())
+    except UnicodeDecodeError as e:
+        raise bad("corrupt", f"not text (byte {e.start} is not UTF-8)") from None
+    except json.JSONDecodeError as e:
+        reason = _json_reason(e)
+        raise bad("truncated" if reason.startswith("truncated") else "corrupt", reason) from None
+    except RecursionError:
+        raise bad("corrupt", "not a step result (nested too deeply)") from None
+    if not isinstance(obj, dict):
+        raise bad("corrupt", f"not a step result (a JSON object was expected, found {type(obj).__name__})")
+    integrity = obj.pop("integrity", None)
+    if integrity is not None:
+        want = integrity.get("json_sha256") if isinstance(integrity, dict) else None
+        if want != _sha256(_canonical(obj)):
+            raise bad("checksum", "checksum mismatch: the content differs from what was written")
+    if obj.get("key") != key:
+        raise bad("corrupt", f"the result inside is for step {obj.get('key')!r}, not {key!r}")
+    return obj, integrity
+
+
+def _check_npz(path: Path, key: str, integrity: dict | None) -> None:
+    def bad(kind, reason):
+        return DamagedStep(StepProblem(key, path, kind, reason))
+    try:
+        size = path.stat().st_size
+    except FileNotFoundError:
+        raise bad("missing", "missing (the step's raw block; its result file is there)") from None
+    if integrity is None:                       # a step written before checksums existed
+        if not zipfile.is_zipfile(path):
+            raise bad("corrupt", "not a readable .npz (truncated or overwritten?)")
+        return
+    want_bytes = integrity.get("npz_bytes")
+    if isinstance(want_bytes, int) and size != want_bytes:
+        kind = "truncated" if size < want_bytes else "corrupt"
+        raise bad(kind, f"{'truncated: ' if size < want_bytes else ''}{size} bytes, {want_bytes} were written")
+    if _sha256(path.read_bytes()) != integrity.get("npz_sha256"):
+        raise bad("checksum", "checksum mismatch: the raw block differs from what was written")
+
+
+def planned_keys(meta: dict | None) -> set[str] | None:
+    """Keys of every step of the run's stored plan (None if the plan cannot be rebuilt)."""
+    from procedures.plan import Plan
+
+    p = (meta or {}).get("plan")
+    if not isinstance(p, dict):
+        return None
+    try:
+        kw = {f.name: p[f.name] for f in fields(Plan) if f.name in p}
+        kw.update(levels_N=tuple(p["levels_N"]), freqs_Hz=tuple(p["freqs_Hz"]),
+                  skip=tuple(tuple(s) for s in p.get("skip") or ()))
+        return {s.key for s in Plan(**kw).schedule()}
+    except Exception as e:  # noqa: BLE001 - a damaged plan entry: then keys cannot be judged
+        log.warning("run.json: the stored plan cannot be rebuilt (%s); step keys not checked", e)
+        return None

@@ -104,11 +104,18 @@ class CanFdDaq:
             msg = self._recv(deadline, f"status after command {command}")
             if msg.arbitration_id != codec.ID_STATUS:
                 continue
-            status = codec.decode(codec.ID_STATUS, bytes(msg.data))
+            status = self._decode_status(msg)
             if int(status["LastCommand"]) != command:
                 continue
             self._raise_on_error(status, command)
             return status
+
+    @staticmethod
+    def _decode_status(msg: can.Message) -> dict:
+        try:
+            return codec.decode(codec.ID_STATUS, bytes(msg.data))
+        except Exception as exc:  # noqa: BLE001 - cantools raises several types
+            raise FrameError(f"DAQ: unreadable status frame ({len(msg.data)} bytes): {exc}") from exc
 
     @staticmethod
     def _raise_on_error(status: dict, command: int) -> None:
@@ -245,7 +252,7 @@ class CanFdDaq:
                     raise err from exc
                 return header, frames, end
             elif fid == codec.ID_STATUS:
-                status = codec.decode(codec.ID_STATUS, bytes(msg.data))
+                status = self._decode_status(msg)
                 self._raise_on_error(status, int(status["LastCommand"]))
                 if header is None and int(status["State"]) == codec.State.ACQUIRING:
                     deadline = min(max(deadline, time.monotonic() + self.timeout_s), busy_limit)

@@ -2,8 +2,9 @@
 
 Method:
 - Frequency (when not given): peak of the Hann-windowed spectrum of the force, refined by
-  Gaussian interpolation of the three bins around it and then by a few Gauss-Newton
-  iterations of a least-squares sine fit (frequency, amplitude, phase, offset).
+  Gaussian interpolation of the three bins around it and then by Gauss-Newton iterations
+  of a least-squares fit of the frequency, an offset and five harmonics (a distorted
+  drive does not bias it), on each channel; the three are combined by inverse variance.
 - The analysis window is the largest integer number of periods P in the record.  When
   the sample rate is an integer multiple of the frequency (our DAQ), the P periods are
   averaged sample by sample: the mean period holds every harmonic up to Nyquist and the
@@ -36,6 +37,7 @@ log = logging.getLogger(__name__)
 CHANNELS = ("force", "accel", "disp")
 MAX_HARMONICS = 200
 DRIFT_HARMONICS = 3
+FREQ_HARMONICS = 5       # harmonics in the model that refines the frequency
 
 
 @dataclass(frozen=True)
@@ -58,9 +60,8 @@ class PeriodicRecords:
     drift_detail: str       # which channel and harmonic gave it
 
 
-def estimate_frequency(x: np.ndarray, fs_Hz: float) -> float:
-    """Frequency of the dominant sine in ``x`` (Hz): interpolated FFT peak, refined by least squares."""
-    x = np.asarray(x, float)
+def _coarse_frequency(x: np.ndarray, fs_Hz: float) -> float:
+    """Peak of the Hann-windowed spectrum, Gaussian-interpolated between bins."""
     n = x.size
     if n < 16:
         raise ValueError(f"record too short to estimate a frequency ({n} samples)")
@@ -69,22 +70,69 @@ def estimate_frequency(x: np.ndarray, fs_Hz: float) -> float:
     a, b, c = np.log(spec[k - 1:k + 2] + 1e-300)
     den = a - 2 * b + c
     delta = 0.5 * (a - c) / den if den < 0 else 0.0
-    f = (k + float(np.clip(delta, -0.5, 0.5))) * fs_Hz / n
+    return (k + float(np.clip(delta, -0.5, 0.5))) * fs_Hz / n
+
+
+def refine_frequency(x: np.ndarray, fs_Hz: float, f: float) -> tuple[float, float]:
+    """Gauss-Newton on x = o + sum_k s_k sin(kwt) + q_k cos(kwt) (variable projection, a
+    few harmonics, so a distorted signal does not bias it).  Returns (frequency, its variance)."""
+    x = np.asarray(x, float)
+    n = x.size
     t = np.arange(n) / fs_Hz
-    for _ in range(6):   # Gauss-Newton on x = s sin(wt) + q cos(wt) + o
+    K = int(max(1, min(FREQ_HARMONICS, math.floor(0.45 * fs_Hz / f))))
+    k = np.arange(1, K + 1)
+    var = math.inf
+    for _ in range(20):
         w = 2 * np.pi * f
-        S, C = np.sin(w * t), np.cos(w * t)
-        coef, *_ = np.linalg.lstsq(np.column_stack([S, C, np.ones(n)]), x, rcond=None)
-        s, q, o = coef
-        d = t * (s * C - q * S)                     # d model / d w
-        r = x - (s * S + q * C + o)
-        dw = float(d @ r / (d @ d))
+        S, C = np.sin(w * np.outer(t, k)), np.cos(w * np.outer(t, k))
+        A = np.column_stack([S, C, np.ones(n)])
+        coef, *_ = np.linalg.lstsq(A, x, rcond=None)
+        s, q = coef[:K], coef[K:2 * K]
+        d = t * ((C * k) @ s - (S * k) @ q)             # d model / d w
+        d -= A @ np.linalg.lstsq(A, d, rcond=None)[0]   # the part the amplitudes cannot absorb
+        r = x - A @ coef
+        dd = float(d @ d)
+        if not dd > 0:
+            break
+        dw = float(d @ r / dd)
+        var = float(r @ r) / max(1, n - A.shape[1] - 1) / dd / (2 * np.pi) ** 2
         f += dw / (2 * np.pi)
         if abs(dw) < 1e-12 * w:
             break
+    return float(f), var
+
+
+def estimate_frequency(x: np.ndarray, fs_Hz: float, *others: np.ndarray) -> float:
+    """Frequency of the dominant periodic signal in ``x`` (Hz): interpolated FFT peak,
+    refined by least squares on ``x`` and on the ``others`` (records of the same step),
+    combined by inverse variance (the channel with the best signal-to-noise ratio, often
+    the accelerometer at small force, then sets it)."""
+    x = np.asarray(x, float)
+    f0 = _coarse_frequency(x, fs_Hz)
+    est = [refine_frequency(y, fs_Hz, f0) for y in (x, *others)]
+    est = [(f, v) for f, v in est if math.isfinite(f) and f > 0 and v > 0 and abs(f / f0 - 1) < 0.01]
+    if not est:
+        f, v = refine_frequency(x, fs_Hz, f0)
+        est = [(f, v if v > 0 else 1.0)]
+    wsum = sum(1 / v for _, v in est)
+    f = sum(f / v for f, v in est) / wsum
     if not (f > 0 and math.isfinite(f)):
         raise ValueError("no dominant frequency found in the record")
     return float(f)
+
+
+def _solve_near_diagonal(G: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Solve G c = rhs for a Gram matrix of nearly orthogonal columns (whole periods up to
+    a fraction of a sample: off-diagonal terms below one, diagonal about N/2): Jacobi
+    iterations, a dense solve if they do not settle."""
+    diag = np.diag(G).copy()
+    c = rhs / diag
+    for _ in range(200):
+        step = (rhs - G @ c) / diag
+        c += step
+        if np.max(np.abs(step)) <= 1e-14 * max(np.max(np.abs(c)), 1e-300):
+            return c
+    return np.linalg.solve(G, rhs)
 
 
 def _lsq_harmonics(x: np.ndarray, fs: float, f: float, K: int):
@@ -106,7 +154,7 @@ def _lsq_harmonics(x: np.ndarray, fs: float, f: float, K: int):
     G = np.block([[cc, cs[:, 1:]], [cs[:, 1:].T, ss[1:, 1:]]])
     Z = czt(x, m=K + 1, w=np.exp(-1j * step), a=1.0)
     rhs = np.concatenate([Z.real, -Z.imag[1:]])
-    coef = np.linalg.solve(G, rhs)
+    coef = _solve_near_diagonal(G, rhs)
     a_cos, b_sin = coef[:K + 1], coef[K + 1:]
     resid2 = max(float(x @ x - coef @ rhs), 0.0)
     rms = math.sqrt(resid2 / max(1, N - coef.size))
@@ -147,7 +195,8 @@ def analyse_records(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | 
             raise ValueError(f"{k} record contains NaN or inf" if v.ndim == 1 else f"{k} record is not 1-D")
     if not (fs_Hz > 0 and math.isfinite(fs_Hz)):
         raise ValueError(f"sample rate must be finite and > 0, got {fs_Hz!r}")
-    f = estimate_frequency(sig["force"], fs_Hz) if freq_Hz is None else float(freq_Hz)
+    f = (estimate_frequency(sig["force"], fs_Hz, sig["accel"], sig["disp"]) if freq_Hz is None
+         else float(freq_Hz))
     n = sizes["force"]
     ratio = fs_Hz / f
     periods = int(math.floor(n / ratio + 1e-9))
@@ -170,7 +219,10 @@ def analyse_records(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | 
         s_h = chans[k].noise_rms * math.sqrt(2.0 / n_half) * math.sqrt(2.0)
         if not s_h > 0:
             continue
-        dh = np.abs(a.harmonics[:DRIFT_HARMONICS] - b.harmonics[:DRIFT_HARMONICS]) / s_h
+        # the second half's time origin is n_half samples later: refer it back to the first's
+        kk = np.arange(1, b.harmonics[:DRIFT_HARMONICS].size + 1)
+        hb = b.harmonics[:DRIFT_HARMONICS] * np.exp(-2j * np.pi * kk * f * n_half / fs_Hz)
+        dh = np.abs(a.harmonics[:DRIFT_HARMONICS] - hb) / s_h
         do = abs(a.offset - b.offset) / (s_h / math.sqrt(2.0))
         for name, z in [(f"harmonic {i + 1}", float(v_)) for i, v_ in enumerate(dh)] + [("offset", do)]:
             if z > drift:

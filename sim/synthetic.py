@@ -59,6 +59,17 @@ def issue_grid(model: RigModel, levels: int = 5, freqs: int = 18) -> tuple[np.nd
     return np.linspace(0.1, 0.85, levels) * model.F_s_N, np.geomspace(0.3 * f_s, 3.0 * f_s, freqs)
 
 
+def random_rig(seed: int, n_range: tuple[float, float]) -> dict:
+    """Parameters of a generated rig (seeded): F_s 2-40 N, x_s 2-100 um (log-uniform),
+    m 2-40 kg, n uniform in ``n_range`` (kept 0.1 away from 1)."""
+    rng = np.random.default_rng(seed)
+    n = rng.uniform(*n_range)
+    while abs(n - 1) < 0.1:
+        n = rng.uniform(*n_range)
+    return dict(F_s_N=float(rng.uniform(2, 40)), x_s_m=float(math.exp(rng.uniform(math.log(2e-6), math.log(100e-6)))),
+                n=float(n), mass_kg=float(rng.uniform(2, 40)))
+
+
 def clean_model(F_s_N: float, x_s_m: float, n: float, mass_kg: float, seed: int = 0, **effects) -> RigModel:
     """A rig model with the given parameters, no sensor noise (added by :func:`generate`)."""
     return RigModel(F_s_N=F_s_N, x_s_m=x_s_m, n=n, mass_kg=mass_kg, force_noise_N=0.0,

@@ -1,0 +1,161 @@
+"""An independent simulator of the rig, for test data the package did not make.
+
+Written from ../shared/notes/physics.md alone (it shares no code with sim/): the virgin
+curve F_s (u^n - n u)/(1 - n) for u = x/x_s <= 1 and F_s beyond; Masing branches
+F_r + 2 f((x - x_r)/2) after a reversal at (x_r, F_r); a branch that reaches the start of
+the previous branch closes that inner loop (both reversal points dropped), the first
+branch after virgin loading rejoins the virgin curve at the mirror point -x_r.  The motion
+m x'' = P sin(w t) - F(x) is integrated by scipy's DOP853 with tight tolerances, stopping
+at every reversal (velocity zero) and every loop closure (terminal events) to update the
+reversal stack.  Steps are swept upwards per force level from a virgin carriage; records
+are sampled at a fixed rate that is not a multiple of the frequency, as other software
+writes them, and exported as UFF58 with pyuff (function type 1, one load case per step,
+ordinate data types 13/12/8, no tags).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+
+class MasingCarriage:
+    """Dimensionless state: u = x/x_s, time t' = omega_s t, force in units of F_s."""
+
+    def __init__(self, n: float):
+        self.n = n
+        self.stack: list[tuple[float, float]] = []     # (u_r, F_r), oldest first
+        self.d = 0.0                                    # direction of motion
+
+    def virgin(self, u: float) -> float:
+        a = abs(u)
+        g = 1.0 if a >= 1.0 else (a ** self.n - self.n * a) / (1.0 - self.n)
+        return math.copysign(g, u)
+
+    def force(self, u: float) -> float:
+        if not self.stack:
+            return self.virgin(u)
+        u_r, F_r = self.stack[-1]
+        return F_r + 2.0 * self.virgin((u - u_r) / 2.0)
+
+    def closure(self) -> float | None:
+        """Where the present branch ends (u), or None on the virgin curve."""
+        if len(self.stack) >= 2:
+            return self.stack[-2][0]
+        if len(self.stack) == 1:
+            return -self.stack[0][0]
+        return None
+
+
+def simulate_level(n: float, gamma0: float, betas, periods_settle: int, periods_measure: int,
+                   samples_per_unit_time: float, rtol: float = 1e-10):
+    """Up-sweep through frequency ratios ``betas`` at force gamma0 (dimensionless).
+    Yields per step (t', u, u'', force) sampled over the measured periods at a fixed rate."""
+    car = MasingCarriage(n)
+    y = np.array([0.0, 0.0])
+    t = 0.0
+    phase = 0.0
+    for beta in betas:
+        T = 2 * math.pi / beta
+        t_start = t
+        ph0 = phase
+
+        def rhs(tt, yy):
+            P = gamma0 * math.sin(beta * (tt - t_start) + ph0)
+            return [yy[1], P - car.force(yy[0])]
+
+        def ev_rev(tt, yy):
+            return yy[1]
+        ev_rev.terminal = True
+
+        def ev_close(tt, yy):
+            c = car.closure()
+            return 1.0 if c is None else car.d * (yy[0] - c) - 1e-15
+        ev_close.terminal = True
+        ev_close.direction = 1
+
+        t_end = t_start + (periods_settle + periods_measure) * T
+        t_meas = t_start + periods_settle * T
+        dt = 1.0 / samples_per_unit_time
+        grid = t_meas + dt * np.arange(int(periods_measure * T / dt))
+        u_s = np.empty(grid.size)
+        v_s = np.empty(grid.size)
+        f_s = np.empty(grid.size)
+        j = 0
+        while t < t_end - 1e-12:
+            ev_rev.direction = -car.d if car.d != 0 else 0
+            sol = solve_ivp(rhs, (t, t_end), y, method="DOP853", rtol=rtol, atol=1e-12,
+                            events=(ev_rev, ev_close), dense_output=True)
+            t_stop = sol.t[-1]
+            # sample the piece (the branch is fixed over it)
+            k = j
+            while k < grid.size and grid[k] <= t_stop:
+                k += 1
+            if k > j:
+                yy = sol.sol(grid[j:k])
+                u_s[j:k] = yy[0]
+                v_s[j:k] = yy[1]
+                f_s[j:k] = [car.force(u) for u in yy[0]]
+                j = k
+            y = sol.y[:, -1].copy()
+            t = t_stop
+            if sol.status == 1:
+                if sol.t_events[0].size and sol.t_events[0][-1] == t_stop:       # reversal
+                    if car.d != 0:
+                        car.stack.append((y[0], car.force(y[0])))
+                    car.d = -car.d if car.d != 0 else (1.0 if rhs(t, y)[1] > 0 else -1.0)
+                    y[1] = 0.0
+                else:                                                           # loop closed
+                    if len(car.stack) >= 2:
+                        del car.stack[-2:]
+                    else:
+                        car.stack.clear()
+            elif car.d == 0 and abs(y[1]) > 0:
+                car.d = 1.0 if y[1] > 0 else -1.0
+            if car.d == 0:
+                car.d = 1.0 if rhs(t, y)[1] >= 0 else -1.0
+        phase = (ph0 + beta * (t_end - t_start)) % (2 * math.pi)
+        P = gamma0 * np.sin(beta * (grid - t_start) + ph0)
+        yield grid, u_s[:j], P[:j] - f_s[:j], P[:j]
+
+
+def generate_uff(path, F_s_N, x_s_m, n, mass_kg, levels_N, freqs_Hz, *, fs_Hz=None, settle=25, measure=8,
+                 noise=(0.003, 0.005, 0.002), seed=0):
+    """Simulate the up-sweeps and write them to ``path`` as UFF58 (no tags). Returns the
+    number of steps written."""
+    import pyuff
+
+    rng = np.random.default_rng(seed)
+    w_s = math.sqrt(F_s_N / (x_s_m * mass_kg))
+    fs = fs_Hz or 128.0 * max(freqs_Hz) * 1.037       # not a multiple of any step frequency
+    sets = []
+    case = 0
+    for level in levels_N:
+        betas = [2 * math.pi * f / w_s for f in sorted(freqs_Hz)]
+        for _t, u, acc, P in simulate_level(n, level / F_s_N, betas, settle, measure, fs / w_s):
+            case += 1
+            force = P * F_s_N
+            accel = acc * F_s_N / mass_kg
+            disp = u * x_s_m
+            force = force + noise[0] * F_s_N * rng.standard_normal(force.size)
+            accel = accel + noise[1] * np.std(accel) * rng.standard_normal(accel.size)
+            disp = disp + noise[2] * x_s_m * rng.standard_normal(disp.size)
+            for sdt, unit, label, x in ((13, "N", "force", force), (12, "m/s^2", "acceleration", accel),
+                                        (8, "m", "displacement", disp)):
+                sets.append(dict(type=58, func_type=1, func_id=len(sets) + 1, ver_num=0, load_case_id=case,
+                                 id1=f"{label} time response", id2="independent simulator",
+                                 id3="NONE", id4="NONE", id5="NONE",
+                                 rsp_ent_name="carriage", rsp_node=1, rsp_dir=1,
+                                 ref_ent_name="shaker", ref_node=1, ref_dir=1,
+                                 abscissa_spacing=1, abscissa_min=0.0, abscissa_inc=1.0 / fs,
+                                 abscissa_spec_data_type=17, abscissa_axis_lab="time",
+                                 abscissa_axis_units_lab="s",
+                                 ordinate_spec_data_type=sdt, ordinate_axis_lab=label,
+                                 ordinate_axis_units_lab=unit,
+                                 orddenom_spec_data_type=0, orddenom_axis_units_lab="NONE",
+                                 x=np.arange(x.size) / fs, data=x.astype(float)))
+    uff = pyuff.UFF(str(path))
+    uff.write_sets(sets, mode="overwrite")
+    return case

@@ -1,0 +1,65 @@
+"""Harmonics, noise, frequency and periodicity of time records (sim.records), on signals
+whose answer is known in closed form."""
+import math
+
+import numpy as np
+import pytest
+
+from sim.records import analyse_records, estimate_frequency
+
+
+def signal(t, f, amps, phases):
+    return sum(a * np.sin(2 * np.pi * (k + 1) * f * t + p) for k, (a, p) in enumerate(zip(amps, phases)))
+
+
+@pytest.mark.parametrize("fs_Hz", [25600.0, 10_000.0 * 1.0371])      # integer and non-integer samples per period
+def test_harmonics_noise_and_frequency_of_a_known_signal(fs_Hz):
+    rng = np.random.default_rng(0)
+    f = 50.0
+    t = np.arange(int(8.6 * fs_Hz / f)) / fs_Hz                      # 8.6 periods: 8 are used
+    amps, phases = [1.0, 0.0, 0.2, 0.0, 0.05], [0.3, 0.0, -1.0, 0.0, 2.0]
+    clean = signal(t, f, amps, phases)
+    x = clean + 0.01 * rng.standard_normal(t.size) + 0.5
+    noisy = lambda y, s: y + s * rng.standard_normal(t.size)    # noqa: E731
+    rec = analyse_records(x, noisy(3 * clean, 0.001), noisy(-clean, 0.02), fs_Hz)   # frequency estimated
+    assert rec.freq_Hz == pytest.approx(f, rel=1e-5)          # a few standard errors
+    assert rec.periods == 8
+    ch = rec.channels["force"]
+    C = ch.harmonics[:5]
+    want = np.array(amps) * np.exp(1j * np.array(phases))
+    assert np.all(np.abs(C - want) < 5 * ch.sigma + 1e-9)
+    assert ch.noise_rms == pytest.approx(0.01, rel=0.1)
+    assert ch.sigma == pytest.approx(0.01 * math.sqrt(2 / rec.samples), rel=0.1)
+    assert ch.offset == pytest.approx(0.5, abs=1e-3)
+    assert rec.drift_sigma < 6
+
+
+def test_frequency_estimate_is_finer_than_the_fft_bin():
+    fs, f = 3000.0, 37.123456
+    t = np.arange(2000) / fs                                            # bin width 1.5 Hz
+    x = np.sin(2 * np.pi * f * t + 0.4) + 0.003 * np.random.default_rng(1).standard_normal(t.size)
+    assert estimate_frequency(x, fs) == pytest.approx(f, rel=1e-5)   # 1e-4 of a bin
+
+
+def test_a_response_still_settling_scores_as_not_periodic():
+    fs, f = 25600.0, 40.0
+    t = np.arange(int(8 * fs / f)) / fs
+    rng = np.random.default_rng(2)
+    steady = np.sin(2 * np.pi * f * t)
+    ringing = steady * (1 + 0.03 * np.exp(-t / 0.1))          # amplitude still converging
+    noise = lambda: 0.003 * rng.standard_normal(t.size)        # noqa: E731
+    assert analyse_records(steady + noise(), steady + noise(), steady + noise(), fs, f).drift_sigma < 6
+    rec = analyse_records(steady + noise(), ringing + noise(), steady + noise(), fs, f)
+    assert rec.drift_sigma > 10 and rec.drift_detail.startswith("accel")
+
+
+def test_bad_records_are_refused_with_the_reason():
+    x = np.sin(np.arange(1000) / 10)
+    with pytest.raises(ValueError, match="different lengths"):
+        analyse_records(x, x[:-1], x, 1000.0)
+    y = x.copy()
+    y[5] = np.nan
+    with pytest.raises(ValueError, match="disp record contains NaN"):
+        analyse_records(x, x, y, 1000.0)
+    with pytest.raises(ValueError, match="at least 2 are needed"):
+        analyse_records(x, x, x, 1000.0, freq_Hz=1.5)
