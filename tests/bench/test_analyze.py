@@ -12,12 +12,17 @@ from sim.discrepancy.cases import make_case
 
 
 def write_foreign_uff(case, path, periods=8):
+    """One averaged period per channel repeated, with fresh sensor noise in every period
+    (the issue's levels), as a record of ``periods`` periods."""
     import pyuff
+    rng = np.random.default_rng(0)
     sets = []
     for s in case.steps:
         fs = s.fs_Hz
-        for sdt, unit, rec in ((13, "N", s.force_N), (12, "m/s^2", s.accel_m_s2), (8, "m", s.disp_m)):
-            y = np.tile(rec, periods)
+        for sdt, unit, rec, noise in ((13, "N", s.force_N, 0.003 * case.rig["F_s_N"]),
+                                      (12, "m/s^2", s.accel_m_s2, 0.005 * np.std(s.accel_m_s2)),
+                                      (8, "m", s.disp_m, 0.002 * case.rig["x_s_m"])):
+            y = np.tile(rec, periods) + noise * rng.standard_normal(rec.size * periods)
             sets.append(pyuff.prepare_58(
                 binary=1, id1=f"record {len(sets) + 1}", id2="other software", id3="NONE", id4="NONE", id5="NONE",
                 func_type=1, ver_num=0, load_case_id=len(sets) // 3 + 1, rsp_ent_name="carriage", rsp_node=1,
