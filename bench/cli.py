@@ -280,6 +280,18 @@ def cmd_identify(args) -> int:
     return 0
 
 
+def cmd_analyze(args) -> int:
+    """Where the Masing model is wrong in SOURCE, the cause, the extended model and its gain."""
+    from .analyze import analyze_source, default_out_dir
+    source = Path(args.source)
+    result = analyze_source(source, Path(args.out) if args.out else None, Path(args.rig) if args.rig else None)
+    out = Path(args.out) if args.out else default_out_dir(source)
+    print(result["verdict"])
+    print(f"causes: {', '.join(c['id'] for c in result['causes']) or 'none'}; "
+          f"unexplained: {'yes' if result['unexplained'] else 'no'}; written to {out}")
+    return 0
+
+
 def cmd_check(args) -> int:
     """Verify a run directory: every problem on one line, exit 1 if there is any."""
     from .storage import RunStore
@@ -382,6 +394,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("source", help="run directory, or a UFF file of time records (bench export)")
     s.add_argument("--rig", help="rig TOML whose [rig.expected] values start the fit (UFF input)")
     s.set_defaults(func=cmd_identify)
+
+    s = sub.add_parser("analyze", help="find what the Masing model gets wrong in a run or UFF58 file, "
+                                       "name the cause, extend the model, measure the gain")
+    s.add_argument("source", help="run directory, or a UFF58 file of time records")
+    s.add_argument("--rig", help="rig TOML whose [rig.expected] values start the fit")
+    s.add_argument("--out", help="output directory (default: SOURCE/analysis, or next to the file)")
+    s.set_defaults(func=cmd_analyze)
 
     s = sub.add_parser("twins", help="serve the simulated rig's instruments on loopback; print their URLs")
     s.add_argument("--rig", help="simulated rig TOML (default: bench/defaults/sim_rig.toml)")

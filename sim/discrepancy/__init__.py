@@ -1,0 +1,11 @@
+"""What the Masing model gets wrong in measured stepped-sine data, and why.
+
+Public surface: :func:`analyze_steps` -> :class:`Analysis` (``to_dict()`` is the
+analysis.json schema of docs/analysis.md), the catalog :data:`CATALOG`, and the test-case
+generator in :mod:`sim.discrepancy.cases`.
+"""
+
+from .analysis import SCHEMA, Analysis, analyze_steps
+from .models import CATALOG, EFFECTS
+
+__all__ = ["SCHEMA", "Analysis", "analyze_steps", "CATALOG", "EFFECTS"]

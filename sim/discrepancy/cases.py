@@ -1,0 +1,256 @@
+"""Generated test cases: a random rig with an effect hidden in it, measured step by step.
+
+A case is what a technician would bring back from the rig: stepped-sine steps (5 force
+levels 0.1-0.85 F_s, 18 log-spaced frequencies 0.3-3 times the friction resonance
+f_res = omega_s / 2 pi, upward sweeps) with realistic noise: 0.3 % of F_s on the force,
+0.5 % of the step's rms on the acceleration, 0.2 % of x_s on the displacement (rms per
+sample).  The data come from the RK4 plant (:class:`sim.rig.SimulatedRig`, driven per
+step directly: settle, then one block of whole periods); harmonics and their standard
+errors are estimated from the records as the procedure does (least squares over whole
+periods, noise from the residual), so nothing of the truth leaks into the analysis.
+
+Effects are drawn at a strength above the sensitivity the issue requires (the factor
+``margin``, 1.3-2.5x by default); see :data:`THRESHOLDS` for what "sensitivity" means for
+each id.  ``cubic_spring`` is deliberately outside the analysis catalog.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field, fields, replace
+
+import numpy as np
+
+from ..identify import StepHarmonics
+from ..rig import RigModel, SimulatedRig
+
+log = logging.getLogger(__name__)
+
+CATALOG = ("viscous_damping", "linear_spring", "second_mode", "velocity_dependent_friction",
+           "sensor_delay", "sensor_gain_error")
+OUTSIDE = ("cubic_spring",)
+# What the issue's sensitivity means for each effect (the strength drawn is above it):
+THRESHOLDS = {
+    "viscous_damping": "equivalent damping ratio c / (2 m omega_res) of 3 %",
+    "linear_spring": "k of 5 % of F_s / x_s",
+    "second_mode": "a pitching mode at 2.5-4.5 times the friction resonance",
+    "velocity_dependent_friction": "friction 15 % higher at the resonance speed omega_res x_s",
+    "sensor_delay": "a displacement delay of 1 % of the resonance period",
+    "sensor_gain_error": "a displacement/acceleration gain inconsistency of 5 %",
+    "cubic_spring": "a hardening spring of 15 % of F_s at 2 x_s",
+}
+# RigModel fields each effect needs (contract 1); an effect whose fields the plant lacks
+# cannot be generated.
+PLANT_FIELDS = {
+    "viscous_damping": ("viscous_N_s_per_m",),
+    "linear_spring": ("spring_N_per_m",),
+    "second_mode": ("pitch_inertia_kg_m2", "pitch_stiffness_N_m_per_rad", "pitch_damping_N_m_s_per_rad",
+                    "drive_height_m", "cg_height_m"),
+    "velocity_dependent_friction": ("friction_alpha", "friction_v_ref_m_per_s"),
+    "sensor_delay": ("disp_delay_s",),
+    "sensor_gain_error": ("disp_gain_error", "accel_gain_error"),
+    "cubic_spring": ("cubic_spring_N_per_m3",),
+}
+SAMPLES_PER_PERIOD = 2048      # measured blocks: fine enough that n < 1 reversals do not alias
+SETTLE_SAMPLES_PER_PERIOD = 64  # the plant still takes >= 400 RK4 steps per period
+MAX_EXTRA_SETTLES = 6
+RECORD_POINTS = 256             # one averaged period kept for loop plots
+HARMONICS = 20                  # stored per step (the analysis' residuals use the first 9)
+
+
+def plant_supports(effect: str) -> bool:
+    """True when :class:`sim.rig.RigModel` has the fields the effect needs."""
+    known = {f.name for f in fields(RigModel)}
+    return all(name in known for name in PLANT_FIELDS[effect])
+
+
+@dataclass(frozen=True)
+class Step:
+    """One measured step, with the attribute names of ``bench.sources.MeasuredStep``."""
+
+    key: str
+    level_N: float
+    freq_Hz: float
+    harmonics: StepHarmonics
+    fs_Hz: float
+    force_N: np.ndarray        # one period, averaged over the measured block
+    accel_m_s2: np.ndarray
+    disp_m: np.ndarray
+    direction: str = "up"
+
+
+@dataclass(frozen=True)
+class Case:
+    seed: int
+    rig: dict                  # F_s_N, x_s_m, n, mass_kg (the truth)
+    effects: dict              # effect id -> RigModel fields set for it
+    f_res_Hz: float
+    steps: list[Step] = field(repr=False)
+
+    @property
+    def causes(self) -> tuple[str, ...]:
+        return tuple(e for e in self.effects if e in CATALOG)
+
+
+def truth_size(case: "Case", effect: str) -> tuple[str | None, float | None]:
+    """(parameter name in the analysis' cause parameters, its true value) for the effects
+    whose reported size maps one to one onto the plant's settings; (None, None) otherwise."""
+    fx = case.effects[effect]
+    if effect == "viscous_damping":
+        return "c", fx["viscous_N_s_per_m"]
+    if effect == "linear_spring":
+        return "k", fx["spring_N_per_m"]
+    if effect == "sensor_delay":
+        return "delay", fx["disp_delay_s"]
+    if effect == "sensor_gain_error":   # displacement scale relative to the accelerometer
+        return "gain_error", (1 + fx.get("disp_gain_error", 0.0)) / (1 + fx.get("accel_gain_error", 0.0)) - 1
+    if effect == "velocity_dependent_friction":
+        w_res = 2 * math.pi * case.f_res_Hz
+        return "alpha", fx["friction_alpha"] * (w_res * case.rig["x_s_m"]) / fx["friction_v_ref_m_per_s"]
+    return None, None
+
+
+def random_rig(rng: np.random.Generator) -> dict:
+    """F_s 2-40 N, x_s 2-100 um (log-uniform), n 0.35-3 at least 0.2 from 1, m 2-40 kg."""
+    n = rng.uniform(0.35, 3.0)
+    while abs(n - 1.0) < 0.2:
+        n = rng.uniform(0.35, 3.0)
+    return dict(F_s_N=float(rng.uniform(2, 40)), x_s_m=float(math.exp(rng.uniform(math.log(2e-6), math.log(100e-6)))),
+                n=float(n), mass_kg=float(rng.uniform(2, 40)))
+
+
+def friction_resonance_Hz(rig: dict) -> float:
+    return math.sqrt(rig["F_s_N"] / (rig["x_s_m"] * rig["mass_kg"])) / (2 * math.pi)
+
+
+def draw_effect(effect: str, rig: dict, rng: np.random.Generator, margin: tuple[float, float] = (1.3, 2.5)) -> dict:
+    """RigModel fields for ``effect`` at a random strength ``margin`` times its threshold."""
+    s = rng.uniform(*margin)
+    m, F_s, x_s = rig["mass_kg"], rig["F_s_N"], rig["x_s_m"]
+    w_res = 2 * math.pi * friction_resonance_Hz(rig)
+    if effect == "viscous_damping":
+        return dict(viscous_N_s_per_m=2 * 0.03 * s * m * w_res)
+    if effect == "linear_spring":
+        return dict(spring_N_per_m=0.05 * s * F_s / x_s)
+    if effect == "velocity_dependent_friction":
+        return dict(friction_alpha=0.15 * s, friction_v_ref_m_per_s=w_res * x_s)
+    if effect == "sensor_delay":
+        return dict(disp_delay_s=0.01 * s / (w_res / (2 * math.pi)))
+    if effect == "sensor_gain_error":
+        name = "disp_gain_error" if rng.uniform() < 0.5 else "accel_gain_error"
+        return {name: float(0.05 * s * rng.choice([-1.0, 1.0]))}
+    if effect == "second_mode":
+        # a column of height ~2 h on the carriage: J about the contact line ~ m h^2 (1-2),
+        # centre of gravity at 0.3-0.7 h; stiffness puts the mode at 2.5-4.5 f_res
+        h = 0.1
+        J = m * h * h * rng.uniform(1.0, 2.0)
+        e = h * rng.uniform(0.3, 0.7)
+        w_p = w_res * rng.uniform(2.5, 4.5)
+        zeta = rng.uniform(0.01, 0.05)
+        J_eff = J - m * e * e              # the mode with the carriage held by friction
+        return dict(pitch_inertia_kg_m2=J, pitch_stiffness_N_m_per_rad=J_eff * w_p ** 2,
+                    pitch_damping_N_m_s_per_rad=2 * zeta * J_eff * w_p, drive_height_m=h, cg_height_m=e)
+    if effect == "cubic_spring":
+        return dict(cubic_spring_N_per_m3=0.15 * s * F_s / (2 * x_s) ** 3)
+    raise ValueError(f"unknown effect {effect!r}; known: {CATALOG + OUTSIDE}")
+
+
+def plan_grid(rig: dict, levels: int = 5, freqs: int = 18) -> tuple[np.ndarray, np.ndarray]:
+    """Force levels 0.1-0.85 F_s (N) and log-spaced frequencies 0.3-3 f_res (Hz)."""
+    f_res = friction_resonance_Hz(rig)
+    return (np.linspace(0.1, 0.85, levels) * rig["F_s_N"],
+            np.geomspace(0.3 * f_res, 3.0 * f_res, freqs))
+
+
+def _harmonics(x: np.ndarray, periods: int, K: int) -> tuple[np.ndarray, float, np.ndarray]:
+    """Complex harmonics C_k (of sin), their standard error and the one-period average."""
+    N = x.size
+    spec = np.fft.rfft(x) * (2.0 / N)
+    C = 1j * spec[periods * np.arange(1, K + 1)]
+    kept = np.zeros(spec.size, bool)
+    kept[0] = True
+    kept[periods * np.arange(1, K + 1)] = True
+    fitted = np.fft.irfft(np.where(kept, np.fft.rfft(x), 0), n=N)
+    resid = x - fitted
+    noise_rms = math.sqrt(resid @ resid / max(1, N - (2 * K + 1)))
+    one = x.reshape(periods, -1).mean(axis=0)
+    return C, noise_rms * math.sqrt(2.0 / N), one[::max(1, one.size // RECORD_POINTS)]
+
+
+def measure_steps(model: RigModel, levels_N, freqs_Hz, *, settle_periods: int = 150, measure_periods: int = 8,
+                  harmonics: int = HARMONICS, noise: tuple[float, float, float] = (0.003, 0.005, 0.002),
+                  seed: int = 0) -> list[Step]:
+    """Drive the plant level by level, sweeping up in frequency, and measure each step.
+
+    ``noise``: force rms / F_s, acceleration rms / the step's rms, displacement rms / x_s.
+    The plant's own sensor noise is switched off; this noise is added to its outputs."""
+    model = replace(model, force_noise_N=0.0, accel_noise_m_s2=0.0, disp_noise_m=0.0)
+    rig = SimulatedRig(model)
+    rng = np.random.default_rng(seed)
+    M = SAMPLES_PER_PERIOD
+    steps = []
+    f_mid = math.sqrt(freqs_Hz[0] * freqs_Hz[-1])
+    for li, level in enumerate(levels_N):
+        for fi, f in enumerate(freqs_Hz):
+            fs = f * M
+            rig.set_generator(freq_Hz=f, amplitude_Vpp=2 * level / model.amp_gain_N_per_V, output_on=True)
+            # free vibrations of the stiff small-amplitude friction decay over a number of
+            # their own periods: settle longer above the resonance
+            settle = int(settle_periods * max(1.0, f / f_mid))
+            rig.run(settle * SETTLE_SAMPLES_PER_PERIOD, f * SETTLE_SAMPLES_PER_PERIOD)
+            rig.run(2 * M, fs)     # the plant's delay line restarts when the sample rate changes
+            b = rig.run(measure_periods * M, fs)
+            # like the procedure: settle more while a free vibration still dies out (the
+            # acceleration's residual, where ringing above the drive frequency shows most,
+            # still falling by more than 10 % from block to block)
+            ringing = _harmonics(b.accel_V, measure_periods, harmonics)[1]
+            for _ in range(MAX_EXTRA_SETTLES):
+                rig.run(settle * SETTLE_SAMPLES_PER_PERIOD, f * SETTLE_SAMPLES_PER_PERIOD)
+                rig.run(2 * M, fs)
+                nb = rig.run(measure_periods * M, fs)
+                now = _harmonics(nb.accel_V, measure_periods, harmonics)[1]
+                b = nb
+                if not now < 0.9 * ringing:
+                    break
+                ringing = now
+            g = (1 + model.force_gain_error, 1 + model.accel_gain_error, 1 + model.disp_gain_error)
+            force = b.force_V / model.force_sens_V_per_N
+            accel = b.accel_V / model.accel_sens_V_per_m_s2
+            disp = b.disp_V / model.disp_sens_V_per_m
+            force = force + noise[0] * model.F_s_N * g[0] * rng.standard_normal(force.size)
+            accel = accel + noise[1] * np.std(accel) * rng.standard_normal(accel.size)
+            disp = disp + noise[2] * model.x_s_m * g[2] * rng.standard_normal(disp.size)
+            (P, sP, p1), (A, sA, a1), (X, sX, x1) = (_harmonics(s, measure_periods, harmonics)
+                                                     for s in (force, accel, disp))
+            h = StepHarmonics(freq_Hz=float(f), force=P, accel=A, disp=X, sigma_force=sP, sigma_accel=sA,
+                              sigma_disp=sX)
+            steps.append(Step(key=f"L{li:02d}-F{fi:03d}-up", level_N=float(abs(P[0])), freq_Hz=float(f),
+                              harmonics=h, fs_Hz=f * p1.size, force_N=p1, accel_m_s2=a1, disp_m=x1))
+        rig.set_generator(output_on=False)
+        rig.run(settle_periods * SETTLE_SAMPLES_PER_PERIOD, freqs_Hz[-1] * SETTLE_SAMPLES_PER_PERIOD)
+    return steps
+
+
+def make_case(seed: int, effects: tuple[str, ...] | None = None, *, margin: tuple[float, float] = (1.3, 2.5),
+              levels: int = 5, freqs: int = 18, noise: tuple[float, float, float] = (0.003, 0.005, 0.002)) -> Case:
+    """A seeded case.  ``effects`` None draws one catalog effect at random (or none, with
+    probability 1/7); ``()`` is a clean case."""
+    rng = np.random.default_rng(seed)
+    rig = random_rig(rng)
+    if effects is None:
+        pool = [e for e in CATALOG if plant_supports(e)] + ["clean"]
+        pick = str(rng.choice(pool))
+        effects = () if pick == "clean" else (pick,)
+    fx = {}
+    for e in effects:
+        if not plant_supports(e):
+            raise ValueError(f"the plant has no {e} effect yet (needs RigModel fields {PLANT_FIELDS[e]})")
+        fx[e] = draw_effect(e, rig, rng, margin)
+    params = dict(rig)
+    for d in fx.values():
+        params.update(d)
+    model = RigModel(**params, seed=seed)
+    levels_N, freqs_Hz = plan_grid(rig, levels, freqs)
+    steps = measure_steps(model, levels_N, freqs_Hz, noise=noise, seed=seed)
+    return Case(seed=seed, rig=rig, effects=fx, f_res_Hz=friction_resonance_Hz(rig), steps=steps)

@@ -1,0 +1,128 @@
+"""Weighted least-squares fit of a :class:`~sim.discrepancy.models.Model` to the two
+residuals, with the noise of all three channels propagated.
+
+Per step and harmonic the force-balance residual r_F = P - m A - G(X) and the kinematic
+residual r_K = A - A_pred(X) share the noise of A and X, so they are whitened together:
+
+    var_F = s_P^2 + m^2 s_A^2 + k^2 s_X^2,  var_K = s_A^2 + Omega^4 s_X^2,
+    cov   = -m s_A^2 - k Omega^2 s_X^2
+
+(k = |P_1 - m A_1| / |X_1|, the step's friction stiffness; real and imaginary parts are
+independent with these variances).  The weights are fixed once per analysis (from the base
+fit), so the chi-square of every candidate is measured in the same noise units and their
+BIC = chi2 + p ln N compare directly.  Intervals come from the Jacobian, scaled by the
+reduced chi-square when it is above 1.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .models import Data, Model
+
+log = logging.getLogger(__name__)
+
+N_BOUNDS = (0.1, 6.0)
+F_P_BOUNDS_HZ = (1e-2, 1e6)
+Z95 = 1.959964
+
+
+@dataclass(frozen=True)
+class Weights:
+    """Whitening of (r_F, r_K): r_F / s_F and (r_K - c r_F / s_F^2) / s_Kc, per step x harmonic."""
+
+    s_F: np.ndarray
+    c: np.ndarray
+    s_Kc: np.ndarray
+
+    @classmethod
+    def from_data(cls, d: Data, mass_kg: float, rel_floor: float = 1e-5) -> "Weights":
+        Om = d.Omega
+        k = (np.abs(d.P[:, 0] - mass_kg * d.A[:, 0]) / np.maximum(np.abs(d.X[:, 0]), 1e-300))[:, None]
+        sP = np.maximum(d.sP, rel_floor * np.abs(d.P[:, 0]))[:, None]
+        sA = np.maximum(d.sA, rel_floor * np.abs(d.A[:, 0]))[:, None]
+        sX = np.maximum(d.sX, rel_floor * np.abs(d.X[:, 0]))[:, None]
+        var_F = np.broadcast_to(sP ** 2 + (mass_kg * sA) ** 2 + (k * sX) ** 2, Om.shape)
+        var_K = sA ** 2 + Om ** 4 * sX ** 2
+        c = -mass_kg * sA ** 2 - k * Om ** 2 * sX ** 2
+        return cls(np.sqrt(var_F), c, np.sqrt(np.maximum(var_K - c ** 2 / var_F, 1e-300)))
+
+    def subset(self, mask: np.ndarray) -> "Weights":
+        return Weights(self.s_F[mask], self.c[mask], self.s_Kc[mask])
+
+    def whiten(self, rF: np.ndarray, rK: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return rF / self.s_F, (rK - self.c / self.s_F ** 2 * rF) / self.s_Kc
+
+
+@dataclass(frozen=True)
+class Fit:
+    model: Model
+    theta: np.ndarray
+    cov: np.ndarray
+    chi2: float                  # sum of squared whitened residuals
+    n_data: int                  # real numbers in the residual
+
+    @property
+    def dof(self) -> int:
+        return max(1, self.n_data - self.model.size)
+
+    @property
+    def reduced_chi2(self) -> float:
+        return self.chi2 / self.dof
+
+    @property
+    def bic(self) -> float:
+        return self.chi2 + self.model.size * math.log(self.n_data)
+
+    def interval(self, i: int) -> tuple[float, float, float]:
+        """(value, low, high) of parameter ``i`` in physical units (95 %)."""
+        th, s = self.theta[i], math.sqrt(max(self.cov[i, i], 0.0))
+        w = min(Z95 * s, 700.0)
+        if i in (0, 1, 3) or self._is_log(i):
+            return math.exp(th), math.exp(th - w), math.exp(th + w)
+        return float(th), float(th - w), float(th + w)
+
+    def _is_log(self, i: int) -> bool:
+        sl = self.model.slices.get("second_mode")
+        return sl is not None and i == sl.start
+
+    def named_intervals(self) -> dict:
+        names = list(self.model.values(self.theta))
+        return {name: self.interval(i) for i, name in enumerate(names)}
+
+
+def whitened(theta: np.ndarray, model: Model, d: Data, W: Weights) -> np.ndarray:
+    rF, rK = model.residuals(theta, d)
+    wF, wK = W.whiten(rF, rK)
+    return np.concatenate([wF.real.ravel(), wF.imag.ravel(), wK.real.ravel(), wK.imag.ravel()])
+
+
+def bounds(model: Model) -> tuple[np.ndarray, np.ndarray]:
+    lo = np.full(model.size, -np.inf)
+    hi = np.full(model.size, np.inf)
+    lo[2], hi[2] = N_BOUNDS
+    for e, sl in model.slices.items():
+        if e == "second_mode":        # log f_p, zeta, a, r
+            lo[sl.start], hi[sl.start] = math.log(F_P_BOUNDS_HZ[0]), math.log(F_P_BOUNDS_HZ[1])
+            lo[sl.start + 1], hi[sl.start + 1] = 1e-4, 0.5
+            lo[sl.start + 2] = 0.0
+        if e == "sensor_gain_error":
+            lo[sl.start] = -0.5
+    return lo, hi
+
+
+def fit(model: Model, theta0: np.ndarray, d: Data, W: Weights, max_nfev: int = 100) -> Fit:
+    lo, hi = bounds(model)
+    th0 = np.clip(theta0, lo + 1e-9, hi - 1e-9)
+    res = least_squares(whitened, th0, args=(model, d, W), bounds=(lo, hi), x_scale="jac",
+                        max_nfev=max_nfev, method="trf")
+    chi2 = float(res.fun @ res.fun)
+    _, sv, Vt = np.linalg.svd(res.jac, full_matrices=False)
+    sv = np.maximum(sv, sv.max() * 1e-12)
+    cov = (Vt.T / sv ** 2) @ Vt * max(chi2 / max(1, res.fun.size - model.size), 1.0)
+    return Fit(model, res.x, cov, chi2, res.fun.size)

@@ -1,0 +1,214 @@
+"""The base Masing model and its candidate extensions, as two residuals per harmonic.
+
+For every step and harmonic k (Omega = k omega) the measured complex amplitudes of force
+P, drive-point acceleration A and displacement X must satisfy
+
+    force balance   r_F = P - m A - G(X, P)      G: friction and what else acts on the carriage
+    kinematics      r_K = A - A_pred(X, P)       what the accelerometer should read
+
+The base model is G = F_Masing(x) along the measured displacement (the friction of
+:mod:`sim.identify`, band-limited to the measured harmonics) and A_pred = -Omega^2 X (a
+rigid carriage).  Each catalog effect changes one of these:
+
+- ``viscous_damping``:   G += i Omega c X
+- ``linear_spring``:     G += k X
+- ``velocity_dependent_friction``: F = F_Masing(x) (1 + beta |v|) in the time domain;
+  only beta = alpha / v_ref is identifiable (reported as alpha at a stated v_ref)
+- ``sensor_delay``:      the probe lags: x_true,k = X_k exp(+i Omega tau)
+- ``sensor_gain_error``: the probe's scale relative to the accelerometer: x_true = X / (1 + g)
+- ``second_mode``:       a pitching mode (frequency f_p, damping ratio zeta) driven by the
+  force at height h and coupled through the centre of gravity at e: with
+  D = omega_p^2 - Omega^2 + 2 i zeta omega_p Omega, a = h^2 / J and r = e / h,
+      h theta'' = -Omega^2 a (P + m r Omega^2 x) / D,
+      A_pred += h theta'',  G += m (r - 1) h theta''
+  (from m x'' + m e theta'' = P - F and m e x'' + J theta'' = h P - k_th theta - c_th theta';
+  the accelerometer at h reads x'' + h theta'', the probe reads x).
+
+Everything is affine in P, so a model also predicts P and A from the measured X alone
+(:meth:`Model.predict`): that is how compliance and accelerance are predicted for held-out
+steps.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..identify import _loop_friction, analyse
+from ..masing import LAMBDA_MASING
+
+BASE_PARAMS = ("F_s_N", "x_s_m", "n", "mass_kg")
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One catalog entry: its parameters (name, unit, typical scale) as the fit sees them."""
+
+    id: str
+    label: str
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+
+
+EFFECTS = {e.id: e for e in (
+    Effect("viscous_damping", "viscous damping", ("c",), ("N s/m",)),
+    Effect("linear_spring", "linear spring", ("k",), ("N/m",)),
+    Effect("velocity_dependent_friction", "velocity-dependent friction", ("beta",), ("s/m",)),
+    Effect("sensor_delay", "displacement channel delay", ("delay",), ("s",)),
+    Effect("sensor_gain_error", "displacement/acceleration gain error", ("gain",), ("1",)),
+    Effect("second_mode", "second (pitching) mode", ("f_p", "zeta", "a", "r"), ("Hz", "1", "1/kg", "1")),
+)}
+CATALOG = tuple(EFFECTS)
+
+
+@dataclass(frozen=True)
+class Data:
+    """Harmonics of the steps as arrays (steps x K) and their standard errors (per step)."""
+
+    omega: np.ndarray     # rad/s, per step
+    P: np.ndarray
+    A: np.ndarray
+    X: np.ndarray
+    sP: np.ndarray
+    sA: np.ndarray
+    sX: np.ndarray
+    level: np.ndarray     # force-level group of each step (for leave-one-level-out)
+    Xf: np.ndarray | None = None   # more displacement harmonics (>= K) for the friction
+
+    @property
+    def Omega(self) -> np.ndarray:
+        return self.omega[:, None] * np.arange(1, self.X.shape[1] + 1)
+
+    @property
+    def X_friction(self) -> np.ndarray:
+        return self.X if self.Xf is None else self.Xf
+
+    def subset(self, mask: np.ndarray) -> "Data":
+        return Data(*(getattr(self, f)[mask] for f in ("omega", "P", "A", "X", "sP", "sA", "sX", "level")),
+                    Xf=None if self.Xf is None else self.Xf[mask])
+
+
+def synthesize(C: np.ndarray, M: int) -> np.ndarray:
+    """Rows of samples of sum_k Im(C_k exp(i k w t)) over one period (as
+    :func:`sim.identify.synthesize`, by inverse FFT: no BLAS call, which under a loaded
+    machine's multi-threaded OpenBLAS costs 40x more than the arithmetic)."""
+    Z = np.zeros((C.shape[0], M // 2 + 1), complex)
+    Z[:, 1:C.shape[1] + 1] = -0.5j * M * C
+    return np.fft.irfft(Z, n=M, axis=1)
+
+
+def masing_samples(F_s: float, x_s: float, n: float, x: np.ndarray) -> np.ndarray:
+    """Masing friction (N) along each row of displacement samples ``x`` (one period, m): the
+    steady loop after virgin loading to the period's largest value (as sim.identify)."""
+    M = x.shape[1]
+    centre = 0.5 * (x.max(axis=1) + x.min(axis=1))
+    u = (x - centre[:, None]) / x_s
+    start = np.argmax(u, axis=1)
+    rows = np.arange(u.shape[0])[:, None]
+    idx = (start[:, None] + np.arange(M)[None, :]) % M
+    path = u[rows, idx]
+    out = np.empty_like(path)
+    _loop_friction(path, path[:, 0].copy(), LAMBDA_MASING, np.array([n]), out)
+    F = np.empty_like(out)
+    F[rows, idx] = out
+    return F_s * F
+
+
+class Model:
+    """Base Masing model plus a set of effects; parameters as one flat vector.
+
+    The vector holds log F_s, log x_s, n, log m, then each effect's parameters in the
+    units of :data:`EFFECTS` (f_p in log Hz)."""
+
+    def __init__(self, effects: tuple[str, ...] = (), harmonics: int = 9, points_per_period: int = 256):
+        unknown = [e for e in effects if e not in EFFECTS]
+        if unknown:
+            raise ValueError(f"unknown effects {unknown}; catalog: {CATALOG}")
+        self.effects = tuple(effects)
+        self.M = points_per_period
+        self.K = harmonics
+        self.slices = {}
+        i = len(BASE_PARAMS)
+        for e in self.effects:
+            self.slices[e] = slice(i, i + len(EFFECTS[e].names))
+            i += len(EFFECTS[e].names)
+        self.size = i
+
+    # ------------------------------------------------------------------ parameters
+    def values(self, theta: np.ndarray) -> dict:
+        """Physical values by name (effects' names prefixed by their id)."""
+        out = dict(F_s_N=math.exp(theta[0]), x_s_m=math.exp(theta[1]), n=float(theta[2]),
+                   mass_kg=math.exp(theta[3]))
+        for e in self.effects:
+            p = theta[self.slices[e]]
+            for name, v in zip(EFFECTS[e].names, p):
+                out[f"{e}.{name}"] = math.exp(v) if name == "f_p" else float(v)
+        return out
+
+    def extend(self, theta: np.ndarray, effect: str, init: np.ndarray) -> tuple["Model", np.ndarray]:
+        """This model with one more effect, and the parameter vector warm-started from ``theta``."""
+        m = Model(self.effects + (effect,), self.K, self.M)
+        return m, np.concatenate([theta, init])
+
+    # ------------------------------------------------------------------ physics
+    def _sensor(self, v: dict, X: np.ndarray, Om: np.ndarray) -> np.ndarray:
+        """The true displacement harmonics behind the probe's (delay and gain undone)."""
+        if "sensor_delay" in self.effects:
+            X = X * np.exp(1j * Om * v["sensor_delay.delay"])
+        if "sensor_gain_error" in self.effects:
+            X = X / (1.0 + v["sensor_gain_error.gain"])
+        return X
+
+    def _friction(self, v: dict, d: Data) -> np.ndarray:
+        """Harmonics 1..K of the friction along the displacement rebuilt from all the
+        harmonics at hand (a reversal for n < 1 needs more than K of them)."""
+        Xf = d.X_friction
+        Om = d.omega[:, None] * np.arange(1, Xf.shape[1] + 1)
+        x = self._sensor(v, Xf, Om)
+        n = v["n"] if abs(v["n"] - 1.0) >= 1e-6 else 1.0 + 1e-6
+        F = masing_samples(v["F_s_N"], v["x_s_m"], n, synthesize(x, self.M))
+        beta = v.get("velocity_dependent_friction.beta", 0.0)
+        if beta != 0.0:       # friction level rising with speed: F (1 + beta |v|)
+            F = F * (1.0 + beta * np.abs(synthesize(1j * Om * x, self.M)))
+        return analyse(F, d.X.shape[1])
+
+    def terms(self, theta: np.ndarray, d: Data, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(G, A_pred) for force harmonics ``P`` (the measured ones, or a trial)."""
+        v = self.values(theta)
+        Om = d.Omega
+        x = self._sensor(v, d.X, Om)
+        G = self._friction(v, d)
+        if "viscous_damping" in self.effects:
+            G = G + 1j * Om * v["viscous_damping.c"] * x
+        if "linear_spring" in self.effects:
+            G = G + v["linear_spring.k"] * x
+        A_pred = -Om ** 2 * x
+        if "second_mode" in self.effects:
+            w_p = 2 * math.pi * v["second_mode.f_p"]
+            a, r, m = v["second_mode.a"], v["second_mode.r"], v["mass_kg"]
+            D = w_p ** 2 - Om ** 2 + 2j * v["second_mode.zeta"] * w_p * Om
+            h_th = -Om ** 2 * a * (P + m * r * Om ** 2 * x) / D
+            A_pred = A_pred + h_th
+            G = G + m * (r - 1.0) * h_th
+        return G, A_pred
+
+    def residuals(self, theta: np.ndarray, d: Data) -> tuple[np.ndarray, np.ndarray]:
+        G, A_pred = self.terms(theta, d, d.P)
+        m = math.exp(theta[3])
+        return d.P - m * d.A - G, d.A - A_pred
+
+    def predict(self, theta: np.ndarray, d: Data) -> tuple[np.ndarray, np.ndarray]:
+        """(P, A) the model predicts from the measured displacement alone.
+
+        P solves P = m A_pred(P) + G(P); both are affine in P, so two evaluations give it."""
+        m = math.exp(theta[3])
+        G0, A0 = self.terms(theta, d, np.zeros_like(d.P))
+        f0 = m * A0 + G0
+        if "second_mode" not in self.effects:
+            return f0, A0
+        G1, A1 = self.terms(theta, d, d.P)
+        slope = (m * A1 + G1 - f0) / np.where(d.P == 0, 1.0, d.P)
+        P = f0 / (1.0 - slope)
+        return P, A0 + (A1 - A0) / np.where(d.P == 0, 1.0, d.P) * P
