@@ -283,7 +283,10 @@ def cmd_identify(args) -> int:
 def cmd_analyze(args) -> int:
     """Where the Masing model is wrong in SOURCE, the cause, the extended model and its gain."""
     from .analyze import analyze_source, default_out_dir
-    source = Path(args.source)
+    from .studies.cli import cmd_analyze_batch, is_batch
+    if is_batch(args):
+        return cmd_analyze_batch(args, Progress)
+    source = Path(args.sources[0])
     result = analyze_source(source, Path(args.out) if args.out else None, Path(args.rig) if args.rig else None)
     out = Path(args.out) if args.out else default_out_dir(source)
     print(result["verdict"])
@@ -397,9 +400,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("analyze", help="find what the Masing model gets wrong in a run or UFF58 file, "
                                        "name the cause, extend the model, measure the gain")
-    s.add_argument("source", help="run directory, or a UFF58 file of time records")
+    s.add_argument("sources", nargs="+", metavar="source",
+                   help="run directory or UFF58 file of time records; several (or an archive directory) "
+                        "run as a batch with one summary table")
     s.add_argument("--rig", help="rig TOML whose [rig.expected] values start the fit")
-    s.add_argument("--out", help="output directory (default: SOURCE/analysis, or next to the file)")
+    s.add_argument("--out", help="output directory (default: SOURCE/analysis, or next to the file; "
+                                 "required for a batch)")
+    from .studies.cli import add_batch_options
+    add_batch_options(s)
     s.set_defaults(func=cmd_analyze)
 
     s = sub.add_parser("twins", help="serve the simulated rig's instruments on loopback; print their URLs")

@@ -8,7 +8,7 @@ cause named, and separately "unexplained"), wrong causes named, the median out-o
 gain and the time per case, with the analysis time also as a ratio to one base
 identification (sim.identify) of the same case measured in the same run.
 
-    python benchmarks/bench_analysis.py [--cases 56] [--workers 1] [--json out.json]
+    python benchmarks/bench_analysis.py [--cases 56] [--workers 1] [--scheduler tcp://host:port] [--json out.json]
 
 The case loop is a plain map over ``run_case``, so a scheduler (dask) can run it too.
 """
@@ -140,14 +140,15 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", type=int, default=56)
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--scheduler", help="run the cases on this dask scheduler (tcp://host:port)")
     ap.add_argument("--json", help="write the rows here")
     args = ap.parse_args(argv)
     seeds = range(args.cases)
     t0 = time.perf_counter()
-    if args.workers > 1:
-        from concurrent.futures import ProcessPoolExecutor
-        with ProcessPoolExecutor(args.workers) as ex:
-            rows = list(map(_progress, ex.map(run_case, seeds)))
+    if args.workers > 1 or args.scheduler:
+        from bench.studies import map_cases     # the study engine: local cores or a dask cluster
+        rows = [_progress(r) for r in map_cases(run_case, list(seeds), scheduler=args.scheduler,
+                                                  workers=args.workers)]
     else:
         rows = list(map(_progress, map(run_case, seeds)))
     print(f"bench_analysis: {args.cases} cases in {time.perf_counter() - t0:.0f} s ({args.workers} worker(s))")

@@ -99,7 +99,7 @@ def cmd_analyze_batch(args, progress) -> int:
 
 
 def add_parsers(sub, progress) -> None:
-    """Register `study` (and `analyze`, unless another module already did) on ``sub``."""
+    """Register `study` on ``sub`` (the batch options of `analyze`: :func:`add_batch_options`)."""
     s = sub.add_parser("study", help="parameter studies on all local cores or a dask cluster (resumable)")
     ss = s.add_subparsers(dest="study", required=True)
     m = ss.add_parser("map", help="compliance map G(beta, gamma0) for one or more n (Parquet + map.png)")
@@ -123,19 +123,6 @@ def add_parsers(sub, progress) -> None:
     c.add_argument("--out", required=True, help="study directory (run again to resume)")
     _engine_args(c)
     c.set_defaults(func=lambda a: cmd_study_mc(a, progress))
-    if "analyze" not in sub.choices:
-        a = sub.add_parser("analyze", help="analyse many sources (run dirs, UFF58 files, archive dirs) at once")
-        add_batch_arguments(a, progress)
-
-
-def add_batch_arguments(a, progress=None) -> None:
-    """`bench analyze SOURCES... --out DIR` when no single-source `analyze` exists."""
-    a.add_argument("sources", nargs="+", help="run directories, UFF58 files or archive directories")
-    a.add_argument("--out", required=True, help="batch directory: summary table and one report per source")
-    a.add_argument("--rig", help="rig TOML for sources that carry no rig (UFF58)")
-    add_batch_options(a)
-    if progress is not None:
-        a.set_defaults(func=lambda args: cmd_analyze_batch(args, progress))
 
 
 def add_batch_options(a) -> None:
