@@ -110,7 +110,7 @@ def test_report_export_and_identify_carry_on(damaged, tmp_path, caplog, capsys):
         assert main(["report", str(run)]) == ExitCode.OK
         assert main(["identify", str(run)]) == ExitCode.OK
         paths = {p.name: p for p in export_run(run, tmp_path / "export")}
-    assert f"{n_good} steps, reduced chi^2" in capsys.readouterr().out
+    assert f"{n_good} steps (5 rejected), reduced chi^2" in capsys.readouterr().out
     assert (run / "report" / "compliance.png").is_file()
     rows = paths["steps.csv"].read_text().splitlines()
     assert len(rows) == 1 + n_good
