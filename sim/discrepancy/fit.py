@@ -15,8 +15,8 @@ Masing model, which matters at the sharp reversals of n < 1, where the friction 
 it replaces var_F and cov, for the real and the imaginary part each: the friction along x
 then responds to the probe's noise only with the probe's weight in the rebuilt x, and
 k Omega^2 s_X^2 would overstate the correlation (on a clean n = 0.58 case it made the
-whitened kinematic residual 140 noise variances at the lowest level).  The weights are fixed once per analysis (from the base
-fit), so the chi-square of every candidate is measured in the same noise units and their
+whitened kinematic residual 140 noise variances at the lowest level).  The weights are
+fixed once per analysis (from the base fit), so the chi-square of every candidate is measured in the same noise units and their
 BIC = chi2 + p ln N compare directly.  Intervals come from the Jacobian, scaled by the
 reduced chi-square when it is above 1.
 """
