@@ -181,17 +181,28 @@ def _paths(X: np.ndarray, M: int) -> tuple[np.ndarray, np.ndarray]:
     return x, starts
 
 
-def _friction_harmonics(paths: np.ndarray, starts: np.ndarray, x_s: float, n: float, lam: float,
-                        K: int) -> np.ndarray:
-    """Harmonics 1..K of the dimensionless Masing friction along rows of ``paths`` (m)."""
+def _path_friction(paths: np.ndarray, x_s: float, n: float, lam: float = LAMBDA_MASING) -> np.ndarray:
+    """Dimensionless Masing friction sampled along rows of ``paths`` (m, from :func:`_paths`)."""
     u = paths / x_s
     out = np.empty_like(u)
     _loop_friction(u, u[:, 0].copy(), lam, np.array([n]), out)
-    M = u.shape[1]
+    return out
+
+
+def _path_harmonics(samples: np.ndarray, starts: np.ndarray, K: int) -> np.ndarray:
+    """Harmonics 1..K of rows of samples taken along :func:`_paths`' rotated periods, in
+    the period's own time."""
+    M = samples.shape[1]
     k = np.arange(1, K + 1)
-    spec = np.fft.rfft(out, axis=1)[:, 1:K + 1] * (2.0 / M)
+    spec = np.fft.rfft(samples, axis=1)[:, 1:K + 1] * (2.0 / M)
     # undo the rotation: sample j of the path is sample j + start of the period
     return 1j * spec * np.exp(-2j * np.pi * np.outer(starts, k) / M)
+
+
+def _friction_harmonics(paths: np.ndarray, starts: np.ndarray, x_s: float, n: float, lam: float,
+                        K: int) -> np.ndarray:
+    """Harmonics 1..K of the dimensionless Masing friction along rows of ``paths`` (m)."""
+    return _path_harmonics(_path_friction(paths, x_s, n, lam), starts, K)
 
 
 def synthesize(C: np.ndarray, M: int) -> np.ndarray:
@@ -221,6 +232,7 @@ class _Prepared:
     start: int
     sig_re: np.ndarray | None = None
     sig_im: np.ndarray | None = None
+    cov: np.ndarray | None = None   # with the kinematic residual (real, imaginary part; 2 x K)
     theta: np.ndarray | None = None
 
 
@@ -277,6 +289,9 @@ class Identifier:
         sdX = np.sqrt(p.wD ** 2 * sD ** 2 + (1 - p.wD) ** 2 * p.vA)
         var_re = np.full(K, sP ** 2) + (m * sA) ** 2          # force; accel's direct term
         var_im = var_re.copy()
+        # covariance with the kinematic residual a_j + (j w)^2 x_j of the probe (direct term
+        # of the acceleration; the friction's part follows for the propagated harmonics)
+        cov = np.full((2, K), -m * sA ** 2)
         live = np.flatnonzero(sdX[:EIV_HARMONICS] > 0)
         rng = np.random.default_rng(len(self._prep))
         tail = np.arange(EIV_HARMONICS, p.X.size)
@@ -301,6 +316,7 @@ class Identifier:
                     e_A = (d * (1 - p.wD[j]) * math.sqrt(vAn[j])).astype(complex)
                     if j < K:   # the direct term is counted above; here only its correlation
                         e_A[j] -= m * sA * unit
+                        cov[part, j] = ((e_D[j] * (j + 1) ** 2 * w ** 2 * sD + e_A[j] * sA) / unit).real
                         var_re[j] -= (m * sA * unit).real ** 2
                         var_im[j] -= (m * sA * unit).imag ** 2
                     for e in (e_D, e_K, e_A):
@@ -313,6 +329,17 @@ class Identifier:
         tiny = 1e-12 * max(abs(s.force[0]), 1e-300)    # numerical safety only
         p.sig_re = np.sqrt(np.maximum(var_re, tiny ** 2))
         p.sig_im = np.sqrt(np.maximum(var_im, tiny ** 2))
+        p.cov = cov
+
+    def residual_noise(self, K: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Noise of the friction residual P - m a - F(x) at the current estimate (errors in
+        variables, as the fit weighs them): standard deviations (N) of its real and
+        imaginary parts (each steps x K), and their covariances with the same parts of the
+        kinematic residual a_k + (k w)^2 x_k of the probe (2 x steps x K; the probe's and
+        the accelerometer's noise enter both)."""
+        self._refresh_weights(self.theta, K)
+        return (np.array([p.sig_re for p in self._prep]), np.array([p.sig_im for p in self._prep]),
+                np.stack([p.cov for p in self._prep], axis=1))
 
     def _refresh_weights(self, th: np.ndarray, K: int, force: bool = False, budget: int | None = None) -> None:
         """Recompute the weights of steps whose weights were computed far from ``th``

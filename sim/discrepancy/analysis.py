@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..identify import Identifier
+from ..identify import Identifier, displacement_harmonics
 from .models import synthesize
 from .fit import Fit, Weights, fit, whitened
 from .gain import frf, heldout_error
@@ -33,8 +33,6 @@ log = logging.getLogger(__name__)
 SCHEMA = "guideway-bench/analysis/1"
 LEVEL_GAP = 1.15
 LOOPS = 4
-FRICTION_HARMONICS = 20     # displacement harmonics the friction is computed along (probe noise
-                            # buries more; a reversal for n < 1 needs more than the residuals' 9)
 PARAM_KEYS = dict(F_s_N="F_s_N", x_s_m="x_s_m", n="n", mass_kg="m_kg")
 
 
@@ -51,20 +49,29 @@ def level_groups(levels_N: np.ndarray) -> np.ndarray:
     return group
 
 
-def data_from_steps(steps, harmonics: int = 9, friction_harmonics: int = FRICTION_HARMONICS) -> Data:
-    """Arrays of the first ``harmonics`` harmonics (the residuals), and up to
-    ``friction_harmonics`` of the displacement (the friction along it)."""
+def data_from_steps(steps, harmonics: int = 9) -> Data:
+    """Arrays of the first ``harmonics`` harmonics (the residuals), and every harmonic of
+    both motion channels with their inverse-variance weights (the friction along x,
+    :func:`sim.identify.displacement_harmonics`)."""
     if not steps:
         raise ValueError("no steps to analyse")
     H = [s.harmonics for s in steps]
     K = min([harmonics] + [min(h.force.size, h.accel.size, h.disp.size) for h in H])
-    Kx = max(K, min([friction_harmonics] + [h.disp.size for h in H]))
+    Kf = max(K, max(min(h.force.size, h.accel.size, h.disp.size) for h in H))
+    Xf, XAf, Pf = (np.zeros((len(H), Kf), complex) for _ in range(3))
+    wDf = np.ones((len(H), Kf))
+    for i, h in enumerate(H):
+        X, wD, _ = displacement_harmonics(h)
+        k = np.arange(1, X.size + 1)
+        j = min(X.size, h.force.size)
+        Xf[i, :j], wDf[i, :j], Pf[i, :j] = h.disp[:j], wD[:j], h.force[:j]
+        XAf[i, :j] = -h.accel[:j] / (k[:j] * 2 * math.pi * h.freq_Hz) ** 2
     return Data(omega=np.array([2 * math.pi * h.freq_Hz for h in H]),
                 P=np.array([h.force[:K] for h in H]), A=np.array([h.accel[:K] for h in H]),
                 X=np.array([h.disp[:K] for h in H]), sP=np.array([h.sigma_force for h in H]),
                 sA=np.array([h.sigma_accel for h in H]), sX=np.array([h.sigma_disp for h in H]),
                 level=level_groups(np.array([float(s.level_N) for s in steps])),
-                Xf=np.array([h.disp[:Kx] for h in H]) if Kx > K else None)
+                Xf=Xf, XAf=XAf, wDf=wDf, Pf=Pf)
 
 
 def guess_from_data(d: Data) -> dict:
@@ -81,17 +88,17 @@ def guess_from_data(d: Data) -> dict:
 
 def base_fit(steps, d: Data, guess: dict | None, harmonics: int) -> tuple[Fit, Weights]:
     starts = [guess] if guess else [dict(guess_from_data(d), n=n) for n in (0.5, 1.5, 2.5)]
-    best = None
+    best, best_ident = None, None
     for g in starts:
         ident = Identifier(g, harmonics)
         for s in steps:
             ident.add(s.harmonics)
         est = ident.fit(max_nfev=200)
         if best is None or est.cost < best.cost:
-            best = est
+            best, best_ident = est, ident
     v = best.values
     theta = np.array([math.log(v["F_s_N"]), math.log(v["x_s_m"]), v["n"], math.log(v["mass_kg"])])
-    W = Weights.from_data(d, v["mass_kg"])
+    W = Weights.from_data(d, v["mass_kg"], friction_noise=best_ident.residual_noise(d.X.shape[1]))
     return fit(Model((), d.X.shape[1]), theta, d, W, max_nfev=200), W
 
 

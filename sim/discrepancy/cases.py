@@ -56,7 +56,7 @@ SAMPLES_PER_PERIOD = 2048      # measured blocks: fine enough that n < 1 reversa
 SETTLE_SAMPLES_PER_PERIOD = 64  # the plant still takes >= 400 RK4 steps per period
 MAX_EXTRA_SETTLES = 6
 RECORD_POINTS = 256             # one averaged period kept for loop plots
-HARMONICS = 20                  # stored per step (the analysis' residuals use the first 9)
+HARMONICS = 200                 # stored per step (the residuals use the first 9; the friction all)
 
 
 def plant_supports(effect: str) -> bool:

@@ -8,8 +8,15 @@ residual r_K = A - A_pred(X) share the noise of A and X, so they are whitened to
     cov   = -m s_A^2 - k Omega^2 s_X^2
 
 (k = |P_1 - m A_1| / |X_1|, the step's friction stiffness; real and imaginary parts are
-independent with these variances).  The weights are fixed once per analysis (from the base
-fit), so the chi-square of every candidate is measured in the same noise units and their
+independent with these variances).  When the base identification's errors-in-variables
+noise of the friction residual is given (:meth:`sim.identify.Identifier.residual_noise`:
+force, acceleration and every harmonic of the rebuilt displacement propagated through the
+Masing model, which matters at the sharp reversals of n < 1, where the friction is stiff),
+it replaces var_F and cov, for the real and the imaginary part each: the friction along x
+then responds to the probe's noise only with the probe's weight in the rebuilt x, and
+k Omega^2 s_X^2 would overstate the correlation (on a clean n = 0.58 case it made the
+whitened kinematic residual 140 noise variances at the lowest level).  The weights are
+fixed once per analysis (from the base fit), so the chi-square of every candidate is measured in the same noise units and their
 BIC = chi2 + p ln N compare directly.  Intervals come from the Jacobian, scaled by the
 reduced chi-square when it is above 1.
 """
@@ -34,29 +41,38 @@ Z95 = 1.959964
 
 @dataclass(frozen=True)
 class Weights:
-    """Whitening of (r_F, r_K): r_F / s_F and (r_K - c r_F / s_F^2) / s_Kc, per step x harmonic."""
+    """Whitening of (r_F, r_K): r_F / s_F and (r_K - c r_F / s_F^2) / s_Kc, per step x
+    harmonic; each has a leading axis for the real and the imaginary part."""
 
     s_F: np.ndarray
     c: np.ndarray
     s_Kc: np.ndarray
 
     @classmethod
-    def from_data(cls, d: Data, mass_kg: float, rel_floor: float = 1e-5) -> "Weights":
+    def from_data(cls, d: Data, mass_kg: float, rel_floor: float = 1e-5,
+                  friction_noise: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> "Weights":
         Om = d.Omega
         k = (np.abs(d.P[:, 0] - mass_kg * d.A[:, 0]) / np.maximum(np.abs(d.X[:, 0]), 1e-300))[:, None]
         sP = np.maximum(d.sP, rel_floor * np.abs(d.P[:, 0]))[:, None]
         sA = np.maximum(d.sA, rel_floor * np.abs(d.A[:, 0]))[:, None]
         sX = np.maximum(d.sX, rel_floor * np.abs(d.X[:, 0]))[:, None]
-        var_F = np.broadcast_to(sP ** 2 + (mass_kg * sA) ** 2 + (k * sX) ** 2, Om.shape)
         var_K = sA ** 2 + Om ** 4 * sX ** 2
-        c = -mass_kg * sA ** 2 - k * Om ** 2 * sX ** 2
-        return cls(np.sqrt(var_F), c, np.sqrt(np.maximum(var_K - c ** 2 / var_F, 1e-300)))
+        if friction_noise is None:
+            var_F = np.broadcast_to(sP ** 2 + (mass_kg * sA) ** 2 + (k * sX) ** 2, (2,) + Om.shape)
+            c = np.broadcast_to(-mass_kg * sA ** 2 - k * Om ** 2 * sX ** 2, (2,) + Om.shape)
+        else:
+            sig_re, sig_im, c = friction_noise
+            var_F = np.stack([sig_re ** 2, sig_im ** 2])
+        return cls(np.sqrt(var_F), c, np.sqrt(np.maximum(var_K - c ** 2 / var_F, 1e-6 * var_K)))
 
     def subset(self, mask: np.ndarray) -> "Weights":
-        return Weights(self.s_F[mask], self.c[mask], self.s_Kc[mask])
+        return Weights(self.s_F[:, mask], self.c[:, mask], self.s_Kc[:, mask])
 
     def whiten(self, rF: np.ndarray, rK: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return rF / self.s_F, (rK - self.c / self.s_F ** 2 * rF) / self.s_Kc
+        (fr, fi), (kr, ki), (cr, ci) = self.s_F, self.s_Kc, self.c
+        wF = rF.real / fr + 1j * rF.imag / fi
+        wK = (rK.real - cr / fr ** 2 * rF.real) / kr + 1j * (rK.imag - ci / fi ** 2 * rF.imag) / ki
+        return wF, wK
 
 
 @dataclass(frozen=True)

@@ -6,9 +6,16 @@ P, drive-point acceleration A and displacement X must satisfy
     force balance   r_F = P - m A - G(X, P)      G: friction and what else acts on the carriage
     kinematics      r_K = A - A_pred(X, P)       what the accelerometer should read
 
-The base model is G = F_Masing(x) along the measured displacement (the friction of
-:mod:`sim.identify`, band-limited to the measured harmonics) and A_pred = -Omega^2 X (a
-rigid carriage).  Each catalog effect changes one of these:
+The base model is G = F_Masing(x) along the measured displacement and A_pred = -Omega^2 X
+(a rigid carriage).  A sharp reversal for n < 1 needs far more harmonics of x than the
+probe's noise leaves usable, so the friction follows :mod:`sim.identify`: x is rebuilt from
+every harmonic, each the inverse-variance mean of the probe's X_k and of the
+accelerometer's A_k mapped to displacement (:func:`sim.identify.displacement_harmonics`;
+the probe carries the low harmonics, the accelerometer the high ones).  Both channels go
+through the CANDIDATE's own kinematics before they are mixed (the probe through its sensor
+delay or gain, the accelerometer through the rigid map or the pitching mode's transfer),
+so the friction never assumes the agreement of the two channels that the kinematic
+candidates test.  Each catalog effect changes one of these:
 
 - ``viscous_damping``:   G += i Omega c X
 - ``linear_spring``:     G += k X
@@ -36,8 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..identify import _loop_friction, analyse
-from ..masing import LAMBDA_MASING
+from ..identify import POINTS_PER_PERIOD, _path_friction, _path_harmonics, _paths
 
 BASE_PARAMS = ("F_s_N", "x_s_m", "n", "mass_kg")
 
@@ -65,7 +71,8 @@ CATALOG = tuple(EFFECTS)
 
 @dataclass(frozen=True)
 class Data:
-    """Harmonics of the steps as arrays (steps x K) and their standard errors (per step)."""
+    """Harmonics of the steps as arrays (steps x K) and their standard errors (per step);
+    for the friction, every harmonic of both motion channels (steps x Kf, zero-padded)."""
 
     omega: np.ndarray     # rad/s, per step
     P: np.ndarray
@@ -75,19 +82,25 @@ class Data:
     sA: np.ndarray
     sX: np.ndarray
     level: np.ndarray     # force-level group of each step (for leave-one-level-out)
-    Xf: np.ndarray | None = None   # more displacement harmonics (>= K) for the friction
+    Xf: np.ndarray | None = None    # probe's displacement harmonics 1..Kf (m)
+    XAf: np.ndarray | None = None   # accelerometer's, as a rigid carriage's displacement -A_k / (k w)^2
+    wDf: np.ndarray | None = None   # the probe's weight in their inverse-variance mean
+    Pf: np.ndarray | None = None    # force harmonics 1..Kf (the pitching mode's transfer needs them)
+
+    FIELDS = ("omega", "P", "A", "X", "sP", "sA", "sX", "level", "Xf", "XAf", "wDf", "Pf")
 
     @property
     def Omega(self) -> np.ndarray:
         return self.omega[:, None] * np.arange(1, self.X.shape[1] + 1)
 
-    @property
-    def X_friction(self) -> np.ndarray:
-        return self.X if self.Xf is None else self.Xf
+    def friction_channels(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(X, XA, wD, P) over every harmonic at hand (the probe alone when only it is)."""
+        if self.Xf is None:
+            return self.X, np.zeros_like(self.X), np.ones(self.X.shape), self.P
+        return self.Xf, self.XAf, self.wDf, self.Pf
 
     def subset(self, mask: np.ndarray) -> "Data":
-        return Data(*(getattr(self, f)[mask] for f in ("omega", "P", "A", "X", "sP", "sA", "sX", "level")),
-                    Xf=None if self.Xf is None else self.Xf[mask])
+        return Data(*(None if getattr(self, f) is None else getattr(self, f)[mask] for f in self.FIELDS))
 
 
 def synthesize(C: np.ndarray, M: int) -> np.ndarray:
@@ -99,30 +112,13 @@ def synthesize(C: np.ndarray, M: int) -> np.ndarray:
     return np.fft.irfft(Z, n=M, axis=1)
 
 
-def masing_samples(F_s: float, x_s: float, n: float, x: np.ndarray) -> np.ndarray:
-    """Masing friction (N) along each row of displacement samples ``x`` (one period, m): the
-    steady loop after virgin loading to the period's largest value (as sim.identify)."""
-    M = x.shape[1]
-    centre = 0.5 * (x.max(axis=1) + x.min(axis=1))
-    u = (x - centre[:, None]) / x_s
-    start = np.argmax(u, axis=1)
-    rows = np.arange(u.shape[0])[:, None]
-    idx = (start[:, None] + np.arange(M)[None, :]) % M
-    path = u[rows, idx]
-    out = np.empty_like(path)
-    _loop_friction(path, path[:, 0].copy(), LAMBDA_MASING, np.array([n]), out)
-    F = np.empty_like(out)
-    F[rows, idx] = out
-    return F_s * F
-
-
 class Model:
     """Base Masing model plus a set of effects; parameters as one flat vector.
 
     The vector holds log F_s, log x_s, n, log m, then each effect's parameters in the
     units of :data:`EFFECTS` (f_p in log Hz)."""
 
-    def __init__(self, effects: tuple[str, ...] = (), harmonics: int = 9, points_per_period: int = 256):
+    def __init__(self, effects: tuple[str, ...] = (), harmonics: int = 9, points_per_period: int = POINTS_PER_PERIOD):
         unknown = [e for e in effects if e not in EFFECTS]
         if unknown:
             raise ValueError(f"unknown effects {unknown}; catalog: {CATALOG}")
@@ -161,18 +157,34 @@ class Model:
             X = X / (1.0 + v["sensor_gain_error.gain"])
         return X
 
+    def _accel_disp(self, v: dict, XA: np.ndarray, P: np.ndarray, Om: np.ndarray) -> np.ndarray:
+        """The true displacement harmonics behind the accelerometer's (XA = -A / Omega^2):
+        a rigid carriage's, or with the pitching mode XA = x (1 + a m r Omega^2 / D) + a P / D."""
+        if "second_mode" not in self.effects:
+            return XA
+        w_p = 2 * math.pi * v["second_mode.f_p"]
+        a, r, m = v["second_mode.a"], v["second_mode.r"], v["mass_kg"]
+        D = w_p ** 2 - Om ** 2 + 2j * v["second_mode.zeta"] * w_p * Om
+        return (XA - a * P / D) / (1.0 + a * m * r * Om ** 2 / D)
+
     def _friction(self, v: dict, d: Data) -> np.ndarray:
-        """Harmonics 1..K of the friction along the displacement rebuilt from all the
-        harmonics at hand (a reversal for n < 1 needs more than K of them)."""
-        Xf = d.X_friction
-        Om = d.omega[:, None] * np.arange(1, Xf.shape[1] + 1)
-        x = self._sensor(v, Xf, Om)
+        """Harmonics 1..K of the friction along the displacement rebuilt from every harmonic
+        of both motion channels, each through this model's kinematics (module doc).  The
+        measured force enters only the pitching mode's map, so the result does not depend
+        on a trial force (:meth:`predict` relies on that)."""
+        X, XA, wD, P = d.friction_channels()
+        Om = d.omega[:, None] * np.arange(1, X.shape[1] + 1)
+        x = wD * self._sensor(v, X, Om) + (1.0 - wD) * self._accel_disp(v, XA, P, Om)
+        paths, starts = _paths(x, self.M)
         n = v["n"] if abs(v["n"] - 1.0) >= 1e-6 else 1.0 + 1e-6
-        F = masing_samples(v["F_s_N"], v["x_s_m"], n, synthesize(x, self.M))
+        F = v["F_s_N"] * _path_friction(paths, v["x_s_m"], n)
         beta = v.get("velocity_dependent_friction.beta", 0.0)
         if beta != 0.0:       # friction level rising with speed: F (1 + beta |v|)
-            F = F * (1.0 + beta * np.abs(synthesize(1j * Om * x, self.M)))
-        return analyse(F, d.X.shape[1])
+            vel = synthesize(1j * Om * x, self.M)
+            rows = np.arange(vel.shape[0])[:, None]
+            vel = vel[rows, (starts[:, None] + np.arange(self.M)[None, :]) % self.M]
+            F = F * (1.0 + beta * np.abs(vel))
+        return _path_harmonics(F, starts, d.X.shape[1])
 
     def terms(self, theta: np.ndarray, d: Data, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(G, A_pred) for force harmonics ``P`` (the measured ones, or a trial)."""

@@ -73,7 +73,7 @@ def init_effect(effect: str, current: Fit, d: Data, W: Weights) -> np.ndarray:
     _, rK = current.model.residuals(current.theta, d)
     Om = d.Omega
     m = math.exp(current.theta[3])
-    wgt = 1.0 / W.s_Kc
+    wgt = 1.0 / np.sqrt(0.5 * (W.s_Kc[0] ** 2 + W.s_Kc[1] ** 2))
     best = (math.inf, None)
     f_lo, f_hi = d.omega.min() / (2 * math.pi), 3 * Om.max() / (2 * math.pi)
     for f_p in np.geomspace(f_lo, f_hi, 90):

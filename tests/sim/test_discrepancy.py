@@ -77,7 +77,11 @@ def test_clean_data_gets_no_cause(seed):
 def test_clean_data_with_n_below_one_gets_no_cause():
     case = make_case(3, ())                         # n = 0.58
     assert case.rig["n"] < 1
-    assert analyse(case, 3).causes == []
+    d = analyse(case, 3).to_dict()
+    # the friction along x rebuilt from every harmonic (decision 0015): the sharp reversals
+    # of n < 1 leave no structure the noise does not account for
+    assert d["causes"] == [] and not d["unexplained"], d["verdict"]
+    assert 0.5 < d["base"]["reduced_chi2"] < 2.0
 
 
 @pytest.mark.slow
