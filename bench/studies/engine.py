@@ -231,6 +231,14 @@ class Study:
     def _write_manifest(self, m: dict) -> None:
         _atomic_write(self.manifest, lambda fh: fh.write(json.dumps(m, indent=1, default=float).encode()))
 
+    def run_on(self, fn: Callable, engine: Engine | None = None, scheduler: str | None = None,
+               workers: int | None = None, *, progress=None) -> Outcome:
+        """:meth:`run` on ``engine``, or on one started (and closed) for this study."""
+        if engine is not None:
+            return self.run(fn, engine, progress=progress)
+        with Engine(scheduler, workers) as eng:
+            return self.run(fn, eng, progress=progress)
+
     def run(self, fn: Callable, engine: Engine, *, progress=None) -> Outcome:
         """Compute every task whose part is missing; returns the outcome (never raises for
         a failed task: it is in ``outcome.failures`` and ``study.json``)."""

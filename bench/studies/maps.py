@@ -98,11 +98,7 @@ def compliance_map(spec: MapSpec, study_dir, *, scheduler: str | None = None, wo
                    engine: Engine | None = None, progress=None, figure: bool = True) -> Outcome:
     """Run (or resume) a map study; writes results.parquet and, with ``figure``, map.png."""
     study = Study(study_dir, "compliance-map", spec.to_dict(), spec.tasks())
-    if engine is None:
-        with Engine(scheduler, workers) as eng:
-            out = study.run(map_row, eng, progress=progress)
-    else:
-        out = study.run(map_row, engine, progress=progress)
+    out = study.run_on(map_row, engine, scheduler, workers, progress=progress)
     if figure and out.table_path.exists():
         from .figures import plot_compliance_map
         plot_compliance_map(out.table(), study.dir / "map.png")

@@ -184,11 +184,7 @@ def identification_mc(spec: McSpec, study_dir, *, scheduler: str | None = None, 
                       engine: Engine | None = None, progress=None, figure: bool = True) -> Outcome:
     """Run (or resume) a Monte-Carlo study; writes results.parquet and errors.png."""
     study = Study(study_dir, "identification-mc", spec.to_dict(), spec.tasks(), seed=spec.seed)
-    if engine is None:
-        with Engine(scheduler, workers) as eng:
-            out = study.run(identification_sample, eng, progress=progress)
-    else:
-        out = study.run(identification_sample, engine, progress=progress)
+    out = study.run_on(identification_sample, engine, scheduler, workers, progress=progress)
     if figure and out.table_path.exists():
         from .figures import plot_identification_errors
         plot_identification_errors(out.table(), study.dir / "errors.png")
