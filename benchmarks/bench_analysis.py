@@ -28,6 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from sim.discrepancy import analyze_steps  # noqa: E402
+from sim.discrepancy.models import synthesize  # noqa: E402
 from sim.discrepancy.cases import CATALOG, make_case, plant_supports, truth_size  # noqa: E402
 from sim.identify import Identifier  # noqa: E402
 
@@ -64,13 +65,14 @@ def run_case(seed: int) -> dict:
                     t_generate_s=t_gen, t_analysis_s=time.perf_counter() - t0, t_identify_s=t_ref)
     t_an = time.perf_counter() - t0
     named = a.causes
+    x = synthesize(np.array([st.harmonics.disp[:9] for st in case.steps]), 256)
+    amp_over_xs = float(0.5 * (x.max(axis=1) - x.min(axis=1)).max() / case.rig["x_s_m"])
     first = a.selection.named[0] if a.selection.named else None
     size_error = covered = None
     if kind in named:
         name, truth = truth_size(case, kind)
         if name:
-            c = next(c for c in a.selection.named if c.id == kind)
-            p = a.cause_parameters(kind, c.fit)[name]
+            p = a.cause_parameters(kind, a.final)[name]
             size_error = p["value"] / truth - 1
             covered = bool(p["low"] <= truth <= p["high"])
     return dict(seed=seed, kind=kind, skipped=False, n=case.rig["n"], steps=len(case.steps), named=named,
@@ -78,7 +80,8 @@ def run_case(seed: int) -> dict:
                 heldout_before=a.selection.heldout_base,
                 heldout_after=(a.selection.named[-1].heldout_error if first else a.selection.heldout_base),
                 base_chi2=a.base.reduced_chi2, final_chi2=a.final.reduced_chi2,
-                size_error=size_error, interval_covers_truth=covered,
+                size_error=size_error, interval_covers_truth=covered, amplitude_over_true_x_s=amp_over_xs,
+                spring_separable=a.spring_separable(),
                 t_generate_s=t_gen, t_analysis_s=t_an, t_identify_s=t_ref)
 
 
@@ -100,9 +103,16 @@ def summarise(rows: list[dict]) -> str:
                    f"{100 * np.mean([r['detected'] for r in rs]):5.0f}% "
                    f"{sum(r['detected'] for r in lo):3d}/{len(lo):<3d} {sum(bool(r['wrong']) for r in rs):6d} "
                    f"{sum(r['unexplained'] for r in rs):6d}")
+    pre = [r for r in eff if r["kind"] == "linear_spring" and r.get("amplitude_over_true_x_s", 2.0) < 1.0]
+    if pre:
+        out.append(f"linear_spring cases that never left pre-rolling (amplitude < x_s, where a spring is a "
+                   f"reparametrised Masing curve): {len(pre)}, named {sum(r['detected'] for r in pre)}, "
+                   f"verdict warns in {sum(not r['spring_separable'] for r in pre)}")
     if eff:
+        sep = [r for r in eff if r not in pre]
         out.append(f"{'all effects':30s} {len(eff):5d} {sum(r['detected'] for r in eff):6d} "
-                   f"{100 * np.mean([r['detected'] for r in eff]):5.0f}%")
+                   f"{100 * np.mean([r['detected'] for r in eff]):5.0f}%   (separable: "
+                   f"{sum(r['detected'] for r in sep)}/{len(sep)}, {100 * np.mean([r['detected'] for r in sep]):.0f} %)")
     clean = [r for r in rows if r["kind"] == "clean"]
     if clean:
         fa = [bool(r["named"]) for r in clean]

@@ -4,7 +4,9 @@
    grouped into force levels by their force amplitude (gaps of more than 15 %).
 2. Base fit: :class:`sim.identify.Identifier` (the project's identification) from the
    guess, then the base model refitted on both residuals (force balance and kinematics).
-3. :func:`sim.discrepancy.select.select`: candidates, gates, unexplained structure.
+3. :func:`sim.discrepancy.select.select`: candidates and gates, in the base model's noise
+   units; then :func:`~sim.discrepancy.select.settle_final` refits the chosen model with
+   the noise of its own residuals (its intervals) and tests what remains for structure.
 4. :class:`Analysis` keeps the fits and renders the analysis.json schema
    (``docs/analysis.md``) with :meth:`Analysis.to_dict`.
 
@@ -26,7 +28,7 @@ from .models import synthesize
 from .fit import Fit, Weights, fit, whitened
 from .gain import frf, heldout_error
 from .models import BASE_PARAMS, EFFECTS, Data, Model
-from .select import Selection, select
+from .select import Selection, select, settle_final
 
 log = logging.getLogger(__name__)
 
@@ -207,7 +209,33 @@ class Analysis:
             parts.append(f"Structure remains that {what} does not explain: {'; '.join(sel.reasons[:4])}. "
                          f"No effect in the catalog accounts for it; look for something else (a nonlinear "
                          f"spring, a loose fixture, mains hum, an unsettled vibration).")
+        caveat = self._spring_caveat()
+        if caveat:
+            parts.append(caveat)
         return " ".join(parts)
+
+    def largest_amplitude_over_x_s(self) -> float:
+        """Largest half peak-to-peak displacement of any step over the final model's x_s:
+        below 1 every Masing branch stays in pre-rolling."""
+        x = synthesize(self.data.X, 256)
+        amp = 0.5 * (x.max(axis=1) - x.min(axis=1)).max()
+        return float(amp / self.final.model.values(self.final.theta)["x_s_m"])
+
+    def spring_separable(self) -> bool:
+        """Whether the data can tell a linear spring from the Masing curve.  In pre-rolling
+        the virgin curve is f1 = A x^n + B x; a spring k in parallel only turns B into B + k,
+        which is again a Masing curve with other F_s and x_s (the Masing rule holds for the
+        sum, branch by branch).  Only steps beyond x_s, where f1 gives way to F_s but the
+        spring keeps rising, separate the two."""
+        return "linear_spring" in self.causes or self.largest_amplitude_over_x_s() > 1.0
+
+    def _spring_caveat(self) -> str:
+        if self.spring_separable():
+            return ""
+        return (f"Every step stayed in pre-rolling (largest amplitude {self.largest_amplitude_over_x_s():.2f} x_s): "
+                f"there a linear spring in parallel (cables, hoses, preload) cannot be told from a stiffer Masing "
+                f"curve, so F_s and x_s include any such spring; steps whose amplitude exceeds x_s would "
+                f"separate them.")
 
     def _resonance_phrase(self) -> str:
         """', and over-predicts the compliance at the resonance by 12 %' (median over levels)."""
@@ -223,7 +251,7 @@ class Analysis:
         return f", and {'over' if e > 0 else 'under'}-predicts the compliance at the resonance by {100 * abs(e):.1f} %"
 
     def _phrase(self, c) -> str:
-        p = self.cause_parameters(c.id, c.fit)
+        p = self.cause_parameters(c.id, self.final)
 
         def iv(name, fmt, scale=1.0, unit=""):
             q = p[name]
@@ -265,7 +293,7 @@ class Analysis:
                       final=dict(compliance=ri(C_fin[i]), accelerance=ri(A_fin[i])),
                       residual_by_harmonic=[float(x) for x in res_h[i]])
                  for i, s in enumerate(self.steps)]
-        causes = [dict(id=c.id, label=EFFECTS[c.id].label, parameters=self.cause_parameters(c.id, c.fit),
+        causes = [dict(id=c.id, label=EFFECTS[c.id].label, parameters=self.cause_parameters(c.id, self.final),
                        gain=dict(heldout_error_before=c.heldout_before, heldout_error_after=c.heldout_error,
                                  delta_bic=c.delta_bic))
                   for c in sel.named]
@@ -278,7 +306,9 @@ class Analysis:
             base=dict(parameters=self._params(self.base), reduced_chi2=self.base.reduced_chi2,
                       heldout_error=sel.heldout_base,
                       diagnostics=dict(structure_final=sel.structure, unexplained_reasons=sel.reasons,
-                                       f_res_Hz=self.f_res_Hz(self.base))),
+                                       f_res_Hz=self.f_res_Hz(self.base),
+                                       largest_amplitude_over_x_s=self.largest_amplitude_over_x_s(),
+                                       spring_separable=self.spring_separable())),
             final=dict(effects=list(self.final.model.effects), reduced_chi2=self.final.reduced_chi2),
             causes=causes, unexplained=sel.unexplained, verdict=self.verdict(), candidates=candidates,
             steps_used=[s.key for s in self.steps], steps_rejected=list(self.rejected),
@@ -329,6 +359,6 @@ def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, sourc
         raise ValueError("need steps at two force levels at least (held-out checks leave one level out)")
     base, W = base_fit(steps, d, guess, harmonics)
     log.info("base fit: reduced chi2 %.2f", base.reduced_chi2)
-    sel = select(base, d, W)
+    sel = settle_final(select(base, d, W), d)
     return Analysis(steps=steps, data=d, weights=W, selection=sel, source=source,
                     software_version=software_version, rejected=list(rejected or []))

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -37,6 +37,8 @@ log = logging.getLogger(__name__)
 N_BOUNDS = (0.1, 6.0)
 F_P_BOUNDS_HZ = (1e-2, 1e6)
 Z95 = 1.959964
+REL_FLOOR = 1e-5        # noise floors relative to the fundamental (numerical safety)
+TAIL_DRAWS = 8
 
 
 @dataclass(frozen=True)
@@ -49,7 +51,7 @@ class Weights:
     s_Kc: np.ndarray
 
     @classmethod
-    def from_data(cls, d: Data, mass_kg: float, rel_floor: float = 1e-5,
+    def from_data(cls, d: Data, mass_kg: float, rel_floor: float = REL_FLOOR,
                   friction_noise: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> "Weights":
         Om = d.Omega
         k = (np.abs(d.P[:, 0] - mass_kg * d.A[:, 0]) / np.maximum(np.abs(d.X[:, 0]), 1e-300))[:, None]
@@ -63,6 +65,66 @@ class Weights:
         else:
             sig_re, sig_im, c = friction_noise
             var_F = np.stack([sig_re ** 2, sig_im ** 2])
+        return cls(np.sqrt(var_F), c, np.sqrt(np.maximum(var_K - c ** 2 / var_F, 1e-6 * var_K)))
+
+    @classmethod
+    def propagated(cls, model: "Model", theta: np.ndarray, d: Data, tail_draws: int = TAIL_DRAWS,
+                   seed: int = 0) -> "Weights":
+        """The noise of this model's own residuals: every channel's noise propagated through
+        ``model.residuals`` at ``theta`` by central differences of one standard deviation
+        (the friction is not differentiable at a reversal for n < 1; the noise's own scale is
+        the honest step).  Harmonics 1..K of each channel are propagated one part at a time
+        (in every step at once: a step's residuals depend on its own data only); the higher
+        harmonics of all three channels act together through ``tail_draws`` random-sign
+        draws (their summed variance, unbiased).
+
+        Needed because a candidate can change which noise reaches its residuals: with the
+        pitching mode the force balance holds m (1 - r) x'' from the probe, whose noise at
+        the upper harmonics is hundreds of times the rigid model's (a pitch-mode case had
+        reduced chi-square 43 at the true parameters under the base model's weights)."""
+        K = d.X.shape[1]
+        Xf, XAf, _, Pf = d.friction_channels()
+        Kf = Xf.shape[1]
+        live = (np.abs(Xf) + np.abs(XAf) + np.abs(Pf)) > 0 if d.Xf is not None else np.ones(Xf.shape, bool)
+        k = np.arange(1, Kf + 1)
+        to_disp = -1.0 / (d.omega[:, None] * k) ** 2
+        sig = dict(P=np.maximum(d.sP, REL_FLOOR * np.abs(d.P[:, 0]))[:, None],
+                   A=np.maximum(d.sA, REL_FLOOR * np.abs(d.A[:, 0]))[:, None],
+                   X=np.maximum(d.sX, REL_FLOOR * np.abs(d.X[:, 0]))[:, None])
+
+        def moved(dP, dA, dX, sign):
+            dP, dA, dX = sign * dP * live, sign * dA * live, sign * dX * live
+            return replace(d, P=d.P + dP[:, :K], A=d.A + dA[:, :K], X=d.X + dX[:, :K],
+                           **({} if d.Xf is None else dict(Xf=d.Xf + dX, XAf=d.XAf + dA * to_disp, Pf=d.Pf + dP)))
+
+        def response(dP, dA, dX):
+            (fp, kp), (fm, km) = (model.residuals(theta, moved(dP, dA, dX, s)) for s in (1.0, -1.0))
+            return (fp - fm) / 2, (kp - km) / 2
+
+        acc = np.zeros((6,) + d.X.shape)      # var F re, im; var K re, im; cov re, im
+        add = lambda gF, gK, w=1.0: acc.__iadd__(w * np.stack([  # noqa: E731
+            gF.real ** 2, gF.imag ** 2, gK.real ** 2, gK.imag ** 2, gF.real * gK.real, gF.imag * gK.imag]))
+        zero = np.zeros(Xf.shape, complex)
+        for ch in ("P", "A", "X"):
+            for j in range(min(K, Kf)):
+                for unit in (1.0, 1j):
+                    dch = zero.copy()
+                    dch[:, j] = unit * sig[ch][:, 0]
+                    add(*response(*(dch if c == ch else zero for c in ("P", "A", "X"))))
+        if Kf > K and tail_draws:
+            rng = np.random.default_rng(seed)
+            for _ in range(tail_draws):
+                ds = []
+                for ch in ("P", "A", "X"):
+                    dch = zero.copy()
+                    dch[:, K:] = sig[ch] * (rng.choice([-1.0, 1.0], (Xf.shape[0], Kf - K))
+                                            + 1j * rng.choice([-1.0, 1.0], (Xf.shape[0], Kf - K)))
+                    ds.append(dch)
+                add(*response(*ds), 1.0 / tail_draws)
+        tiny = 1e-24 * np.abs(d.P[:, :1]) ** 2 + 1e-300
+        var_F = np.maximum(acc[:2], tiny)
+        var_K = np.maximum(acc[2:4], tiny)
+        c = acc[4:]
         return cls(np.sqrt(var_F), c, np.sqrt(np.maximum(var_K - c ** 2 / var_F, 1e-6 * var_K)))
 
     def subset(self, mask: np.ndarray) -> "Weights":

@@ -46,6 +46,8 @@ import numpy as np
 from ..identify import POINTS_PER_PERIOD, _path_friction, _path_harmonics, _paths
 
 BASE_PARAMS = ("F_s_N", "x_s_m", "n", "mass_kg")
+MOTION_EFFECTS = ("sensor_delay", "sensor_gain_error", "second_mode")   # they change the rebuilt x
+MEMO_ENTRIES = 8
 
 
 @dataclass(frozen=True)
@@ -131,6 +133,10 @@ class Model:
             self.slices[e] = slice(i, i + len(EFFECTS[e].names))
             i += len(EFFECTS[e].names)
         self.size = i
+        self._memo: dict = {}        # (data, key) -> what depends on the key only (see _cached)
+
+    def __getstate__(self) -> dict:
+        return dict(self.__dict__, _memo={})        # the memo is a cache, not state
 
     # ------------------------------------------------------------------ parameters
     def values(self, theta: np.ndarray) -> dict:
@@ -157,50 +163,97 @@ class Model:
             X = X / (1.0 + v["sensor_gain_error.gain"])
         return X
 
-    def _accel_disp(self, v: dict, XA: np.ndarray, P: np.ndarray, Om: np.ndarray) -> np.ndarray:
-        """The true displacement harmonics behind the accelerometer's (XA = -A / Omega^2):
-        a rigid carriage's, or with the pitching mode XA = x (1 + a m r Omega^2 / D) + a P / D."""
-        if "second_mode" not in self.effects:
-            return XA
+    def _pitch(self, v: dict, Om: np.ndarray) -> tuple[np.ndarray, float, float, float]:
+        """(D, a, r, m) of the pitching mode at the angular frequencies ``Om``."""
         w_p = 2 * math.pi * v["second_mode.f_p"]
-        a, r, m = v["second_mode.a"], v["second_mode.r"], v["mass_kg"]
         D = w_p ** 2 - Om ** 2 + 2j * v["second_mode.zeta"] * w_p * Om
-        return (XA - a * P / D) / (1.0 + a * m * r * Om ** 2 / D)
+        return D, v["second_mode.a"], v["second_mode.r"], v["mass_kg"]
 
-    def _friction(self, v: dict, d: Data) -> np.ndarray:
-        """Harmonics 1..K of the friction along the displacement rebuilt from every harmonic
-        of both motion channels, each through this model's kinematics (module doc).  The
-        measured force enters only the pitching mode's map, so the result does not depend
-        on a trial force (:meth:`predict` relies on that)."""
+    def _displacement(self, v: dict, d: Data) -> np.ndarray:
+        """The true displacement's harmonics 1..Kf, rebuilt from both motion channels, each
+        through this model's kinematics (module doc).
+
+        The probe reads x through its sensor (delay, gain).  The accelerometer reads
+        XA = -A / Omega^2 = g x + a P / D with g = 1 + a m r Omega^2 / D under the pitching
+        mode (g = 1 for a rigid carriage).  Its estimate of x, (XA - a P / D) / g, has the
+        noise variance of XA over |g|^2, so its inverse-variance weight against the probe
+        becomes w = wD / (wD + |g|^2 (1 - wD)) (wD: the rigid carriage's weight).  At the
+        coupled mode of a free carriage (g -> 0) the accelerometer carries no information on
+        x and the probe takes over; written as below nothing divides by g."""
         X, XA, wD, P = d.friction_channels()
         Om = d.omega[:, None] * np.arange(1, X.shape[1] + 1)
-        x = wD * self._sensor(v, X, Om) + (1.0 - wD) * self._accel_disp(v, XA, P, Om)
-        paths, starts = _paths(x, self.M)
+        xp = self._sensor(v, X, Om)
+        if "second_mode" not in self.effects:
+            return wD * xp + (1.0 - wD) * XA
+        D, a, r, m = self._pitch(v, Om)
+        g = 1.0 + a * m * r * Om ** 2 / D
+        den = np.maximum(wD + np.abs(g) ** 2 * (1.0 - wD), 1e-300)
+        return (wD * xp + np.conj(g) * (1.0 - wD) * (XA - a * P / D)) / den
+
+    def _cached(self, d: Data, key: tuple, make):
+        """``make()`` for this data and key, remembered for the last few keys.  A Jacobian
+        by finite differences moves one parameter at a time: the rebuilt displacement and
+        its sampled period depend only on the motion effects' parameters (and m under the
+        pitching mode), the Masing friction along it also on x_s and n, so most columns
+        reuse both (F_s scales the friction; m, c, k, beta do not touch it)."""
+        entry = self._memo.get(key)
+        if entry is not None and entry[0] is d:
+            return entry[1]
+        value = make()
+        if len(self._memo) >= MEMO_ENTRIES:
+            self._memo.pop(next(iter(self._memo)))
+        self._memo[key] = (d, value)
+        return value
+
+    def _motion_key(self, theta: np.ndarray) -> tuple:
+        key = [float(v) for e in MOTION_EFFECTS if e in self.slices for v in theta[self.slices[e]]]
+        if "second_mode" in self.slices:
+            key.append(float(theta[3]))
+        return ("x", *key)
+
+    def _friction(self, theta: np.ndarray, v: dict, d: Data) -> tuple[np.ndarray, np.ndarray]:
+        """(Harmonics 1..K of the friction, harmonics 1..Kf of the rebuilt displacement):
+        the friction along the displacement rebuilt from every harmonic (module doc).  The
+        measured force enters only the pitching mode's map of the accelerometer, so the
+        result does not depend on a trial force (:meth:`predict` relies on that)."""
+        mkey = self._motion_key(theta)
+
+        def motion():
+            x = self._displacement(v, d)
+            paths, starts = _paths(x, self.M)
+            return x, paths, starts
+        x, paths, starts = self._cached(d, mkey, motion)
         n = v["n"] if abs(v["n"] - 1.0) >= 1e-6 else 1.0 + 1e-6
-        F = v["F_s_N"] * _path_friction(paths, v["x_s_m"], n)
+        F = v["F_s_N"] * self._cached(d, mkey + (float(theta[1]), n),
+                                      lambda: _path_friction(paths, v["x_s_m"], n))
         beta = v.get("velocity_dependent_friction.beta", 0.0)
         if beta != 0.0:       # friction level rising with speed: F (1 + beta |v|)
-            vel = synthesize(1j * Om * x, self.M)
-            rows = np.arange(vel.shape[0])[:, None]
-            vel = vel[rows, (starts[:, None] + np.arange(self.M)[None, :]) % self.M]
-            F = F * (1.0 + beta * np.abs(vel))
-        return _path_harmonics(F, starts, d.X.shape[1])
+            def speed():
+                Om = d.omega[:, None] * np.arange(1, x.shape[1] + 1)
+                vel = synthesize(1j * Om * x, self.M)
+                rows = np.arange(vel.shape[0])[:, None]
+                return np.abs(vel[rows, (starts[:, None] + np.arange(self.M)[None, :]) % self.M])
+            F = F * (1.0 + beta * self._cached(d, mkey + ("v",), speed))
+        return _path_harmonics(F, starts, d.X.shape[1]), x
 
     def terms(self, theta: np.ndarray, d: Data, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(G, A_pred) for force harmonics ``P`` (the measured ones, or a trial)."""
+        """(G, A_pred) for force harmonics ``P`` (the measured ones, or a trial).
+
+        Everything acting on the carriage (G) follows the rebuilt displacement, the least
+        noisy estimate of x at every harmonic; the rigid-body term of A_pred follows the
+        probe alone, so that the kinematic residual compares the two channels."""
         v = self.values(theta)
         Om = d.Omega
-        x = self._sensor(v, d.X, Om)
-        G = self._friction(v, d)
+        K = d.X.shape[1]
+        G, xr = self._friction(theta, v, d)
+        x = xr[:, :K]
         if "viscous_damping" in self.effects:
             G = G + 1j * Om * v["viscous_damping.c"] * x
         if "linear_spring" in self.effects:
             G = G + v["linear_spring.k"] * x
-        A_pred = -Om ** 2 * x
+        A_pred = -Om ** 2 * self._sensor(v, d.X, Om)
         if "second_mode" in self.effects:
-            w_p = 2 * math.pi * v["second_mode.f_p"]
-            a, r, m = v["second_mode.a"], v["second_mode.r"], v["mass_kg"]
-            D = w_p ** 2 - Om ** 2 + 2j * v["second_mode.zeta"] * w_p * Om
+            D, a, r, m = self._pitch(v, Om)
             h_th = -Om ** 2 * a * (P + m * r * Om ** 2 * x) / D
             A_pred = A_pred + h_th
             G = G + m * (r - 1.0) * h_th

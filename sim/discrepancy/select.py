@@ -14,8 +14,9 @@ An effect is named only if delta BIC < :data:`BIC_GATE` and the held-out error f
 least :data:`HELDOUT_GATE` (relative).  The best-scoring effect that passes both joins the
 model and the next round starts; selection stops when none passes.
 
-Unexplained structure: the final model's whitened residuals, grouped by harmonic, force
-level and frequency band, should each have a mean square near 1.  A reduced chi-square
+Unexplained structure (:func:`settle_final`): the final model, refitted with the noise
+of its own residuals, should leave whitened residuals whose mean square, grouped by
+harmonic, force level and frequency band, is near 1 in every group.  A reduced chi-square
 above :data:`CHI2_UNEXPLAINED`, or a group above :data:`GROUP_UNEXPLAINED` (and far above
 its own sampling spread), means the data hold something the final model does not.
 """
@@ -60,6 +61,7 @@ class Selection:
     tried: list[Candidate]
     heldout_base: float
     structure: dict = field(default_factory=dict)
+    final_weights: Weights | None = None
     unexplained: bool = False
     reasons: list[str] = field(default_factory=list)
 
@@ -162,7 +164,19 @@ def select(base: Fit, d: Data, W: Weights, catalog: tuple[str, ...] = CATALOG, m
         chosen.named = True
         named.append(chosen)
         current, held_cur = chosen.fit, chosen.heldout_error
-    s = structure(current, d, W)
+    return Selection(base=base, final=current, named=named, tried=tried, heldout_base=held_base)
+
+
+def settle_final(sel: Selection, d: Data, seed: int = 0) -> Selection:
+    """Refit the selected model with the noise of its own residuals
+    (:meth:`Weights.propagated`) and test what remains for structure.
+
+    Selection compares candidates in the base model's noise units; the verdict on the
+    final model (its intervals, reduced chi-square and the unexplained test) must use the
+    noise that actually reaches its residuals."""
+    W = Weights.propagated(sel.final.model, sel.final.theta, d, seed=seed)
+    final = fit(sel.final.model, sel.final.theta, d, W, max_nfev=100)
+    s = structure(final, d, W)
     reasons = _unexplained(s)
-    return Selection(base=base, final=current, named=named, tried=tried, heldout_base=held_base,
-                     structure=s, unexplained=bool(reasons), reasons=reasons)
+    sel.final, sel.final_weights, sel.structure, sel.unexplained, sel.reasons = final, W, s, bool(reasons), reasons
+    return sel

@@ -36,7 +36,7 @@ def test_each_hidden_cause_is_named_with_its_size(effect):
         pytest.skip(f"the plant has no {effect} yet (contract 1)")
     case = make_case(SEEDS[effect], (effect,))
     a = analyse(case, SEEDS[effect])
-    assert a.causes[:1] == [effect], a.verdict()
+    assert a.causes[:1] == [effect] and not a.unexplained, a.verdict()
     d = a.to_dict()
     name, truth = truth_size(case, effect)
     if name:
@@ -107,3 +107,46 @@ def test_one_force_level_is_refused_with_a_reason():
     case = make_case(2, (), levels=2, freqs=4)
     with pytest.raises(ValueError, match="two force levels"):
         analyze_steps([s for s in case.steps if s.key.startswith("L00")], None)
+
+
+def _reparametrised(F_s, x_s, n, k):
+    """F_s', x_s' of the Masing curve f1 = A x^n + (B + k) x (seed Eqs. 4-5 inverted)."""
+    A, B = F_s / ((1 - n) * x_s ** n), -n * F_s / ((1 - n) * x_s) + k
+    x_s2 = (-B / (n * A)) ** (1 / (n - 1))
+    return A * (1 - n) * x_s2 ** n, x_s2
+
+
+@pytest.mark.parametrize("n", [0.4, 2.2])
+def test_a_spring_in_pre_rolling_is_exactly_a_masing_curve_with_other_parameters(n):
+    # f1 = A x^n + B x: a spring k in parallel makes B + k, and the Masing rule holds for the
+    # sum branch by branch, so along any path that stays below x_s the two loops coincide
+    from sim.identify import _path_friction
+    F_s, x_s, k = 10.0, 20e-6, 0.1 * 10.0 / 20e-6
+    t = np.linspace(0, 2 * np.pi, 512, endpoint=False)
+    path = 0.7 * x_s * (np.cos(t) + 0.2 * np.cos(3 * t + 0.4)) / 1.2
+    path = path[np.argmax(path):].tolist() + path[:np.argmax(path)].tolist()
+    path = np.array([path])
+    F_s2, x_s2 = _reparametrised(F_s, x_s, n, k)
+    with_spring = F_s * _path_friction(path, x_s, n) + k * path
+    masing = F_s2 * _path_friction(path, x_s2, n)
+    assert np.max(np.abs(with_spring - masing)) < 1e-9 * F_s
+    beyond = path * 2.2                                   # into rolling: they part
+    assert np.max(np.abs(F_s * _path_friction(beyond, x_s, n) + k * beyond
+                         - F_s2 * _path_friction(beyond, x_s2, n))) > 0.01 * F_s
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_a_spring_the_data_cannot_separate_is_not_named_and_the_verdict_says_why():
+    case = make_case(1044, ("linear_spring",))         # n = 0.38, every step below x_s
+    assert case.rig["n"] < 1
+    a = analyse(case, 44)
+    d = a.to_dict()
+    assert d["causes"] == [] and not d["unexplained"], d["verdict"]
+    F_s2, x_s2 = _reparametrised(case.rig["F_s_N"], case.rig["x_s_m"], case.rig["n"],
+                                 case.effects["linear_spring"]["spring_N_per_m"])
+    assert d["parameters"]["F_s_N"]["value"] == pytest.approx(F_s2, rel=0.01)
+    assert d["parameters"]["x_s_m"]["value"] == pytest.approx(x_s2, rel=0.02)
+    assert d["base"]["diagnostics"]["spring_separable"] is False
+    assert d["base"]["diagnostics"]["largest_amplitude_over_x_s"] < 1
+    assert "cannot be told from a stiffer Masing curve" in d["verdict"]
