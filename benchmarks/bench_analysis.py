@@ -29,7 +29,7 @@ import numpy as np  # noqa: E402
 
 from sim.discrepancy import analyze_steps  # noqa: E402
 from sim.discrepancy.models import synthesize  # noqa: E402
-from sim.discrepancy.cases import CATALOG, make_case, plant_supports, truth_size  # noqa: E402
+from sim.discrepancy.cases import CATALOG, make_case, observable_rig, plant_supports, truth_size  # noqa: E402
 from sim.identify import Identifier  # noqa: E402
 
 KINDS = ("clean",) + CATALOG
@@ -75,12 +75,20 @@ def run_case(seed: int) -> dict:
             p = a.cause_parameters(kind, a.final)[name]
             size_error = p["value"] / truth - 1
             covered = bool(p["low"] <= truth <= p["high"])
+    # the final model's F_s, x_s, n, m against the rig (as the data can show it), when the
+    # final model is the true one: pulls (error / standard error, in the fit's coordinates)
+    base_pulls = None
+    if set(named) == ({kind} - {"clean"}) and not a.unexplained:
+        obs = observable_rig(case)
+        truth = np.array([np.log(obs["F_s_N"]), np.log(obs["x_s_m"]), obs["n"], np.log(obs["mass_kg"])])
+        base_pulls = ((a.final.theta[:4] - truth) / np.sqrt(np.diag(a.final.cov)[:4])).tolist()
     return dict(seed=seed, kind=kind, skipped=False, n=case.rig["n"], steps=len(case.steps), named=named,
                 unexplained=a.unexplained, detected=kind in named, wrong=[c for c in named if c != kind],
                 heldout_before=a.selection.heldout_base,
                 heldout_after=(a.selection.named[-1].heldout_error if first else a.selection.heldout_base),
                 base_chi2=a.base.reduced_chi2, final_chi2=a.final.reduced_chi2,
-                size_error=size_error, interval_covers_truth=covered, amplitude_over_true_x_s=amp_over_xs,
+                size_error=size_error, interval_covers_truth=covered, base_pulls=base_pulls,
+                amplitude_over_true_x_s=amp_over_xs,
                 spring_separable=a.spring_separable(),
                 t_generate_s=t_gen, t_analysis_s=t_an, t_identify_s=t_ref)
 
@@ -96,7 +104,7 @@ def summarise(rows: list[dict]) -> str:
     for kind in CATALOG:
         rs = [r for r in eff if r["kind"] == kind]
         if not rs:
-            out.append(f"{kind:30s} {'(not in the plant)':>20s}")
+            out.append(f"{kind:30s} {'(no cases)':>20s}")
             continue
         lo = [r for r in rs if r["n"] < 1]
         out.append(f"{kind:30s} {len(rs):5d} {sum(r['detected'] for r in rs):6d} "
@@ -127,9 +135,16 @@ def summarise(rows: list[dict]) -> str:
                    f"-> {100 * np.median([r['heldout_after'] for r in det]):.3f} %")
     sized = [r for r in det if r.get("size_error") is not None]
     if sized:
-        out.append(f"effect size (c, k, delay, gain, alpha): median |error| "
+        out.append(f"effect size (c, k, f_p, delay, gain, alpha): median |error| "
                    f"{100 * np.median([abs(r['size_error']) for r in sized]):.2f} %, 95 % interval covers the "
                    f"truth in {sum(r['interval_covers_truth'] for r in sized)} of {len(sized)}")
+    pulls = np.array([r["base_pulls"] for r in rows if r.get("base_pulls")])
+    if pulls.size:
+        cover = np.abs(pulls) < 1.959964
+        out.append(f"F_s, x_s, n, m of the final model (cases where it is the true model): 95 % intervals cover "
+                   f"the rig's values in {cover.sum()} of {cover.size} ({100 * cover.mean():.1f} %); pulls "
+                   f"(error / standard error) rms " + ", ".join(f"{k} {v:.2f}" for k, v in zip(
+                       ("F_s", "x_s", "n", "m"), np.sqrt((pulls ** 2).mean(axis=0)))))
     ta = np.array([r["t_analysis_s"] for r in rows])
     tr = np.array([r["t_identify_s"] for r in rows])
     tg = np.array([r["t_generate_s"] for r in rows])
@@ -157,8 +172,10 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     if args.workers > 1 or args.scheduler:
         from bench.studies import map_cases     # the study engine: local cores or a dask cluster
+        def done(i, total, label):
+            print(f"{label}: {i}/{total} cases done, {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
         rows = [_progress(r) for r in map_cases(run_case, list(seeds), scheduler=args.scheduler,
-                                                  workers=args.workers)]
+                                                  workers=args.workers, progress=done)]
     else:
         rows = list(map(_progress, map(run_case, seeds)))
     print(f"bench_analysis: {args.cases} cases in {time.perf_counter() - t0:.0f} s ({args.workers} worker(s))")

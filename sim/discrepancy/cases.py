@@ -108,7 +108,18 @@ def truth_size(case: "Case", effect: str) -> tuple[str | None, float | None]:
     if effect == "velocity_dependent_friction":
         w_res = 2 * math.pi * case.f_res_Hz
         return "alpha", fx["friction_alpha"] * (w_res * case.rig["x_s_m"]) / fx["friction_v_ref_m_per_s"]
+    if effect == "second_mode":         # the model's f_p is the mode with x held: sqrt(k_th / J)
+        return "frequency", math.sqrt(fx["pitch_stiffness_N_m_per_rad"] / fx["pitch_inertia_kg_m2"]) / (2 * math.pi)
     return None, None
+
+
+def observable_rig(case: "Case") -> dict:
+    """The rig's F_s_N, x_s_m, n, mass_kg as measurements can show them.  The analysis takes
+    the accelerometer as the reference of scale (a gain error is the displacement's scale
+    relative to it), so an accelerometer gain error g_a shows as x_s (1 + g_a) and
+    m / (1 + g_a); nothing in the data can tell the two apart."""
+    g_a = case.effects.get("sensor_gain_error", {}).get("accel_gain_error", 0.0)
+    return dict(case.rig, x_s_m=case.rig["x_s_m"] * (1 + g_a), mass_kg=case.rig["mass_kg"] / (1 + g_a))
 
 
 def random_rig(rng: np.random.Generator) -> dict:

@@ -43,7 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..identify import POINTS_PER_PERIOD, _path_friction, _path_harmonics, _paths
+from ..identify import POINTS_PER_PERIOD, _path_friction, _path_harmonics, _paths, synthesize
 
 BASE_PARAMS = ("F_s_N", "x_s_m", "n", "mass_kg")
 MOTION_EFFECTS = ("sensor_delay", "sensor_gain_error", "second_mode")   # they change the rebuilt x
@@ -103,15 +103,6 @@ class Data:
 
     def subset(self, mask: np.ndarray) -> "Data":
         return Data(*(None if getattr(self, f) is None else getattr(self, f)[mask] for f in self.FIELDS))
-
-
-def synthesize(C: np.ndarray, M: int) -> np.ndarray:
-    """Rows of samples of sum_k Im(C_k exp(i k w t)) over one period (as
-    :func:`sim.identify.synthesize`, by inverse FFT: no BLAS call, which under a loaded
-    machine's multi-threaded OpenBLAS costs 40x more than the arithmetic)."""
-    Z = np.zeros((C.shape[0], M // 2 + 1), complex)
-    Z[:, 1:C.shape[1] + 1] = -0.5j * M * C
-    return np.fft.irfft(Z, n=M, axis=1)
 
 
 class Model:
