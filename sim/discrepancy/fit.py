@@ -102,8 +102,10 @@ class Weights:
             return (fp - fm) / 2, (kp - km) / 2
 
         acc = np.zeros((6,) + d.X.shape)      # var F re, im; var K re, im; cov re, im
-        add = lambda gF, gK, w=1.0: acc.__iadd__(w * np.stack([  # noqa: E731
-            gF.real ** 2, gF.imag ** 2, gK.real ** 2, gK.imag ** 2, gF.real * gK.real, gF.imag * gK.imag]))
+
+        def add(gF, gK, w=1.0):
+            acc[:] += w * np.stack([gF.real ** 2, gF.imag ** 2, gK.real ** 2, gK.imag ** 2,
+                                    gF.real * gK.real, gF.imag * gK.imag])
         zero = np.zeros(Xf.shape, complex)
         for ch in ("P", "A", "X"):
             for j in range(min(K, Kf)):
