@@ -282,8 +282,7 @@ class RunStore:
         jsons = {p.stem for p in self._step_files()}
         for key in sorted(jsons):
             try:
-                self.verify_step(key)
-                raw = self.raw(key)
+                raw = self.raw(key)                 # verifies both files first
                 if not {"force_N", "accel_m_s2", "disp_m"} <= set(raw):
                     problems.append(StepProblem(key, self.steps_dir / f"{key}.npz", "corrupt",
                                                 f"raw block lacks {sorted({'force_N', 'accel_m_s2', 'disp_m'} - set(raw))}"))

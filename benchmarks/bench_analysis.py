@@ -29,7 +29,7 @@ import numpy as np  # noqa: E402
 
 from sim.discrepancy import analyze_steps  # noqa: E402
 from sim.discrepancy.models import synthesize  # noqa: E402
-from sim.discrepancy.cases import CATALOG, make_case, observable_rig, plant_supports, truth_size  # noqa: E402
+from sim.discrepancy.cases import CATALOG, make_case, observable_rig, truth_size  # noqa: E402
 from sim.identify import Identifier  # noqa: E402
 
 KINDS = ("clean",) + CATALOG
@@ -42,8 +42,6 @@ def case_kind(seed: int) -> str:
 def run_case(seed: int) -> dict:
     """One generated case, analysed; a flat row of what happened."""
     kind = case_kind(seed)
-    if kind != "clean" and not plant_supports(kind):
-        return dict(seed=seed, kind=kind, skipped=True)
     t0 = time.perf_counter()
     case = make_case(1000 + seed, () if kind == "clean" else (kind,))
     t_gen = time.perf_counter() - t0
@@ -59,7 +57,7 @@ def run_case(seed: int) -> dict:
     try:
         a = analyze_steps(case.steps, guess)
     except Exception as e:          # a failure is a result: count it, keep going
-        return dict(seed=seed, kind=kind, skipped=False, failed=f"{type(e).__name__}: {e}", n=case.rig["n"],
+        return dict(seed=seed, kind=kind, failed=f"{type(e).__name__}: {e}", n=case.rig["n"],
                     steps=len(case.steps), named=[], unexplained=False, detected=False, wrong=[],
                     heldout_before=np.nan, heldout_after=np.nan, base_chi2=np.nan, final_chi2=np.nan,
                     t_generate_s=t_gen, t_analysis_s=time.perf_counter() - t0, t_identify_s=t_ref)
@@ -82,7 +80,7 @@ def run_case(seed: int) -> dict:
         obs = observable_rig(case)
         truth = np.array([np.log(obs["F_s_N"]), np.log(obs["x_s_m"]), obs["n"], np.log(obs["mass_kg"])])
         base_pulls = ((a.final.theta[:4] - truth) / np.sqrt(np.diag(a.final.cov)[:4])).tolist()
-    return dict(seed=seed, kind=kind, skipped=False, n=case.rig["n"], steps=len(case.steps), named=named,
+    return dict(seed=seed, kind=kind, n=case.rig["n"], steps=len(case.steps), named=named,
                 unexplained=a.unexplained, detected=kind in named, wrong=[c for c in named if c != kind],
                 heldout_before=a.selection.heldout_base,
                 heldout_after=(a.selection.named[-1].heldout_error if first else a.selection.heldout_base),
@@ -94,7 +92,6 @@ def run_case(seed: int) -> dict:
 
 
 def summarise(rows: list[dict]) -> str:
-    rows = [r for r in rows if not r["skipped"]]
     out = []
     failed = [r for r in rows if r.get("failed")]
     if failed:
@@ -155,9 +152,8 @@ def summarise(rows: list[dict]) -> str:
 
 def _progress(row: dict) -> dict:
     """Print a case's outcome as it arrives (stderr), pass the row on."""
-    if not row["skipped"]:
-        print(f"case {row['seed']:3d} {row['kind']:28s} n={row['n']:.2f} named={','.join(row['named']) or '-':30s} "
-              f"unexplained={row['unexplained']!s:5s} analysis {row['t_analysis_s']:.1f} s", file=sys.stderr, flush=True)
+    print(f"case {row['seed']:3d} {row['kind']:28s} n={row['n']:.2f} named={','.join(row['named']) or '-':30s} "
+          f"unexplained={row['unexplained']!s:5s} analysis {row['t_analysis_s']:.1f} s", file=sys.stderr, flush=True)
     return row
 
 

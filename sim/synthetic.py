@@ -50,21 +50,29 @@ def friction_resonance_Hz(model: RigModel) -> float:
     return model.omega_s / (2 * math.pi)
 
 
-def issue_grid(model: RigModel, levels: int = 5, freqs: int = 18) -> tuple[np.ndarray, np.ndarray]:
+def grid(F_s_N: float, f_res_Hz: float, levels: int = 5, freqs: int = 18) -> tuple[np.ndarray, np.ndarray]:
     """The issue's grid: force levels 0.1-0.85 F_s, frequencies 0.3-3 x the friction resonance (log)."""
-    f_s = friction_resonance_Hz(model)
-    return np.linspace(0.1, 0.85, levels) * model.F_s_N, np.geomspace(0.3 * f_s, 3.0 * f_s, freqs)
+    return np.linspace(0.1, 0.85, levels) * F_s_N, np.geomspace(0.3 * f_res_Hz, 3.0 * f_res_Hz, freqs)
 
 
-def random_rig(seed: int, n_range: tuple[float, float]) -> dict:
-    """Parameters of a generated rig (seeded): F_s 2-40 N, x_s 2-100 um (log-uniform),
-    m 2-40 kg, n uniform in ``n_range`` (kept 0.1 away from 1)."""
-    rng = np.random.default_rng(seed)
+def issue_grid(model: RigModel, levels: int = 5, freqs: int = 18) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`grid` of ``model``."""
+    return grid(model.F_s_N, friction_resonance_Hz(model), levels, freqs)
+
+
+def draw_rig(rng: np.random.Generator, n_range: tuple[float, float], n_gap: float = 0.1) -> dict:
+    """Parameters of a generated rig: F_s 2-40 N, x_s 2-100 um (log-uniform), m 2-40 kg,
+    n uniform in ``n_range`` and at least ``n_gap`` away from 1."""
     n = rng.uniform(*n_range)
-    while abs(n - 1) < 0.1:
+    while abs(n - 1) < n_gap:
         n = rng.uniform(*n_range)
     return dict(F_s_N=float(rng.uniform(2, 40)), x_s_m=float(math.exp(rng.uniform(math.log(2e-6), math.log(100e-6)))),
                 n=float(n), mass_kg=float(rng.uniform(2, 40)))
+
+
+def random_rig(seed: int, n_range: tuple[float, float]) -> dict:
+    """:func:`draw_rig` seeded, n kept 0.1 away from 1."""
+    return draw_rig(np.random.default_rng(seed), n_range)
 
 
 def clean_model(F_s_N: float, x_s_m: float, n: float, mass_kg: float, seed: int = 0, **effects) -> RigModel:

@@ -319,8 +319,6 @@ def test_a_scheduler_that_does_not_answer_is_a_clear_error(tmp_path):
 
 @pytest.mark.timeout(600)
 def test_batch_analysis_with_analyze_source_on_the_cluster(cluster, sources, tmp_path):
-    # bench.analyze (contract 3/5) lands with the `causes` branch; until then this skips
-    pytest.importorskip("bench.analyze")
     out = analyze_batch(sources, tmp_path / "batch", scheduler=cluster.address)
     assert out.computed == 2 and not out.failures
     rows = pq.read_table(tmp_path / "batch" / "summary.parquet").to_pylist()

@@ -5,13 +5,12 @@ through the RK4 plant (sim.rig.SimulatedRig) on the issue's grid (5 levels 0.1-0
 18 frequencies 0.3-3 f_res) with the issue's noise; the effect strength is drawn above the
 required sensitivity.  The starting guess is the truth times 0.7-1.3, as a technician's.
 """
-import math
 
 import numpy as np
 import pytest
 
 from sim.discrepancy import CATALOG, analyze_steps
-from sim.discrepancy.cases import make_case, plant_supports, truth_size
+from sim.discrepancy.cases import make_case, truth_size
 
 # one seed per cause (the seeds only fix the random rig and strength; n below 1 and above 1)
 SEEDS = {"viscous_damping": 5, "linear_spring": 6, "sensor_delay": 7, "sensor_gain_error": 8,
@@ -24,16 +23,10 @@ def analyse(case, seed):
     return analyze_steps(case.steps, guess)
 
 
-def needs_plant(effect):
-    return pytest.mark.skipif(not plant_supports(effect), reason=f"the plant has no {effect} yet (contract 1)")
-
-
 @pytest.mark.slow
 @pytest.mark.timeout(300)
 @pytest.mark.parametrize("effect", CATALOG)
 def test_each_hidden_cause_is_named_with_its_size(effect):
-    if not plant_supports(effect):
-        pytest.skip(f"the plant has no {effect} yet (contract 1)")
     case = make_case(SEEDS[effect], (effect,))
     a = analyse(case, SEEDS[effect])
     assert a.causes[:1] == [effect] and not a.unexplained, a.verdict()
@@ -95,7 +88,6 @@ def test_two_hidden_effects_are_both_named():
 
 @pytest.mark.slow
 @pytest.mark.timeout(300)
-@needs_plant("cubic_spring")
 def test_an_effect_outside_the_catalog_is_unexplained():
     case = make_case(41, ("cubic_spring",))
     d = analyse(case, 41).to_dict()
