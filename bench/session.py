@@ -127,11 +127,27 @@ def _signals(handler, *signums):
             signal.signal(s, h)
 
 
-def _sigterm_as_interrupt():
-    """SIGTERM takes the same clean exit as Ctrl-C."""
-    def handler(signum, frame):
-        raise KeyboardInterrupt(f"signal {signum}")
-    return _signals(handler, signal.SIGTERM)
+class _SignalLatch:
+    """SIGTERM takes the same clean exit as Ctrl-C, and neither can be lost.
+
+    The handler raises ``KeyboardInterrupt`` at once, but Python drops an exception raised
+    while a finalizer runs (``Exception ignored in ... __del__``: numba's compiler, for one,
+    finalizes LLVM objects mid-step), so the signal is also latched and raised again before
+    the next DAQ block (:meth:`check`)."""
+
+    def __init__(self):
+        self.reason: str | None = None
+
+    def handler(self, signum, frame):
+        self.reason = "Ctrl-C" if signum == signal.SIGINT else f"signal {signum}"
+        raise KeyboardInterrupt(self.reason)
+
+    def check(self) -> None:
+        if self.reason is not None:
+            raise KeyboardInterrupt(self.reason)
+
+    def installed(self):
+        return _signals(self.handler, signal.SIGINT, signal.SIGTERM)
 
 
 def _uninterruptible(what: str):
@@ -237,14 +253,15 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
     log_handler = _log_to(store.path / "bench.log")
     status = "failed"
     sup = None
-    with ExitStack() as stack, _sigterm_as_interrupt():
+    latch = _SignalLatch()
+    with ExitStack() as stack, latch.installed():
         try:
             ins = open_instruments(rig, stack, sim_seed=sim_seed,
                                    on_output_off=lambda ok: store.event("output_off", confirmed=ok))
             store.update(identities=ins.identities)
             sup = Supervisor(limits, ins.generator)
             gen = SupervisedGenerator(ins.generator, sup)
-            daq = stop_request.StopOnRequest(SupervisedDaq(ins.daq, sup), store.path)
+            daq = stop_request.StopOnRequest(SupervisedDaq(ins.daq, sup), store.path, also=latch.check)
 
             def sensor_check() -> dict:
                 reading = ins.sensor.read_gap()

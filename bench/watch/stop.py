@@ -60,10 +60,12 @@ class StopOnRequest:
     block once a stop request is waiting.  Every step acquires blocks of at most about a
     second, so a request takes effect within about a second of rig time."""
 
-    def __init__(self, daq, run_dir: Path):
-        self._daq, self._file = daq, Path(run_dir) / STOP_FILE
+    def __init__(self, daq, run_dir: Path, also=None):
+        self._daq, self._file, self._also = daq, Path(run_dir) / STOP_FILE, also
 
     def _check(self) -> None:
+        if self._also is not None:
+            self._also()            # a stop from elsewhere (the session's signal latch)
         if self._file.exists():
             req = pending(self._file.parent) or {}
             raise StopRequested(f"stop requested by {req.get('by', 'unknown')}")
