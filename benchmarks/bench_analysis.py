@@ -8,7 +8,7 @@ cause named, and separately "unexplained"), wrong causes named, the median out-o
 gain and the time per case, with the analysis time also as a ratio to one base
 identification (sim.identify) of the same case measured in the same run.
 
-    python benchmarks/bench_analysis.py [--cases 56] [--workers 1] [--scheduler tcp://host:port] [--json out.json]
+    python benchmarks/bench_analysis.py [--cases 56] [--first 0] [--workers 1] [--scheduler tcp://host:port] [--json out.json]
 
 The case loop is a plain map over ``run_case``, so a scheduler (dask) can run it too.
 """
@@ -160,11 +160,12 @@ def _progress(row: dict) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", type=int, default=56)
+    ap.add_argument("--first", type=int, default=0, help="seed of the first case (a fresh sample: --first 56)")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--scheduler", help="run the cases on this dask scheduler (tcp://host:port)")
     ap.add_argument("--json", help="write the rows here")
     args = ap.parse_args(argv)
-    seeds = range(args.cases)
+    seeds = range(args.first, args.first + args.cases)
     t0 = time.perf_counter()
     if args.workers > 1 or args.scheduler:
         from bench.studies import map_cases     # the study engine: local cores or a dask cluster
