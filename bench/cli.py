@@ -303,7 +303,7 @@ def cmd_check(args) -> int:
     if not store.path.is_dir():
         RunStore.open(store.path)             # raises the one-line usage error
     problems = store.check()
-    n = len(store._step_files())
+    n = len(store.step_files())
     for p in problems:
         print(f"{p.kind:>9}  {p}")
     good = n - len({p.key for p in problems if p.key and p.kind != "unknown" and

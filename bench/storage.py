@@ -212,7 +212,8 @@ class RunStore:
         self._npz_ok[key] = (st.st_mtime_ns, st.st_size, plain["integrity"]["npz_sha256"])   # just written
 
     # ------------------------------------------------------------------ steps: reading
-    def _step_files(self) -> list[Path]:
+    def step_files(self) -> list[Path]:
+        """The steps' JSON files present (intact or not), in key order."""
         return sorted(self.steps_dir.glob("*.json")) if self.steps_dir.is_dir() else []
 
     def verify_step(self, key: str) -> dict:
@@ -237,7 +238,7 @@ class RunStore:
         """Completed steps' results, in schedule order; a damaged or half-missing step is
         skipped with a warning naming the file and why (and listed in ``self.problems``)."""
         out, self.problems = [], []
-        for p in self._step_files():
+        for p in self.step_files():
             try:
                 out.append(self.verify_step(p.stem))
             except DamagedStep as e:
@@ -279,7 +280,7 @@ class RunStore:
         if not self.steps_dir.is_dir():
             problems.append(StepProblem("", self.steps_dir, "missing", "no steps/ directory"))
             return problems
-        jsons = {p.stem for p in self._step_files()}
+        jsons = {p.stem for p in self.step_files()}
         for key in sorted(jsons):
             try:
                 raw = self.raw(key)                 # verifies both files first
