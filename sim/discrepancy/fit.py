@@ -18,7 +18,9 @@ k Omega^2 s_X^2 would overstate the correlation (on a clean n = 0.58 case it mad
 whitened kinematic residual 140 noise variances at the lowest level).  The weights are
 fixed once per analysis (from the base fit), so the chi-square of every candidate is measured in the same noise units and their
 BIC = chi2 + p ln N compare directly.  Intervals come from the Jacobian, scaled by the
-reduced chi-square when it is above 1.
+reduced chi-square when it is above 1.  The final model is refitted with
+:meth:`Weights.propagated`: the noise of its own residuals, and the mean the noise itself
+adds to them (decision records 0020, 0022).
 """
 
 from __future__ import annotations
@@ -44,11 +46,15 @@ TAIL_DRAWS = 8
 @dataclass(frozen=True)
 class Weights:
     """Whitening of (r_F, r_K): r_F / s_F and (r_K - c r_F / s_F^2) / s_Kc, per step x
-    harmonic; each has a leading axis for the real and the imaginary part."""
+    harmonic; each has a leading axis for the real and the imaginary part.  ``bias_F``,
+    ``bias_K`` (complex, step x harmonic; :meth:`propagated` only) are the mean the noise
+    itself adds to the residuals, subtracted before whitening."""
 
     s_F: np.ndarray
     c: np.ndarray
     s_Kc: np.ndarray
+    bias_F: np.ndarray | float = 0.0
+    bias_K: np.ndarray | float = 0.0
 
     @classmethod
     def from_data(cls, d: Data, mass_kg: float, rel_floor: float = REL_FLOOR,
@@ -78,6 +84,12 @@ class Weights:
         harmonics of all three channels act together through ``tail_draws`` random-sign
         draws (their summed variance, unbiased).
 
+        The same differences give the residuals' noise-induced mean, (r(+) + r(-)) / 2 - r:
+        noise in the upper harmonics roughens the rebuilt path, and the Masing friction
+        along a rough path runs small extra loops, so even at the true parameters the
+        residuals are not centred (on a delay case it moved m by -0.8 standard errors,
+        which Monte Carlo confirmed).  It is kept as ``bias_F``, ``bias_K`` and subtracted.
+
         Needed because a candidate can change which noise reaches its residuals: with the
         pitching mode the force balance holds m (1 - r) x'' from the probe, whose noise at
         the upper harmonics is hundreds of times the rigid model's (a pitch-mode case had
@@ -97,15 +109,19 @@ class Weights:
             return replace(d, P=d.P + dP[:, :K], A=d.A + dA[:, :K], X=d.X + dX[:, :K],
                            **({} if d.Xf is None else dict(Xf=d.Xf + dX, XAf=d.XAf + dA * to_disp, Pf=d.Pf + dP)))
 
+        f0, k0 = model.residuals(theta, d)
+
         def response(dP, dA, dX):
             (fp, kp), (fm, km) = (model.residuals(theta, moved(dP, dA, dX, s)) for s in (1.0, -1.0))
-            return (fp - fm) / 2, (kp - km) / 2
+            return (fp - fm) / 2, (kp - km) / 2, (fp + fm) / 2 - f0, (kp + km) / 2 - k0
 
         acc = np.zeros((6,) + d.X.shape)      # var F re, im; var K re, im; cov re, im
+        bias = np.zeros((2,) + d.X.shape, complex)
 
-        def add(gF, gK, w=1.0):
+        def add(gF, gK, bF, bK, w=1.0):
             acc[:] += w * np.stack([gF.real ** 2, gF.imag ** 2, gK.real ** 2, gK.imag ** 2,
                                     gF.real * gK.real, gF.imag * gK.imag])
+            bias[:] += w * np.stack([bF, bK])
         zero = np.zeros(Xf.shape, complex)
         for ch in ("P", "A", "X"):
             for j in range(min(K, Kf)):
@@ -127,12 +143,14 @@ class Weights:
         var_F = np.maximum(acc[:2], tiny)
         var_K = np.maximum(acc[2:4], tiny)
         c = acc[4:]
-        return cls(np.sqrt(var_F), c, np.sqrt(np.maximum(var_K - c ** 2 / var_F, 1e-6 * var_K)))
+        return cls(np.sqrt(var_F), c, np.sqrt(np.maximum(var_K - c ** 2 / var_F, 1e-6 * var_K)), *bias)
 
     def subset(self, mask: np.ndarray) -> "Weights":
-        return Weights(self.s_F[:, mask], self.c[:, mask], self.s_Kc[:, mask])
+        pick = lambda b: b[mask] if np.ndim(b) else b       # noqa: E731
+        return Weights(self.s_F[:, mask], self.c[:, mask], self.s_Kc[:, mask], pick(self.bias_F), pick(self.bias_K))
 
     def whiten(self, rF: np.ndarray, rK: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        rF, rK = rF - self.bias_F, rK - self.bias_K
         (fr, fi), (kr, ki), (cr, ci) = self.s_F, self.s_Kc, self.c
         wF = rF.real / fr + 1j * rF.imag / fi
         wK = (rK.real - cr / fr ** 2 * rF.real) / kr + 1j * (rK.imag - ci / fi ** 2 * rF.imag) / ki
