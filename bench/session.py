@@ -11,10 +11,9 @@ import logging
 import math
 import os
 import platform
-import signal
 import socket
 import sys
-from contextlib import ExitStack, contextmanager
+from contextlib import ExitStack
 from dataclasses import dataclass, replace
 from importlib import metadata as importlib_metadata
 from pathlib import Path
@@ -28,6 +27,7 @@ from procedures.safety import LimitExceeded, SupervisedDaq, SupervisedGenerator,
 from procedures.stepped_sine import SteppedSine
 
 from .config import Plan, Rig
+from .signals import SignalLatch, uninterruptible
 from .storage import RunStore
 from .watch import stop as stop_request
 
@@ -110,52 +110,6 @@ def versions() -> dict:
         except importlib_metadata.PackageNotFoundError:
             out[pkg] = None
     return out
-
-
-@contextmanager
-def _signals(handler, *signums):
-    """Run the block with ``handler`` for ``signums`` (main thread only; elsewhere as is)."""
-    try:
-        old = {s: signal.signal(s, handler) for s in signums}
-    except ValueError:          # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)
-
-
-class _SignalLatch:
-    """SIGTERM takes the same clean exit as Ctrl-C, and neither can be lost.
-
-    The handler raises ``KeyboardInterrupt`` at once, but Python drops an exception raised
-    while a finalizer runs (``Exception ignored in ... __del__``: numba's compiler, for one,
-    finalizes LLVM objects mid-step), so the signal is also latched and raised again before
-    the next DAQ block (:meth:`check`)."""
-
-    def __init__(self):
-        self.reason: str | None = None
-
-    def handler(self, signum, frame):
-        self.reason = "Ctrl-C" if signum == signal.SIGINT else f"signal {signum}"
-        raise KeyboardInterrupt(self.reason)
-
-    def check(self) -> None:
-        if self.reason is not None:
-            raise KeyboardInterrupt(self.reason)
-
-    def installed(self):
-        return _signals(self.handler, signal.SIGINT, signal.SIGTERM)
-
-
-def _uninterruptible(what: str):
-    """Hold Ctrl-C and SIGTERM off while ``what`` runs (switching the output off must not
-    be cut short by an impatient second Ctrl-C); they are logged, not lost silently."""
-    def handler(signum, frame):
-        log.warning("signal %d while %s: finishing that first", signum, what)
-    return _signals(handler, signal.SIGINT, signal.SIGTERM)
 
 
 @dataclass
@@ -253,7 +207,7 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
     log_handler = _log_to(store.path / "bench.log")
     status = "failed"
     sup = None
-    latch = _SignalLatch()
+    latch = SignalLatch()
     with ExitStack() as stack, latch.installed():
         try:
             ins = open_instruments(rig, stack, sim_seed=sim_seed,
@@ -316,7 +270,7 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
             status = "interrupted"
             store.event("interrupted", reason=str(e) or "Ctrl-C")
             if sup is not None:
-                with _uninterruptible("ramping down"):
+                with uninterruptible("ramping down"):
                     sup.shutdown()       # ramp down; the output is switched off below
             stop_request.clear(store.path)
             log.warning("interrupted; resume with: bench resume %s", store.path)
@@ -330,7 +284,7 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
             log.exception("run failed")
             raise
         finally:
-            with _uninterruptible("switching the output off"):
+            with uninterruptible("switching the output off"):
                 stack.close()    # output off, then close links and twins
             store.finish(status, steps_done=len(store.done_keys()), steps_total=len(plan.schedule()))
             if log_handler:

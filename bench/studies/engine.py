@@ -42,6 +42,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from distributed import Client, LocalCluster, WorkerPlugin, as_completed
 
+from bench.signals import SignalLatch
 from bench.storage import _atomic_write, now_iso
 
 log = logging.getLogger(__name__)
@@ -261,21 +262,24 @@ class Study:
         total, finished = len(self.tasks), out.skipped
         if progress and finished:
             progress(finished, total, "(resumed)")
+        latch = SignalLatch()       # SIGTERM as Ctrl-C; one dropped in a finalizer acts after the next task
         try:
-            for fut in as_completed(list(futures)):
-                k, t = futures[fut]
-                try:
-                    rows = fut.result()
-                except Exception as e:  # noqa: BLE001 - one task's failure must not stop the study
-                    msg = f"{type(e).__name__}: {e}"
-                    log.error("task %s failed with inputs %s: %s", k, t, msg)
-                    out.failures.append(dict(task=k, inputs=t, error=msg))
-                else:
-                    _write_part(self.parts / f"{k}.parquet", _rows_table(rows, t, k, version))
-                    out.computed += 1
-                finished += 1
-                if progress:
-                    progress(finished, total, f"{len(out.failures)} failed" if out.failures else "")
+            with latch.installed():
+                for fut in as_completed(list(futures)):
+                    latch.check()
+                    k, t = futures[fut]
+                    try:
+                        rows = fut.result()
+                    except Exception as e:  # noqa: BLE001 - one task's failure must not stop the study
+                        msg = f"{type(e).__name__}: {e}"
+                        log.error("task %s failed with inputs %s: %s", k, t, msg)
+                        out.failures.append(dict(task=k, inputs=t, error=msg))
+                    else:
+                        _write_part(self.parts / f"{k}.parquet", _rows_table(rows, t, k, version))
+                        out.computed += 1
+                    finished += 1
+                    if progress:
+                        progress(finished, total, f"{len(out.failures)} failed" if out.failures else "")
         except BaseException:
             log.warning("%s: cancelling %d pending tasks", self.dir, sum(not f.done() for f in futures))
             client.cancel(list(futures))
