@@ -169,14 +169,22 @@ def cmd_watch(args) -> int:
         raise ValueError(f"{run_dir}: no such run directory")
     if not (run_dir / "run.json").is_file():
         log.warning("%s has no run.json yet: the page waits for the run to start", run_dir)
+    import signal
+
+    from .signals import handling
+
     server = _watch_server(run_dir, args.host, args.port)
-    print(f"watch: {server.url}  (Ctrl-C ends the page, not the run)", flush=True)
-    try:
-        server.serve_forever()
-    except KeyboardInterrupt:
-        pass
-    finally:
-        server.close()         # open pages get the last state and a goodbye
+    # The page serves from its own thread; Ctrl-C and SIGTERM only raise a flag (no lock
+    # the main thread might hold, no exception a finalizer could drop: bench/signals.py).
+    ended = []
+    with handling(lambda signum, frame: ended.append(signum), signal.SIGINT, signal.SIGTERM):
+        server.start()
+        print(f"watch: {server.url}  (Ctrl-C ends the page, not the run)", flush=True)
+        try:
+            while not ended:
+                time.sleep(0.2)
+        finally:
+            server.close()         # open pages get the last state and a goodbye
     return 0
 
 
