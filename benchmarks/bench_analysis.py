@@ -28,9 +28,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from sim.discrepancy import analyze_steps  # noqa: E402
-from sim.discrepancy.models import synthesize  # noqa: E402
 from sim.discrepancy.cases import CATALOG, make_case, observable_rig, truth_size  # noqa: E402
-from sim.identify import Identifier  # noqa: E402
+from sim.identify import Identifier, synthesize  # noqa: E402
 
 KINDS = ("clean",) + CATALOG
 

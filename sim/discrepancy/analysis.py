@@ -23,8 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..identify import Identifier, displacement_harmonics
-from .models import synthesize
+from ..identify import Identifier, displacement_harmonics, synthesize
 from .fit import Fit, Weights, fit, whitened
 from .gain import frf, heldout_error
 from .models import BASE_PARAMS, EFFECTS, Data, Model

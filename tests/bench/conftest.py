@@ -3,6 +3,8 @@ a test that changes a run works on a copy)."""
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from bench.config import DEFAULTS, load_plan, load_rig
@@ -34,3 +36,25 @@ def analysis_example():
     """An analysis dict computed from the rig's physics (tests/bench/analysis_example.py)."""
     from .analysis_example import build_example
     return build_example()
+
+
+@pytest.fixture
+def signal_in_a_finalizer(mocker):
+    """``send(signum)`` delivers the signal while a ``__del__`` runs, where Python drops the
+    handler's exception ("Exception ignored in"); ``send.dropped`` lists what it dropped."""
+    dropped = []
+    mocker.patch("sys.unraisablehook", side_effect=lambda u: dropped.append(u.exc_type))
+
+    class Finalized:
+        def __init__(self, signum):
+            self.signum = signum
+
+        def __del__(self):
+            os.kill(os.getpid(), self.signum)
+            for _ in range(10_000):          # the handler runs here, inside the finalizer
+                pass
+
+    def send(signum):
+        Finalized(signum)                    # made and dropped: __del__ runs at once
+    send.dropped = dropped
+    return send

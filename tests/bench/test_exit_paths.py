@@ -151,28 +151,19 @@ def test_ctrl_c_is_recorded_as_interrupted_with_the_output_off(tmp_path, mocker,
     assert the(tmp_path / "run", "interrupted")["reason"] == "Ctrl-C"
 
 
-def test_a_signal_python_drops_inside_a_finalizer_still_stops_the_run(tmp_path, mocker, twins_of_run):
-    # Python discards an exception raised while a __del__ runs ("Exception ignored in"):
-    # a SIGTERM landing in numba's LLVM finalizers once let a run finish all its steps.
-    dropped = []
-    mocker.patch("sys.unraisablehook", side_effect=lambda u: dropped.append(u.exc_type))
-
-    class Finalized:
-        def __del__(self):
-            os.kill(os.getpid(), signal.SIGTERM)
-            for _ in range(10_000):          # the handler runs here, inside the finalizer
-                pass
-
+def test_a_signal_python_drops_inside_a_finalizer_still_stops_the_run(tmp_path, mocker, twins_of_run,
+                                                                      signal_in_a_finalizer):
+    # a SIGTERM landing in numba's LLVM finalizers once let a run finish all its steps
     original, calls = SteppedSine.control_force, itertools.count(1)
 
     def control_force(*args, **kwargs):
         if next(calls) == 3:
-            Finalized()                      # made and dropped: __del__ runs at once
+            signal_in_a_finalizer(signal.SIGTERM)
         return original(*args, **kwargs)
     mocker.patch.object(SteppedSine, "control_force", autospec=True, side_effect=control_force)
     with pytest.raises(KeyboardInterrupt):
         run(tmp_path / "run")
-    assert dropped == [KeyboardInterrupt]    # Python did drop it ...
+    assert signal_in_a_finalizer.dropped == [KeyboardInterrupt]    # Python did drop it ...
     assert not output_on(twins_of_run)       # ... and the run still stopped, output off
     m = meta(tmp_path / "run")
     assert m["status"] == "interrupted" and m["steps_done"] < len(FREQS)
