@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from drivers import check_daq_url, check_generator_url, check_sensor_url
 from procedures.plan import Limits, Plan, Rig, StepSpec
 
 log = logging.getLogger(__name__)
@@ -236,6 +237,12 @@ def parse_rig(data: dict, source: str = "rig") -> Rig:
     ins = r.table("instruments")
     # a simulated rig starts its own twins and fills the URLs in at run time
     urls = {k: ins.text(k, "" if simulated else _REQUIRED) for k in ("generator", "sensor", "daq")}
+    for key, check in (("generator", check_generator_url), ("sensor", check_sensor_url), ("daq", check_daq_url)):
+        if urls[key] or not simulated:         # only known schemes: pyserial's spy:// writes files
+            try:
+                check(urls[key])
+            except ValueError as e:
+                raise ConfigError(f"{ins.where(key)}: {e}") from None
     ins.done()
     cal = r.table("calibration")
     exp = r.table("expected")

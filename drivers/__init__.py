@@ -8,6 +8,7 @@ Public surface (everything else is private implementation):
   ModbusEddySensor (Modbus TCP/RTU), open_can_bus, plan_block
 - twins: start_twins, run_standalone, Twins
 - errors: InstrumentError and its subclasses
+- URL allow-lists: check_generator_url, check_sensor_url, check_daq_url
 """
 
 import logging
@@ -22,6 +23,7 @@ from ._function_generator import ScpiFunctionGenerator
 from ._interfaces import (Channel, ChannelSpec, Daq, DaqBlock, DisplacementSensor,
                           FunctionGenerator, GapReading, Identity, SensorStatus, TargetMaterial)
 from ._twins import Twins, run_standalone, start_twins
+from ._urls import check_daq_url, check_generator_url, check_sensor_url
 
 log = logging.getLogger(__name__)
 
@@ -31,5 +33,5 @@ __all__ = [
     "FunctionGenerator", "GapReading", "Identity", "InstrumentError", "InstrumentTimeout",
     "ModbusEddySensor", "ModbusError", "ProtocolError", "SafetyInterlock", "ScpiError",
     "ScpiFunctionGenerator", "SensorStatus", "TargetMaterial", "TcpCanBus", "Twins",
-    "dbc_path", "open_can_bus", "plan_block", "run_standalone", "start_twins",
+    "check_daq_url", "check_generator_url", "check_sensor_url", "dbc_path", "open_can_bus", "plan_block", "run_standalone", "start_twins",
 ]

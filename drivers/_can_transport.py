@@ -17,9 +17,12 @@ import socket
 import struct
 import threading
 import time
+import urllib.parse
 from typing import Any
 
 import can
+
+from ._urls import check_daq_url
 
 log = logging.getLogger(__name__)
 
@@ -175,14 +178,12 @@ class CanTcpBridge:
 
 def open_can_bus(url: str) -> can.BusABC:
     """A python-can bus from a URL: ``virtual:<channel>``, ``tcp://host:port``, or
-    ``<interface>:<channel>`` for any python-can interface."""
+    ``<interface>:<channel>`` for a python-can interface allowed by ``drivers/_urls.py``."""
+    check_daq_url(url)
     if url.startswith("virtual:"):
         return can.Bus(interface="virtual", channel=url[len("virtual:"):])
     if url.startswith("tcp://"):
-        host, _, port = url[len("tcp://"):].rpartition(":")
-        return TcpCanBus(host, int(port))
-    interface, sep, channel = url.partition(":")
-    if not sep:
-        raise ValueError(f"CAN bus URL {url!r}: expected virtual:<ch>, tcp://host:port or "
-                         f"<interface>:<channel>")
+        parts = urllib.parse.urlsplit(url)
+        return TcpCanBus(parts.hostname, parts.port)
+    interface, _, channel = url.partition(":")
     return can.Bus(interface=interface, channel=channel, fd=True)

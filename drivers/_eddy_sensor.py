@@ -22,11 +22,13 @@ from . import _eddy_registers as regmap
 from ._eddy_registers import Reg
 from ._errors import ConnectionLost, InstrumentTimeout, ModbusError, ProtocolError
 from ._interfaces import GapReading, Identity, SensorStatus, TargetMaterial
+from ._urls import check_sensor_url
 
 log = logging.getLogger(__name__)
 
 
 def _parse_url(url: str) -> tuple[str, dict[str, Any], int]:
+    check_sensor_url(url)
     parts = urllib.parse.urlsplit(url)
     query = dict(urllib.parse.parse_qsl(parts.query))
     unit = int(query.get("unit", 1))

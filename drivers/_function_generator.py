@@ -34,6 +34,7 @@ import serial
 
 from ._errors import ConnectionLost, InstrumentTimeout, ProtocolError, SafetyInterlock, ScpiError
 from ._interfaces import Identity
+from ._urls import check_generator_url
 
 TWIN_MARK = "guideway-bench twin"     # in the *IDN? firmware field of the simulated generator
 
@@ -46,7 +47,8 @@ FREQ_MAX_HZ = 20e6
 class ScpiFunctionGenerator:
     """A function generator on a SCPI link. Satisfies :class:`FunctionGenerator`.
 
-    :param url: anything ``serial.serial_for_url`` opens.
+    :param url: a serial device path, ``socket://host:port`` or ``loop://`` (see
+        ``drivers/_urls.py``; any other pyserial URL raises ValueError, nothing opened).
     :param timeout_s: bound on every reply; a silent instrument raises InstrumentTimeout.
     :param drive_limit_V: largest instantaneous output voltage magnitude the procedures may
         ask for (|offset| + Vpp/2). Requests above it raise ValueError before anything is
@@ -55,7 +57,7 @@ class ScpiFunctionGenerator:
 
     def __init__(self, url: str, *, timeout_s: float = 2.0, baudrate: int = 115200,
                  drive_limit_V: float | None = None) -> None:
-        self.url = url
+        self.url = check_generator_url(url)
         self.timeout_s = timeout_s
         self.drive_limit_V = drive_limit_V
         self._twin: bool | None = None

@@ -198,5 +198,5 @@ def test_stopped_twin_gives_a_typed_error(sensor_twin, sensor):
 
 
 def test_bad_url_is_rejected_with_a_clear_message():
-    with pytest.raises(ValueError, match="modbus-tcp or modbus-rtu"):
+    with pytest.raises(ValueError, match="allowed: modbus-tcp://host:port"):
         ModbusEddySensor("http://127.0.0.1:80")

@@ -1,0 +1,89 @@
+"""Which instrument URLs the drivers open: a short allow-list per instrument.
+
+A rig file or a stored ``run.json`` names the instruments by URL, and pyserial's
+``serial_for_url`` (behind the generator, the Modbus RTU sensor and python-can's serial
+adapters) opens far more than instruments: ``spy://PORT?file=PATH`` truncates PATH,
+``hwgrep://`` opens whatever port matches, ``alt://`` picks a backend class.  So every URL
+is checked here, before anything is opened, against the schemes this bench uses; anything
+else raises :class:`ValueError` naming the URL and the allowed forms (the configuration
+adds the key: ``[rig.instruments] generator``).  See docs/decisions/0028-hardening.md.
+"""
+
+from __future__ import annotations
+
+import urllib.parse
+
+# Generator: a serial device path (no scheme), a raw SCPI socket, or pyserial's loopback
+# (the driver tests use it).  VISA resource strings (``TCPIP0::host::INSTR``, opened
+# through pyvisa) are a separate transport: add their pattern to GENERATOR_FORMS and
+# accept them in check_generator_url before the pyserial branch.
+GENERATOR_SCHEMES = ("socket", "loop")
+GENERATOR_FORMS = ("/dev/<serial port> (or COM<n>)", "socket://host:port", "loop://")
+
+SENSOR_SCHEMES = ("modbus-tcp", "modbus-rtu")
+SENSOR_FORMS = ("modbus-tcp://host:port?unit=N", "modbus-rtu:///dev/<port>?baud=B&unit=N")
+
+# DAQ: python-can interfaces by name.  Those in CAN_SERIAL_INTERFACES hand their channel to
+# serial_for_url, so their channel must be a plain device path.
+CAN_INTERFACES = ("socketcan", "socketcand", "pcan", "kvaser", "vector", "ixxat", "nican", "nixnet",
+                  "neovi", "etas", "gs_usb", "systec", "usb2can", "canalystii", "cantact",
+                  "slcan", "serial", "robotell", "seeedstudio")
+CAN_SERIAL_INTERFACES = ("slcan", "serial", "robotell", "seeedstudio")
+DAQ_FORMS = ("virtual:<channel>", "tcp://host:port", "<interface>:<channel> with interface one of "
+             + ", ".join(CAN_INTERFACES))
+
+
+def _refuse(url: str, what: str, forms) -> ValueError:
+    return ValueError(f"{url!r} is not an allowed {what} URL; allowed: {', '.join(forms)}")
+
+
+def _is_device_path(path: str) -> bool:
+    """A serial port named by its path, which serial_for_url opens as a plain port."""
+    return bool(path) and "://" not in path and "?" not in path and not path.startswith("-")
+
+
+def check_generator_url(url: str) -> str:
+    if not isinstance(url, str):
+        raise _refuse(repr(url), "function generator", GENERATOR_FORMS)
+    if "://" not in url:
+        if _is_device_path(url):
+            return url
+        raise _refuse(url, "function generator", GENERATOR_FORMS)
+    scheme = url.split("://", 1)[0].lower()
+    if scheme not in GENERATOR_SCHEMES:
+        raise _refuse(url, "function generator", GENERATOR_FORMS)
+    if scheme == "socket":
+        parts = urllib.parse.urlsplit(url)
+        if parts.hostname is None or parts.port is None:
+            raise ValueError(f"{url!r}: expected socket://host:port")
+    return url
+
+
+def check_sensor_url(url: str) -> str:
+    parts = urllib.parse.urlsplit(url) if isinstance(url, str) else None
+    if parts is None or parts.scheme not in SENSOR_SCHEMES:
+        raise _refuse(url, "displacement sensor", SENSOR_FORMS)
+    if parts.scheme == "modbus-tcp" and (parts.hostname is None or parts.port is None or parts.path not in ("", "/")):
+        raise ValueError(f"{url!r}: expected modbus-tcp://host:port")
+    if parts.scheme == "modbus-rtu" and (parts.netloc or not _is_device_path(parts.path)):
+        raise ValueError(f"{url!r}: expected modbus-rtu:///dev/<port> (a serial device path)")
+    return url
+
+
+def check_daq_url(url: str) -> str:
+    if not isinstance(url, str):
+        raise _refuse(repr(url), "DAQ", DAQ_FORMS)
+    if url.startswith("virtual:") and len(url) > len("virtual:"):
+        return url
+    if url.startswith("tcp://"):
+        parts = urllib.parse.urlsplit(url)
+        if parts.hostname is None or parts.port is None or parts.path or parts.query:
+            raise ValueError(f"{url!r}: expected tcp://host:port")
+        return url
+    interface, sep, channel = url.partition(":")
+    if not sep or not channel or interface not in CAN_INTERFACES:
+        raise _refuse(url, "DAQ", DAQ_FORMS)
+    if interface in CAN_SERIAL_INTERFACES and not _is_device_path(channel.split("@", 1)[0]):
+        raise ValueError(f"{url!r}: the {interface} interface takes a serial device path "
+                         f"(/dev/<port>), not {channel!r}")
+    return url
