@@ -28,7 +28,7 @@ from procedures.stepped_sine import SteppedSine
 
 from .config import Plan, Rig
 from .signals import SignalLatch, uninterruptible
-from .storage import RunStore
+from .storage import RunStore, open_append
 from .watch import stop as stop_request
 
 log = logging.getLogger(__name__)
@@ -293,12 +293,19 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
     return store
 
 
+class _NoFollowFileHandler(logging.FileHandler):
+    """A log file that is never opened through a symbolic link (bench.storage.open_append)."""
+
+    def _open(self):
+        return open_append(self.baseFilename)
+
+
 def _log_to(path: Path) -> logging.Handler | None:
     """Add a root handler writing to ``path``; the caller removes it when the run ends."""
     root = logging.getLogger()
     if any(getattr(h, "baseFilename", None) == str(path) for h in root.handlers):
         return None
-    h = logging.FileHandler(path)
+    h = _NoFollowFileHandler(path)
     h.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
     root.addHandler(h)
     return h

@@ -18,6 +18,13 @@ skip a damaged or half-missing step with a warning naming the file and why, and 
 :meth:`RunStore.check` lists every problem; :meth:`RunStore.set_aside_damaged` moves a
 damaged step's files to ``<run>/damaged/<time>/`` (never deleting) so that resume measures
 it again.  Steps written before checksums existed are read with the structural checks only.
+
+Links and modes: nothing a run writes goes through a symbolic link inside the run
+directory (``steps/``, ``damaged/``, ``events.jsonl``, ``bench.log``, ...): a link there
+raises :class:`RunDirError` naming it, and appends open with ``O_NOFOLLOW``.  Every file
+a run writes gets the mode ``0o666 & ~umask`` and every directory ``0o777 & ~umask``,
+what ``touch`` and ``mkdir`` give (the temporary files of atomic writes are widened to
+it: ``mkstemp`` alone makes them 0o600).  See docs/decisions/0028-hardening.md.
 """
 
 from __future__ import annotations
@@ -27,7 +34,9 @@ import io
 import json
 import logging
 import os
+import stat
 import tempfile
+import threading
 import zipfile
 from dataclasses import dataclass, fields
 from datetime import datetime, timezone
@@ -50,9 +59,62 @@ def _fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
+_umask_lock = threading.Lock()
+
+
+def _umask() -> int:
+    with _umask_lock:          # os.umask can only be read by setting it
+        old = os.umask(0o022)
+        os.umask(old)
+    return old
+
+
+def file_mode() -> int:
+    """The mode of every file a run writes: what ``open(..., "w")`` gives."""
+    return 0o666 & ~_umask()
+
+
+def real_dir(path: Path, *, create: bool = False) -> Path:
+    """``path`` as a directory that is not a symbolic link (made if ``create``); a link or a
+    file in its place raises :class:`RunDirError` naming it."""
+    path = Path(path)
+    if create:
+        try:
+            path.mkdir()
+        except FileExistsError:
+            pass
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        raise RunDirError(f"{path}: missing (expected a directory)") from None
+    if stat.S_ISLNK(st.st_mode):
+        raise RunDirError(f"{path}: is a symbolic link; a run writes nothing through links "
+                          f"(replace it with a real directory)")
+    if not stat.S_ISDIR(st.st_mode):
+        raise RunDirError(f"{path}: not a directory")
+    return path
+
+
+def open_append(path: Path):
+    """``path`` opened for appending text, never through a symbolic link (``O_NOFOLLOW``)."""
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o666)
+    except OSError as e:
+        if os.path.islink(path):
+            raise RunDirError(f"{path}: is a symbolic link; a run writes nothing through links "
+                              f"(remove it)") from None
+        raise
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise RunDirError(f"{path}: not a regular file")
+    return os.fdopen(fd, "a")
+
+
 def _atomic_write(path: Path, write) -> None:
+    real_dir(path.parent)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
+        os.fchmod(fd, file_mode())
         with os.fdopen(fd, "wb") as fh:
             write(fh)
             fh.flush()
@@ -120,6 +182,10 @@ class StepProblem:
 PROBLEM_KINDS = ("missing", "truncated", "corrupt", "checksum", "unknown")
 
 
+# what a run writes inside its directory: none of them may be a symbolic link
+WRITTEN = ("steps", "damaged", "events.jsonl", "bench.log", "identification.jsonl", "stop.request")
+
+
 class RunStore:
     def __init__(self, path: Path):
         self.path = Path(path)
@@ -134,7 +200,8 @@ class RunStore:
         if path.exists() and any(path.iterdir()):
             raise FileExistsError(f"run directory {path} exists and is not empty; "
                                   f"use 'bench resume {path}' or choose another --out")
-        (path / "steps").mkdir(parents=True, exist_ok=True)
+        path.mkdir(parents=True, exist_ok=True)
+        real_dir(path / "steps", create=True)
         store = cls(path)
         write_json(path / "run.json", dict(metadata, status="running", started=now_iso()))
         store.event("start")
@@ -148,7 +215,17 @@ class RunStore:
         if not (store.path / "run.json").is_file():
             raise RunDirError(f"{path}: not a run directory (no run.json; expected a directory made by 'bench run')")
         store.metadata   # noqa: B018 - a damaged run.json is named now, not deep inside a reader
+        store.refuse_links()
         return store
+
+    def refuse_links(self) -> None:
+        """Raise :class:`RunDirError` if anything the run writes is a symbolic link, before
+        anything is written (a link could lead the writes out of the run directory)."""
+        for name in WRITTEN:
+            if (self.path / name).is_symlink():
+                raise RunDirError(f"{self.path / name}: is a symbolic link; a run writes nothing "
+                                  f"through links (replace it with a real "
+                                  f"{'directory' if name in ('steps', 'damaged') else 'file'})")
 
     @property
     def metadata(self) -> dict:
@@ -175,7 +252,7 @@ class RunStore:
     # ------------------------------------------------------------------ events
     def event(self, kind: str, **fields) -> None:
         line = json.dumps(dict(time=now_iso(), event=kind, **fields), default=_json_default)
-        with open(self.path / "events.jsonl", "a") as fh:
+        with open_append(self.path / "events.jsonl") as fh:
             fh.write(line + "\n")
             fh.flush()
             os.fsync(fh.fileno())
@@ -313,8 +390,8 @@ class RunStore:
         damaged = [pr for pr in self.check() if pr.key and pr.kind != "unknown"]
         if not damaged:
             return []
-        dest = self.path / "damaged" / now_iso().replace(":", "-")
-        dest.mkdir(parents=True, exist_ok=True)
+        real_dir(self.steps_dir)
+        dest = real_dir(real_dir(self.path / "damaged", create=True) / now_iso().replace(":", "-"), create=True)
         for pr in damaged:
             for p in (self.steps_dir / f"{pr.key}.json", self.steps_dir / f"{pr.key}.npz"):
                 if p.exists():

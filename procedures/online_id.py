@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
 import time
 
 import numpy as np
@@ -126,7 +127,9 @@ class OnlineIdentification:
         dt = time.perf_counter() - t
         self.update_times_s.append(dt)
         rec = dict(step=result.get("key"), update_s=dt, **est.as_dict())
-        with open(self.path, "a") as fh:
+        # never through a symbolic link placed in the run directory (as bench.storage)
+        fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o666)
+        with os.fdopen(fd, "a") as fh:
             fh.write(json.dumps(rec) + "\n")
         return rec
 

@@ -16,7 +16,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from ..storage import now_iso
+from ..storage import file_mode, now_iso
 
 log = logging.getLogger(__name__)
 
@@ -31,6 +31,7 @@ def request_stop(run_dir: Path, by: str) -> dict:
     """Ask the run in ``run_dir`` to stop safely; returns the request written."""
     req = {"time": now_iso(), "by": by}
     fd, tmp = tempfile.mkstemp(dir=run_dir, prefix=f".{STOP_FILE}.", suffix=".tmp")
+    os.fchmod(fd, file_mode())            # as every file of a run (bench.storage)
     with os.fdopen(fd, "w") as fh:
         json.dump(req, fh)
     os.replace(tmp, Path(run_dir) / STOP_FILE)
