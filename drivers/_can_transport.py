@@ -95,11 +95,18 @@ class TcpCanBus(can.BusABC):
         self._sock.close()
 
 
+MAX_LINKS = 8          # clients of one bridge at once; one more is accepted and closed
+SEND_TIMEOUT_S = 5.0   # a client that does not read its frames for as long is dropped (its
+                       # virtual bus queue would otherwise grow without bound)
+
+
 class CanTcpBridge:
     """Serves an in-process virtual CAN channel on a loopback TCP port."""
 
-    def __init__(self, channel: str, host: str = "127.0.0.1", port: int = 0) -> None:
+    def __init__(self, channel: str, host: str = "127.0.0.1", port: int = 0, *,
+                 max_links: int = MAX_LINKS) -> None:
         self.channel = channel
+        self.max_links = max_links
         self._server = socket.create_server((host, port))
         self.host, self.port = self._server.getsockname()[:2]
         self._stop = threading.Event()
@@ -118,7 +125,14 @@ class CanTcpBridge:
                 conn, _ = self._server.accept()
             except OSError:
                 return
+            with self._lock:
+                full = len(self._links) >= self.max_links
+            if full:
+                log.warning("CAN bridge %s: %d links already; refused one", self.url, self.max_links)
+                conn.close()
+                continue
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            conn.settimeout(SEND_TIMEOUT_S)
             bus = can.Bus(interface="virtual", channel=self.channel)
             with self._lock:
                 self._links.append((conn, bus))
@@ -128,7 +142,15 @@ class CanTcpBridge:
     def _socket_to_bus(self, conn: socket.socket, bus: can.BusABC) -> None:
         reader = _FrameReader()
         try:
-            while data := conn.recv(65536):
+            while True:
+                try:
+                    data = conn.recv(65536)
+                except TimeoutError:            # a quiet host is fine (the timeout is for sends)
+                    if self._stop.is_set():
+                        break
+                    continue
+                if not data:
+                    break
                 for msg in reader.feed(data):
                     bus.send(msg)
         except (OSError, can.CanError) as exc:

@@ -34,7 +34,9 @@ log = logging.getLogger(__name__)
 
 MIN_RATE_mHz = 1_000_000
 MAX_RATE_mHz = 204_800_000
-MAX_SAMPLES = 2**24 - 1
+MAX_SAMPLES = 2**21     # the twin's block limit (the real DAQ's is 2^24-1): about 60 MB in
+                        # flight; the bench asks for at most a few 10^5 (drivers.plan_block)
+MAX_PENDING_FAULTS = 64
 BUSY_STATUS_INTERVAL_S = 0.1
 
 FrameFault = Callable[[list[bytes]], list[bytes]]
@@ -65,6 +67,8 @@ class DaqTwin:
 
     def inject_fault(self, fault: FrameFault) -> None:
         """Apply ``fault`` to the data frames of the next block transmission only."""
+        if len(self._faults) >= MAX_PENDING_FAULTS:
+            raise ValueError(f"{MAX_PENDING_FAULTS} faults already queued")
         self._faults.append(fault)
 
     # ----------------------------------------------------------------- loop

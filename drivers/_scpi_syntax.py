@@ -107,23 +107,36 @@ def parse_unit(text: str, previous_path: tuple[str, ...]) -> ProgramUnit:
 
 _SUFFIX_SCALE = {"": 1.0, "HZ": 1.0, "KHZ": 1e3, "MAHZ": 1e6, "V": 1.0, "VPP": 1.0,
                  "MV": 1e-3, "MVPP": 1e-3, "OHM": 1.0}
-_NUMBER_RE = re.compile(r"^([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\s*([A-Za-z]*)$")
+# Unambiguous (each digit can belong to one group only), so a failed match is linear in
+# the length: ``\d+\.?\d*`` split a long digit run every possible way (quadratic: 8000
+# digits held the model's lock for seconds).  IEEE 488.2 (7.7.2.4.1) lets an instrument
+# refuse a mantissa of more than 255 digits; longer arguments are refused before matching.
+_NUMBER_RE = re.compile(r"^([+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?)\s*([A-Za-z]*)$")
+MAX_NUMBER_CHARS = 256
 
 
 class ParameterError(ValueError):
-    """A parameter is not a number, keyword or boolean the command accepts."""
+    """A parameter is not a number, keyword or boolean the command accepts; ``code`` is
+    the SCPI error it queues (-104 data type error unless said otherwise)."""
+
+    def __init__(self, message: str, code: int = -104) -> None:
+        super().__init__(message)
+        self.code = code
 
 
 def parse_number(argument: str) -> float | str:
     """A decimal number with an optional unit suffix, or a keyword (MIN, MAX, DEF, INF)."""
     text = argument.strip()
     if not text:
-        raise ParameterError("missing parameter")
+        raise ParameterError("missing parameter", code=-109)
     keyword = text.upper()
     for long, short in (("MINIMUM", "MIN"), ("MAXIMUM", "MAX"), ("DEFAULT", "DEF"),
                         ("INFINITY", "INF")):
         if keyword in (long, short):
             return short
+    if len(text) > MAX_NUMBER_CHARS:
+        raise ParameterError(f"too many digits: a number of {len(text)} characters "
+                             f"(at most {MAX_NUMBER_CHARS})", code=-124)
     m = _NUMBER_RE.match(text)
     if m is None:
         raise ParameterError(f"not a number: {text!r}")

@@ -42,6 +42,7 @@ ERRORS = {
     -108: "Parameter not allowed",
     -109: "Missing parameter",
     -113: "Undefined header",
+    -124: "Too many digits",
     -221: "Settings conflict",
     -222: "Data out of range",
     -224: "Illegal parameter value",
@@ -136,7 +137,7 @@ class ScpiGeneratorModel:
                 try:
                     response = handler(unit)
                 except ParameterError as exc:
-                    self.push_error(-109 if "missing" in str(exc) else -104, str(exc))
+                    self.push_error(-109 if "missing" in str(exc) else exc.code, str(exc))
                     continue
                 if response is not None:
                     responses.append(response)

@@ -4,6 +4,11 @@ Both feed LF-terminated lines to one shared :class:`ScpiGeneratorModel` (the ins
 has a single error queue whatever port a command came from) and keep serving after bad
 input. A query left without its terminator when the peer closes (TCP) or goes quiet
 (serial, :data:`SERIAL_IDLE_S`) is reported as -420.
+
+Bounds (docs/decisions/0028-hardening.md): a program message longer than
+:data:`MAX_LINE_BYTES` is discarded unread (-100); at most :data:`MAX_CLIENTS` TCP clients
+are served at once (one more is accepted and closed at once); a client silent for
+:data:`CLIENT_IDLE_S` or not reading its replies for as long is dropped.
 """
 
 from __future__ import annotations
@@ -20,6 +25,8 @@ log = logging.getLogger(__name__)
 
 SERIAL_IDLE_S = 1.0
 MAX_LINE_BYTES = 4096
+MAX_CLIENTS = 16
+CLIENT_IDLE_S = 300.0
 
 
 class _LineAssembler:
@@ -35,6 +42,9 @@ class _LineAssembler:
         while (end := self.buffer.find(b"\n")) >= 0:
             line = bytes(self.buffer[:end]).rstrip(b"\r")
             del self.buffer[:end + 1]
+            if len(line) > MAX_LINE_BYTES:      # completed across reads: still too long
+                self.model.push_error(-100, "program message too long, discarded")
+                continue
             response = self.model.execute(line.decode("ascii", errors="replace"))
             if response is not None:
                 responses.append(response.encode("ascii", errors="replace") + b"\n")
@@ -52,8 +62,10 @@ class _LineAssembler:
 class ScpiTcpServer:
     """Raw SCPI socket (like port 5025 on the instrument), one thread per connection."""
 
-    def __init__(self, model: ScpiGeneratorModel, host: str = "127.0.0.1", port: int = 0) -> None:
+    def __init__(self, model: ScpiGeneratorModel, host: str = "127.0.0.1", port: int = 0, *,
+                 max_clients: int = MAX_CLIENTS, idle_s: float = CLIENT_IDLE_S) -> None:
         self.model = model
+        self.max_clients, self.idle_s = max_clients, idle_s
         self._sock = socket.create_server((host, port))
         self.host, self.port = self._sock.getsockname()[:2]
         self._stop = threading.Event()
@@ -78,9 +90,16 @@ class ScpiTcpServer:
                 conn, peer = self._sock.accept()
             except OSError:
                 return
-            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             with self._clients_lock:
-                self._clients.add(conn)
+                full = len(self._clients) >= self.max_clients
+                if not full:
+                    self._clients.add(conn)
+            if full:
+                log.warning("SCPI twin: %d clients already; refused %s", self.max_clients, peer)
+                conn.close()
+                continue
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            conn.settimeout(self.idle_s)       # a silent or non-reading client is dropped
             threading.Thread(target=self._serve, args=(conn, peer), daemon=True,
                              name=f"scpi-twin-conn-{peer[1]}").start()
 

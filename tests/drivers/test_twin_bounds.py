@@ -1,0 +1,121 @@
+"""The twins stay responsive under hostile input on loopback: a long digit run is refused
+in linear time without stalling other clients, connections are capped and silent ones
+dropped, and the DAQ twin refuses blocks larger than it can hold."""
+
+from __future__ import annotations
+
+import socket
+import time
+
+import pytest
+
+from drivers import CanTcpBridge, InstrumentError
+from drivers._daq_twin import MAX_SAMPLES
+from drivers._scpi_syntax import _NUMBER_RE, MAX_NUMBER_CHARS
+from drivers._scpi_twin_server import MAX_LINE_BYTES, ScpiTcpServer
+
+pytestmark = pytest.mark.timeout(60)
+
+
+def best_time(fn, repeat=5) -> float:
+    best = float("inf")
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
+def test_the_number_pattern_fails_in_linear_time_on_a_long_digit_run():
+    """10x the digits must cost about 10x the time (the old pattern took 100x)."""
+    short, long = "1" * 2_000 + "x.", "1" * 20_000 + "x."
+    assert _NUMBER_RE.match(short) is None and _NUMBER_RE.match(long) is None
+    ratio = best_time(lambda: _NUMBER_RE.match(long)) / best_time(lambda: _NUMBER_RE.match(short))
+    assert ratio < 35, f"20000 digits took {ratio:.0f}x the time of 2000"
+
+
+def query(f, s, text: str) -> str:
+    s.sendall(text.encode() + b"\n")
+    return f.readline().decode().strip()
+
+
+def test_a_long_digit_run_answers_an_error_at_once_and_other_clients_keep_working(scpi_server):
+    addr = (scpi_server.host, scpi_server.port)
+    with socket.create_connection(addr, timeout=10) as a, socket.create_connection(addr, timeout=10) as b:
+        fa, fb = a.makefile("rb"), b.makefile("rb")
+        normal = best_time(lambda: query(fb, b, "FREQ 123.5;*OPC?"), repeat=3)
+
+        digits = "1" * (MAX_NUMBER_CHARS + 50)                 # under the line limit: parsed
+        t = time.perf_counter()
+        assert query(fa, a, f"FREQ {digits};*OPC?") == "1"
+        too_many = time.perf_counter() - t
+        assert query(fa, a, "SYST:ERR?").startswith("-124,")
+
+        huge = "1" * (2 * MAX_LINE_BYTES)                       # over it: discarded unread
+        t = time.perf_counter()
+        a.sendall(f"FREQ {huge}x\n".encode())
+        assert query(fb, b, "*IDN?").startswith("Keysight")    # the other client, meanwhile
+        beside = time.perf_counter() - t
+        assert query(fa, a, "SYST:ERR?").startswith("-100,")
+        assert query(fb, b, "FREQ?").startswith("+1.23500")    # nothing set by the bad lines
+    # the old pattern took seconds here (8000 digits held the model 2.4 s); generous bounds
+    assert too_many < 20 * normal + 0.25, (too_many, normal)
+    assert beside < 20 * normal + 0.25, (beside, normal)
+
+
+def test_connections_beyond_the_cap_are_closed_and_a_freed_slot_serves_again(scpi_model):
+    server = ScpiTcpServer(scpi_model, max_clients=2)
+    addr = (server.host, server.port)
+    try:
+        held = [socket.create_connection(addr, timeout=5) for _ in range(2)]
+        for s in held:                                         # both served
+            assert query(s.makefile("rb"), s, "*OPC?") == "1"
+        with socket.create_connection(addr, timeout=5) as extra:
+            assert extra.recv(100) == b""                      # closed by the twin
+        held.pop().close()
+        deadline = time.monotonic() + 5
+        while True:                                            # the slot frees when the
+            with socket.create_connection(addr, timeout=5) as again:   # twin's thread sees it
+                try:
+                    if query(again.makefile("rb"), again, "*OPC?") == "1":
+                        break
+                except OSError:
+                    pass
+            assert time.monotonic() < deadline, "the freed slot was never reused"
+            time.sleep(0.05)
+        for s in held:
+            s.close()
+    finally:
+        server.close()
+
+
+def test_a_silent_client_is_dropped_after_the_idle_time(scpi_model):
+    server = ScpiTcpServer(scpi_model, idle_s=0.3)
+    try:
+        with socket.create_connection((server.host, server.port), timeout=10) as s:
+            t = time.monotonic()
+            assert s.recv(100) == b""                          # closed by the twin
+            assert time.monotonic() - t < 5
+    finally:
+        server.close()
+
+
+def test_the_daq_twin_refuses_a_block_larger_than_it_holds(daq):
+    with pytest.raises(InstrumentError, match="refused CONFIG: BAD_CONFIG"):
+        daq.configure(25_600.0, MAX_SAMPLES + 1)
+    daq.configure(25_600.0, 256)                               # and keeps serving
+    assert daq.acquire().force_N.shape == (256,)
+
+
+def test_the_can_bridge_caps_its_links():
+    bridge = CanTcpBridge("test-bridge-cap", max_links=1)
+    try:
+        with socket.create_connection((bridge.host, bridge.port), timeout=5) as first:
+            time.sleep(0.1)                                    # accepted and registered
+            with socket.create_connection((bridge.host, bridge.port), timeout=5) as extra:
+                assert extra.recv(100) == b""
+            first.setblocking(False)
+            with pytest.raises(BlockingIOError):               # the first is still open
+                first.recv(100)
+    finally:
+        bridge.close()
