@@ -6,19 +6,32 @@
     GET  /api/stream        the same as server-sent events, pushed whenever the directory changes
     POST /api/stop          ask the run to stop safely; needs the header X-Stop-Token
 
-Binds to 127.0.0.1 unless another host is given explicitly.  The stop token is random per
-server (``secrets.token_urlsafe``), printed with the URL (``?token=...``) and compared in
+Binds to 127.0.0.1 unless another host is given explicitly (``::1`` too; any address off
+loopback is served with a warning).  The stop token is random per server
+(``secrets.token_urlsafe``), printed with the URL (``?token=...``) and compared in
 constant time; reading needs no token.  Requests naming a foreign Host are refused while
 bound to loopback (a web page elsewhere cannot reach the server by DNS rebinding).
+
+Bounds (docs/decisions/0028-hardening.md): at most :data:`MAX_CONNECTIONS` connections are
+served at once (one more is closed unanswered) and :data:`MAX_STREAMS` of them event
+streams (503 beyond); a client silent for :data:`CLIENT_TIMEOUT_S` in the middle of a
+request, or between requests, is dropped; a request body must have a valid
+``Content-Length`` (400 otherwise) of at most :data:`MAX_BODY` bytes (413), and is read
+whole, never taken for a next request.  Every answer carries a Content-Security-Policy
+(scripts from this server only, no framing), ``X-Frame-Options: DENY`` and
+``Referrer-Policy: no-referrer`` (the page's URL holds the stop token).
 """
 
 from __future__ import annotations
 
 import hmac
+import ipaddress
 import json
 import logging
 import math
+import re
 import secrets
+import socket
 import threading
 import time
 from http import HTTPStatus
@@ -31,9 +44,35 @@ from .snapshot import RunReader
 log = logging.getLogger(__name__)
 
 PAGE = Path(__file__).with_name("page.html")
+SCRIPT = Path(__file__).with_name("page.js")
+MAX_CONNECTIONS = 32      # handler threads at once
+MAX_STREAMS = 8           # of them, event streams
+CLIENT_TIMEOUT_S = 10.0   # for each read of a request (headers, body) and between requests
+MAX_BODY = 4096           # a stop request has no body worth more
+SECURITY_HEADERS = (
+    # plotly sets inline styles; nothing else is needed from anywhere but this server
+    ("Content-Security-Policy", "default-src 'none'; script-src 'self'; style-src 'self' 'unsafe-inline'; "
+                                "img-src 'self' data:; connect-src 'self'; frame-ancestors 'none'; "
+                                "base-uri 'none'; form-action 'none'"),
+    ("X-Frame-Options", "DENY"),
+    ("Referrer-Policy", "no-referrer"),
+    ("X-Content-Type-Options", "nosniff"),
+)
 POLL_S = 0.25             # how often a stream looks at the directory
 HEARTBEAT_S = 10.0        # keep-alive comment on a quiet stream
-LOOPBACK_NAMES = {"127.0.0.1", "localhost", "::1", "[::1]"}
+
+
+def is_loopback(host: str) -> bool:
+    """127.0.0.0/8, ::1 (also as [::1] or ::ffff:127.x) and localhost."""
+    host = host.strip("[]").lower()
+    if host == "localhost":
+        return True
+    try:
+        ip = ipaddress.ip_address(host)
+    except ValueError:
+        return False
+    mapped = getattr(ip, "ipv4_mapped", None)
+    return (mapped or ip).is_loopback
 
 
 def _plotly_js() -> bytes:
@@ -65,6 +104,9 @@ class WatchServer(ThreadingHTTPServer):
     daemon_threads = True
 
     def __init__(self, run_dir: Path, host: str = "127.0.0.1", port: int = 0, token: str | None = None):
+        host = host.strip("[]")                       # "[::1]" as in a URL
+        if ":" in host:
+            self.address_family = socket.AF_INET6
         self.run_dir = Path(run_dir)
         self.reader = RunReader(self.run_dir)
         self.token = token or secrets.token_urlsafe(24)
@@ -73,11 +115,35 @@ class WatchServer(ThreadingHTTPServer):
         self._streams_lock = threading.Lock()
         self._plotly: bytes | None = None
         self._thread: threading.Thread | None = None
+        self._slots = threading.BoundedSemaphore(MAX_CONNECTIONS)
         super().__init__((host, port), _Handler)
+        if not self.loopback:
+            log.warning("the watch page is served on %s, off loopback: anyone who can reach this "
+                        "address can read the run (the stop token is still needed to stop it)",
+                        self.server_address[0])
+
+    # one thread per connection, at most MAX_CONNECTIONS of them
+    def process_request(self, request, client_address):
+        if not self._slots.acquire(blocking=False):
+            log.warning("watch: %d connections already; closed one from %s", MAX_CONNECTIONS,
+                        client_address[0])
+            self.shutdown_request(request)
+            return
+        try:
+            super().process_request(request, client_address)
+        except BaseException:
+            self._slots.release()
+            raise
+
+    def process_request_thread(self, request, client_address):
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            self._slots.release()
 
     @property
     def loopback(self) -> bool:
-        return self.server_address[0] in LOOPBACK_NAMES or self.server_address[0].startswith("127.")
+        return is_loopback(self.server_address[0])
 
     @property
     def url(self) -> str:
@@ -92,7 +158,7 @@ class WatchServer(ThreadingHTTPServer):
 
     def start(self) -> "WatchServer":
         """Serve from a daemon thread (beside a run in this process)."""
-        self._thread = threading.Thread(target=self.serve_forever, name="bench-watch", daemon=True)
+        self._thread = threading.Thread(target=self.serve_forever, args=(0.05,), name="bench-watch", daemon=True)
         self._thread.start()
         return self
 
@@ -111,9 +177,13 @@ class WatchServer(ThreadingHTTPServer):
         self.close()
 
 
+_DIGITS = re.compile(r"[0-9]{1,12}")
+
+
 class _Handler(BaseHTTPRequestHandler):
     server: WatchServer
     protocol_version = "HTTP/1.1"
+    timeout = CLIENT_TIMEOUT_S          # socket timeout: a slow or silent client is dropped
 
     def log_message(self, fmt, *args):
         log.debug("%s %s", self.address_string(), fmt % args)
@@ -124,9 +194,38 @@ class _Handler(BaseHTTPRequestHandler):
         self.send_header("Content-Type", ctype)
         self.send_header("Content-Length", str(len(body)))
         self.send_header("Cache-Control", "max-age=86400" if cache else "no-store")
-        self.send_header("X-Content-Type-Options", "nosniff")
+        self._security_headers()
         self.end_headers()
         self.wfile.write(body)
+
+    def _security_headers(self) -> None:
+        for name, value in SECURITY_HEADERS:
+            self.send_header(name, value)
+
+    def _body_ok(self) -> bool:
+        """Read the request's body whole (so it is never taken for a next request); answer
+        400 for a bad Content-Length, 413 for one over MAX_BODY, and close the connection."""
+        given = self.headers.get_all("Content-Length") or []
+        if self.headers.get("Transfer-Encoding"):
+            self.close_connection = True
+            self._send_json(HTTPStatus.NOT_IMPLEMENTED, {"error": "Transfer-Encoding is not supported"})
+            return False
+        if not given:
+            return True
+        if len(set(given)) != 1 or not _DIGITS.fullmatch(given[0].strip()):
+            self.close_connection = True
+            self._send_json(HTTPStatus.BAD_REQUEST, {"error": f"bad Content-Length: {', '.join(given)[:40]!r}"})
+            return False
+        length = int(given[0])
+        if length > MAX_BODY:
+            self.close_connection = True
+            self._send_json(HTTPStatus.REQUEST_ENTITY_TOO_LARGE,
+                            {"error": f"request body of {length} bytes; at most {MAX_BODY}"})
+            return False
+        if length and len(self.rfile.read(length)) < length:
+            self.close_connection = True       # the client went away mid-body
+            return False
+        return True
 
     def _send_json(self, code: int, obj) -> None:
         self._send(code, _json(obj), "application/json")
@@ -136,15 +235,19 @@ class _Handler(BaseHTTPRequestHandler):
             return True
         host = (self.headers.get("Host") or "").strip()
         name = host.rsplit(":", 1)[0] if not host.endswith("]") else host
-        return name.lower() in LOOPBACK_NAMES
+        return is_loopback(name)
 
     # ------------------------------------------------------------------ routes
     def do_GET(self):  # noqa: N802 - http.server's naming
+        if not self._body_ok():
+            return
         if not self._host_ok():
             return self._send_json(HTTPStatus.FORBIDDEN, {"error": "unexpected Host header"})
         path = self.path.split("?", 1)[0]
         if path in ("/", "/index.html"):
             self._send(HTTPStatus.OK, PAGE.read_bytes(), "text/html; charset=utf-8")
+        elif path == "/page.js":
+            self._send(HTTPStatus.OK, SCRIPT.read_bytes(), "text/javascript; charset=utf-8")
         elif path == "/plotly.min.js":
             self._send(HTTPStatus.OK, self.server.plotly_js(), "text/javascript; charset=utf-8", cache=True)
         elif path == "/api/state":
@@ -155,9 +258,8 @@ class _Handler(BaseHTTPRequestHandler):
             self._send_json(HTTPStatus.NOT_FOUND, {"error": f"no such page: {path}"})
 
     def do_POST(self):  # noqa: N802
-        length = int(self.headers.get("Content-Length") or 0)
-        if length:
-            self.rfile.read(min(length, 4096))
+        if not self._body_ok():
+            return
         if not self._host_ok():
             return self._send_json(HTTPStatus.FORBIDDEN, {"error": "unexpected Host header"})
         if self.path.split("?", 1)[0] != "/api/stop":
@@ -181,16 +283,23 @@ class _Handler(BaseHTTPRequestHandler):
         self._send_json(HTTPStatus.ACCEPTED, {"requested": req})
 
     def _stream(self) -> None:
-        self.send_response(HTTPStatus.OK)
-        self.send_header("Content-Type", "text/event-stream")
-        self.send_header("Cache-Control", "no-store")
-        self.send_header("Connection", "close")
-        self.end_headers()
-        self.close_connection = True
-        reader, last, beat = self.server.reader, None, time.monotonic()
         with self.server._streams_lock:
-            self.server.streams += 1
+            full = self.server.streams >= MAX_STREAMS
+            if not full:
+                self.server.streams += 1
+        if full:
+            self.close_connection = True
+            return self._send_json(HTTPStatus.SERVICE_UNAVAILABLE,
+                                   {"error": f"{MAX_STREAMS} live pages open already; close one"})
         try:
+            self.send_response(HTTPStatus.OK)
+            self.send_header("Content-Type", "text/event-stream")
+            self.send_header("Cache-Control", "no-store")
+            self.send_header("Connection", "close")
+            self._security_headers()
+            self.end_headers()
+            self.close_connection = True
+            reader, last, beat = self.server.reader, None, time.monotonic()
             self.wfile.write(b"retry: 2000\n\n")
             while True:
                 closing = self.server.closing.is_set()
@@ -208,7 +317,7 @@ class _Handler(BaseHTTPRequestHandler):
                     self.wfile.flush()
                     return
                 self.server.closing.wait(POLL_S)
-        except (BrokenPipeError, ConnectionResetError):
+        except (BrokenPipeError, ConnectionResetError, TimeoutError):
             return
         finally:
             with self.server._streams_lock:
