@@ -4,9 +4,12 @@ numba compiles a kernel on its first call and caches the machine code beside the
 (``sim/__pycache__``), so only the very first run on a machine pays for it (about 45 s on
 two cores).  The warm-up pays it during set-up instead: it drives the plain plant and the
 plant with every effect on, and runs a two-step plan through the twins with online
-identification, so every kernel the bench calls is compiled and cached.  A stamp records
-the newest ``sim/*.py`` it compiled; :func:`kernels_warm` compares against it, so a run can
-say "compiling the simulation kernels (first run only)" when the cache will be rebuilt.
+identification, so every kernel the bench calls is compiled and cached.  numba keys its
+cache on the jitted function's own file only, so first the cache is cleared if any
+``sim/*.py`` changed since it was built (:mod:`sim.kernel_cache`, a hash of the sources).
+A stamp records the hash of the sources it compiled; :func:`kernels_warm` compares
+against it, so a run can say "compiling the simulation kernels (first run only)" when the
+cache will be rebuilt.
 """
 
 from __future__ import annotations
@@ -15,6 +18,8 @@ import logging
 import tempfile
 import time
 from pathlib import Path
+
+from sim.kernel_cache import invalidate_stale_kernels, sources_hash
 
 log = logging.getLogger(__name__)
 
@@ -27,15 +32,11 @@ _PLAN = {"plan": {"name": "warm-up", "levels_N": [1.0],
                               "max_extra_settle_blocks": 0}}}
 
 
-def _newest_source() -> float:
-    return max(p.stat().st_mtime for p in SIM_DIR.glob("*.py"))
-
-
 def kernels_warm() -> bool:
     """True when a warm-up compiled the present sim/ sources (the cache will load)."""
     try:
-        return float(STAMP.read_text()) >= _newest_source()
-    except (OSError, ValueError):
+        return STAMP.read_text() == sources_hash(SIM_DIR)
+    except OSError:
         return False
 
 
@@ -47,7 +48,8 @@ def warm_up() -> float:
     from .session import run_plan
 
     t0 = time.perf_counter()
-    newest = _newest_source()
+    invalidate_stale_kernels(SIM_DIR)
+    compiled = sources_hash(SIM_DIR)
     effects = dict(friction_alpha=0.1, friction_v_ref_m_per_s=1e-2, pitch_inertia_kg_m2=0.3,
                    pitch_stiffness_N_m_per_rad=3e5, cg_height_m=0.1, drive_height_m=0.2,
                    cubic_spring_N_per_m3=1e12)
@@ -62,7 +64,7 @@ def warm_up() -> float:
             raise RuntimeError(f"warm-up run ended {store.metadata['status']!r}")
     try:
         STAMP.parent.mkdir(exist_ok=True)
-        STAMP.write_text(repr(newest))
+        STAMP.write_text(compiled)
     except OSError as e:         # a read-only install: numba caches elsewhere or not at all
         log.warning("could not write the warm-up stamp %s: %s", STAMP, e)
     return time.perf_counter() - t0
