@@ -2,10 +2,13 @@
 continued with `bench resume` until it finishes; the result must be the plan's schedule,
 each step once, readable after every kill, and agree with an uninterrupted run.
 
-One kill/resume sequence (module fixture) feeds several tests.  Kill points are drawn
-from a seeded generator: a kill after a random number (1-5) of new steps plus a random
-delay of up to about a step (so it lands anywhere in a step: acquiring, fitting, writing),
-and one kill at a random moment of start-up (opening the instruments, the resume event).
+One kill/resume sequence (module fixture) feeds several tests.  Every kill waits on an
+event in the run's own files, never on the clock, so the pattern is the same on a fast
+machine and a loaded one: after a seeded random number (1-5) of new steps, either as soon
+as the step's result is stored (the process is then fitting it, or starting the next step's
+drive) or as soon as its online fit is logged (then driving and measuring the next step);
+and once in start-up, as soon as the resume event is written (the process is opening the
+instruments).
 """
 
 from __future__ import annotations
@@ -81,6 +84,16 @@ def wait_until(condition, proc: subprocess.Popen, timeout_s: float, what: str) -
         time.sleep(0.005)
 
 
+def identification_lines(run: Path) -> int:
+    p = run / "identification.jsonl"
+    return p.read_bytes().count(b"\n") if p.exists() else 0
+
+
+def resume_events(run: Path) -> int:
+    p = run / "events.jsonl"
+    return p.read_bytes().count(b'"event": "resume"') if p.exists() else 0
+
+
 def snapshot(run: Path) -> dict:
     """Everything a kill must leave readable: run.json, events, every completed step."""
     meta = json.loads((run / "run.json").read_text())
@@ -116,21 +129,26 @@ def crash_run(tmp_path_factory):
         snapshots.append(snapshot(run))
 
     # the first process, then resumes; the third process is killed during start-up
-    plan_of_kills = [("steps", rng.randint(1, 5)), ("steps", rng.randint(1, 5)),
-                     ("startup", rng.uniform(0.2, 1.0)), ("steps", rng.randint(1, 5))]
+    plan_of_kills = [("steps", rng.randint(1, 5), rng.choice(["stored", "fitted"])),
+                     ("steps", rng.randint(1, 5), rng.choice(["stored", "fitted"])),
+                     ("startup", 0, "resume event"),
+                     ("steps", rng.randint(1, 5), rng.choice(["stored", "fitted"]))]
     proc = bench("run", "--plan", str(base / "plan.toml"), "--out", str(run), "--seed", str(SEED),
                  "--no-report", log=log)
     try:
-        for kind, amount in plan_of_kills:
-            if kind == "steps":
+        for kind, amount, when in plan_of_kills:
+            if kind == "steps" and when == "stored":
                 target = len(step_files(run)) + amount
                 wait_until(lambda: len(step_files(run)) >= target, proc, 120, f"{target} steps")
-                delay = rng.uniform(0.0, 0.15)
-                time.sleep(delay)
-                kill(proc, f"after {target} steps + {delay:.3f} s")
+                kill(proc, f"as step {target} was stored")
+            elif kind == "steps":
+                target = identification_lines(run) + amount
+                wait_until(lambda: identification_lines(run) >= target, proc, 120, f"{target} fits")
+                kill(proc, f"as fit {target} was logged")
             else:
-                time.sleep(amount)
-                kill(proc, f"{amount:.3f} s into start-up")
+                target = resume_events(run) + 1
+                wait_until(lambda: resume_events(run) >= target, proc, 60, "the resume event")
+                kill(proc, "in start-up, after the resume event")
             proc = bench("resume", str(run), "--no-report", log=log)
             resumes += 1
         rc = proc.wait(timeout=180)
@@ -185,8 +203,7 @@ def test_events_record_every_resume(crash_run):
     assert kinds[-1] == "end" and events[-1]["status"] == "completed"
     assert kinds.count("end") == 1              # no process that was killed got to "end"
     resumes = [e for e in events if e["event"] == "resume"]
-    # a process killed during start-up may die before its resume event; every other did not
-    assert crash_run["resumes"] - 1 <= len(resumes) <= crash_run["resumes"]
+    assert len(resumes) == crash_run["resumes"]         # the start-up kill waited for it
     after_kill = {len(s["steps"]) for s in crash_run["snapshots"]}
     assert [e["done"] for e in resumes] == sorted(e["done"] for e in resumes)
     assert all(e["done"] in after_kill for e in resumes)
