@@ -34,6 +34,15 @@ def write_foreign_uff(case, path, periods=8):
     return path
 
 
+
+def within_interval(truth: float, q: dict) -> None:
+    """The true value within the analysis's own 95 % interval (widened to 2x its half-width,
+    about 4 standard errors): what the fit promises (observed: 0.07 % and 0.003 % off,
+    inside intervals of +-0.09 % and +-0.01 %; the tolerances were 5 % and 10 %)."""
+    centre, half = (q["low"] + q["high"]) / 2, (q["high"] - q["low"]) / 2
+    assert 0 < half < 0.01 * truth, q
+    assert abs(truth - centre) <= 2 * half, (truth, q)
+
 @pytest.fixture(scope="module")
 def analysed(tmp_path_factory):
     d = tmp_path_factory.mktemp("uff")
@@ -56,7 +65,7 @@ def test_analyze_names_the_cause_in_a_foreign_uff_file_and_writes_the_schema(ana
         assert key in d
     assert [c["id"] for c in d["causes"]] == ["viscous_damping"], d["verdict"]
     c = d["causes"][0]["parameters"]["c"]
-    assert c["value"] == pytest.approx(case.effects["viscous_damping"]["viscous_N_s_per_m"], rel=0.05)
+    within_interval(case.effects["viscous_damping"]["viscous_N_s_per_m"], c)
     assert len(d["steps_used"]) == len(case.steps) and d["steps_rejected"] == []
     st = d["steps"][0]
     assert len(st["measured"]["compliance"]) == 2 and len(st["final"]["accelerance"]) == 2
@@ -96,7 +105,7 @@ def test_analyze_a_run_made_through_the_twins_names_the_viscous_damping(tmp_path
     assert main(["analyze", str(run)]) == 0
     d = json.loads((run / "analysis" / "analysis.json").read_text())
     assert [c["id"] for c in d["causes"]][:1] == ["viscous_damping"], d["verdict"]
-    assert d["causes"][0]["parameters"]["c"]["value"] == pytest.approx(314.0, rel=0.1)
+    within_interval(314.0, d["causes"][0]["parameters"]["c"])
     # every step is used or rejected with its reason (bench.sources checks periodicity)
     assert len(d["steps_used"]) + len(d["steps_rejected"]) == len(store.results())
     assert all(r["reason"] for r in d["steps_rejected"]) and len(d["steps_used"]) >= 0.8 * len(store.results())

@@ -69,7 +69,7 @@ def test_displacement_delay_shows_as_phase_lag():
         b = drive(rig, f, 3.0, settle_s=0.3)
         phases.append(fit(b.disp_V, b.fs_Hz, f)[1])
     lag = (phases[0] - phases[1]) % (2 * np.pi)
-    assert lag == pytest.approx(2 * np.pi * f * delay, rel=0.05)
+    assert lag == pytest.approx(2 * np.pi * f * delay, rel=0.005)   # observed 5e-4: the fitted phase of a low-noise block
 
 
 def test_gain_error_scales_the_reading():
