@@ -297,10 +297,9 @@ def test_the_page_shows_a_running_test_and_its_stop_button_stops_it_safely(tmp_p
                 assert listening_addresses(port) == {LOOPBACK_HEX}
                 browser.goto(url())
                 points = "Number(document.getElementById('compliance').dataset.points || 0)"
-                first = browser.wait_for(f"{points} >= 1 && {points}", 60, "a first point on the compliance plot")
+                browser.wait_for(f"{points} >= 1 && {points}", 60, "a first point on the compliance plot")
                 wait_for(rig.held.is_set, 60, "the run to reach the held step", proc)
                 assert browser.wait_for(f"{points} === 3 && {points}", 60, "the three steps done") == 3
-                assert first <= 3                               # points came as steps completed
                 assert browser.js("document.getElementById('compliance').data.length") >= 2   # |x/P| and phase
                 assert browser.js("document.getElementById('status').textContent") == "running"
                 browser.wait_for("!document.getElementById('stop').disabled", 10, "the stop button")
