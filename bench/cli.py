@@ -344,6 +344,56 @@ def cmd_twins(args) -> int:
     return 0
 
 
+# ---------------------------------------------------------------------------- twin and compare (0026)
+
+
+def cmd_twin(args) -> int:
+    """rig.toml and plan.toml of a simulated twin of the rig that measured SOURCE."""
+    from .twin import make_twin
+    twin, paths = make_twin(Path(args.source), Path(args.analysis) if args.analysis else None,
+                            Path(args.out) if args.out else None, plain=args.plain)
+    v = twin.parameters
+    print("twin: " + ", ".join(f"{k} {v[k]['value']:.4g}" for k in ("F_s_N", "x_s_m", "n", "m_kg")))
+    for cid, keys in twin.applied.items():
+        print(f"cause {cid} -> " + ", ".join(f"{k} = {x:.4g}" if isinstance(x, float) else f"{k} = {x}"
+                                             for k, x in keys.items()))
+    for item in twin.not_in_plant:
+        print(f"not in the plant: {item['cause']}: {item['reason']}")
+    print(f"wrote {paths['rig']}, {paths['plan']} and {paths['twin']}")
+    print(f"run it: bench run --plan {paths['plan']} --rig {paths['rig']} --out RUN")
+    return ExitCode.OK
+
+
+def cmd_compare(args) -> int:
+    """Exit 0 when the two sources agree within the tolerance, 1 when not."""
+    from .compare import summary, write_compare
+    result, out = write_compare(Path(args.reference), Path(args.other), Path(args.out) if args.out else None,
+                                args.tolerance)
+    print(summary(result))
+    print(f"written to {out}/compare.json and compare.html")
+    return ExitCode.OK if result["overall"]["within_tolerance"] else ExitCode.FAILURE
+
+
+def _add_twin_parsers(sub) -> None:
+    s = sub.add_parser("twin", help="write rig.toml and plan.toml of a simulated twin of the rig that measured "
+                                    "SOURCE (identified friction, named causes, noise)")
+    s.add_argument("source", help="run directory or UFF58 file of time records")
+    s.add_argument("--analysis", help="directory (or file) of an existing analysis.json of SOURCE "
+                                      "(default: analyse SOURCE into OUT/analysis)")
+    s.add_argument("--out", help="output directory (default: SOURCE/twin, or <stem>_twin next to a file)")
+    s.add_argument("--plain", action="store_true", help="a plain Masing twin: base F_s, x_s, n, m only")
+    s.set_defaults(func=cmd_twin)
+
+    s = sub.add_parser("compare", help="compare first-harmonic compliance and accelerance of two sources step "
+                                       "by step; exit 1 when they differ by more than the tolerance")
+    s.add_argument("reference", help="run directory or UFF58 file")
+    s.add_argument("other", help="run directory or UFF58 file")
+    s.add_argument("--tolerance", type=float, default=0.02,
+                   help="largest rms relative difference accepted (fraction; default 0.02 = 2 %%)")
+    s.add_argument("--out", help="output directory (default: OTHER/compare, or <stem>_compare next to a file)")
+    s.set_defaults(func=cmd_compare)
+
+
 class _Parser(argparse.ArgumentParser):
     """Usage errors in one line, naming the command, the problem and where to look."""
 
@@ -439,6 +489,8 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("check", help="verify a run directory: list missing, truncated, damaged and unknown steps")
     s.add_argument("run")
     s.set_defaults(func=cmd_check)
+
+    _add_twin_parsers(sub)
 
     from .studies.cli import add_parsers as add_study_parsers
     add_study_parsers(sub, Progress)
