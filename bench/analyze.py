@@ -47,12 +47,13 @@ def _version() -> str:
         return "unknown"
 
 
-def analyze_source(source: Path, out_dir: Path | None = None, rig: Path | None = None) -> dict:
-    """Analyse SOURCE, write ``analysis.json`` (and ``analysis.html``) to ``out_dir``; return the dict."""
+def analyze_source(source: Path, out_dir: Path | None = None, rig: Path | None = None, *, src=None) -> dict:
+    """Analyse SOURCE, write ``analysis.json`` (and ``analysis.html``) to ``out_dir``; return the dict.
+    ``src``: SOURCE already read by :func:`bench.sources.load_source` (not read again)."""
     source = Path(source)
     if not source.exists():
         raise ValueError(f"{source}: no such run directory or file")
-    src = load_source(source)
+    src = src if src is not None else load_source(source)
     steps, rejected = list(src.steps), [dict(step=r.step, reason=r.reason) for r in src.rejected]
     if not steps:
         raise ValueError(f"{source}: no usable steps ({len(rejected)} rejected"

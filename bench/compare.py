@@ -97,15 +97,19 @@ def _describe(src: Source) -> dict:
                 rejected=[dict(step=r.step, reason=r.reason) for r in src.rejected])
 
 
-def compare_sources(reference: Path, other: Path, tolerance: float = 0.02) -> dict:
-    """The comparison as a dict (compare.json's schema)."""
+def compare_sources(reference, other, tolerance: float = 0.02) -> dict:
+    """The comparison as a dict (compare.json's schema).  ``reference``, ``other``: paths, or
+    sources already read by :func:`bench.sources.load_source`."""
     if not (math.isfinite(tolerance) and tolerance > 0):
         raise ValueError(f"--tolerance must be a positive fraction (0.02 = 2 %), got {tolerance!r}")
     srcs = []
-    for p in (Path(reference), Path(other)):
-        if not p.exists():
+    for p in (reference, other):
+        if isinstance(p, Source):
+            srcs.append(p)
+            continue
+        if not Path(p).exists():
             raise ValueError(f"{p}: no such run directory or file")
-        srcs.append(load_source(p))
+        srcs.append(load_source(Path(p)))
     ref, oth = srcs
     for s in srcs:
         if not s.steps:

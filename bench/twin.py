@@ -257,11 +257,12 @@ def load_analysis(path: Path) -> dict:
     return d
 
 
-def build_twin(source: Path, analysis: dict, *, plain: bool = False) -> Twin:
+def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source | None = None) -> Twin:
     """The twin of SOURCE from its analysis dict (``plain``: only the base model's F_s, x_s,
-    n, m and the noise: a plain Masing twin, to show what the named causes buy)."""
+    n, m and the noise: a plain Masing twin, to show what the named causes buy).  ``src``:
+    SOURCE already read by :func:`bench.sources.load_source`."""
     source = Path(source)
-    src = load_source(source)
+    src = src if src is not None else load_source(source)
     if not src.steps:
         raise ValueError(f"{source}: no usable steps to build a twin from")
     params = analysis["base"]["parameters"] if plain else analysis["parameters"]
@@ -302,7 +303,8 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False) -> Twin:
     for k in ("probe_standoff_m", "steps_per_period"):
         if k in src_model:
             model[k] = src_model[k]
-    model["seed"] = 1
+    # a noise realisation of its own: a simulated source's seed + 1
+    model["seed"] = int(src_model.get("seed", 0)) + 1
 
     known = {f.name for f in fields(RigModel)}
     ctx = dict(mass_kg=model["mass_kg"], drive_height_m=src_model.get("drive_height_m"))
@@ -430,18 +432,19 @@ def default_out_dir(source: Path) -> Path:
 
 
 def make_twin(source: Path, analysis_dir: Path | None = None, out: Path | None = None, *,
-              plain: bool = False) -> tuple[Twin, dict[str, Path]]:
+              plain: bool = False, src: Source | None = None) -> tuple[Twin, dict[str, Path]]:
     """Analyse SOURCE (into OUT/analysis) unless ``analysis_dir`` holds its analysis.json;
     build the twin and write rig.toml, plan.toml and twin.json to OUT."""
     source = Path(source)
     if not source.exists():
         raise ValueError(f"{source}: no such run directory or file")
     out = Path(out) if out else default_out_dir(source)
+    src = src if src is not None else load_source(source)
     if analysis_dir is not None:
         analysis = load_analysis(analysis_dir)
         if analysis.get("source") and Path(analysis["source"]).resolve() != source.resolve():
             log.warning("the analysis in %s is of %s, not of %s", analysis_dir, analysis["source"], source)
     else:
-        analysis = analyze_source(source, out / "analysis")
-    twin = build_twin(source, analysis, plain=plain)
+        analysis = analyze_source(source, out / "analysis", src=src)
+    twin = build_twin(source, analysis, plain=plain, src=src)
     return twin, write_twin(twin, out)

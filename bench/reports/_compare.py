@@ -90,8 +90,7 @@ def plot_difference(result: dict) -> Figure:
     tol = 100 * result["tolerance"]
     ax.axhline(tol, color="#b00", ls="--", lw=1.2)
     ax.text(0.005, tol, f" tolerance {tol:g} %", color="#b00", va="bottom", transform=ax.get_yaxis_transform())
-    ax.set(xscale="log", xlabel="frequency (Hz)", ylabel="|H_other - H_ref| / |H_ref| (%)")
-    ax.set_ylim(bottom=0)
+    ax.set(xscale="log", yscale="log", xlabel="frequency (Hz)", ylabel="|H_other - H_ref| / |H_ref| (%)")
     ax.grid(True, which="both", alpha=0.3)
     handles = [Line2D([], [], color=colours[lv], lw=2, label=f"{lv:.3g} N") for lv in levels]
     handles += [Line2D([], [], color="0.3", ls="none", marker="o", label="compliance"),
