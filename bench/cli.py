@@ -369,7 +369,7 @@ def cmd_compare(args) -> int:
     from .compare import summary, write_compare
     result, out = write_compare(Path(args.reference), Path(args.other), Path(args.out) if args.out else None,
                                 args.tolerance)
-    print(summary(result))
+    print(summary(result), end="")
     print(f"written to {out}/compare.json and compare.html")
     return ExitCode.OK if result["overall"]["within_tolerance"] else ExitCode.FAILURE
 

@@ -8,9 +8,14 @@ compared: the relative complex difference |H_o - H_r| / |H_r| (magnitude and pha
 together), the magnitude difference in per cent, the phase difference in degrees, and
 the difference in units of its noise (both steps' standard errors propagated).
 
-The overall figure per quantity is the rms of the relative complex difference over the
-matched steps; ``within_tolerance`` holds when both the compliance's and the
-accelerance's are at most the tolerance (CLI exit 0, else 1).  Writes ``compare.json``
+A step is *judged* when the noise of the two measurements alone gives a relative
+difference of at most half the tolerance (``JUDGED_NOISE``): a noisier step (a tiny
+displacement far above resonance, an unsettled free vibration) cannot tell a difference
+of the tolerance from noise, and is reported but not gated.  The overall figure per
+quantity is the rms of the relative complex difference over the judged steps (the rms
+over all matched steps is reported beside it); ``within_tolerance`` holds when both the
+compliance's and the accelerance's are at most the tolerance (CLI exit 0, else 1; no
+judged step is exit 1).  Writes ``compare.json``
 (schema in docs/twin.md) and ``compare.html``.  Decision record 0026.
 """
 
@@ -32,6 +37,7 @@ SCHEMA = "guideway-bench/compare/1"
 LEVEL_TOL = 0.05       # relative force-level difference of matched steps
 FREQ_TOL = 0.005       # relative frequency difference of matched steps
 QUANTITIES = ("compliance", "accelerance")
+JUDGED_NOISE = 0.5     # a step is judged when its noise alone gives at most half the tolerance
 
 
 @dataclass(frozen=True)
@@ -78,12 +84,14 @@ def _ri(z: complex) -> list[float]:
     return [float(z.real), float(z.imag)]
 
 
-def _difference(hr: complex, ho: complex, sr: float, so: float) -> dict:
+def _difference(hr: complex, ho: complex, sr: float, so: float, tolerance: float) -> dict:
     dphi = math.degrees(math.remainder(np.angle(ho) - np.angle(hr), 2 * math.pi))
     sigma = math.hypot(sr, so)
+    rel_noise = math.sqrt(2) * sigma / abs(hr)        # rms of rel_diff from the noise alone
     return dict(reference=_ri(hr), other=_ri(ho), rel_diff=abs(ho - hr) / abs(hr),
                 mag_diff_pct=100 * (abs(ho) / abs(hr) - 1), phase_diff_deg=dphi,
-                noise_units=abs(ho - hr) / sigma if sigma > 0 else None)
+                noise_units=abs(ho - hr) / sigma if sigma > 0 else None, rel_noise=rel_noise,
+                judged=bool(rel_noise <= JUDGED_NOISE * tolerance))
 
 
 def _rms(x) -> float:
@@ -125,23 +133,30 @@ def compare_sources(reference, other, tolerance: float = 0.02) -> dict:
         steps.append(dict(reference_key=r.key, other_key=o.key, level_N=float(r.level_N),
                           other_level_N=float(o.level_N), freq_Hz=float(r.freq_Hz), direction=r.direction or o.direction,
                           **{q: _difference(getattr(fr, q), getattr(fo, q), getattr(fr, f"sigma_{q}"),
-                                            getattr(fo, f"sigma_{q}")) for q in QUANTITIES}))
+                                            getattr(fo, f"sigma_{q}"), tolerance) for q in QUANTITIES}))
     overall = {}
     for q in QUANTITIES:
         d = [s[q] for s in steps]
-        overall[q] = dict(rms_rel_diff=_rms(x["rel_diff"] for x in d),
-                          max_rel_diff=float(max(x["rel_diff"] for x in d)),
+        judged = [x["rel_diff"] for x in d if x["judged"]]
+        overall[q] = dict(rms_rel_diff=_rms(judged) if judged else None, judged=len(judged),
+                          rms_rel_diff_all=_rms(x["rel_diff"] for x in d),
+                          max_rel_diff=float(max(judged)) if judged else None,
                           rms_mag_diff_pct=_rms(x["mag_diff_pct"] for x in d),
                           rms_phase_diff_deg=_rms(x["phase_diff_deg"] for x in d),
                           rms_noise_units=_rms(x["noise_units"] for x in d if x["noise_units"] is not None))
-    worst = max(overall[q]["rms_rel_diff"] for q in QUANTITIES)
+    rms = [overall[q]["rms_rel_diff"] for q in QUANTITIES]
+    worst = None if None in rms else max(rms)
     matched_r, matched_o = {i for i, _ in pairs}, {j for _, j in pairs}
     return dict(schema=SCHEMA, reference=_describe(ref), other=_describe(oth), tolerance=tolerance,
                 matching=dict(level_rel=LEVEL_TOL, freq_rel=FREQ_TOL), matched=len(pairs),
                 unmatched_reference=[s.key for k, s in enumerate(ref.steps) if k not in matched_r],
                 unmatched_other=[s.key for k, s in enumerate(oth.steps) if k not in matched_o],
-                overall=dict(overall, rms_rel_diff=worst, within_tolerance=bool(worst <= tolerance)),
+                overall=dict(overall, rms_rel_diff=worst, within_tolerance=worst is not None and worst <= tolerance),
                 steps=steps)
+
+
+def _pct(x) -> str:
+    return "n/a" if x is None else f"{100 * x:.3g} %"
 
 
 def summary(result: dict) -> str:
@@ -150,12 +165,17 @@ def summary(result: dict) -> str:
              f"{len(result['unmatched_other'])} of the other unmatched)"]
     for q in QUANTITIES:
         x = o[q]
-        lines.append(f"{q:>11}: rms difference {100 * x['rms_rel_diff']:.3g} % (magnitude {x['rms_mag_diff_pct']:.3g} %, "
+        lines.append(f"{q:>11}: rms difference {_pct(x['rms_rel_diff'])} over the {x['judged']} steps precise enough "
+                     f"to judge ({_pct(x['rms_rel_diff_all'])} over all; magnitude {x['rms_mag_diff_pct']:.3g} %, "
                      f"phase {x['rms_phase_diff_deg']:.3g} deg; {x['rms_noise_units']:.3g} x noise), "
-                     f"largest {100 * x['max_rel_diff']:.3g} %")
-    lines.append(f"{'within' if o['within_tolerance'] else 'OUTSIDE'} the tolerance of "
-                 f"{100 * result['tolerance']:g} % (largest rms {100 * o['rms_rel_diff']:.3g} %)")
-    return "\n".join(lines)
+                     f"largest judged {_pct(x['max_rel_diff'])}")
+    if o["rms_rel_diff"] is None:
+        lines.append(f"OUTSIDE: no step is precise enough to judge a difference of {100 * result['tolerance']:g} % "
+                     f"(its noise alone would give more than {100 * JUDGED_NOISE * result['tolerance']:g} %)")
+    else:
+        lines.append(f"{'within' if o['within_tolerance'] else 'OUTSIDE'} the tolerance of "
+                     f"{100 * result['tolerance']:g} % (larger rms {_pct(o['rms_rel_diff'])})")
+    return "\n".join(lines) + "\n"
 
 
 def default_out_dir(other: Path) -> Path:

@@ -107,6 +107,40 @@ def shaker_model(freqs_Hz: np.ndarray, ratio_N_per_V: np.ndarray) -> tuple[dict,
                 f"(amp_gain_N_per_V = median {med:.4g} N/V); hook: bench.twin.shaker_model")
 
 
+def apply_causes(model: dict, causes: list[dict], ctx: dict) -> tuple[dict, dict, list[dict]]:
+    """``model`` ([rig.model] keys) with every cause of ``causes`` (analysis.json's
+    ``causes``) that the plant can represent: (new model, {cause id: keys written},
+    [{cause, reason}] for the rest).  ``ctx``: the twin's ``mass_kg`` and the source rig's
+    ``drive_height_m`` (or None)."""
+    from .config import _check_model, _Section
+    known = {f.name for f in fields(RigModel)}
+    applied, missed = {}, []
+    for c in causes:
+        cid = c["id"]
+        if cid not in CAUSE_KEYS:
+            missed.append(dict(cause=cid, reason="no plant or sensor form for this cause (bench.twin.CAUSE_KEYS)"))
+            continue
+        try:
+            keys = CAUSE_KEYS[cid](c.get("parameters", {}), ctx)
+        except KeyError as e:
+            missed.append(dict(cause=cid, reason=f"the analysis gives no parameter {e} for it"))
+            continue
+        absent = sorted(set(keys) - known)
+        if absent:
+            missed.append(dict(cause=cid, reason=f"this version's plant has no {', '.join(absent)} "
+                                                 f"(keys {', '.join(f'{k} = {v}' for k, v in keys.items())})"))
+            continue
+        trial = dict(model, **keys)
+        try:
+            _check_model(_Section("twin", "rig.model", trial))
+        except ValueError as e:
+            missed.append(dict(cause=cid, reason=f"its identified values are not a valid plant: {e}"))
+            continue
+        model = trial
+        applied[cid] = keys
+    return model, applied, missed
+
+
 @dataclass
 class Twin:
     rig: dict                    # the TOML layout of rig.toml (top table "rig")
@@ -306,33 +340,9 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source
     # a noise realisation of its own: a simulated source's seed + 1
     model["seed"] = int(src_model.get("seed", 0)) + 1
 
-    known = {f.name for f in fields(RigModel)}
     ctx = dict(mass_kg=model["mass_kg"], drive_height_m=src_model.get("drive_height_m"))
-    applied = {}
-    for c in causes:
-        cid = c["id"]
-        if cid not in CAUSE_KEYS:
-            not_in_plant.append(dict(cause=cid, reason="no plant or sensor form for this cause (bench.twin.CAUSE_KEYS)"))
-            continue
-        try:
-            keys = CAUSE_KEYS[cid](c.get("parameters", {}), ctx)
-        except KeyError as e:
-            not_in_plant.append(dict(cause=cid, reason=f"the analysis gives no parameter {e} for it"))
-            continue
-        missing = sorted(set(keys) - known)
-        if missing:
-            not_in_plant.append(dict(cause=cid, reason=f"this version's plant has no {', '.join(missing)}"))
-            continue
-        trial = dict(model, **keys)
-        try:
-            RigModel.from_dict(trial)
-            from .config import _check_model, _Section
-            _check_model(_Section("twin", "rig.model", trial))
-        except ValueError as e:
-            not_in_plant.append(dict(cause=cid, reason=f"its identified values are not a valid plant: {e}"))
-            continue
-        model = trial
-        applied[cid] = keys
+    model, applied, missed = apply_causes(model, causes, ctx)
+    not_in_plant += missed
     rig["model"] = {k: (_sig(v, 8) if isinstance(v, float) else v) for k, v in model.items()}
 
     # plan

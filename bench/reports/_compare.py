@@ -100,18 +100,31 @@ def plot_difference(result: dict) -> Figure:
     return fig
 
 
+def _p(x) -> str:
+    return "n/a" if x is None else f"{100 * x:.3g} %"
+
+
 def _verdict(result: dict) -> str:
     o = result["overall"]
     ok = o["within_tolerance"]
-    parts = [f"<p><strong>{'Within' if ok else 'Outside'} the tolerance</strong>: the larger rms difference of "
-             f"compliance and accelerance is {100 * o['rms_rel_diff']:.3g} % over {result['matched']} matched "
-             f"steps (tolerance {100 * result['tolerance']:g} %).</p>"]
+    tol = 100 * result["tolerance"]
+    if o["rms_rel_diff"] is None:
+        head = (f"<p><strong>Outside the tolerance</strong>: no matched step is precise enough to judge a difference of "
+                f"{tol:g} % (the noise of the two measurements alone gives more than half of it).</p>")
+    else:
+        head = (f"<p><strong>{'Within' if ok else 'Outside'} the tolerance</strong>: the larger rms difference of "
+                f"compliance and accelerance is {_p(o['rms_rel_diff'])} over the matched steps precise enough to judge "
+                f"(tolerance {tol:g} %; {result['matched']} steps matched).</p>")
+    parts = [head]
     for q in QUANTITIES:
         x = o[q]
-        parts.append(f"<p>{q.capitalize()}: rms difference {100 * x['rms_rel_diff']:.3g} % (magnitude "
+        parts.append(f"<p>{q.capitalize()}: rms difference {_p(x['rms_rel_diff'])} over {x['judged']} judged steps "
+                     f"({_p(x['rms_rel_diff_all'])} over all matched steps; magnitude "
                      f"{_num(x['rms_mag_diff_pct'], '.3g')} %, phase {_num(x['rms_phase_diff_deg'], '.3g')} deg), "
-                     f"{_num(x['rms_noise_units'], '.3g')} times the measurement noise; largest "
-                     f"{100 * x['max_rel_diff']:.3g} %.</p>")
+                     f"{_num(x['rms_noise_units'], '.3g')} times the measurement noise; largest judged "
+                     f"{_p(x['max_rel_diff'])}.</p>")
+    parts.append("<p>A step is judged when the noise of the two measurements alone would give a difference of at "
+                 "most half the tolerance; the others are shown but not gated.</p>")
     cls = "verdict" if ok else "verdict unexplained"
     return (f'<section aria-labelledby="verdict-h"><h2 id="verdict-h">Verdict</h2><div class="{cls}">'
             + "".join(parts) + "</div></section>")
@@ -138,13 +151,15 @@ def _steps_table(result: dict) -> str:
                      _num(s["freq_Hz"], ".5g"), escape(s["direction"] or "-"),
                      _num(100 * c["rel_diff"], ".3g"), _num(c["mag_diff_pct"], "+.3g"), _num(c["phase_diff_deg"], "+.3g"),
                      _num(c["noise_units"] if c["noise_units"] is not None else math.nan, ".3g"),
+                     "yes" if c["judged"] else "no (noisy)",
                      _num(100 * a["rel_diff"], ".3g"), _num(a["mag_diff_pct"], "+.3g"), _num(a["phase_diff_deg"], "+.3g")])
     head = ["reference step", "other step", "level (N)", "frequency (Hz)", "sweep", "compliance diff (%)",
-            "magnitude (%)", "phase (deg)", "x noise", "accelerance diff (%)", "magnitude (%)", "phase (deg)"]
+            "magnitude (%)", "phase (deg)", "x noise", "judged", "accelerance diff (%)", "magnitude (%)", "phase (deg)"]
     out = ['<section aria-labelledby="steps-h"><h2 id="steps-h">Matched steps</h2>',
-           _table(head, rows, set(range(2, 12)) - {4},
+           _table(head, rows, set(range(2, 13)) - {4, 9},
                   "Per matched step: relative complex difference, magnitude difference, phase difference "
-                  "(other minus reference) and, for the compliance, the difference in units of its noise.")]
+                  "(other minus reference) and, for the compliance, the difference in units of its noise and whether "
+                  "the step is precise enough to be judged at the tolerance.")]
     for role in ("reference", "other"):
         keys = result[f"unmatched_{role}"]
         if keys:
