@@ -100,6 +100,8 @@ def test_the_twin_of_a_twins_run_is_the_same_twin(pitch):
     a2 = {c["id"]: c["parameters"] for c in json.loads((d / "twin2" / "analysis" / "analysis.json").read_text())["causes"]}
     for cid in a1:
         for name, p1 in a1[cid].items():
+            if p1["high"] == p1["low"]:
+                continue            # a stated reference (v_ref), not an estimate
             p2 = a2[cid][name]
             half = math.hypot(p1["high"] - p1["low"], p2["high"] - p2["low"]) / 2
             assert abs(p2["value"] - p1["value"]) <= max(half, 1e-12 * abs(p1["value"])), (cid, name, p1, p2)
@@ -126,7 +128,7 @@ def test_the_twin_of_a_foreign_uff_file_reproduces_it(tmp_path):
     F_s, x_s, n, m = 12.0, 15e-6, 0.7, 6.0
     f_res = math.sqrt(F_s / (x_s * m)) / (2 * math.pi)
     src = tmp_path / "measured.uff"
-    generate_uff(src, F_s, x_s, n, m, [0.3 * F_s, 0.7 * F_s], list(np.geomspace(0.5 * f_res, 2.0 * f_res, 5)))
+    generate_uff(src, F_s, x_s, n, m, [0.3 * F_s, 0.7 * F_s], list(np.geomspace(0.5 * f_res, 2.0 * f_res, 4)))
     digest = hashlib.sha256(src.read_bytes()).hexdigest()
     assert _bench("twin", src) == 0
     out = tmp_path / "measured_twin"
@@ -136,12 +138,12 @@ def test_the_twin_of_a_foreign_uff_file_reproduces_it(tmp_path):
     assert twin["causes"] == [] and twin["provenance"]["source_sha256"] == digest
     assert any("foreign file" in note for note in twin["notes"])       # the defaults used are said
     plan = load_plan(out / "plan.toml")
-    assert plan.levels_N == pytest.approx((0.3 * F_s, 0.7 * F_s), rel=0.01) and len(plan.freqs_Hz) == 5
+    assert plan.levels_N == pytest.approx((0.3 * F_s, 0.7 * F_s), rel=0.01) and len(plan.freqs_Hz) == 4
     assert _bench("run", "--plan", out / "plan.toml", "--rig", out / "rig.toml", "--out", tmp_path / "run",
                   "--no-report") == 0
     assert _bench("compare", src, tmp_path / "run", "--out", tmp_path / "cmp") == 0
     c = json.loads((tmp_path / "cmp" / "compare.json").read_text())
-    assert c["matched"] == 10 and c["overall"]["compliance"]["rms_rel_diff"] < 0.02
+    assert c["matched"] == 8 and c["overall"]["compliance"]["rms_rel_diff"] < 0.02
     assert hashlib.sha256(src.read_bytes()).hexdigest() == digest
 
 
@@ -257,9 +259,9 @@ def test_compare_page_renders_in_chromium(pitch, tmp_path):
     text = page.read_text()
     assert "http://" not in text and "https://" not in text and "<script" not in text     # self-contained
     mark = _render_check(page, tmp_path)
-    assert int(mark["images"]) == 3 and mark["loaded"] == mark["images"]
-    assert all(int(w) > 300 for w in mark["widths"].split(","))
-    assert "Within the tolerance" in mark["verdict"]
+    assert int(mark["data-images"]) == 3 and mark["data-loaded"] == mark["data-images"]
+    assert all(int(w) > 300 for w in mark["data-widths"].split(","))
+    assert "Within the tolerance" in mark["data-verdict"]
 
 
 def test_compare_refuses_bad_input_with_a_clear_error(pitch, tmp_path, capsys):
