@@ -44,6 +44,7 @@ bench: setup
 	$(PY) benchmarks/bench_studies.py
 	$(PY) benchmarks/bench_analysis.py
 	$(PY) benchmarks/bench_identification.py
+	$(PY) benchmarks/bench_twin.py
 
 # Soak test (by hand, not in `make test`): 2000 steps, ~3 h of rig time, twins hammered by
 # other clients; prints memory, open files, latencies. SOAK_PROFILE=short for a quick one.

@@ -95,7 +95,10 @@ def shaker_model(freqs_Hz: np.ndarray, ratio_N_per_V: np.ndarray) -> tuple[dict,
     """Hook: [rig.model] keys of a frequency-dependent shaker fitted to the source's
     measured force per drive volt, and a note.  This plant's amplifier has one gain
     (``amp_gain_N_per_V``, set to the median ratio by the caller), so no keys yet; the
-    note lists a spread the plant cannot reproduce."""
+    note lists a spread the plant cannot reproduce.  Decision record 0025 (the shaker
+    model: Bl, R, L, armature mass, suspension, damping) gives the linear force per volt
+    P/V = amp_gain R/(R + j w L) Z_s/(Z_s + Z_a + Bl^2/(R + j w L)) to fit here; the
+    ratios are kept in twin.json (``drive_ratio``) for that."""
     if ratio_N_per_V.size == 0:
         return {}, ""
     lo, hi = float(ratio_N_per_V.min()), float(ratio_N_per_V.max())
@@ -151,11 +154,12 @@ class Twin:
     applied: dict                # cause id -> {key: value} written to [rig.model]
     not_in_plant: list[dict] = field(default_factory=list)    # {cause, reason}
     notes: list[str] = field(default_factory=list)            # defaults used, and why
+    drive_ratio: list[dict] = field(default_factory=list)     # {freq_Hz, N_per_V} per step of a run
 
     def to_dict(self) -> dict:
         return dict(schema=SCHEMA, provenance=self.provenance, parameters=self.parameters, causes=self.causes,
                     applied=self.applied, not_in_plant=self.not_in_plant, notes=self.notes,
-                    rig=self.rig, plan=self.plan)
+                    drive_ratio=self.drive_ratio, rig=self.rig, plan=self.plan)
 
 
 # ---------------------------------------------------------------------------- provenance
@@ -360,7 +364,8 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source
                 steps_used=len(src.steps), steps_rejected=len(src.rejected), plain=plain)
     twin = Twin(rig={"rig": rig}, plan={"plan": plan}, provenance=prov,
                 parameters={k: dict(v) for k, v in params.items()}, causes=[c["id"] for c in causes],
-                applied=applied, not_in_plant=not_in_plant, notes=notes)
+                applied=applied, not_in_plant=not_in_plant, notes=notes,
+                drive_ratio=[dict(freq_Hz=float(f), N_per_V=float(r)) for f, r in zip(f_r, ratio)])
     # both files must load as the commands will load them
     parse_rig(twin.rig, "twin rig.toml")
     parse_plan(twin.plan, "twin plan.toml")

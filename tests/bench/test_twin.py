@@ -271,3 +271,11 @@ def test_compare_refuses_bad_input_with_a_clear_error(pitch, tmp_path, capsys):
     assert "tolerance" in capsys.readouterr().err
     assert _bench("twin", pitch["src"], "--analysis", tmp_path, "--out", tmp_path / "t") == 2
     assert "no analysis.json" in capsys.readouterr().err
+
+
+def test_a_frequency_dependent_drive_ratio_is_listed_for_the_shaker_hook():
+    from bench.twin import shaker_model
+    f = np.array([20.0, 50.0, 100.0, 300.0])
+    assert shaker_model(f, np.array([20.0, 20.1, 19.9, 20.05])) == ({}, "")
+    keys, note = shaker_model(f, np.array([20.0, 12.0, 19.0, 15.0]))
+    assert keys == {} and "12 to 20 N/V" in note and "bench.twin.shaker_model" in note
