@@ -110,12 +110,20 @@ def shaker_model(freqs_Hz: np.ndarray, ratio_N_per_V: np.ndarray) -> tuple[dict,
                 f"(amp_gain_N_per_V = median {med:.4g} N/V); hook: bench.twin.shaker_model")
 
 
+def check_model(model: dict) -> None:
+    """ValueError naming the key when ``model`` is not a valid [rig.model] (as `bench run`
+    would load it: the simulated rig's file with this model)."""
+    import tomllib
+    rig = tomllib.loads((DEFAULTS / "sim_rig.toml").read_text())
+    rig["rig"]["model"] = model
+    parse_rig(rig, "twin")
+
+
 def apply_causes(model: dict, causes: list[dict], ctx: dict) -> tuple[dict, dict, list[dict]]:
     """``model`` ([rig.model] keys) with every cause of ``causes`` (analysis.json's
     ``causes``) that the plant can represent: (new model, {cause id: keys written},
     [{cause, reason}] for the rest).  ``ctx``: the twin's ``mass_kg`` and the source rig's
     ``drive_height_m`` (or None)."""
-    from .config import _check_model, _Section
     known = {f.name for f in fields(RigModel)}
     applied, missed = {}, []
     for c in causes:
@@ -135,7 +143,7 @@ def apply_causes(model: dict, causes: list[dict], ctx: dict) -> tuple[dict, dict
             continue
         trial = dict(model, **keys)
         try:
-            _check_model(_Section("twin", "rig.model", trial))
+            check_model(trial)
         except ValueError as e:
             missed.append(dict(cause=cid, reason=f"its identified values are not a valid plant: {e}"))
             continue
