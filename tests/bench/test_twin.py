@@ -279,3 +279,53 @@ def test_a_frequency_dependent_drive_ratio_is_listed_for_the_shaker_hook():
     assert shaker_model(f, np.array([20.0, 20.1, 19.9, 20.05])) == ({}, "")
     keys, note = shaker_model(f, np.array([20.0, 12.0, 19.0, 15.0]))
     assert keys == {} and "12 to 20 N/V" in note and "bench.twin.shaker_model" in note
+
+
+def _step(key, level, f, C, A_over_P, sigma_rel=1e-6, direction="up"):
+    """A measured step with first harmonics P = level, X = C P, A = A_over_P P; every channel's
+    standard error sigma_rel times its amplitude."""
+    from bench.sources import MeasuredStep
+    from sim.identify import StepHarmonics
+    P = complex(level)
+    X, A = C * P, A_over_P * P
+    h = StepHarmonics(freq_Hz=f, force=np.array([P]), accel=np.array([A]), disp=np.array([X]),
+                      sigma_force=sigma_rel * abs(P), sigma_accel=sigma_rel * abs(A), sigma_disp=sigma_rel * abs(X))
+    z = np.zeros(8)
+    return MeasuredStep(key=key, level_N=level, freq_Hz=f, harmonics=h, fs_Hz=f * 8, force_N=z, accel_m_s2=z,
+                        disp_m=z, direction=direction, periods=10)
+
+
+def test_compare_matches_steps_and_gates_only_the_steps_precise_enough_to_judge(tmp_path):
+    from bench.compare import compare_sources
+    from bench.sources import Source
+    freqs = [10.0, 20.0, 30.0, 40.0]
+    C = {f: 1e-6 * np.exp(-1j * f / 20) for f in freqs}
+    ref = Source(tmp_path, "run", [_step(f"r{f:g}", 1.0, f, C[f], -(2 * np.pi * f) ** 2 * C[f]) for f in freqs])
+
+    def other(d, noisy_factor):
+        steps = [_step(f"o{f:g}", 1.02, f * 1.003, C[f] * (1 + d), -(2 * np.pi * f) ** 2 * C[f] * (1 + d))
+                 for f in freqs[:3]]
+        # 40 Hz: 30 % off but with 10 % noise per channel: not judged at a 2 % tolerance
+        f = freqs[3]
+        steps.append(_step("o40", 1.0, f, C[f] * noisy_factor, -(2 * np.pi * f) ** 2 * C[f] * noisy_factor, 0.1))
+        steps.append(_step("o20-far-level", 1.3, 20.0, C[20.0], -(2 * np.pi * 20) ** 2 * C[20.0]))
+        steps.append(_step("o10-down", 1.0, 10.0, C[10.0], -(2 * np.pi * 10) ** 2 * C[10.0], direction="down"))
+        return Source(tmp_path, "uff58", steps)
+
+    r = compare_sources(ref, other(0.01, 1.3), 0.02)
+    assert r["matched"] == 4 and set(r["unmatched_other"]) == {"o20-far-level", "o10-down"}
+    by = {s["reference_key"]: s for s in r["steps"]}
+    assert by["r10"]["other_key"] == "o10"                     # the up step, not the down one
+    c40 = by["r40"]["compliance"]
+    assert not c40["judged"] and c40["rel_diff"] == pytest.approx(0.3)
+    sigma = abs(C[40.0]) * 1.3 * math.sqrt(0.1 ** 2 + 0.1 ** 2)     # the other's X/P error; the reference's is ~0
+    assert c40["noise_units"] == pytest.approx(0.3 * abs(C[40.0]) / sigma, rel=1e-3)
+    assert all(by[f"r{f:g}"]["compliance"]["judged"] for f in freqs[:3])
+    o = r["overall"]
+    assert o["compliance"]["judged"] == 3 and o["compliance"]["rms_rel_diff"] == pytest.approx(0.01, rel=1e-6)
+    assert o["compliance"]["rms_rel_diff_all"] > 0.1 and o["within_tolerance"]
+    assert by["r20"]["compliance"]["mag_diff_pct"] == pytest.approx(1.0) and abs(by["r20"]["compliance"]["phase_diff_deg"]) < 1e-9
+    r = compare_sources(ref, other(0.025, 1.3), 0.02)                # 2.5 % on the judged steps: outside
+    assert not r["overall"]["within_tolerance"] and r["overall"]["rms_rel_diff"] == pytest.approx(0.025, rel=1e-6)
+    r = compare_sources(ref, other(0.019, 1.3), 0.02)                # 1.9 %: inside
+    assert r["overall"]["within_tolerance"]
