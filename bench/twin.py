@@ -355,6 +355,10 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source
     ctx = dict(mass_kg=model["mass_kg"], drive_height_m=src_model.get("drive_height_m"))
     model, applied, missed = apply_causes(model, causes, ctx)
     not_in_plant += missed
+    if analysis.get("unexplained") and not plain:
+        reasons = analysis.get("base", {}).get("diagnostics", {}).get("unexplained_reasons", [])
+        not_in_plant.append(dict(cause="unexplained", reason="structure the analysis could not name"
+                                 + (f": {'; '.join(reasons[:3])}" if reasons else "")))
     rig["model"] = {k: (_sig(v, 8) if isinstance(v, float) else v) for k, v in model.items()}
 
     # plan

@@ -329,3 +329,14 @@ def test_compare_matches_steps_and_gates_only_the_steps_precise_enough_to_judge(
     assert not r["overall"]["within_tolerance"] and r["overall"]["rms_rel_diff"] == pytest.approx(0.025, rel=1e-6)
     r = compare_sources(ref, other(0.019, 1.3), 0.02)                # 1.9 %: inside
     assert r["overall"]["within_tolerance"]
+
+
+def test_structure_left_unexplained_is_listed_not_dropped(pitch):
+    from bench.twin import build_twin
+    a = json.loads((pitch["dir"] / "twin" / "analysis" / "analysis.json").read_text())
+    a["unexplained"] = True
+    a["base"]["diagnostics"]["unexplained_reasons"] = ["harmonic 3 stands out"]
+    twin = build_twin(pitch["src"], a)
+    assert {"cause": "unexplained", "reason": "structure the analysis could not name: harmonic 3 stands out"} \
+        in twin.not_in_plant
+    assert set(twin.applied) == {"second_mode", "velocity_dependent_friction"}    # the named causes still are
