@@ -304,22 +304,27 @@ def cmd_analyze(args) -> int:
 
 
 def cmd_check(args) -> int:
-    """Verify a run directory: every problem on one line, exit 1 if there is any."""
-    from .storage import RunStore
+    """Verify a run directory against its plan: every missing, damaged and orphan step on
+    one line, then the count; exit 1 if there is any problem."""
+    from .storage import RunDirError, RunStore
 
     store = RunStore(Path(args.run))
     if not store.path.is_dir():
         RunStore.open(store.path)             # raises the one-line usage error
-    problems = store.check()
-    n = len(store.step_files())
+    try:
+        acc = store.account()
+    except RunDirError:                       # run.json damaged: the files alone, no plan to count against
+        acc = None
+    problems = store.check() if acc is None else acc.missing + acc.damaged + acc.orphan
     for p in problems:
         print(f"{p.kind:>9}  {p}")
-    good = n - len({p.key for p in problems if p.key and p.kind != "unknown" and
-                    (store.steps_dir / f"{p.key}.json").exists()})
-    print(f"{store.path}: {n} step result files, {good} intact; "
-          f"{len(problems)} problem{'s' if len(problems) != 1 else ''}"
-          + (f" (bench resume {store.path} measures damaged steps again, keeping their files in damaged/)"
-             if any(p.key and p.kind != "unknown" for p in problems) else ""))
+    if acc is None:
+        print(f"{store.path}: {len(store.step_files())} step result files; run.json unreadable, so the steps "
+              f"cannot be counted against the plan; {len(problems)} problem{'s' if len(problems) != 1 else ''}")
+        return ExitCode.FAILURE
+    print(f"{store.path}: {acc.summary()}"
+          + (f" (bench resume {store.path} measures missing and damaged steps again, keeping damaged "
+             "files in damaged/)" if acc.missing or acc.damaged else ""))
     return ExitCode.FAILURE if problems else ExitCode.OK
 
 

@@ -112,6 +112,7 @@ class StepProblem:
     path: Path        # the file concerned
     kind: str         # one of PROBLEM_KINDS
     reason: str       # plain language
+    count: int = 1    # steps concerned (more than one: an adaptive sweep's shortfall)
 
     def __str__(self) -> str:
         return f"{self.path}: {self.reason}"
@@ -307,6 +308,51 @@ class RunStore:
             problems.append(StepProblem("", p, "unknown", "not a step file"))
         return problems
 
+    def account(self) -> Accounting:
+        """The run's steps counted against its stored plan: intact, missing (no files, or
+        only one of the pair), damaged and orphan files, each named (see :class:`Accounting`)."""
+        meta = self.metadata
+        plan = stored_plan(meta)
+        problems = self.check()
+        orphan = [p for p in problems if p.kind == "unknown" or not p.key]
+        bad = {p.key: p for p in problems if p.key and p.kind != "unknown"}
+        have_json = {p.stem for p in self.step_files()}
+        have_npz = {p.stem for p in self.steps_dir.glob("*.npz")} if self.steps_dir.is_dir() else set()
+        if plan is None:
+            intact = sorted(have_json - set(bad))
+            return Accounting(None, intact, [], [p for p in bad.values()], orphan)
+        sweeps = _sweeps(plan)
+        k = plan.adaptive_per_sweep
+        intact, missing, damaged, n_planned = [], [], [], 0
+        for (li, direction), keys in sweeps.items():
+            n_sweep = min(len(keys), k) if k else len(keys)
+            n_planned += n_sweep
+            present = 0
+            for key in keys:
+                jp, zp = self.steps_dir / f"{key}.json", self.steps_dir / f"{key}.npz"
+                if key not in have_json and key not in have_npz:
+                    if not k:
+                        missing.append(StepProblem(key, jp, "missing", "missing: neither .json nor .npz"))
+                    continue
+                present += 1
+                if key not in have_json:
+                    missing.append(StepProblem(key, jp, "missing", "missing: no .json (only the .npz)"))
+                elif bad.get(key) and bad[key].kind == "missing":
+                    missing.append(StepProblem(key, zp, "missing", "missing: no .npz (only the .json)"))
+                elif key in bad:
+                    damaged.append(bad[key])
+                else:
+                    intact.append(key)
+            if k and present < n_sweep:
+                label = f"L{li:02d}-{direction}"
+                missing.append(StepProblem(label, self.steps_dir, "missing",
+                                           f"missing: {n_sweep - present} of the {n_sweep} steps this sweep "
+                                           f"measures (adaptive plan: chosen online, so not named by key)",
+                                           count=n_sweep - present))
+        order = {key: i for i, key in enumerate(s.key for s in plan.schedule())}
+        missing.sort(key=lambda p: order.get(p.key, -1))
+        return Accounting(n_planned, intact, missing, damaged, orphan)
+
     def set_aside_damaged(self) -> list[StepProblem]:
         """Move the files of every damaged step to ``<run>/damaged/<time>/`` (so that resume
         measures those steps again) and record it; returns the problems found."""
@@ -382,8 +428,8 @@ def _check_npz(path: Path, key: str, integrity: dict | None) -> None:
         raise bad("checksum", "checksum mismatch: the raw block differs from what was written")
 
 
-def planned_keys(meta: dict | None) -> set[str] | None:
-    """Keys of every step of the run's stored plan (None if the plan cannot be rebuilt)."""
+def stored_plan(meta: dict | None):
+    """The run's stored plan as a :class:`procedures.plan.Plan` (None if it cannot be rebuilt)."""
     from procedures.plan import Plan
 
     p = (meta or {}).get("plan")
@@ -393,7 +439,67 @@ def planned_keys(meta: dict | None) -> set[str] | None:
         kw = {f.name: p[f.name] for f in fields(Plan) if f.name in p}
         kw.update(levels_N=tuple(p["levels_N"]), freqs_Hz=tuple(p["freqs_Hz"]),
                   skip=tuple(tuple(s) for s in p.get("skip") or ()))
-        return {s.key for s in Plan(**kw).schedule()}
+        plan = Plan(**kw)
+        plan.schedule()
+        return plan
     except Exception as e:  # noqa: BLE001 - a damaged plan entry: then keys cannot be judged
         log.warning("run.json: the stored plan cannot be rebuilt (%s); step keys not checked", e)
         return None
+
+
+def planned_keys(meta: dict | None) -> set[str] | None:
+    """Keys of every step of the run's stored plan (None if the plan cannot be rebuilt)."""
+    plan = stored_plan(meta)
+    return None if plan is None else {s.key for s in plan.schedule()}
+
+
+# ---------------------------------------------------------------------------- accounting
+
+
+def _keys_text(keys: list[str], limit: int = 8) -> str:
+    return ", ".join(keys[:limit]) + (f" and {len(keys) - limit} more" if len(keys) > limit else "")
+
+
+@dataclass
+class Accounting:
+    """A run's steps counted against its plan (:meth:`RunStore.account`).
+
+    ``missing``: planned steps without a complete file pair (nothing, or only one of the
+    two files); in an adaptive plan, the steps a sweep still lacks of the number it
+    measures (their keys are chosen online, so the sweep is named).  ``damaged``: planned
+    steps whose files are both there but fail a check.  ``orphan``: files no planned step
+    owns.  ``planned`` is None when run.json holds no plan this version can rebuild."""
+
+    planned: int | None
+    intact: list[str]
+    missing: list[StepProblem]
+    damaged: list[StepProblem]
+    orphan: list[StepProblem]
+
+    @property
+    def complete(self) -> bool:
+        """Every planned step is there and intact."""
+        return self.planned is not None and not self.missing and not self.damaged
+
+    @property
+    def missing_count(self) -> int:
+        return sum(p.count for p in self.missing)
+
+    def to_measure(self) -> list[str]:
+        """What a resume measures: missing and damaged steps, by key (sweep for adaptive plans)."""
+        return [p.key for p in self.missing] + [p.key for p in self.damaged]
+
+    def summary(self) -> str:
+        """'28 intact / 30 planned; missing: K1; damaged: K2 (truncated); orphan: none'."""
+        missing = [p.key if p.count == 1 else f"{p.key} ({p.count})" for p in self.missing]
+        return (f"{len(self.intact)} intact / {'?' if self.planned is None else self.planned} planned; "
+                f"missing: {_keys_text(missing) or 'none'}; "
+                f"damaged: {_keys_text([f'{p.key} ({p.kind})' for p in self.damaged]) or 'none'}; "
+                f"orphan: {_keys_text([p.path.name for p in self.orphan]) or 'none'}")
+
+
+def _sweeps(plan) -> dict[tuple[int, str], list[str]]:
+    out: dict[tuple[int, str], list[str]] = {}
+    for s in plan.schedule():
+        out.setdefault((s.level_index, s.direction), []).append(s.key)
+    return out

@@ -60,11 +60,17 @@ def test_report_names_plan_rig_status_and_each_level(report, run_dir):
     text = report.read_text()
     meta = RunStore.open(run_dir).metadata
     assert "small test plan" in text and meta["rig"]["name"] in text
-    assert "**completed**" in text and "20 / 20" in text
+    assert "**completed**" in text and "20 readable / 20 planned" in text
     for part in ("TWIN000001", "numpy", "none (events.jsonl"):
         assert part in text
     for level in (1.0, 5.0):
         assert any(line.startswith(f"| {level:g} | ") for line in text.splitlines()), level
+
+
+def test_report_opens_with_the_steps_used_against_the_plan_and_an_overall_line(report):
+    head = report.read_text().split("## Instruments")[0]
+    assert "**20 used / 20 planned**; skipped: none" in head
+    assert "Overall: **went well**" in head and "needs attention" not in head
 
 
 def test_harmonic_resonance_falls_as_force_rises(report):
@@ -284,7 +290,8 @@ def test_partial_run_reports_its_interruption(run_dir, tmp_path):
     store.event("interrupted", reason="Ctrl-C")
     store.update(status="interrupted", steps_done=7)
     text = write_report(run).read_text()
-    assert "**interrupted**" in text and "7 / 20" in text
+    assert "**interrupted**" in text and "**7 used / 20 planned**" in text
+    assert "Overall: **needs attention**: the run was interrupted" in text
     assert "| interrupted | reason=Ctrl-C |" in text
     assert (run / "report" / "compliance.png").is_file()
 
