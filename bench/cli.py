@@ -124,7 +124,15 @@ def _run(args, resume: bool) -> int:
 
     if resume:
         from .config import parse_plan, parse_rig
-        meta = RunStore.open(Path(args.run)).metadata
+        store = RunStore.open(Path(args.run))
+        meta, acc = store.metadata, store.account()
+        if acc.complete and meta.get("status") == "completed":
+            print(f"resume: nothing to do: the run completed and its steps are all there "
+                  f"({acc.summary()})")
+            return ExitCode.OK
+        print(f"resume: {acc.resume_text()}" if acc.missing or acc.damaged else
+              f"resume: every planned step is there; finishing the run (it ended '{meta.get('status', '?')}')",
+              flush=True)
         plan = parse_plan({"plan": _plan_toml(meta["plan"])}, f"{args.run}/run.json")
         rig = parse_rig({"rig": _rig_toml(meta["rig"])}, f"{args.run}/run.json")
         out, seed = Path(args.run), meta.get("sim_seed")

@@ -489,6 +489,17 @@ class Accounting:
         """What a resume measures: missing and damaged steps, by key (sweep for adaptive plans)."""
         return [p.key for p in self.missing] + [p.key for p in self.damaged]
 
+    def resume_text(self) -> str:
+        """'measures again 3 of 30 planned steps; missing: K1, K2; damaged: K3 (truncated)'."""
+        n = self.missing_count + len(self.damaged)
+        parts = [f"measures again {n} of {self.planned} planned step{'s' * (self.planned != 1)}"]
+        if self.missing:
+            parts.append("missing: " + _keys_text([p.key if p.count == 1 else f"{p.key} ({p.count})"
+                                                   for p in self.missing], 12))
+        if self.damaged:
+            parts.append("damaged: " + _keys_text([f"{p.key} ({p.kind})" for p in self.damaged], 12))
+        return "; ".join(parts)
+
     def summary(self) -> str:
         """'28 intact / 30 planned; missing: K1; damaged: K2 (truncated); orphan: none'."""
         missing = [p.key if p.count == 1 else f"{p.key} ({p.count})" for p in self.missing]
