@@ -33,44 +33,53 @@ from .watch import stop as stop_request
 
 log = logging.getLogger(__name__)
 
-FORCE_MARGIN = 1.25      # control overshoot allowance in the envelope check
+FORCE_MARGIN = 1.25      # control overshoot allowance: the envelope is checked at 1.25 x each level
 
 
 @dataclass(frozen=True)
 class EnvelopePoint:
     force_N: float
     freq_Hz: float
-    drive_V: float
-    disp_m: float
+    drive_V: float           # generator output amplitude (= Vpp/2) at the level, without the margin
+    disp_m: float            # bounds at FORCE_MARGIN x the level
     accel_m_s2: float
     problems: tuple[str, ...]
 
 
 def envelope(plan: Plan, rig: Rig) -> list[EnvelopePoint]:
-    """Expected peak drive, displacement and acceleration of every (level, frequency).
+    """Expected drive, peak displacement and acceleration of every (level, frequency).
 
-    Displacement: free mass P/(m w^2) plus a pre-rolling allowance of 3 x_s; acceleration
-    P/m (the free-mass bound, reached above the friction resonance)."""
+    Drive: the generator's amplitude (V, = Vpp/2: the unit of ``drive_V`` and of the
+    amplifier gain) at the level.  The limits are checked at FORCE_MARGIN x the level (the
+    force control may overshoot), and a problem says so.  Displacement: free mass
+    P/(m w^2) plus a pre-rolling allowance of 3 x_s; acceleration P/m (the free-mass bound,
+    reached above the friction resonance); both at the margin."""
     lim = tightest(rig.limits, plan.limits)
+    m = f"x {FORCE_MARGIN:g} margin"
     out = []
     for F in plan.levels_N:
         for f in plan.freqs_Hz:
             Fp = F * FORCE_MARGIN
             w = 2 * math.pi * f
-            drive = Fp / rig.amp_gain_N_per_V
+            drive = F / rig.amp_gain_N_per_V
             disp = Fp / (rig.expected_mass_kg * w * w) + 3 * rig.expected_x_s_m
             acc = Fp / rig.expected_mass_kg
             problems = tuple(p for p, bad in (
-                (f"drive {drive:.3g} V > {lim.drive_V:g} V", drive > lim.drive_V),
-                (f"force {Fp:.3g} N > {lim.force_N:g} N", Fp > lim.force_N),
-                (f"displacement {disp * 1e3:.3g} mm > {lim.disp_m * 1e3:g} mm", disp > lim.disp_m),
-                (f"acceleration {acc:.3g} m/s^2 > {lim.accel_m_s2:g} m/s^2", acc > lim.accel_m_s2)) if bad)
+                (f"drive {drive:.3g} V {m} = {drive * FORCE_MARGIN:.3g} V > drive_V {lim.drive_V:g} V",
+                 drive * FORCE_MARGIN > lim.drive_V),
+                (f"{F:g} N {m} = {Fp:.3g} N > force_N {lim.force_N:g} N", Fp > lim.force_N),
+                (f"displacement {disp * 1e3:.3g} mm at {F:g} N {m} > disp_m {lim.disp_m * 1e3:g} mm",
+                 disp > lim.disp_m),
+                (f"acceleration {acc:.3g} m/s^2 at {F:g} N {m} > accel_m_s2 {lim.accel_m_s2:g} m/s^2",
+                 acc > lim.accel_m_s2)) if bad)
             out.append(EnvelopePoint(F, f, drive, disp, acc, problems))
     return out
 
 
 def envelope_report(points: list[EnvelopePoint]) -> str:
-    lines = [f"{'level N':>8} {'drive V':>8} {'disp mm (max)':>14} {'accel m/s2':>10}  problems"]
+    lines = [f"{'level N':>8} {'drive V':>8} {'disp mm (max)':>14} {'accel m/s2':>10}  problems",
+             f"(drive: the generator's amplitude, V = Vpp/2, at the level; displacement, acceleration and every "
+             f"limit check: at {FORCE_MARGIN:g} x the level, the control's overshoot margin)"]
     for F in sorted({p.force_N for p in points}):
         ps = [p for p in points if p.force_N == F]
         bad = [f"{p.freq_Hz:g} Hz: {'; '.join(p.problems)}" for p in ps if p.problems]

@@ -50,23 +50,31 @@ class Supervisor:
     def check_drive(self, amplitude_Vpp: float, offset_V: float = 0.0) -> None:
         peak = abs(offset_V) + amplitude_Vpp / 2
         if peak > self.limits.drive_V * (1 + 1e-9):
-            self.trip("drive voltage", peak, self.limits.drive_V)
+            self.trip("drive voltage", peak, self.limits.drive_V, "V amplitude", "drive_V")
 
     def check_block(self, block) -> None:
-        checks = (("force", float(np.max(np.abs(block.force_N))), self.limits.force_N),
-                  ("acceleration", float(np.max(np.abs(block.accel_m_s2))), self.limits.accel_m_s2),
-                  ("displacement", float(np.max(np.abs(block.disp_m - self.x_ref_m))), self.limits.disp_m))
-        for name, value, limit in checks:
+        checks = (("force", float(np.max(np.abs(block.force_N))), self.limits.force_N, "N", "force_N"),
+                  ("acceleration", float(np.max(np.abs(block.accel_m_s2))), self.limits.accel_m_s2, "m/s^2",
+                   "accel_m_s2"),
+                  ("displacement", float(np.max(np.abs(block.disp_m - self.x_ref_m))), self.limits.disp_m, "m",
+                   "disp_m"))
+        for name, value, limit, unit, key in checks:
             if value > limit:
-                self.trip(name, value, limit)
+                self.trip(name, value, limit, unit, key)
 
     # ------------------------------------------------------------------ shutdown
-    def trip(self, reason: str, value: float, limit: float) -> None:
+    def trip(self, reason: str, value: float, limit: float, unit: str = "", key: str = "") -> None:
+        """Record the first trip, ramp down and switch off; raise LimitExceeded.  The text
+        gives the unit and the limit's key, e.g. 'drive voltage 7.2 V amplitude exceeds the
+        limit 7 V (drive_V)': voltages are amplitudes, |offset| + Vpp/2 (decision 0029)."""
+        u = f" {unit}" if unit else ""
+        text = f"{reason} {value:.4g}{u} exceeds the limit {limit:.4g}{u.replace(' amplitude', '')}" + \
+            (f" ({key})" if key else "")
         if self.trip_record is None:
             self.trip_record = Trip(reason, value, limit)
-            log.error("LIMIT: %s %.4g exceeds %.4g; ramping down and switching off", reason, value, limit)
+            log.error("LIMIT: %s; ramping down and switching off", text)
             self.shutdown()
-        raise LimitExceeded(f"{reason} {value:.4g} exceeds the limit {limit:.4g}")
+        raise LimitExceeded(text)
 
     def shutdown(self) -> None:
         """Ramp the amplitude down, then output off.  Never raises."""

@@ -114,7 +114,8 @@ def _step_summary(r: dict) -> dict:
                 direction=r.get("direction"), force_N=r.get("force_N"), force_error=r.get("force_error"),
                 control_iterations=r.get("control_iterations"), force_converged=r.get("force_converged"),
                 thd_force=r.get("force", {}).get("thd"), thd_accel=r.get("accel", {}).get("thd"),
-                thd_disp=r.get("disp", {}).get("thd"), drive_Vpp=r.get("drive_Vpp"))
+                thd_disp=r.get("disp", {}).get("thd"), drive_Vpp=r.get("drive_Vpp"),
+                drive_V=None if r.get("drive_Vpp") is None else r["drive_Vpp"] / 2)   # amplitude (0029)
 
 
 class RunReader:

@@ -16,6 +16,7 @@ import itertools
 import json
 import logging
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -371,7 +372,7 @@ def test_a_force_limit_trip_aborts_with_the_output_off_and_latched(tmp_path, moc
     assert not output_on(twins_of_run)
     assert_ended(tmp_path / "run", "aborted", 0)
     reason = the(tmp_path / "run", "abort")["reason"]
-    assert reason.startswith("force ") and "exceeds the limit 1.5" in reason
+    assert re.fullmatch(r"force [0-9.]+ N exceeds the limit 1.5 N \(force_N\)", reason), reason   # unit and key
     sup = trips.call_args.args[0]
     assert sup.trip_record.reason == "force"
     # the measured peak: above the limit, and no more than the plant can make from the

@@ -123,6 +123,9 @@ def test_the_state_counts_what_the_run_directory_holds(small_run):
     c = next(c for c in series if one["key"] in c["key"])
     assert c["abs_m_per_N"][c["key"].index(one["key"])] == pytest.approx(one["compliance_abs_m_per_N"])
     assert len(state["identification"]["history"]) == len(steps)
+    # one voltage convention (decision record 0029): the drive is the generator's amplitude, Vpp/2
+    last = json.loads(steps[-1].read_text())
+    assert state["last_step"]["drive_V"] == pytest.approx(last["drive_Vpp"] / 2)
     assert b"plotly" in js[:2000] and len(js) > 1_000_000        # the package's own bundle
 
 
@@ -278,6 +281,8 @@ def test_the_page_shows_a_running_test_and_its_stop_button_stops_it_safely(tmp_p
                     assert later >= first + 2
                     assert browser.js("document.getElementById('compliance').data.length") >= 2   # |x/P| and phase
                     assert browser.js("document.getElementById('status').textContent") == "running"
+                    current = browser.js("document.getElementById('current').textContent")
+                    assert re.search(r"drive[0-9.]+ V amplitude", current) and "Vpp" not in current, current
                     browser.wait_for("!document.getElementById('stop').disabled", 10, "the stop button")
                     browser.click("#stop")
                     rc = proc.wait(timeout=60)
