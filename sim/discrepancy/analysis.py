@@ -27,6 +27,7 @@ from ..identify import Identifier, displacement_harmonics, synthesize
 from .fit import Fit, Weights, fit, whitened
 from .gain import frf, heldout_error
 from .models import BASE_PARAMS, EFFECTS, Data, Model
+from .rounding import interval_text, value_text
 from .select import Selection, select, settle_final
 
 log = logging.getLogger(__name__)
@@ -101,14 +102,6 @@ def base_fit(steps, d: Data, guess: dict | None, harmonics: int) -> tuple[Fit, W
     theta = np.array([math.log(v["F_s_N"]), math.log(v["x_s_m"]), v["n"], math.log(v["mass_kg"])])
     W = Weights.from_data(d, v["mass_kg"], friction_noise=best_ident.residual_noise(d.X.shape[1]))
     return fit(Model((), d.X.shape[1]), theta, d, W, max_nfev=200), W
-
-
-def interval_text(value: float, low: float, high: float, unit: str = "", signed: bool = False) -> str:
-    """'41 N s/m (95 %: 37 to 45 N s/m)' with just enough digits to tell the bounds apart."""
-    width = abs(high - low)
-    digits = 3 if width == 0 or value == 0 else max(2, min(8, int(math.ceil(math.log10(abs(value) / width))) + 2))
-    f = (lambda x: f"{x:+.{digits}g}") if signed else (lambda x: f"{x:.{digits}g}")
-    return f"{f(value)}{unit} (95 %: {f(low)} to {f(high)}{unit})"
 
 
 @dataclass
