@@ -54,3 +54,9 @@ def interval_text(value: float, low: float, high: float, unit: str = "", signed:
     if last_digit(low, high) is None:
         return f"{v}{unit}"
     return f"{v}{unit} (95 %: {lo} to {hi}{unit})"
+
+
+def percent_text(fraction: float, digits: int = 2) -> str:
+    """'12.30 %', or 'not computed' for a NaN (a candidate that failed the BIC gate is
+    never scored on held-out data), as the analysis page says it."""
+    return "not computed" if math.isnan(fraction) else f"{100 * fraction:.{digits}f} %"

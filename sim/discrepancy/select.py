@@ -32,6 +32,7 @@ import numpy as np
 from .fit import Fit, Weights, fit, whitened
 from .gain import heldout_error
 from .models import CATALOG, Data, Model
+from .rounding import percent_text
 
 log = logging.getLogger(__name__)
 
@@ -158,7 +159,7 @@ def select(base: Fit, d: Data, W: Weights, catalog: tuple[str, ...] = CATALOG, m
                 chosen = c
                 break
         log.info("round %d: %s", rnd, ", ".join(f"{c.id} dBIC {c.delta_bic:.0f} held-out "
-                                                 f"{100 * c.heldout_error:.2f} %" for c in cands))
+                                                 f"{percent_text(c.heldout_error)}" for c in cands))
         if chosen is None:
             break
         chosen.named = True

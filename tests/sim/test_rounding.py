@@ -7,7 +7,7 @@ import math
 import pytest
 
 from sim.discrepancy.analysis import interval_text     # what the verdict uses
-from sim.discrepancy.rounding import last_digit, round_to_interval, value_text
+from sim.discrepancy.rounding import last_digit, percent_text, round_to_interval, value_text
 
 
 @pytest.mark.parametrize("value, low, high, unit, text", [
@@ -28,3 +28,9 @@ def test_signed_values_and_figures_without_an_interval():
     assert value_text(159.1549, math.nan, math.nan, " Hz") == "159 Hz"
     assert last_digit(0.0, math.inf) is None
     assert round_to_interval(math.nan, 1.0, 2.0) == ("n/a", "1.0", "2.0")
+
+
+def test_a_held_out_error_not_computed_is_said_in_words():
+    """The selection's log line printed "held-out nan %" where the page says "not computed"."""
+    assert percent_text(math.nan) == "not computed"
+    assert percent_text(0.1234) == "12.34 %"
