@@ -27,7 +27,9 @@ def default_out_dir(source: Path) -> Path:
     return source / "analysis" if source.is_dir() else source.parent / f"{source.stem}_analysis"
 
 
-def _guess(source: Path, rig: Path | None) -> dict | None:
+def _guess(source: Path, rig: Path | None) -> tuple[dict | None, float | None]:
+    """Starting values (None: from the data) and the rig file's friction_v_ref_m_per_s
+    (None: the file names none), at which a velocity-dependent friction is stated."""
     from .config import load_rig, parse_rig
     if rig is not None:
         r = load_rig(rig)
@@ -36,8 +38,10 @@ def _guess(source: Path, rig: Path | None) -> dict | None:
         from .storage import RunStore
         r = parse_rig({"rig": _rig_toml(RunStore.open(source).metadata["rig"])}, f"{source}/run.json")
     else:
-        return None           # a foreign file: start from the data themselves
-    return dict(F_s_N=r.expected_F_s_N, x_s_m=r.expected_x_s_m, n=r.expected_n, mass_kg=r.expected_mass_kg)
+        return None, None     # a foreign file: start from the data themselves
+    v_ref = (r.model or {}).get("friction_v_ref_m_per_s")
+    return (dict(F_s_N=r.expected_F_s_N, x_s_m=r.expected_x_s_m, n=r.expected_n, mass_kg=r.expected_mass_kg),
+            float(v_ref) if v_ref else None)
 
 
 def _version() -> str:
@@ -57,9 +61,10 @@ def analyze_source(source: Path, out_dir: Path | None = None, rig: Path | None =
     if not steps:
         raise ValueError(f"{source}: no usable steps ({len(rejected)} rejected"
                          + (f", first: {rejected[0]['step']}: {rejected[0]['reason']}" if rejected else "") + ")")
-    guess = _guess(source, Path(rig) if rig else None)
+    guess, v_ref = _guess(source, Path(rig) if rig else None)
     log.info("analysing %d steps of %s (%d rejected)", len(steps), source, len(rejected))
-    analysis = analyze_steps(steps, guess, source=str(source), software_version=_version(), rejected=rejected)
+    analysis = analyze_steps(steps, guess, source=str(source), software_version=_version(), rejected=rejected,
+                             v_ref_m_per_s=v_ref)
     result = analysis.to_dict()
     out = Path(out_dir) if out_dir else default_out_dir(source)
     out.mkdir(parents=True, exist_ok=True)

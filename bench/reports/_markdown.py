@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.discrepancy.rounding import round_to_interval
+
 from . import _figures as figures
 from ._analysis import analysis_data
 from ._identification import ID_PARAMS, IdentificationData, determined_from, finite, steps_of
@@ -117,8 +119,7 @@ def analysis_md(run: RunData) -> list[str]:
     if a.causes:
         md += _table(["cause", "parameters (95 %)", "held-out error before", "after", "delta BIC"],
                      [[f"{c.label} (`{c.id}`)",
-                       "; ".join(f"{k} = {_num(p.value)} {p.unit}".rstrip() + f" [{_num(p.low)}, {_num(p.high)}]"
-                                 for k, p in c.parameters.items()) or "-",
+                       "; ".join(_param_md(k, p) for k, p in c.parameters.items()) or "-",
                        _pct_abs(c.heldout_error_before), _pct_abs(c.heldout_error_after), _num(c.delta_bic)]
                       for c in a.causes])
     else:
@@ -129,6 +130,12 @@ def analysis_md(run: RunData) -> list[str]:
               f"- the analysis page `{ANALYSIS_HTML}` is missing: `bench analyze {run.path}` writes it")
     md += [f"- could not be read: {p}" for p in a.problems]
     return md + [""]
+
+
+def _param_md(key: str, p) -> str:
+    """'c = 41 N s/m [37, 45]': each figure to the digit its interval supports."""
+    v, lo, hi = round_to_interval(p.value, p.low, p.high)
+    return f"{key} = {v} {p.unit}".rstrip() + (f" [{lo}, {hi}]" if math.isfinite(p.low) and p.low != p.high else "")
 
 
 def _pct_abs(x: float) -> str:

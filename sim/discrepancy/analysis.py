@@ -27,7 +27,8 @@ from ..identify import Identifier, displacement_harmonics, synthesize
 from .fit import Fit, Weights, fit, whitened
 from .gain import frf, heldout_error
 from .models import BASE_PARAMS, EFFECTS, Data, Model
-from .rounding import interval_text, value_text
+from .rounding import interval_text
+from .terms import accelerance_pair, second_mode_phrase, speed_friction, speed_friction_phrase
 from .select import Selection, select, settle_final
 
 log = logging.getLogger(__name__)
@@ -113,6 +114,7 @@ class Analysis:
     source: str = ""
     software_version: str = ""
     rejected: list = field(default_factory=list)
+    v_ref_m_per_s: float | None = None     # the rig file's friction_v_ref_m_per_s: alpha is stated there
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -157,9 +159,10 @@ class Analysis:
             put("k", iv["linear_spring.k"], "N/m")
             put("k_relative_to_F_s_over_x_s", iv["linear_spring.k"], "1", v["x_s_m"] / v["F_s_N"])
         elif effect == "velocity_dependent_friction":
-            v_ref = w_res * v["x_s_m"]
-            put("alpha", iv["velocity_dependent_friction.beta"], "1", v_ref)
-            out["v_ref"] = dict(value=v_ref, low=v_ref, high=v_ref, unit="m/s")
+            v_ref, source = ((self.v_ref_m_per_s, "rig") if self.v_ref_m_per_s
+                             else (w_res * v["x_s_m"], "friction resonance"))
+            out["alpha"] = speed_friction(iv["velocity_dependent_friction.beta"], v_ref)
+            out["v_ref"] = dict(value=v_ref, low=v_ref, high=v_ref, unit="m/s", source=source)
         elif effect == "sensor_delay":
             put("delay", iv["sensor_delay.delay"], "s")
             put("delay_relative_to_resonance_period", iv["sensor_delay.delay"], "1", w_res / (2 * math.pi))
@@ -170,6 +173,13 @@ class Analysis:
             put("damping_ratio", iv["second_mode.zeta"], "1")
             put("coupling", iv["second_mode.a"], "1", v["mass_kg"])     # m h^2 / J
             put("cg_over_drive_height", iv["second_mode.r"], "1")
+            f_p = v["second_mode.f_p"]
+            d = self.data
+            pair = accelerance_pair(d.omega / (2 * math.pi), np.abs(d.A[:, 0] / d.P[:, 0]), d.level,
+                                    (0.5 * f_p, 4.0 * f_p))
+            for name, e in zip(("anti_resonance_Hz", "resonance_Hz"), pair):
+                if e is not None:        # as the measured accelerance shows it, between grid points
+                    out[name] = dict(value=e.freq_Hz, low=e.low_Hz, high=e.high_Hz, unit="Hz")
         return out
 
     def _predicted_frf(self, f: Fit) -> tuple[np.ndarray, np.ndarray]:
@@ -256,8 +266,7 @@ class Analysis:
             return (f"a linear spring k = {iv('k', '.3g', unit=' N/m')}, "
                     f"{100 * p['k_relative_to_F_s_over_x_s']['value']:.1f} % of the friction stiffness F_s/x_s")
         if c.id == "velocity_dependent_friction":
-            return (f"friction rising with speed: {iv('alpha', '.1f', 100, ' %')} higher at "
-                    f"v_ref = {1e3 * p['v_ref']['value']:.3g} mm/s (only alpha/v_ref is identifiable)")
+            return speed_friction_phrase(p)
         if c.id == "sensor_delay":
             return (f"a displacement channel delay of {iv('delay', '.3g', 1e6, ' us')}, "
                     f"{100 * p['delay_relative_to_resonance_period']['value']:.1f} % of the resonance period")
@@ -265,8 +274,7 @@ class Analysis:
             return (f"a displacement scale inconsistent with the accelerometer by "
                     f"{iv('gain_error', '+.1f', 100, ' %')}")
         if c.id == "second_mode":
-            return (f"a second (pitching) mode at {iv('frequency', '.4g', unit=' Hz')}, damping ratio "
-                    f"{100 * p['damping_ratio']['value']:.1f} %, coupling m h^2/J = {p['coupling']['value']:.2g}")
+            return second_mode_phrase(p)
         return EFFECTS[c.id].label
 
     # ------------------------------------------------------------------ schema
@@ -340,11 +348,13 @@ class Analysis:
 
 
 def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, source: str = "",
-                  software_version: str = "", rejected: list | None = None) -> Analysis:
+                  software_version: str = "", rejected: list | None = None,
+                  v_ref_m_per_s: float | None = None) -> Analysis:
     """Fit the base model, try the catalog, name what survives both gates (see module doc).
 
     ``guess``: rough F_s_N, x_s_m, n, mass_kg (e.g. a rig file's expected values); None
-    estimates them from the data."""
+    estimates them from the data.  ``v_ref_m_per_s``: the speed at which to state a
+    velocity-dependent friction (the rig file's); None: the speed at the friction resonance."""
     steps = list(steps)
     d = data_from_steps(steps, harmonics)
     if np.unique(d.level).size < 2:
@@ -353,4 +363,4 @@ def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, sourc
     log.info("base fit: reduced chi2 %.2f", base.reduced_chi2)
     sel = settle_final(select(base, d, W), d)
     return Analysis(steps=steps, data=d, weights=W, selection=sel, source=source,
-                    software_version=software_version, rejected=list(rejected or []))
+                    software_version=software_version, rejected=list(rejected or []), v_ref_m_per_s=v_ref_m_per_s)

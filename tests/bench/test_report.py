@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import shutil
 
 import numpy as np
@@ -323,7 +324,12 @@ def test_report_includes_the_analysis_when_bench_analyze_wrote_it(run_dir, tmp_p
     (cause,) = analysis_example["causes"]
     row = _rows(section, [f"{cause['label']} (`{cause['id']}`)"])[f"{cause['label']} (`{cause['id']}`)"]
     c = cause["parameters"]["c"]
-    assert row[1] == f"c = {c['value']:.4g} N s/m [{c['low']:.4g}, {c['high']:.4g}]"
+    # each figure to the digit its interval supports (the interval's first or second significant digit)
+    value, low, high = re.fullmatch(r"c = (\S+) N s/m \[(\S+), (\S+)\]", row[1]).groups()
+    step = 10.0 ** -(len(value.split(".")[1]) if "." in value else 0)
+    assert step <= (c["high"] - c["low"]) / 2 < 100 * step, (row[1], c)
+    for shown, exact in zip((value, low, high), (c["value"], c["low"], c["high"])):
+        assert abs(float(shown) - exact) <= step / 2 * (1 + 1e-9)
     assert float(row[2].split()[0]) == pytest.approx(100 * cause["gain"]["heldout_error_before"], rel=1e-2)
     assert float(row[3].split()[0]) == pytest.approx(100 * cause["gain"]["heldout_error_after"], rel=1e-2)
     link = "../analysis/analysis.html"
