@@ -30,7 +30,13 @@ class Extremum:
     levels: int               # force levels that show it
 
     def text(self) -> str:
-        return value_text(self.freq_Hz, self.low_Hz, self.high_Hz, " Hz")
+        return bracket_text(self.freq_Hz, self.low_Hz, self.high_Hz)
+
+
+def bracket_text(freq_Hz: float, low_Hz: float, high_Hz: float) -> str:
+    """'180 Hz (grid points 130 to 216 Hz)': rounded to what the bracket supports."""
+    return (f"{value_text(freq_Hz, low_Hz, high_Hz, ' Hz')} (grid points "
+            f"{value_text(low_Hz, math.nan, math.nan)} to {value_text(high_Hz, math.nan, math.nan, ' Hz')})")
 
 
 def _vertex(f: np.ndarray, a: np.ndarray, i: int) -> float:
@@ -77,14 +83,13 @@ def second_mode_phrase(p: dict) -> str:
     def iv(name, scale=1.0, unit=""):
         q = p[name]
         return interval_text(q["value"] * scale, q["low"] * scale, q["high"] * scale, unit)
-    anti, res = p.get("anti_resonance_Hz"), p.get("resonance_Hz")
     seen = []
-    if anti:
-        seen.append(f"an anti-resonance at {value_text(anti['value'], anti['low'], anti['high'], ' Hz')}")
-    if res:
-        seen.append(f"a resonance at {value_text(res['value'], res['low'], res['high'], ' Hz')}")
-    data = (f" (the measured accelerance has {' and '.join(seen)}, between the grid points either side)"
-            if seen else " (the measured accelerance shows no dip and peak the grid resolves)")
+    for name, what in (("anti_resonance_Hz", "an anti-resonance"), ("resonance_Hz", "a resonance")):
+        e = p.get(name)
+        if e:
+            seen.append(f"{what} at {bracket_text(e['value'], e['low'], e['high'])}")
+    data = (f" (the measured accelerance has {' and '.join(seen)})" if seen
+            else " (the measured accelerance shows no dip and peak the grid resolves)")
     return (f"a second (pitching) mode{data}; in the model: sqrt(k_th/J)/2 pi = {iv('frequency', unit=' Hz')}, "
             f"damping ratio {iv('damping_ratio', 100, ' %')}, coupling m h^2/J = {iv('coupling')}")
 

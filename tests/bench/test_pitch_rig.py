@@ -86,6 +86,7 @@ def test_the_analysis_finds_the_pair_the_2dof_theory_puts_in_the_measured_accele
          "resonance_Hz": dict(value=res.freq_Hz, low=res.low_Hz, high=res.high_Hz)}
     text = second_mode_phrase(p)
     assert f"an anti-resonance at {anti.text()} and a resonance at {res.text()}" in text, text
+    assert f"(grid points {anti.low_Hz:.3g} to {anti.high_Hz:.3g} Hz)" in text
     assert text.index("anti-resonance") < text.index("sqrt(k_th/J)/2 pi = 159.2 Hz (95 %: 158.9 to 159.5 Hz)")
 
 
