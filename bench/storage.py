@@ -485,28 +485,29 @@ class Accounting:
     def missing_count(self) -> int:
         return sum(p.count for p in self.missing)
 
-    def to_measure(self) -> list[str]:
-        """What a resume measures: missing and damaged steps, by key (sweep for adaptive plans)."""
-        return [p.key for p in self.missing] + [p.key for p in self.damaged]
-
     def resume_text(self) -> str:
         """'measures again 3 of 30 planned steps; missing: K1, K2; damaged: K3 (truncated)'."""
         n = self.missing_count + len(self.damaged)
-        parts = [f"measures again {n} of {self.planned} planned step{'s' * (self.planned != 1)}"]
+        parts = [f"measures again {n} of {'?' if self.planned is None else self.planned} planned "
+                 f"step{'s' * (self.planned != 1)}"]
         if self.missing:
-            parts.append("missing: " + _keys_text([p.key if p.count == 1 else f"{p.key} ({p.count})"
-                                                   for p in self.missing], 12))
+            parts.append("missing: " + _keys_text([_missing_label(p) for p in self.missing], 12))
         if self.damaged:
             parts.append("damaged: " + _keys_text([f"{p.key} ({p.kind})" for p in self.damaged], 12))
         return "; ".join(parts)
 
     def summary(self) -> str:
         """'28 intact / 30 planned; missing: K1; damaged: K2 (truncated); orphan: none'."""
-        missing = [p.key if p.count == 1 else f"{p.key} ({p.count})" for p in self.missing]
+        missing = [_missing_label(p) for p in self.missing]
         return (f"{len(self.intact)} intact / {'?' if self.planned is None else self.planned} planned; "
                 f"missing: {_keys_text(missing) or 'none'}; "
                 f"damaged: {_keys_text([f'{p.key} ({p.kind})' for p in self.damaged]) or 'none'}; "
                 f"orphan: {_keys_text([p.path.name for p in self.orphan]) or 'none'}")
+
+
+def _missing_label(p: StepProblem) -> str:
+    """A step's key, or an adaptive sweep with the number of steps it lacks: 'L01-up (2)'."""
+    return p.key if p.path.suffix in (".json", ".npz") else f"{p.key} ({p.count})"
 
 
 def _sweeps(plan) -> dict[tuple[int, str], list[str]]:

@@ -109,3 +109,24 @@ def test_resume_says_what_it_measures_again(lost, tmp_path, capsys, mocker):
     assert line.startswith("resume: measures again 3 of 20 planned steps")
     assert f"missing: {', '.join(sorted([k['gone'], k['no_json']]))}" in line
     assert f"damaged: {k['cut']} (truncated)" in line
+
+
+def test_an_adaptive_plan_is_counted_per_sweep(small_run, tmp_path, capsys):
+    """adaptive_per_sweep = 3: each sweep measures 3 of its 5 frequencies, chosen online, so
+    a shortfall is named by sweep, not by key."""
+    import json
+    run = tmp_path / "run"
+    shutil.copytree(small_run.path, run, ignore=shutil.ignore_patterns("report", "export", "analysis"))
+    meta = json.loads((run / "run.json").read_text())
+    meta["plan"]["adaptive_per_sweep"] = 3
+    (run / "run.json").write_text(json.dumps(meta))
+    by_sweep: dict[str, list[str]] = {}
+    for key in _keys(run):
+        by_sweep.setdefault(f"{key.split('-')[1]}-{key.split('-')[3]}", []).append(key)
+    assert sorted(by_sweep) == ["L00-down", "L00-up", "L01-down", "L01-up"]
+    for sweep, keys in by_sweep.items():
+        for key in keys[:3 if sweep == "L00-up" else 2]:          # L00-up keeps 2 of the 3 it measures
+            for ext in (".json", ".npz"):
+                (run / "steps" / f"{key}{ext}").unlink()
+    assert main(["check", str(run)]) == ExitCode.FAILURE
+    assert "11 intact / 12 planned; missing: L00-up (1); damaged: none" in capsys.readouterr().out
