@@ -204,7 +204,7 @@ def _plan_toml(p: dict) -> dict:
            "frequencies": {"list_Hz": list(p["freqs_Hz"]), "direction": p["direction"]},
            "control": {k: p[k] for k in keys if k in p}}
     if p.get("limits"):
-        out["limits"] = p["limits"]
+        out["limits"] = {k: v for k, v in p["limits"].items() if v is not None}   # None: the rig's
     return out
 
 

@@ -4,7 +4,6 @@ printing only; the work is in the sibling modules)."""
 from __future__ import annotations
 
 import logging
-import tomllib
 from pathlib import Path
 
 log = logging.getLogger(__name__)
@@ -62,11 +61,14 @@ def cmd_study_map(args, progress) -> int:
 
 def cmd_study_mc(args, progress) -> int:
     _quiet_dask()
-    from bench.config import DEFAULTS
+    from bench.config import DEFAULTS, parse_plan, parse_rig, read_toml
 
     from .montecarlo import McSpec, identification_mc
-    plan = tomllib.loads(Path(args.plan or DEFAULTS / "demo_plan.toml").read_text())
-    rig = tomllib.loads(Path(args.rig or DEFAULTS / "sim_rig.toml").read_text())
+    plan_path, rig_path = Path(args.plan or DEFAULTS / "demo_plan.toml"), Path(args.rig or DEFAULTS / "sim_rig.toml")
+    plan, rig = read_toml(plan_path), read_toml(rig_path)
+    parse_plan(plan, str(plan_path))          # errors name the file (McSpec checks again, unnamed)
+    if not parse_rig(rig, str(rig_path)).simulated:
+        raise ValueError(f"{rig_path}: a Monte-Carlo study needs a simulated rig (simulated = true, [rig.model])")
     spec = McSpec(plan=plan, rig=rig, samples=args.samples, spread=args.spread, n_spread=args.n_spread,
                   noise_scale=args.noise_scale, seed=args.seed)
     out = identification_mc(spec, Path(args.out), scheduler=args.scheduler, workers=args.workers,
