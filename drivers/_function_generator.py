@@ -1,7 +1,9 @@
 """Driver for a Keysight 33500-style function generator (SCPI over serial or TCP).
 
 One driver serves every transport pyserial's ``serial_for_url`` opens: ``/dev/ttyUSB0``,
-``socket://host:5025`` (raw SCPI socket), ``loop://``. Every setting is confirmed: the
+``socket://host:5025`` (raw SCPI socket), ``loop://``; and VISA resource strings
+(``TCPIP0::host::inst0::INSTR``, ``USB0::...::INSTR``, ``...::SOCKET``) through pyvisa-py
+behind the same byte-stream surface (:mod:`drivers._visa_transport`). Every setting is confirmed: the
 driver reads the value back and drains ``SYST:ERR?``; an instrument error becomes a
 :class:`ScpiError` naming the command and the instrument's message.
 
@@ -34,6 +36,7 @@ import serial
 
 from ._errors import ConnectionLost, InstrumentTimeout, ProtocolError, SafetyInterlock, ScpiError
 from ._interfaces import Identity
+from ._visa_transport import VisaTransport, is_visa_resource
 
 TWIN_MARK = "guideway-bench twin"     # in the *IDN? firmware field of the simulated generator
 
@@ -46,7 +49,7 @@ FREQ_MAX_HZ = 20e6
 class ScpiFunctionGenerator:
     """A function generator on a SCPI link. Satisfies :class:`FunctionGenerator`.
 
-    :param url: anything ``serial.serial_for_url`` opens.
+    :param url: anything ``serial.serial_for_url`` opens, or a VISA resource string.
     :param timeout_s: bound on every reply; a silent instrument raises InstrumentTimeout.
     :param drive_limit_V: largest instantaneous output voltage magnitude the procedures may
         ask for (|offset| + Vpp/2). Requests above it raise ValueError before anything is
@@ -60,8 +63,11 @@ class ScpiFunctionGenerator:
         self.drive_limit_V = drive_limit_V
         self._twin: bool | None = None
         try:
-            self._port = serial.serial_for_url(url, baudrate=baudrate, timeout=timeout_s,
-                                               write_timeout=timeout_s)
+            if is_visa_resource(url):     # USB-TMC, VXI-11, HiSLIP, VISA socket: pyvisa-py
+                self._port = VisaTransport(url, timeout=timeout_s)
+            else:
+                self._port = serial.serial_for_url(url, baudrate=baudrate, timeout=timeout_s,
+                                                   write_timeout=timeout_s)
         except (serial.SerialException, OSError, ValueError) as exc:
             raise ConnectionLost(f"cannot open function generator at {url!r}: {exc}") from exc
         sock = getattr(self._port, "_socket", None)
