@@ -140,9 +140,12 @@ def _watch_server(run_dir: Path, host: str, port: int):
 def cmd_watch(args) -> int:
     """Serve the live page of a run directory until Ctrl-C."""
     run_dir = Path(args.run)
-    if not run_dir.is_dir():
-        raise ValueError(f"{run_dir}: no such run directory")
-    if not (run_dir / "run.json").is_file():
+    if run_dir.exists() and not run_dir.is_dir():
+        raise ValueError(f"{run_dir}: not a run directory (a file)")
+    absent = not run_dir.is_dir()
+    if absent:        # started before the run: the page shows "waiting" until the run creates it
+        print(f"waiting for {run_dir} to appear ... (Ctrl-C stops)", flush=True)
+    elif not (run_dir / "run.json").is_file():
         log.warning("%s has no run.json yet: the page waits for the run to start", run_dir)
     import signal
 
@@ -158,6 +161,9 @@ def cmd_watch(args) -> int:
         try:
             while not ended:
                 time.sleep(0.2)
+                if absent and run_dir.is_dir():
+                    absent = False
+                    print(f"{run_dir} appeared: the page follows the run", flush=True)
         finally:
             server.close()         # open pages get the last state and a goodbye
     return 0
