@@ -31,7 +31,6 @@ LIMIT_KEYS = ("drive_V", "force_N", "disp_m", "accel_m_s2")
 # the close valid one, before any value is read (a misspelled required key is reported as
 # the misspelling, not as the key it was meant to be).  [rig.model]: MODEL_SCHEMA below.
 KEYS = {
-    "": ("plan", "rig"),
     "plan": ("name", "levels_N", "frequencies", "control", "limits", "infeasible", "adaptive_per_sweep"),
     "plan.frequencies": ("list_Hz", "start_Hz", "stop_Hz", "points", "spacing", "direction"),
     "plan.control": ("settle_cycles", "min_settle_s", "measure_cycles", "min_measure_s", "control_cycles",
