@@ -111,6 +111,7 @@ def _run(args, resume: bool) -> int:
     finally:
         if watch:
             watch.close()
+        _say_output_state(out)
     meta = store.metadata
     end_line()
     print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/")
@@ -118,6 +119,25 @@ def _run(args, resume: bool) -> int:
         from .reports import write_report
         print(f"report: {write_report(out)}")
     return {"completed": ExitCode.OK, "aborted": ExitCode.LIMIT}.get(meta["status"], ExitCode.FAILURE)
+
+
+def _say_output_state(out: Path) -> None:
+    """On every ending (done, Ctrl-C, limit, error) say how this session left the output:
+    the last ``output_off`` event after its ``start``/``resume``."""
+    from .storage import RunStore
+    try:
+        events = RunStore.open(out).events()
+    except Exception:  # noqa: BLE001 - no run directory yet: nothing was switched on
+        return
+    starts = [i for i, e in enumerate(events) if e.get("event") in ("start", "resume")]
+    offs = [e for e in events[starts[-1] if starts else 0:] if e.get("event") == "output_off"]
+    if not offs:
+        return
+    if offs[-1].get("confirmed"):
+        print("output off, confirmed by the generator", file=sys.stderr, flush=True)
+    else:
+        print("WARNING: output off NOT confirmed by the generator: switch the amplifier off by hand "
+              "and check the generator", file=sys.stderr, flush=True)
 
 
 def _start_watch(run_dir: Path, args):
