@@ -111,9 +111,9 @@ def _run(args, resume: bool) -> int:
     finally:
         if watch:
             watch.close()
+        end_line()                 # an interrupted run's progress line ends where it stood
         _say_output_state(out)
     meta = store.metadata
-    end_line()
     print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/")
     if meta["status"] == "completed" and not getattr(args, "no_report", False):
         from .reports import write_report

@@ -95,7 +95,7 @@ def test_verbosity_speaks_for_the_project_only(capsys):
 
 DEMO = """\
 import logging, sys, time
-from bench.terminal import Progress, setup_logging
+from bench.terminal import Progress, end_line, setup_logging
 setup_logging(0)
 p = Progress("stepped sine")
 note = "30 N  1000.0 Hz up   err +0.0% THD(x) 0.00 | F_s 10.1 N x_s 10.2 um n 1.49 m 10 kg"
@@ -104,6 +104,10 @@ for i in range(1, 8):
     time.sleep(0.02)
     logging.getLogger("bench.session").warning("step %d: a short warning", i)
     logging.getLogger("pymodbus.logging").info("Server listening.")
+q = Progress("stepped sine")       # an interrupted run: its line ends where it stood
+q(2, 9, note)
+end_line()
+print("interrupted at 2/9", file=sys.stderr)
 """
 
 PLAN = """\
@@ -158,12 +162,15 @@ def test_the_progress_line_fits_80_columns_and_log_lines_pass_above_it(tmp_path)
     warnings = [x for x in demo if x.startswith("WARNING: step")]
     assert warnings == [f"WARNING: step {i}: a short warning" for i in range(1, 8)], text
     progress = [x for x in lines if "stepped sine" in x]
-    assert len(progress) == 2, text                 # the demo's and the run's final lines, nothing stale
+    assert len(progress) == 3, text                 # the demo's two and the run's final lines, nothing stale
     assert progress[0].startswith("stepped sine [") and " 7/7 " in progress[0], text
-    assert progress[1].startswith("stepped sine [") and " 3/3 " in progress[1], text
+    assert progress[1].startswith("stepped sine [") and " 2/9 " in progress[1], text
+    assert demo[demo.index(progress[1]) + 1] == "interrupted at 2/9", text
+    assert progress[2].startswith("stepped sine [") and " 3/3 " in progress[2], text
     assert all(len(x) <= 80 for x in progress), [len(x) for x in progress]
     assert all(len(x) <= 80 for x in demo), text
     assert "Server listening" not in text and " INFO " not in text, text     # pymodbus and drivers: silent
     # a default run: its warnings, the progress line and the result, nothing else
     assert [x for x in run if not x.startswith("WARNING: identifiability")] == \
-        [progress[1], f"run completed: 3/3 steps in {tmp_path / 'run'}/", "END-OF-COMMAND"], text
+        [progress[2], "output off, confirmed by the generator", f"run completed: 3/3 steps in {tmp_path / 'run'}/",
+         "END-OF-COMMAND"], text

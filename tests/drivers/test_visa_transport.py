@@ -114,3 +114,29 @@ def test_a_stepped_sine_run_reaches_its_generator_through_visa(tmp_path):
     assert all(abs(r["force_N"] - 1.0) < 0.05 for r in results)         # force control worked over VISA
     assert "OUTP ON" in seen and seen.index("OUTP ON") < len(seen) - seen[::-1].index("OUTP OFF") - 1
     assert [e["confirmed"] for e in RunStore(tmp_path / "run").events() if e["event"] == "output_off"] == [True]
+
+
+def test_ctrl_c_inside_a_query_over_visa_then_the_link_resynchronises_and_safe_off_is_confirmed(
+        scpi_server, rig, mocker, caplog):
+    from tests.drivers.test_function_generator import driving, interrupt_once
+
+    gen = ScpiFunctionGenerator(scpi_server.visa_resource, drive_limit_V=3.0)
+    try:
+        driving(gen)
+        interrupt_once(mocker, gen._port, "read_until")
+        with pytest.raises(KeyboardInterrupt):
+            gen.query("OUTP?")                  # its "1" stays in the link, unread
+        assert not gen.in_step
+        assert gen.query_float("VOLT?") == 1.2  # resynchronised first: its own reply
+        interrupt_once(mocker, gen._port, "read_until", before=lambda *a: gen._port.read(3))
+        with pytest.raises(KeyboardInterrupt):
+            gen.query("VOLT?")                  # cut after half a reply ('+1.' read, the rest pending)
+        assert not gen.in_step
+        assert gen.set_amplitude(0.6) == 0.6    # confirmed read-back: in step again
+        assert rig.amplitude_Vpp == pytest.approx(0.6)
+        gen.safe_off()
+        assert rig.output_on is False and gen.output_enabled() is False
+        assert "safe_off" not in caplog.text
+        assert gen.query_float("FREQ?") == 80.0
+    finally:
+        gen.close()
