@@ -108,6 +108,8 @@ q = Progress("stepped sine")       # an interrupted run: its line ends where it 
 q(2, 9, note)
 end_line()
 print("interrupted at 2/9", file=sys.stderr)
+from bench.cli import main            # then a real run, as `bench run` (same process: one start-up)
+sys.exit(main(sys.argv[1:]))
 """
 
 PLAN = """\
@@ -152,8 +154,7 @@ def tmux_screen(tmp_path: Path, command: str, timeout_s: float = 90) -> list[str
 def test_the_progress_line_fits_80_columns_and_log_lines_pass_above_it(tmp_path):
     (tmp_path / "demo.py").write_text(DEMO)
     (tmp_path / "plan.toml").write_text(PLAN)
-    lines = tmux_screen(tmp_path, f"{sys.executable} {tmp_path / 'demo.py'}\n"
-                                  f"{sys.executable} -m bench.cli run --plan {tmp_path / 'plan.toml'} "
+    lines = tmux_screen(tmp_path, f"{sys.executable} {tmp_path / 'demo.py'} run --plan {tmp_path / 'plan.toml'} "
                                   f"--out {tmp_path / 'run'} --no-report")
     text = "\n".join(lines)
     first_run_line = next(k for k, x in enumerate(lines) if x.startswith("WARNING: identifiability"))
