@@ -87,8 +87,7 @@ def test_verbosity_speaks_for_the_project_only(capsys):
     assert emitted(capsys, logging.DEBUG, "procedures.stepped_sine", 2)
     assert not emitted(capsys, logging.DEBUG, "numba.core.ssa", 2)
     assert not logging.getLogger("matplotlib.font_manager").isEnabledFor(logging.DEBUG)
-    setup_logging(0)
-    logging.getLogger().removeHandler(next(h for h in logging.getLogger().handlers if type(h).__name__ == "TerminalHandler"))
+    logging.getLogger().removeHandler(setup_logging(0))        # the project's loggers back to NOTSET
 
 
 # --------------------------------------------------------------------------- 80 columns, on tmux's screen
