@@ -163,6 +163,9 @@ def cmd_watch(args) -> int:
     if run_dir.exists() and not run_dir.is_dir():
         raise ValueError(f"{run_dir}: not a run directory (a file)")
     absent = not run_dir.is_dir()
+    if absent and not run_dir.absolute().parent.is_dir():      # a mistyped path, not a run to come
+        raise ValueError(f"{run_dir}: no such run directory, nor its parent {run_dir.absolute().parent} "
+                         f"(bench watch waits for a run directory to appear inside an existing one)")
     if absent:        # started before the run: the page shows "waiting" until the run creates it
         print(f"waiting for {run_dir} to appear ... (Ctrl-C stops)", flush=True)
     elif not (run_dir / "run.json").is_file():
