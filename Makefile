@@ -1,7 +1,7 @@
 # The two quickstart commands are `make demo` and `make test`; everything else is theirs.
 VENV ?= .venv
 PY := $(VENV)/bin/python
-DEBS := socat mbpoll chromium
+DEBS := socat mbpoll chromium tmux
 
 .PHONY: setup system-deps demo test bench paper soak
 
@@ -19,7 +19,7 @@ $(VENV)/.kernels: $(VENV)/.installed $(wildcard sim/*.py)
 	touch $@
 
 # Test peers from Debian (pseudo-terminal pairs, an independent Modbus client, a real
-# browser for the HTML pages).
+# browser for the HTML pages, a terminal multiplexer for the 80-column progress line).
 system-deps:
 	@missing=""; for p in $(DEBS); do command -v $$p >/dev/null || missing="$$missing $$p"; done; \
 	if [ -n "$$missing" ]; then \

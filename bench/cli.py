@@ -16,6 +16,8 @@ import time
 from enum import IntEnum
 from pathlib import Path
 
+from .terminal import Progress, end_line, setup_logging
+
 log = logging.getLogger(__name__)
 
 
@@ -25,34 +27,6 @@ class ExitCode(IntEnum):
     USAGE = 2            # bad argument, file or value
     LIMIT = 3            # refused or aborted by a limit
     INTERRUPTED = 130    # Ctrl-C or SIGTERM
-
-
-class Progress:
-    """One status line with a bar and an ETA, redrawn in place on a terminal."""
-
-    def __init__(self, label: str, stream=sys.stderr):
-        self.label, self.stream, self.t0 = label, stream, time.monotonic()
-        self.tty = stream.isatty()
-        self.t_start, self.done0 = self.t0, 0
-
-    def restart(self, done: int = 0) -> None:
-        """Count the ETA from now and from ``done`` steps (set-up and resumed steps excluded)."""
-        self.t_start, self.done0 = time.monotonic(), done
-
-    def __call__(self, done: int, total: int, note: str = "") -> None:
-        frac = done / max(total, 1)
-        now = time.monotonic()
-        el = now - self.t0
-        eta = (now - self.t_start) / (done - self.done0) * (total - done) if done > self.done0 else float("nan")
-        bar = "#" * int(30 * frac)
-        line = f"{self.label} [{bar:<30}] {done}/{total} {el:5.1f}s eta {eta:5.1f}s {note}"
-        if self.tty:
-            self.stream.write("\r" + line[:150].ljust(150))
-            if done >= total:
-                self.stream.write("\n")
-        elif done >= total or done == 1 or done % max(1, total // 10) == 0:
-            self.stream.write(line + "\n")
-        self.stream.flush()
 
 
 def cmd_paper(args) -> int:
@@ -145,12 +119,33 @@ def _run(args, resume: bool) -> int:
     finally:
         if watch:
             watch.close()
+        end_line()                 # an interrupted run's progress line ends where it stood
+        _say_output_state(out)
     meta = store.metadata
     print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/")
     if meta["status"] == "completed" and not getattr(args, "no_report", False):
         from .reports import write_report
         print(f"report: {write_report(out)}")
     return {"completed": ExitCode.OK, "aborted": ExitCode.LIMIT}.get(meta["status"], ExitCode.FAILURE)
+
+
+def _say_output_state(out: Path) -> None:
+    """On every ending (done, Ctrl-C, limit, error) say how this session left the output:
+    the last ``output_off`` event after its ``start``/``resume``."""
+    from .storage import RunStore
+    try:
+        events = RunStore.open(out).events()
+    except Exception:  # noqa: BLE001 - no run directory yet: nothing was switched on
+        return
+    starts = [i for i, e in enumerate(events) if e.get("event") in ("start", "resume")]
+    offs = [e for e in events[starts[-1] if starts else 0:] if e.get("event") == "output_off"]
+    if not offs:
+        return
+    if offs[-1].get("confirmed"):
+        print("output off, confirmed by the generator", file=sys.stderr, flush=True)
+    else:
+        print("WARNING: output off NOT confirmed by the generator: switch the amplifier off by hand "
+              "and check the generator", file=sys.stderr, flush=True)
 
 
 def _start_watch(run_dir: Path, args):
@@ -173,9 +168,15 @@ def _watch_server(run_dir: Path, host: str, port: int):
 def cmd_watch(args) -> int:
     """Serve the live page of a run directory until Ctrl-C."""
     run_dir = Path(args.run)
-    if not run_dir.is_dir():
-        raise ValueError(f"{run_dir}: no such run directory")
-    if not (run_dir / "run.json").is_file():
+    if run_dir.exists() and not run_dir.is_dir():
+        raise ValueError(f"{run_dir}: not a run directory (a file)")
+    absent = not run_dir.is_dir()
+    if absent and not run_dir.absolute().parent.is_dir():      # a mistyped path, not a run to come
+        raise ValueError(f"{run_dir}: no such run directory, nor its parent {run_dir.absolute().parent} "
+                         f"(bench watch waits for a run directory to appear inside an existing one)")
+    if absent:        # started before the run: the page shows "waiting" until the run creates it
+        print(f"waiting for {run_dir} to appear ... (Ctrl-C stops)", flush=True)
+    elif not (run_dir / "run.json").is_file():
         log.warning("%s has no run.json yet: the page waits for the run to start", run_dir)
     import signal
 
@@ -191,6 +192,9 @@ def cmd_watch(args) -> int:
         try:
             while not ended:
                 time.sleep(0.2)
+                if absent and run_dir.is_dir():
+                    absent = False
+                    print(f"{run_dir} appeared: the page follows the run", flush=True)
         finally:
             server.close()         # open pages get the last state and a goodbye
     return 0
@@ -212,7 +216,7 @@ def _plan_toml(p: dict) -> dict:
            "frequencies": {"list_Hz": list(p["freqs_Hz"]), "direction": p["direction"]},
            "control": {k: p[k] for k in keys if k in p}}
     if p.get("limits"):
-        out["limits"] = p["limits"]
+        out["limits"] = {k: v for k, v in p["limits"].items() if v is not None}   # None: the rig's
     return out
 
 
@@ -357,59 +361,94 @@ def cmd_twins(args) -> int:
     return 0
 
 
+DESCRIPTION = """\
+Stepped-sine friction tests on the linear-guideway shaker rig, or on its simulated twin:
+plan and run a test, watch it live, stop and resume it, then report, export and analyse
+the measurements.  Start with `bench demo` (the default plan on the simulated rig), then
+`bench dry-run --plan P --rig R` and `bench run --plan P --rig R --out DIR` with your own
+plan and rig files (annotated examples in bench/defaults/).  Force levels 0.1-100 N,
+frequencies 20-1000 Hz.  `bench COMMAND --help` explains each command."""
+
+EPILOG = """\
+exit codes: 0 done; 1 failure (an instrument error, a failed run, `bench check` found
+problems); 2 usage or configuration error (the message names the file, key and allowed
+values); 3 stopped by a limit (refused before the output went on, or aborted); 130
+interrupted (Ctrl-C, SIGTERM).  The output is switched off on every exit.
+-v, --debug and -vv may come before or after the command."""
+
+
+class _Formatter(argparse.RawDescriptionHelpFormatter):
+    """Every option's default shown after its help, unless it has none to show."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        default = action.default
+        if ("%(default)" in text or "default" in text or any(default is x for x in (None, False, argparse.SUPPRESS))
+                or not action.option_strings or action.option_strings[0] in ("-v", "-h")):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
 class _Parser(argparse.ArgumentParser):
-    """Usage errors in one line, naming the command, the problem and where to look."""
+    """Usage errors in one line, naming the command, the problem and where to look; every
+    (sub)command's help shows the defaults."""
+
+    def __init__(self, *a, **k):
+        k.setdefault("formatter_class", _Formatter)
+        super().__init__(*a, **k)
 
     def error(self, message):
         self.exit(ExitCode.USAGE, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="bench", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
-    p.add_argument("--debug", action="store_true", help="show the traceback of an error")
+    p = _Parser(prog="bench", description=DESCRIPTION, epilog=EPILOG)
+    _add_common(p, argparse.SUPPRESS)
+    p.set_defaults(verbose=0, debug=False)
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("paper", help="redraw the seed paper's numerical figures (PNG + CSV)")
-    s.add_argument("--out", default="out/paper")
-    s.add_argument("--quick", action="store_true", help="coarse grids (seconds)")
+    s.add_argument("--out", default="out/paper", help="directory for the figures, their CSV and a README")
+    s.add_argument("--quick", action="store_true", help="coarse grids (seconds instead of minutes)")
     s.set_defaults(func=cmd_paper)
 
     s = sub.add_parser("demo", help="the main job: the default plan on the simulated rig, with its report")
-    s.add_argument("--out", default="out/demo")
+    s.add_argument("--out", default="out/demo", help="run directory (emptied first: the demo starts afresh)")
     _add_watch_options(s)
     s.set_defaults(func=cmd_demo)
 
     for name, func, hlp in (("run", cmd_run, "run a stepped-sine plan on a rig"),
                             ("dry-run", cmd_dry_run, "check a plan against the rig's limits; print the envelope")):
         s = sub.add_parser(name, help=hlp)
-        s.add_argument("--plan", help="plan TOML (default: the demo plan)")
-        s.add_argument("--rig", help="rig TOML (default: the simulated rig)")
+        s.add_argument("--plan", help="plan TOML: force levels (0.1-100 N), frequencies (20-1000 Hz), control "
+                                      "(default: the demo plan, bench/defaults/demo_plan.toml)")
+        s.add_argument("--rig", help="rig TOML: instrument URLs, calibration, limits "
+                                     "(default: the simulated rig, bench/defaults/sim_rig.toml)")
         if name == "run":
-            s.add_argument("--out", required=True, help="new run directory")
-            s.add_argument("--seed", type=int, help="noise seed of a simulated rig")
-            s.add_argument("--no-report", action="store_true")
+            s.add_argument("--out", required=True, help="new run directory (bench resume continues it)")
+            s.add_argument("--seed", type=int, help="noise seed of a simulated rig (default: the rig file's)")
+            s.add_argument("--no-report", action="store_true", help="do not write the report at the end")
             _add_watch_options(s)
         s.set_defaults(func=func)
 
     s = sub.add_parser("resume", help="continue an interrupted run without repeating completed steps")
-    s.add_argument("run")
-    s.add_argument("--no-report", action="store_true")
+    s.add_argument("run", help="run directory of an interrupted, aborted or failed run")
+    s.add_argument("--no-report", action="store_true", help="do not write the report at the end")
     _add_watch_options(s)
     s.set_defaults(func=cmd_resume)
 
     s = sub.add_parser("watch", help="serve a live page of a run directory (running, resumed or finished)")
-    s.add_argument("run")
+    s.add_argument("run", help="run directory (it may not exist yet: the page waits for it)")
     s.add_argument("--port", type=int, default=0, help="port (default: any free one)")
     s.add_argument("--host", default="127.0.0.1", help="interface (default 127.0.0.1; others only when given)")
     s.set_defaults(func=cmd_watch)
 
     s = sub.add_parser("report", help="(re)write the report of a run directory")
-    s.add_argument("run")
+    s.add_argument("run", help="run directory (the report goes to RUN/report/)")
     s.set_defaults(func=cmd_report)
 
     s = sub.add_parser("export", help="write a run's steps as CSV and UFF 58 (FRFs and time records)")
-    s.add_argument("run")
+    s.add_argument("run", help="run directory")
     s.add_argument("--out", help="output directory (default: <run>/export)")
     s.add_argument("--no-time", action="store_true", help="skip the time records (time.uff)")
     s.set_defaults(func=cmd_export)
@@ -433,7 +472,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("twins", help="serve the simulated rig's instruments on loopback; print their URLs")
     s.add_argument("--rig", help="simulated rig TOML (default: bench/defaults/sim_rig.toml)")
-    s.add_argument("--host", default="127.0.0.1")
+    s.add_argument("--host", default="127.0.0.1", help="interface the twins listen on")
     s.add_argument("--serial", action="store_true", help="also serve SCPI and Modbus RTU on pty pairs")
     s.set_defaults(func=cmd_twins)
 
@@ -441,31 +480,40 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_warmup)
 
     s = sub.add_parser("frf", help="compliance G(beta) of the model at one force level (CSV to stdout)")
-    s.add_argument("--gamma0", type=float, default=0.6)
-    s.add_argument("--n", type=float, default=1.5)
-    s.add_argument("--beta-min", type=float, default=0.2)
-    s.add_argument("--beta-max", type=float, default=2.0)
-    s.add_argument("--points", type=int, default=200)
-    s.add_argument("--engine", choices=("shooting", "rk4"), default="shooting")
+    s.add_argument("--gamma0", type=float, default=0.6, help="force ratio P0/F_s")
+    s.add_argument("--n", type=float, default=1.5, help="shape factor n of the virgin curve")
+    s.add_argument("--beta-min", type=float, default=0.2, help="lowest frequency ratio beta")
+    s.add_argument("--beta-max", type=float, default=2.0, help="highest frequency ratio beta")
+    s.add_argument("--points", type=int, default=200, help="frequency ratios, linearly spaced")
+    s.add_argument("--engine", choices=("shooting", "rk4"), default="shooting",
+                   help="steady state by half-period shooting (fast) or by RK4 time stepping")
     s.set_defaults(func=cmd_frf)
 
     s = sub.add_parser("check", help="verify a run directory: list missing, truncated, damaged and unknown steps")
-    s.add_argument("run")
+    s.add_argument("run", help="run directory")
     s.set_defaults(func=cmd_check)
 
     from .studies.cli import add_parsers as add_study_parsers
     add_study_parsers(sub, Progress)
-    return _with_debug(p)
+    return _with_common(p)
 
 
-def _with_debug(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    """``--debug`` after any subcommand too (every subcommand, whoever added it)."""
+def _add_common(p: argparse.ArgumentParser, default) -> None:
+    p.add_argument("-v", "--verbose", action="count", default=default,
+                   help="more detail on the terminal: -v the bench's INFO lines, -vv its DEBUG lines "
+                        "(other libraries speak only for warnings)")
+    p.add_argument("--debug", action="store_true", default=default, help="show the traceback of an error")
+
+
+def _with_common(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """``-v`` and ``--debug`` after any subcommand too (every level of every subcommand,
+    whoever added it): ``bench run -v`` is ``bench -v run``."""
     for action in p._actions:
         if isinstance(action, argparse._SubParsersAction):
             for s in action.choices.values():
                 if "--debug" not in s._option_string_actions:
-                    s.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
-                                   help="show the traceback of an error")
+                    _add_common(s, argparse.SUPPRESS)
+                _with_common(s)
     return p
 
 
@@ -506,18 +554,21 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as e:               # usage error or --help: argparse has printed it
         return int(e.code or 0)
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    handler = setup_logging(args.verbose)
     try:
         return int(args.func(args))
     except (Exception, KeyboardInterrupt) as e:   # one line, a documented code; --debug: traceback
         code = _exit_code(e)
+        end_line()
         if args.debug:
             log.exception("bench %s failed", args.command)
         print(f"bench {args.command}: {'error: ' if code != ExitCode.INTERRUPTED else ''}{_one_line(e)}"
               + ("" if args.debug or code == ExitCode.INTERRUPTED else " (--debug shows the traceback)"),
               file=sys.stderr)
         return code
+    finally:
+        end_line()
+        logging.getLogger().removeHandler(handler)
 
 
 if __name__ == "__main__":

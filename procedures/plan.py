@@ -35,7 +35,7 @@ class Plan:
     ramp_s: float
     min_sample_rate_Hz: float
     max_extra_settle_blocks: int         # re-measure while a free vibration still decays
-    limits: Limits | None                # optional, tighter than the rig's
+    limits: Limits | None                # optional, tighter than the rig's (a field None: the rig's)
     infeasible: str = "refuse"           # steps the limits cannot hold: "refuse" the plan or "skip" them
     adaptive_per_sweep: int = 0          # > 0: measure only this many frequencies per sweep, chosen online
     skip: tuple[tuple[int, int], ...] = ()   # (level index, frequency index) left out

@@ -24,9 +24,10 @@ class LimitExceeded(RuntimeError):
 
 
 def tightest(a: Limits, b: Limits | None) -> Limits:
+    """Each limit the smaller of the two; a limit ``b`` leaves out (None) is ``a``'s."""
     if b is None:
         return a
-    return Limits(*(min(x, y) for x, y in zip(
+    return Limits(*(x if y is None else min(x, y) for x, y in zip(
         (a.drive_V, a.force_N, a.disp_m, a.accel_m_s2), (b.drive_V, b.force_N, b.disp_m, b.accel_m_s2))))
 
 

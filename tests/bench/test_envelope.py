@@ -120,11 +120,12 @@ def test_a_plan_that_asks_to_skip_infeasible_steps_runs_the_rest(tmp_path, capsy
 
 def test_the_refusal_names_the_force_margin_and_the_limit_key(tmp_path, capsys):
     """Issue 19: 120 N against force_N = 130 N was refused as "force 150 N > 130 N", the
-    1.25 control-overshoot margin applied but never named."""
-    plan = plan_toml(tmp_path, levels=[120.0], freqs=[200.0])
+    1.25 control-overshoot margin applied but never named (levels now end at 100 N)."""
+    plan = plan_toml(tmp_path, levels=[100.0], freqs=[200.0], force_N=120.0)
     assert main(["dry-run", "--plan", plan]) == 3
     refused = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("REFUSED"))
-    assert "120 N x 1.25 margin = 150 N > force_N 130 N" in refused
+    assert "100 N x 1.25 margin = 125 N > force_N 120 N" in refused
+    assert "drive" not in refused                      # 100 N x 1.25 / 20 N/V = 6.25 V < drive_V 7 V
 
 
 def test_the_drive_column_is_the_generator_amplitude_at_the_level(tmp_path, capsys):
