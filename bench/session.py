@@ -28,7 +28,7 @@ from procedures.stepped_sine import SteppedSine
 
 from .config import Plan, Rig
 from .signals import SignalLatch, uninterruptible
-from .storage import RunStore
+from .storage import RunStore, planned_count
 from .watch import stop as stop_request
 
 log = logging.getLogger(__name__)
@@ -295,7 +295,7 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
         finally:
             with uninterruptible("switching the output off"):
                 stack.close()    # output off, then close links and twins
-            store.finish(status, steps_done=len(store.done_keys()), steps_total=len(plan.schedule()))
+            store.finish(status, steps_done=len(store.done_keys()), steps_total=planned_count(plan))
             if log_handler:
                 logging.getLogger().removeHandler(log_handler)
                 log_handler.close()

@@ -515,3 +515,9 @@ def _sweeps(plan) -> dict[tuple[int, str], list[str]]:
     for s in plan.schedule():
         out.setdefault((s.level_index, s.direction), []).append(s.key)
     return out
+
+
+def planned_count(plan) -> int:
+    """Steps the plan measures: its schedule, or in adaptive mode the chosen number per sweep."""
+    k = plan.adaptive_per_sweep
+    return sum(min(len(keys), k) if k else len(keys) for keys in _sweeps(plan).values())
