@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from procedures.plan import Limits, Plan, Rig, StepSpec
+from sim.errors import ConfigurationError
 
 log = logging.getLogger(__name__)
 
@@ -21,8 +22,7 @@ MAX_FREQ_HZ = 1000.0
 DEFAULTS = Path(__file__).with_name("defaults")
 
 
-class ConfigError(ValueError):
-    """A configuration value is missing, unknown or out of range."""
+ConfigError = ConfigurationError     # a configuration value is missing, unknown or out of range
 
 
 class _Section:
@@ -261,3 +261,28 @@ def parse_rig(data: dict, source: str = "rig") -> Rig:
     exp.done()
     r.done()
     return rig
+
+
+def plan_toml(p: dict) -> dict:
+    """The stored plan back into the TOML layout (the stored grid is used verbatim)."""
+    keys = ("settle_cycles", "min_settle_s", "measure_cycles", "min_measure_s", "control_cycles", "force_tolerance",
+            "max_iterations", "harmonics", "ramp_s", "min_sample_rate_Hz", "max_extra_settle_blocks")
+    out = {"name": p["name"], "levels_N": list(p["levels_N"]), "infeasible": p.get("infeasible", "refuse"),
+           "adaptive_per_sweep": p.get("adaptive_per_sweep", 0),
+           "frequencies": {"list_Hz": list(p["freqs_Hz"]), "direction": p["direction"]},
+           "control": {k: p[k] for k in keys if k in p}}
+    if p.get("limits"):
+        out["limits"] = p["limits"]
+    return out
+
+
+def rig_toml(r: dict) -> dict:
+    """The stored rig (run.json) back into the TOML layout."""
+    return {"name": r["name"], "notes": r["notes"], "simulated": r["simulated"],
+            "instruments": {"generator": r["generator_url"], "sensor": r["sensor_url"], "daq": r["daq_url"]},
+            "calibration": {k: r[k] for k in ("force_V_per_N", "accel_V_per_m_s2", "disp_V_per_m",
+                                              "amp_gain_N_per_V")},
+            "limits": r["limits"],
+            "expected": {"mass_kg": r["expected_mass_kg"], "x_s_m": r["expected_x_s_m"],
+                         "F_s_N": r["expected_F_s_N"], "n": r["expected_n"]},
+            **({"model": r["model"]} if r["model"] else {})}

@@ -1,6 +1,6 @@
 """Typed exceptions raised by the instrument drivers.
 
-Every driver error derives from :class:`InstrumentError`, so a procedure can catch one
+Every driver error derives from :class:`InstrumentError` (a :class:`sim.errors.BenchError`), so a procedure can catch one
 type to run its safe-stop path, and a finer type when it wants to react differently
 (retry on :class:`InstrumentTimeout`, stop on :class:`ScpiError`).
 """
@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import logging
 
+from sim.errors import InstrumentError   # the root of the driver errors, in the project's tree
+
 log = logging.getLogger(__name__)
 
-
-class InstrumentError(Exception):
-    """Base class of every error reported by a driver in this package."""
+__all__ = ["BlockIntegrityError", "ConnectionLost", "FrameError", "InstrumentError", "InstrumentTimeout",
+           "ModbusError", "ProtocolError", "SafetyInterlock", "ScpiError"]
 
 
 class ConnectionLost(InstrumentError):

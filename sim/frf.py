@@ -73,7 +73,7 @@ def _workers(workers: int | None) -> int:
     return max(1, workers or os.cpu_count() or 1)
 
 
-def _grid(betas) -> np.ndarray:
+def beta_grid(betas) -> np.ndarray:
     b = np.asarray(betas, dtype=np.float64).ravel()
     if b.size == 0:
         raise ValueError("beta grid is empty")
@@ -93,7 +93,7 @@ def frf_rk4(betas, gamma0: float, n: float = 1.5, *, sweep: str = "independent",
     """
     if sweep not in SWEEPS:
         raise ValueError(f"sweep must be one of {SWEEPS}, got {sweep!r}")
-    b = _grid(betas)
+    b = beta_grid(betas)
     it = integrator or Integrator(n=n)
     total = b.size
     if sweep == "independent":

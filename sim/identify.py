@@ -159,7 +159,7 @@ def displacement_harmonics(step: StepHarmonics) -> tuple[np.ndarray, np.ndarray,
     return X, wD, wD ** 2 * vD + (1 - wD) ** 2 * vA
 
 
-def _paths(X: np.ndarray, M: int) -> tuple[np.ndarray, np.ndarray]:
+def period_paths(X: np.ndarray, M: int) -> tuple[np.ndarray, np.ndarray]:
     """Periods of the displacement (rows of M samples) from rows of harmonics X, each
     centred between its extremes and rotated to start at its largest value; every turning
     point is lifted to the vertex of the parabola through it and its neighbours (the
@@ -181,16 +181,16 @@ def _paths(X: np.ndarray, M: int) -> tuple[np.ndarray, np.ndarray]:
     return x, starts
 
 
-def _path_friction(paths: np.ndarray, x_s: float, n: float, lam: float = LAMBDA_MASING) -> np.ndarray:
-    """Dimensionless Masing friction sampled along rows of ``paths`` (m, from :func:`_paths`)."""
+def path_friction(paths: np.ndarray, x_s: float, n: float, lam: float = LAMBDA_MASING) -> np.ndarray:
+    """Dimensionless Masing friction sampled along rows of ``paths`` (m, from :func:`period_paths`)."""
     u = paths / x_s
     out = np.empty_like(u)
     _loop_friction(u, u[:, 0].copy(), lam, np.array([n]), out)
     return out
 
 
-def _path_harmonics(samples: np.ndarray, starts: np.ndarray, K: int) -> np.ndarray:
-    """Harmonics 1..K of rows of samples taken along :func:`_paths`' rotated periods, in
+def path_harmonics(samples: np.ndarray, starts: np.ndarray, K: int) -> np.ndarray:
+    """Harmonics 1..K of rows of samples taken along :func:`period_paths`' rotated periods, in
     the period's own time."""
     M = samples.shape[1]
     k = np.arange(1, K + 1)
@@ -202,7 +202,7 @@ def _path_harmonics(samples: np.ndarray, starts: np.ndarray, K: int) -> np.ndarr
 def _friction_harmonics(paths: np.ndarray, starts: np.ndarray, x_s: float, n: float, lam: float,
                         K: int) -> np.ndarray:
     """Harmonics 1..K of the dimensionless Masing friction along rows of ``paths`` (m)."""
-    return _path_harmonics(_path_friction(paths, x_s, n, lam), starts, K)
+    return path_harmonics(path_friction(paths, x_s, n, lam), starts, K)
 
 
 def synthesize(C: np.ndarray, M: int) -> np.ndarray:
@@ -263,7 +263,7 @@ class Identifier:
         if isinstance(step, dict):
             step = StepHarmonics.from_result(step)
         X, wD, vX = displacement_harmonics(step)
-        paths, starts = _paths(X, self.M)
+        paths, starts = period_paths(X, self.M)
         self.steps.append(step)
         with np.errstate(divide="ignore", invalid="ignore"):
             vA = np.where(wD < 1, (vX - wD ** 2 * float(step.sigma_disp) ** 2) / (1 - wD) ** 2, 0.0)
@@ -272,7 +272,7 @@ class Identifier:
     # ------------------------------------------------------------------ model
     def model_friction(self, F_s: float, x_s: float, n: float, X: np.ndarray, harmonics: int | None = None) -> np.ndarray:
         """Harmonics (N) of the Masing friction along the displacement harmonics X (m, steps x Kx)."""
-        paths, starts = _paths(X, self.M)
+        paths, starts = period_paths(X, self.M)
         return F_s * _friction_harmonics(paths, starts, x_s, n, self.lam, harmonics or np.atleast_2d(X).shape[1])
 
     def _weights(self, p: _Prepared, F_s: float, x_s: float, n: float, m: float, K: int) -> None:
@@ -310,7 +310,7 @@ class Identifier:
             deltas[2 * live.size + r][tail] = signs[r] * sdX[tail]
         if deltas:
             D = np.array(deltas)
-            F = F_s * _friction_harmonics(*_paths(np.concatenate([p.X + D, p.X - D]), self.M), x_s, n, self.lam, K)
+            F = F_s * _friction_harmonics(*period_paths(np.concatenate([p.X + D, p.X - D]), self.M), x_s, n, self.lam, K)
             resp = (F[:len(D)] - F[len(D):]) / 2                # response to one sd (per row)
             for i, j in enumerate(live):
                 for part, unit in ((0, 1.0), (1, 1j)):

@@ -24,7 +24,7 @@ import numpy as np
 from numba import njit
 
 from .dynamics import Integrator, SteadyState, steady_state
-from .frf import FrequencyResponse, _grid
+from .frf import FrequencyResponse, beta_grid
 from .virgin import virgin_g
 
 log = logging.getLogger(__name__)
@@ -149,7 +149,7 @@ def frf_shooting(betas, gamma0: float, n: float = 1.5, *, integrator: Integrator
     """
     if direction not in ("up", "down"):
         raise ValueError(f"direction must be 'up' or 'down', got {direction!r}")
-    b = np.sort(_grid(betas))
+    b = np.sort(beta_grid(betas))
     if direction == "down":
         b = b[::-1]
     it = integrator or Integrator(n=n)

@@ -25,6 +25,7 @@ from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
+from ..storage import RunStatus
 from . import stop
 from .snapshot import RunReader
 
@@ -169,7 +170,7 @@ class _Handler(BaseHTTPRequestHandler):
             return self._send_json(HTTPStatus.FORBIDDEN, {"error": "a valid stop token is needed "
                                                           "(the one printed with the page's URL)"})
         state = self.server.reader.snapshot()
-        if state.get("status") != "running" or state.get("process_gone"):
+        if state.get("status") != RunStatus.RUNNING or state.get("process_gone"):
             shown = "process gone" if state.get("process_gone") else state.get("status")
             return self._send_json(HTTPStatus.CONFLICT, {"error": f"the run is not running ({shown})"})
         try:

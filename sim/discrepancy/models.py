@@ -43,7 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..identify import POINTS_PER_PERIOD, _path_friction, _path_harmonics, _paths, synthesize
+from ..identify import POINTS_PER_PERIOD, path_friction, path_harmonics, period_paths, synthesize
 
 BASE_PARAMS = ("F_s_N", "x_s_m", "n", "mass_kg")
 MOTION_EFFECTS = ("sensor_delay", "sensor_gain_error", "second_mode")   # they change the rebuilt x
@@ -211,12 +211,12 @@ class Model:
 
         def motion():
             x = self._displacement(v, d)
-            paths, starts = _paths(x, self.M)
+            paths, starts = period_paths(x, self.M)
             return x, paths, starts
         x, paths, starts = self._cached(d, mkey, motion)
         n = v["n"] if abs(v["n"] - 1.0) >= 1e-6 else 1.0 + 1e-6
         F = v["F_s_N"] * self._cached(d, mkey + (float(theta[1]), n),
-                                      lambda: _path_friction(paths, v["x_s_m"], n))
+                                      lambda: path_friction(paths, v["x_s_m"], n))
         beta = v.get("velocity_dependent_friction.beta", 0.0)
         if beta != 0.0:       # friction level rising with speed: F (1 + beta |v|)
             def speed():
@@ -225,7 +225,7 @@ class Model:
                 rows = np.arange(vel.shape[0])[:, None]
                 return np.abs(vel[rows, (starts[:, None] + np.arange(self.M)[None, :]) % self.M])
             F = F * (1.0 + beta * self._cached(d, mkey + ("v",), speed))
-        return _path_harmonics(F, starts, d.X.shape[1]), x
+        return path_harmonics(F, starts, d.X.shape[1]), x
 
     def terms(self, theta: np.ndarray, d: Data, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(G, A_pred) for force harmonics ``P`` (the measured ones, or a trial).

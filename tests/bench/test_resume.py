@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.cli import _plan_toml, _rig_toml
+from bench.config import plan_toml as _plan_toml, rig_toml as _rig_toml
 from bench.config import DEFAULTS, load_plan, load_rig, parse_plan, parse_rig
 from bench.session import run_plan
 from bench.storage import RunStore
