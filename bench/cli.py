@@ -16,8 +16,7 @@ import time
 from enum import IntEnum
 from pathlib import Path
 
-from sim.errors import (BenchError, ConfigurationError, EnvelopeError, LimitError,
-                        RunDirectoryError)
+from sim.errors import BenchError, ConfigurationError, EnvelopeError, LimitError, RunDirectoryError
 
 from . import __version__
 

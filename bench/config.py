@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from procedures.plan import Limits, Plan, Rig, StepSpec
+from procedures.plan import Limits, Plan, Rig
 from sim.errors import ConfigurationError
 
 log = logging.getLogger(__name__)
@@ -80,7 +80,7 @@ class _Section:
             raise ConfigError(f"{self.where(key)}: must be true or false, got {v!r}")
         return v
 
-    def table(self, key) -> "_Section":
+    def table(self, key) -> _Section:
         self.used.add(key)
         return _Section(self.source, f"{self.path}.{key}" if self.path else key, self.data.get(key, {}))
 

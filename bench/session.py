@@ -20,12 +20,19 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers import (CanFdDaq, Channel, ChannelSpec, InstrumentError, ModbusEddySensor,
-                     ScpiFunctionGenerator, open_can_bus, start_twins)
+from drivers import (
+    CanFdDaq,
+    Channel,
+    ChannelSpec,
+    InstrumentError,
+    ModbusEddySensor,
+    ScpiFunctionGenerator,
+    open_can_bus,
+    start_twins,
+)
 from procedures.online_id import OnlineIdentification, identifiability
-from procedures.safety import (LimitExceeded, SupervisedDaq, SupervisedGenerator, Supervisor, check_gap,
-                               tightest)
 from procedures.plan import StepSpec
+from procedures.safety import LimitExceeded, SupervisedDaq, SupervisedGenerator, Supervisor, check_gap, tightest
 from procedures.stepped_sine import SteppedSine, StepResult
 from sim.errors import EnvelopeError
 
@@ -117,7 +124,7 @@ class Instruments:
     daq: CanFdDaq
     sensor: ModbusEddySensor
     identities: dict
-    sim_rig: object = None
+    sim_rig: object | None = None
 
 
 def switch_off(gen: ScpiFunctionGenerator, url: str) -> bool:

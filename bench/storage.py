@@ -35,7 +35,7 @@ import os
 import tempfile
 import zipfile
 from dataclasses import dataclass, fields
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -63,7 +63,7 @@ class RunStatus(enum.StrEnum):
 
 
 def now_iso() -> str:
-    return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
 
 
 def _fsync_dir(path: Path) -> None:
@@ -122,7 +122,7 @@ RunDirError = RunDirectoryError    # not a readable run directory (missing, or r
 class DamagedStep(RunDirectoryError):
     """A completed step's files are missing, truncated or fail their checksum."""
 
-    def __init__(self, problem: "StepProblem"):
+    def __init__(self, problem: StepProblem):
         super().__init__(str(problem))
         self.problem = problem
 
@@ -152,7 +152,7 @@ class RunStore:
 
     # ------------------------------------------------------------------ life cycle
     @classmethod
-    def create(cls, path: Path, metadata: dict) -> "RunStore":
+    def create(cls, path: Path, metadata: dict) -> RunStore:
         path = Path(path)
         if path.exists() and any(path.iterdir()):
             raise FileExistsError(f"run directory {path} exists and is not empty; "
@@ -165,7 +165,7 @@ class RunStore:
         return store
 
     @classmethod
-    def open(cls, path: Path) -> "RunStore":
+    def open(cls, path: Path) -> RunStore:
         store = cls(path)
         if not store.path.exists():
             raise RunDirError(f"{path}: no such directory (expected a run directory made by 'bench run')")

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 
-from sim.errors import InstrumentError   # the root of the driver errors, in the project's tree
+from sim.errors import InstrumentError  # the root of the driver errors, in the project's tree
 
 log = logging.getLogger(__name__)
 
@@ -58,7 +58,13 @@ class ModbusError(InstrumentError):
 
 
 class FrameError(InstrumentError):
-    """A CAN frame of a data block was lost, duplicated, corrupt or of the wrong size."""
+    """A CAN frame of a data block was lost, duplicated, corrupt or of the wrong size.
+
+    ``header`` is the block's header when it was received (a RESEND can then name it)."""
+
+    def __init__(self, message: str, header: object | None = None) -> None:
+        super().__init__(message)
+        self.header = header
 
 
 class BlockIntegrityError(FrameError):

@@ -102,7 +102,7 @@ class ScpiFunctionGenerator:
 
     def read_errors(self) -> list[tuple[int, str]]:
         """Drain the instrument's error queue: [(code, message), ...], oldest first."""
-        errors = []
+        errors: list[tuple[int, str]] = []
         for _ in range(MAX_ERRORS_DRAINED):
             reply = self.query("SYST:ERR?")
             code_text, _, message = reply.partition(",")
@@ -262,7 +262,7 @@ class ScpiFunctionGenerator:
         except Exception as exc:  # noqa: BLE001
             log.warning("closing %s: %s", self.url, exc)
 
-    def __enter__(self) -> "ScpiFunctionGenerator":
+    def __enter__(self) -> ScpiFunctionGenerator:
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,

@@ -14,6 +14,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from sim.errors import ConfigurationError
+
 log = logging.getLogger(__name__)
 
 
@@ -61,7 +63,7 @@ class ChannelSpec:
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.sensitivity_V_per_unit) or self.sensitivity_V_per_unit == 0.0:
-            raise ValueError(f"{self.channel.name}: sensitivity must be finite and non-zero, "
+            raise ConfigurationError(f"{self.channel.name}: sensitivity must be finite and non-zero, "
                              f"got {self.sensitivity_V_per_unit!r}")
 
 

@@ -8,7 +8,7 @@ protocols.  ``drivers._interfaces`` says what each driver offers; these say what
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -81,3 +81,11 @@ class GapSensor(Protocol):
     """What the gap check before each sweep needs from the displacement sensor."""
 
     def read_gap(self) -> GapReading: ...
+
+
+if TYPE_CHECKING:      # the real drivers fit these protocols: `make check` (mypy) proves it
+    from drivers import CanFdDaq, ModbusEddySensor, ScpiFunctionGenerator
+
+    def _drivers_fit(g: ScpiFunctionGenerator, d: CanFdDaq, s: ModbusEddySensor
+                     ) -> tuple[Generator, StepMarker, Daq, GapSensor]:
+        return g, g, d, s

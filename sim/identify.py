@@ -41,7 +41,9 @@ import numpy as np
 from numba import njit
 from scipy.optimize import least_squares
 
+from .errors import ConfigurationError
 from .masing import LAMBDA_MASING, active_depth, branch_force, push_reversal
+from .step_result import StepResult
 from .virgin import CURVE_SAKAI
 
 log = logging.getLogger(__name__)
@@ -73,7 +75,7 @@ class StepHarmonics:
     sigma_disp: float = 0.0   # m
 
     @classmethod
-    def from_result(cls, r: dict) -> "StepHarmonics":
+    def from_result(cls, r: StepResult) -> StepHarmonics:
         def c(fit):
             return np.asarray(fit["amplitude"]) * np.exp(1j * np.asarray(fit["phase_rad"]))
         scale = math.sqrt(2.0 / max(r.get("n_samples", 1000), 1))
@@ -83,7 +85,7 @@ class StepHarmonics:
 
 
     @classmethod
-    def from_records(cls, rec) -> "StepHarmonics":
+    def from_records(cls, rec) -> StepHarmonics:
         """From a :class:`sim.records.PeriodicRecords` (every harmonic the records hold)."""
         c = rec.channels
         return cls(freq_Hz=rec.freq_Hz, force=c["force"].harmonics, accel=c["accel"].harmonics,
@@ -235,9 +237,9 @@ class _Prepared:
     vA: np.ndarray        # variance of the acceleration-derived displacement (per part)
     path: np.ndarray
     start: int
-    sig_re: np.ndarray | None = None
-    sig_im: np.ndarray | None = None
-    cov: np.ndarray | None = None   # with the kinematic residual (real, imaginary part; 2 x K)
+    sig_re: np.ndarray = field(default_factory=lambda: np.empty(0))   # empty until weighed
+    sig_im: np.ndarray = field(default_factory=lambda: np.empty(0))
+    cov: np.ndarray = field(default_factory=lambda: np.empty((2, 0)))   # with the kinematic residual (real, imaginary part; 2 x K)
     theta: np.ndarray | None = None
 
 
@@ -251,7 +253,7 @@ class Identifier:
         self.M = points_per_period
         self.steps: list[StepHarmonics] = []
         self._prep: list[_Prepared] = []
-        self._cache = None
+        self._cache: tuple[tuple[float, float], np.ndarray] | None = None
         self.theta = np.log([guess["F_s_N"], guess["x_s_m"], 1.0, guess["mass_kg"]])
         self.theta[2] = guess["n"]
         self.theta_prior = self.theta.copy()
@@ -259,7 +261,7 @@ class Identifier:
         self.history: list[dict] = []
 
     # ------------------------------------------------------------------ data
-    def add(self, step: StepHarmonics | dict) -> None:
+    def add(self, step: StepHarmonics | StepResult) -> None:
         if isinstance(step, dict):
             step = StepHarmonics.from_result(step)
         X, wD, vX = displacement_harmonics(step)
@@ -401,7 +403,7 @@ class Identifier:
         ``reweight_budget`` caps how many stale weights one call refreshes (online use;
         new steps always get theirs); ``tol`` is least_squares' ftol and xtol."""
         if not self.steps:
-            raise ValueError("no steps to identify from")
+            raise ConfigurationError("no steps to identify from")
         # only harmonics every step measured (a missing one is not a zero)
         K = min([self.K] + [min(s.disp.size, s.force.size, s.accel.size) for s in self.steps])
         paths = np.array([p.path for p in self._prep])

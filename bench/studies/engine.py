@@ -34,9 +34,9 @@ import json
 import logging
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -121,7 +121,7 @@ class Engine:
         self.cluster: LocalCluster | None = None
         self.client: Client | None = None
 
-    def __enter__(self) -> "Engine":
+    def __enter__(self) -> Engine:
         try:
             if self.scheduler:
                 try:

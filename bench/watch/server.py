@@ -91,7 +91,7 @@ class WatchServer(ThreadingHTTPServer):
             self._plotly = _plotly_js()
         return self._plotly
 
-    def start(self) -> "WatchServer":
+    def start(self) -> WatchServer:
         """Serve from a daemon thread (beside a run in this process)."""
         self._thread = threading.Thread(target=self.serve_forever, name="bench-watch", daemon=True)
         self._thread.start()

@@ -13,8 +13,7 @@ from bench import config, storage
 from bench.cli import ExitCode, main
 from procedures.safety import LimitExceeded
 from sim import errors
-from sim.errors import (BenchError, ConfigurationError, EnvelopeError, InstrumentError, LimitError,
-                        RunDirectoryError)
+from sim.errors import BenchError, ConfigurationError, EnvelopeError, InstrumentError, LimitError, RunDirectoryError
 
 CASES = [
     # (exception, exit code, expected line after "bench report: ", internal?)
