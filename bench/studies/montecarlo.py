@@ -41,9 +41,9 @@ class PlantGenerator:
         self.rig.set_generator(freq_Hz=freq_Hz)
         return float(freq_Hz)
 
-    def set_amplitude(self, vpp: float) -> float:
-        self.rig.set_generator(amplitude_Vpp=vpp)
-        return float(vpp)
+    def set_amplitude(self, amplitude_Vpp: float) -> float:
+        self.rig.set_generator(amplitude_Vpp=amplitude_Vpp)
+        return float(amplitude_Vpp)
 
     def set_output(self, on: bool) -> None:
         self.rig.set_generator(output_on=on)
@@ -72,9 +72,9 @@ class PlantDaq:
         self.rig = rig
         self.blocks = 0
 
-    def acquire_samples(self, rate_Hz: float, n: int) -> PlantBlock:
+    def acquire_samples(self, rate_Hz: float, n_samples: int) -> PlantBlock:
         m = self.rig.model
-        b = self.rig.run(n, rate_Hz)
+        b = self.rig.run(n_samples, rate_Hz)
         self.blocks += 1
         return PlantBlock(b.force_V / m.force_sens_V_per_N, b.accel_V / m.accel_sens_V_per_m_s2,
                           b.disp_V / m.disp_sens_V_per_m, rate_Hz, b.t0_s, self.blocks)
