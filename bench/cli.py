@@ -1,10 +1,11 @@
 """Command line: `bench <command>`.  The application configures logging; libraries don't.
 
-Exit codes (docs/reliability.md): 0 done; 1 runtime failure (an instrument error, a failed
-run, `bench check` found problems, an unexpected error); 2 usage or configuration error
-(a bad argument, file or value: the message names it); 3 stopped by a limit (a plan the
-rig's limits refuse, or a run aborted by the safety supervisor); 130 interrupted (Ctrl-C,
-SIGTERM).  Errors are one line on stderr; `--debug` adds the traceback.
+Exit codes (docs/reliability.md), chosen by the error's class in the tree of
+sim/errors.py: 0 done; 1 runtime failure (an instrument error, a failed run, `bench check`
+found problems; an unexpected exception is reported as an internal error); 2 usage or
+configuration error (a bad argument, file or value: the message names it); 3 stopped by a
+limit (a plan the rig's limits refuse, or a run aborted by the safety supervisor); 130
+interrupted (Ctrl-C, SIGTERM).  Errors are one line on stderr; `--debug` adds the traceback.
 """
 
 from __future__ import annotations
