@@ -3,7 +3,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 DEBS := socat mbpoll chromium tmux
 
-.PHONY: setup system-deps demo test bench paper soak
+.PHONY: setup system-deps demo test check bench paper soak
 
 $(VENV)/.installed: pyproject.toml
 	python3 -m venv $(VENV)
@@ -36,6 +36,13 @@ paper: setup
 
 test: setup
 	$(PY) -m pytest -q
+
+# Static checks (CI runs them before the tests): lint and import order, the layer
+# contract bench -> procedures -> drivers -> sim, types of sim/, drivers/, procedures/.
+check: $(VENV)/.installed
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/lint-imports
+	$(VENV)/bin/mypy
 
 bench: setup
 	$(PY) benchmarks/bench_sim.py

@@ -14,6 +14,7 @@ from importlib import metadata
 from pathlib import Path
 
 from sim.discrepancy import analyze_steps
+from sim.errors import ConfigurationError
 
 from .reports import write_analysis_html
 from .sources import load_source
@@ -30,13 +31,12 @@ def default_out_dir(source: Path) -> Path:
 def _guess(source: Path, rig: Path | None) -> tuple[dict | None, float | None]:
     """Starting values (None: from the data) and the rig file's friction_v_ref_m_per_s
     (None: the file names none), at which a velocity-dependent friction is stated."""
-    from .config import load_rig, parse_rig
+    from .config import load_rig, parse_rig, rig_toml
     if rig is not None:
         r = load_rig(rig)
     elif source.is_dir() and (source / "run.json").exists():
-        from .cli import _rig_toml
         from .storage import RunStore
-        r = parse_rig({"rig": _rig_toml(RunStore.open(source).metadata["rig"])}, f"{source}/run.json")
+        r = parse_rig({"rig": rig_toml(RunStore.open(source).metadata["rig"])}, f"{source}/run.json")
     else:
         return None, None     # a foreign file: start from the data themselves
     v_ref = (r.model or {}).get("friction_v_ref_m_per_s")
@@ -55,11 +55,11 @@ def analyze_source(source: Path, out_dir: Path | None = None, rig: Path | None =
     """Analyse SOURCE, write ``analysis.json`` (and ``analysis.html``) to ``out_dir``; return the dict."""
     source = Path(source)
     if not source.exists():
-        raise ValueError(f"{source}: no such run directory or file")
+        raise ConfigurationError(f"{source}: no such run directory or file")
     src = load_source(source)
     steps, rejected = list(src.steps), [dict(step=r.step, reason=r.reason) for r in src.rejected]
     if not steps:
-        raise ValueError(f"{source}: no usable steps ({len(rejected)} rejected"
+        raise ConfigurationError(f"{source}: no usable steps ({len(rejected)} rejected"
                          + (f", first: {rejected[0]['step']}: {rejected[0]['reason']}" if rejected else "") + ")")
     guess, v_ref = _guess(source, Path(rig) if rig else None)
     log.info("analysing %d steps of %s (%d rejected)", len(steps), source, len(rejected))

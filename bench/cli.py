@@ -1,10 +1,11 @@
 """Command line: `bench <command>`.  The application configures logging; libraries don't.
 
-Exit codes (docs/reliability.md): 0 done; 1 runtime failure (an instrument error, a failed
-run, `bench check` found problems, an unexpected error); 2 usage or configuration error
-(a bad argument, file or value: the message names it); 3 stopped by a limit (a plan the
-rig's limits refuse, or a run aborted by the safety supervisor); 130 interrupted (Ctrl-C,
-SIGTERM).  Errors are one line on stderr; `--debug` adds the traceback.
+Exit codes (docs/reliability.md), chosen by the error's class in the tree of
+sim/errors.py: 0 done; 1 runtime failure (an instrument error, a failed run, `bench check`
+found problems; an unexpected exception is reported as an internal error); 2 usage or
+configuration error (a bad argument, file or value: the message names it); 3 stopped by a
+limit (a plan the rig's limits refuse, or a run aborted by the safety supervisor); 130
+interrupted (Ctrl-C, SIGTERM).  Errors are one line on stderr; `--debug` adds the traceback.
 """
 
 from __future__ import annotations
@@ -16,6 +17,9 @@ import time
 from enum import IntEnum
 from pathlib import Path
 
+from sim.errors import BenchError, ConfigurationError, EnvelopeError, LimitError, RunDirectoryError
+
+from . import __version__
 from .terminal import Progress, end_line, setup_logging
 
 log = logging.getLogger(__name__)
@@ -45,7 +49,7 @@ def cmd_frf(args) -> int:
     from sim.shooting import frf_shooting
 
     if args.points < 1:
-        raise ValueError(f"--points must be >= 1, got {args.points}")
+        raise ConfigurationError(f"--points must be >= 1, got {args.points}")
     betas = np.linspace(args.beta_min, args.beta_max, args.points)
     prog = Progress(f"FRF gamma0={args.gamma0} n={args.n} ({args.engine})")
     if args.engine == "shooting":
@@ -94,25 +98,27 @@ def cmd_dry_run(args) -> int:
 
 def _run(args, resume: bool) -> int:
     from .session import run_plan
-    from .storage import RunStore
+    from .storage import RunStatus, RunStore
 
     if resume:
-        from .config import parse_plan, parse_rig
+        from .config import parse_plan, parse_rig, plan_toml, rig_toml
         store = RunStore.open(Path(args.run))
         meta, acc = store.metadata, store.account()
-        if acc.complete and meta.get("status") == "completed":
+        if acc.complete and meta.get("status") == RunStatus.COMPLETED:
             print(f"resume: nothing to do: the run completed and its steps are all there "
                   f"({acc.summary()})")
             return ExitCode.OK
         print(f"resume: {acc.resume_text()}" if acc.missing or acc.damaged else
               f"resume: every planned step is there; finishing the run (it ended '{meta.get('status', '?')}')",
               flush=True)
-        plan = parse_plan({"plan": _plan_toml(meta["plan"])}, f"{args.run}/run.json")
-        rig = parse_rig({"rig": _rig_toml(meta["rig"])}, f"{args.run}/run.json")
+        plan = parse_plan({"plan": plan_toml(meta["plan"])}, f"{args.run}/run.json")
+        rig = parse_rig({"rig": rig_toml(meta["rig"])}, f"{args.run}/run.json")
         out, seed = Path(args.run), meta.get("sim_seed")
     else:
         plan, rig = _load_configs(args)
         out, seed = Path(args.out), args.seed
+    if rig.simulated:
+        _warm_up()
     watch = _start_watch(out, args)
     try:
         store = run_plan(plan, rig, out, resume=resume, progress=Progress("stepped sine"), sim_seed=seed)
@@ -123,10 +129,19 @@ def _run(args, resume: bool) -> int:
         _say_output_state(out)
     meta = store.metadata
     print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/")
-    if meta["status"] == "completed" and not getattr(args, "no_report", False):
+    if meta["status"] == RunStatus.COMPLETED and not getattr(args, "no_report", False):
         from .reports import write_report
         print(f"report: {write_report(out)}")
-    return {"completed": ExitCode.OK, "aborted": ExitCode.LIMIT}.get(meta["status"], ExitCode.FAILURE)
+    return {RunStatus.COMPLETED: ExitCode.OK, RunStatus.ABORTED: ExitCode.LIMIT}.get(meta["status"], ExitCode.FAILURE)
+
+
+def _warm_up() -> None:
+    """Compile the simulation kernels first if they are not (so compiling never counts in
+    the progress line's ETA), with a one-line notice."""
+    from .warmup import kernels_warm, warm_up
+    if not kernels_warm():
+        log.warning("compiling the simulation kernels (first run only; `make setup` does it ahead)")
+        log.info("kernels compiled in %.0f s", warm_up())
 
 
 def _say_output_state(out: Path) -> None:
@@ -162,18 +177,18 @@ def _watch_server(run_dir: Path, host: str, port: int):
     try:
         return WatchServer(run_dir, host, port)
     except OSError as e:       # port taken, no such interface, privileged port
-        raise ValueError(f"cannot serve the watch page on {host}:{port}: {e}") from e
+        raise ConfigurationError(f"cannot serve the watch page on {host}:{port}: {e}") from e
 
 
 def cmd_watch(args) -> int:
     """Serve the live page of a run directory until Ctrl-C."""
     run_dir = Path(args.run)
     if run_dir.exists() and not run_dir.is_dir():
-        raise ValueError(f"{run_dir}: not a run directory (a file)")
+        raise ConfigurationError(f"{run_dir}: not a run directory (a file)")
     absent = not run_dir.is_dir()
     if absent and not run_dir.absolute().parent.is_dir():      # a mistyped path, not a run to come
-        raise ValueError(f"{run_dir}: no such run directory, nor its parent {run_dir.absolute().parent} "
-                         f"(bench watch waits for a run directory to appear inside an existing one)")
+        raise ConfigurationError(f"{run_dir}: no such run directory, nor its parent {run_dir.absolute().parent} "
+                                 f"(bench watch waits for a run directory to appear inside an existing one)")
     if absent:        # started before the run: the page shows "waiting" until the run creates it
         print(f"waiting for {run_dir} to appear ... (Ctrl-C stops)", flush=True)
     elif not (run_dir / "run.json").is_file():
@@ -205,30 +220,6 @@ def _add_watch_options(s) -> None:
     s.add_argument("--watch-port", type=int, default=0, help="port of the page (default: any free one)")
     s.add_argument("--watch-host", default="127.0.0.1",
                    help="interface of the page (default 127.0.0.1; others only when given)")
-
-
-def _plan_toml(p: dict) -> dict:
-    """The stored plan back into the TOML layout (the stored grid is used verbatim)."""
-    keys = ("settle_cycles", "min_settle_s", "measure_cycles", "min_measure_s", "control_cycles", "force_tolerance",
-            "max_iterations", "harmonics", "ramp_s", "min_sample_rate_Hz", "max_extra_settle_blocks")
-    out = {"name": p["name"], "levels_N": list(p["levels_N"]), "infeasible": p.get("infeasible", "refuse"),
-           "adaptive_per_sweep": p.get("adaptive_per_sweep", 0),
-           "frequencies": {"list_Hz": list(p["freqs_Hz"]), "direction": p["direction"]},
-           "control": {k: p[k] for k in keys if k in p}}
-    if p.get("limits"):
-        out["limits"] = {k: v for k, v in p["limits"].items() if v is not None}   # None: the rig's
-    return out
-
-
-def _rig_toml(r: dict) -> dict:
-    return {"name": r["name"], "notes": r["notes"], "simulated": r["simulated"],
-            "instruments": {"generator": r["generator_url"], "sensor": r["sensor_url"], "daq": r["daq_url"]},
-            "calibration": {k: r[k] for k in ("force_V_per_N", "accel_V_per_m_s2", "disp_V_per_m",
-                                              "amp_gain_N_per_V")},
-            "limits": r["limits"],
-            "expected": {"mass_kg": r["expected_mass_kg"], "x_s_m": r["expected_x_s_m"],
-                         "F_s_N": r["expected_F_s_N"], "n": r["expected_n"]},
-            **({"model": r["model"]} if r["model"] else {})}
 
 
 def cmd_run(args) -> int:
@@ -270,7 +261,7 @@ def cmd_identify(args) -> int:
     from procedures.online_id import MAX_HARMONICS
     from sim.identify import identify_results
 
-    from .config import DEFAULTS, load_rig, parse_rig
+    from .config import DEFAULTS, load_rig, parse_rig, rig_toml
     from .sources import load_source
     from .storage import RunStore
 
@@ -279,13 +270,13 @@ def cmd_identify(args) -> int:
         raise FileNotFoundError(2, "no such file or directory (expected a run directory or a UFF58 file)", str(source))
     src = load_source(source)
     if src.kind == "run":
-        rig = parse_rig({"rig": _rig_toml(src.metadata["rig"])}, f"{source}/run.json")
+        rig = parse_rig({"rig": rig_toml(src.metadata["rig"])}, f"{source}/run.json")
     else:
         rig = load_rig(Path(args.rig) if args.rig else DEFAULTS / "sim_rig.toml")
     for r in src.rejected:
         print(f"step {r.step} rejected: {r.reason}")
     if not src.steps:
-        raise ValueError(f"{source}: no steps with force, acceleration and displacement to identify from")
+        raise ConfigurationError(f"{source}: no steps with force, acceleration and displacement to identify from")
     guess = dict(F_s_N=rig.expected_F_s_N, x_s_m=rig.expected_x_s_m, n=rig.expected_n,
                  mass_kg=rig.expected_mass_kg)
     est = identify_results([s.harmonics for s in src.steps], guess, MAX_HARMONICS).estimate
@@ -356,7 +347,7 @@ def cmd_twins(args) -> int:
     from .config import DEFAULTS, load_rig
     rig = load_rig(Path(args.rig) if args.rig else DEFAULTS / "sim_rig.toml")
     if not rig.simulated:
-        raise ValueError(f"{args.rig}: not a simulated rig (simulated = true is needed)")
+        raise ConfigurationError(f"{args.rig}: not a simulated rig (simulated = true is needed)")
     run_standalone(SimulatedRig(RigModel.from_dict(rig.model)), args.host, serial_ports=args.serial)
     return 0
 
@@ -405,6 +396,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="bench", description=DESCRIPTION, epilog=EPILOG)
     _add_common(p, argparse.SUPPRESS)
     p.set_defaults(verbose=0, debug=False)
+    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("paper", help="redraw the seed paper's numerical figures (PNG + CSV)")
@@ -517,23 +509,26 @@ def _with_common(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     return p
 
 
-def _is(e: BaseException, module: str, name: str) -> bool:
-    """isinstance without importing: a module that raised ``e`` is loaded already."""
-    cls = getattr(sys.modules.get(module), name, None)
-    return cls is not None and isinstance(e, cls)
+# OSErrors about a path the user named (a missing file, a directory where a file goes):
+# usage errors.  Any other OSError is a runtime failure (a full disk, a lost network).
+_PATH_ERRORS = (FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError, PermissionError)
 
 
 def _exit_code(e: BaseException) -> ExitCode:
+    """The documented exit code of an exception, by its place in the error tree
+    (sim/errors.py, decision record 0027)."""
     if isinstance(e, KeyboardInterrupt):
         return ExitCode.INTERRUPTED
-    if _is(e, "procedures.safety", "LimitExceeded") or _is(e, "bench.session", "EnvelopeError"):
+    if isinstance(e, (LimitError, EnvelopeError)):
         return ExitCode.LIMIT
-    if _is(e, "drivers._errors", "InstrumentError"):
-        return ExitCode.FAILURE
-    if isinstance(e, (ValueError, FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError,
-                      PermissionError, UnicodeDecodeError)):
+    if isinstance(e, (ConfigurationError, RunDirectoryError, _PATH_ERRORS)):
         return ExitCode.USAGE
-    return ExitCode.FAILURE
+    return ExitCode.FAILURE           # InstrumentError, another BenchError, a failure, a bug
+
+
+def _internal(e: BaseException) -> bool:
+    """A bug (or a library's error nobody translated), not an error raised on purpose."""
+    return not isinstance(e, (BenchError, KeyboardInterrupt, OSError))
 
 
 def _one_line(e: BaseException) -> str:
@@ -544,9 +539,12 @@ def _one_line(e: BaseException) -> str:
         return f"{where}: {e.strerror}" if where else e.strerror
     text = str(e).strip().splitlines()
     first = text[0] if text else ""
+    named = f"{type(e).__name__}: {first}" if first else type(e).__name__
+    if _internal(e):
+        return f"internal error ({named})"
     if _exit_code(e) in (ExitCode.USAGE, ExitCode.LIMIT) and first:
         return first
-    return f"{type(e).__name__}: {first}" if first else type(e).__name__
+    return named
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -562,8 +560,9 @@ def main(argv: list[str] | None = None) -> int:
         end_line()
         if args.debug:
             log.exception("bench %s failed", args.command)
-        print(f"bench {args.command}: {'error: ' if code != ExitCode.INTERRUPTED else ''}{_one_line(e)}"
-              + ("" if args.debug or code == ExitCode.INTERRUPTED else " (--debug shows the traceback)"),
+        hint = ("" if args.debug or code == ExitCode.INTERRUPTED else
+                ", rerun with --debug for the traceback" if _internal(e) else " (--debug shows the traceback)")
+        print(f"bench {args.command}: {'error: ' if code != ExitCode.INTERRUPTED else ''}{_one_line(e)}{hint}",
               file=sys.stderr)
         return code
     finally:

@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from procedures.plan import Limits, Plan, Rig, StepSpec
+from procedures.plan import Limits, Plan, Rig
+from sim.errors import ConfigurationError
 
 log = logging.getLogger(__name__)
 
@@ -45,8 +46,7 @@ KEYS = {
 }
 
 
-class ConfigError(ValueError):
-    """A configuration value is missing, unknown or out of range."""
+ConfigError = ConfigurationError     # a configuration value is missing, unknown or out of range
 
 
 class _Section:
@@ -122,7 +122,7 @@ class _Section:
             raise ConfigError(f"{self.where(key)}: must be true or false, got {v!r}")
         return v
 
-    def table(self, key) -> "_Section":
+    def table(self, key) -> _Section:
         self.used.add(key)
         path = f"{self.path}.{key}" if self.path else key
         return _Section(self.source, path, self.data.get(key, {}), KEYS.get(path))
@@ -310,3 +310,28 @@ def parse_rig(data: dict, source: str = "rig") -> Rig:
     exp.done()
     r.done()
     return rig
+
+
+def plan_toml(p: dict) -> dict:
+    """The stored plan back into the TOML layout (the stored grid is used verbatim)."""
+    keys = ("settle_cycles", "min_settle_s", "measure_cycles", "min_measure_s", "control_cycles", "force_tolerance",
+            "max_iterations", "harmonics", "ramp_s", "min_sample_rate_Hz", "max_extra_settle_blocks")
+    out = {"name": p["name"], "levels_N": list(p["levels_N"]), "infeasible": p.get("infeasible", "refuse"),
+           "adaptive_per_sweep": p.get("adaptive_per_sweep", 0),
+           "frequencies": {"list_Hz": list(p["freqs_Hz"]), "direction": p["direction"]},
+           "control": {k: p[k] for k in keys if k in p}}
+    if p.get("limits"):
+        out["limits"] = {k: v for k, v in p["limits"].items() if v is not None}   # None: the rig's
+    return out
+
+
+def rig_toml(r: dict) -> dict:
+    """The stored rig (run.json) back into the TOML layout."""
+    return {"name": r["name"], "notes": r["notes"], "simulated": r["simulated"],
+            "instruments": {"generator": r["generator_url"], "sensor": r["sensor_url"], "daq": r["daq_url"]},
+            "calibration": {k: r[k] for k in ("force_V_per_N", "accel_V_per_m_s2", "disp_V_per_m",
+                                              "amp_gain_N_per_V")},
+            "limits": r["limits"],
+            "expected": {"mass_kg": r["expected_mass_kg"], "x_s_m": r["expected_x_s_m"],
+                         "F_s_N": r["expected_F_s_N"], "n": r["expected_n"]},
+            **({"model": r["model"]} if r["model"] else {})}

@@ -18,10 +18,15 @@ skip a damaged or half-missing step with a warning naming the file and why, and 
 :meth:`RunStore.check` lists every problem; :meth:`RunStore.set_aside_damaged` moves a
 damaged step's files to ``<run>/damaged/<time>/`` (never deleting) so that resume measures
 it again.  Steps written before checksums existed are read with the structural checks only.
+
+run.json and every step file carry a ``format_version`` (docs/run-format.md); files without
+one are version 1, and a version newer than this code reads is refused with a message
+naming the file, never taken for damage.
 """
 
 from __future__ import annotations
 
+import enum
 import hashlib
 import io
 import json
@@ -30,16 +35,35 @@ import os
 import tempfile
 import zipfile
 from dataclasses import dataclass, fields
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
+from sim.errors import RunDirectoryError
+from sim.step_result import STEP_FORMAT_VERSION, StepResult, check_step_version
+
 log = logging.getLogger(__name__)
 
 
+# run.json's ``format_version`` (docs/run-format.md; absent = 1, the layout before the
+# field existed).  Step files carry their own: sim.step_result.STEP_FORMAT_VERSION.
+RUN_FORMAT_VERSION = 1
+
+
+class RunStatus(enum.StrEnum):
+    """``status`` in run.json (stored as these strings)."""
+
+    RUNNING = "running"
+    COMPLETED = "completed"
+    ABORTED = "aborted"                    # stopped by a safety limit
+    INTERRUPTED = "interrupted"            # Ctrl-C, SIGTERM, a stop request
+    INSTRUMENT_ERROR = "instrument error"
+    FAILED = "failed"                      # any other error
+
+
 def now_iso() -> str:
-    return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
 
 
 def _fsync_dir(path: Path) -> None:
@@ -50,7 +74,7 @@ def _fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
-def _atomic_write(path: Path, write) -> None:
+def atomic_write(path: Path, write) -> None:
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as fh:
@@ -79,7 +103,7 @@ def _json_default(o):
 
 def write_json(path: Path, obj) -> None:
     data = json.dumps(obj, indent=1, default=_json_default).encode()
-    _atomic_write(path, lambda fh: fh.write(data))
+    atomic_write(path, lambda fh: fh.write(data))
 
 
 def _sha256(data: bytes) -> str:
@@ -92,14 +116,13 @@ def _canonical(obj) -> bytes:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=_json_default).encode()
 
 
-class RunDirError(ValueError):
-    """The directory is not a readable run directory (missing, or run.json damaged)."""
+RunDirError = RunDirectoryError    # not a readable run directory (missing, or run.json damaged)
 
 
-class DamagedStep(ValueError):
+class DamagedStep(RunDirectoryError):
     """A completed step's files are missing, truncated or fail their checksum."""
 
-    def __init__(self, problem: "StepProblem"):
+    def __init__(self, problem: StepProblem):
         super().__init__(str(problem))
         self.problem = problem
 
@@ -130,25 +153,29 @@ class RunStore:
 
     # ------------------------------------------------------------------ life cycle
     @classmethod
-    def create(cls, path: Path, metadata: dict) -> "RunStore":
+    def create(cls, path: Path, metadata: dict) -> RunStore:
         path = Path(path)
         if path.exists() and any(path.iterdir()):
             raise FileExistsError(f"run directory {path} exists and is not empty; "
                                   f"use 'bench resume {path}' or choose another --out")
         (path / "steps").mkdir(parents=True, exist_ok=True)
         store = cls(path)
-        write_json(path / "run.json", dict(metadata, status="running", started=now_iso()))
+        write_json(path / "run.json", dict(metadata, format_version=RUN_FORMAT_VERSION, status=RunStatus.RUNNING,
+                                           started=now_iso()))
         store.event("start")
         return store
 
     @classmethod
-    def open(cls, path: Path) -> "RunStore":
+    def open(cls, path: Path) -> RunStore:
         store = cls(path)
         if not store.path.exists():
             raise RunDirError(f"{path}: no such directory (expected a run directory made by 'bench run')")
         if not (store.path / "run.json").is_file():
             raise RunDirError(f"{path}: not a run directory (no run.json; expected a directory made by 'bench run')")
-        store.metadata   # noqa: B018 - a damaged run.json is named now, not deep inside a reader
+        version = store.metadata.get("format_version", 1)   # a damaged run.json is named now, not deep inside a reader
+        if not isinstance(version, int) or isinstance(version, bool) or version > RUN_FORMAT_VERSION:
+            raise RunDirError(f"{store.path / 'run.json'}: run format version {version!r}, written by a newer "
+                              f"guideway-bench (this one reads versions up to {RUN_FORMAT_VERSION}); update to read it")
         return store
 
     @property
@@ -169,7 +196,7 @@ class RunStore:
     def update(self, **fields) -> None:
         write_json(self.path / "run.json", dict(self.metadata, **fields))
 
-    def finish(self, status: str, **fields) -> None:
+    def finish(self, status: RunStatus, **fields) -> None:
         self.update(status=status, ended=now_iso(), **fields)
         self.event("end", status=status)
 
@@ -199,13 +226,14 @@ class RunStore:
         return out
 
     # ------------------------------------------------------------------ steps: writing
-    def write_step(self, key: str, result: dict, raw: dict[str, np.ndarray]) -> None:
+    def write_step(self, key: str, result: StepResult, raw: dict[str, np.ndarray]) -> None:
         buf = io.BytesIO()
         np.savez(buf, **raw)
         npz = buf.getvalue()
-        _atomic_write(self.steps_dir / f"{key}.npz", lambda fh: fh.write(npz))
+        atomic_write(self.steps_dir / f"{key}.npz", lambda fh: fh.write(npz))
         plain = json.loads(json.dumps(result, default=_json_default))    # what a reader will see
         plain.pop("integrity", None)
+        plain["format_version"] = STEP_FORMAT_VERSION
         plain["integrity"] = {"json_sha256": _sha256(_canonical(plain)), "npz_sha256": _sha256(npz),
                               "npz_bytes": len(npz)}
         write_json(self.steps_dir / f"{key}.json", plain)
@@ -217,7 +245,7 @@ class RunStore:
         """The steps' JSON files present (intact or not), in key order."""
         return sorted(self.steps_dir.glob("*.json")) if self.steps_dir.is_dir() else []
 
-    def verify_step(self, key: str) -> dict:
+    def verify_step(self, key: str) -> StepResult:
         """The step's result after checking both its files (JSON content, the .npz's size
         and checksum); raises :class:`DamagedStep` naming the file and why."""
         jp, zp = self.steps_dir / f"{key}.json", self.steps_dir / f"{key}.npz"
@@ -235,7 +263,7 @@ class RunStore:
         """Keys of the completed steps whose files are intact (a damaged step is not done)."""
         return {r["key"] for r in self.results(warn=False)}
 
-    def results(self, *, warn: bool = True) -> list[dict]:
+    def results(self, *, warn: bool = True) -> list[StepResult]:
         """Completed steps' results, in schedule order; a damaged or half-missing step is
         skipped with a warning naming the file and why (and listed in ``self.problems``)."""
         out, self.problems = [], []
@@ -377,7 +405,7 @@ def _json_reason(e: json.JSONDecodeError) -> str:
     return f"{cut}not valid JSON ({e.msg} at line {e.lineno} column {e.colno}, file of {len(e.doc)} characters)"
 
 
-def _read_step_json(path: Path, key: str) -> tuple[dict, dict | None]:
+def _read_step_json(path: Path, key: str) -> tuple[StepResult, dict | None]:
     def bad(kind, reason):
         return DamagedStep(StepProblem(key, path, kind, reason))
     try:
@@ -406,6 +434,7 @@ def _read_step_json(path: Path, key: str) -> tuple[dict, dict | None]:
             raise bad("checksum", "checksum mismatch: the content differs from what was written")
     if obj.get("key") != key:
         raise bad("corrupt", f"the result inside is for step {obj.get('key')!r}, not {key!r}")
+    check_step_version(obj, str(path))       # a newer format is refused, not taken for damage
     return obj, integrity
 
 

@@ -27,7 +27,7 @@ import time
 PROJECT = ("bench", "procedures", "drivers", "sim")     # the loggers -v speaks for
 
 _lock = threading.RLock()          # one writer at a time: progress redraws and log records
-_active: "Progress | None" = None  # the progress line now on the terminal, if any
+_active: Progress | None = None  # the progress line now on the terminal, if any
 
 
 def columns(stream) -> int:

@@ -17,11 +17,30 @@ from ._can_transport import CanTcpBridge, TcpCanBus, open_can_bus
 from ._daq import CanFdDaq, plan_block
 from ._daq_codec import dbc_path
 from ._eddy_sensor import ModbusEddySensor
-from ._errors import (BlockIntegrityError, ConnectionLost, FrameError, InstrumentError,
-                      InstrumentTimeout, ModbusError, ProtocolError, SafetyInterlock, ScpiError)
+from ._errors import (
+    BlockIntegrityError,
+    ConnectionLost,
+    FrameError,
+    InstrumentError,
+    InstrumentTimeout,
+    ModbusError,
+    ProtocolError,
+    SafetyInterlock,
+    ScpiError,
+)
 from ._function_generator import ScpiFunctionGenerator
-from ._interfaces import (Channel, ChannelSpec, Daq, DaqBlock, DisplacementSensor,
-                          FunctionGenerator, GapReading, Identity, SensorStatus, TargetMaterial)
+from ._interfaces import (
+    Channel,
+    ChannelSpec,
+    Daq,
+    DaqBlock,
+    DisplacementSensor,
+    FunctionGenerator,
+    GapReading,
+    Identity,
+    SensorStatus,
+    TargetMaterial,
+)
 from ._twins import Twins, run_standalone, start_twins
 from ._visa_transport import VisaTransport, is_visa_resource
 

@@ -33,6 +33,7 @@ import re
 import socket
 import time
 from types import TracebackType
+from typing import Any
 
 import serial
 
@@ -67,6 +68,7 @@ class ScpiFunctionGenerator:
         self.drive_limit_V = drive_limit_V
         self._twin: bool | None = None
         self._in_step = True
+        self._port: Any           # pyserial's port, or the VISA transport with the same surface
         try:
             if is_visa_resource(url):     # USB-TMC, VXI-11, HiSLIP, VISA socket: pyvisa-py
                 self._port = VisaTransport(url, timeout=timeout_s)
@@ -179,7 +181,7 @@ class ScpiFunctionGenerator:
 
     def read_errors(self) -> list[tuple[int, str]]:
         """Drain the instrument's error queue: [(code, message), ...], oldest first."""
-        errors = []
+        errors: list[tuple[int, str]] = []
         for _ in range(MAX_ERRORS_DRAINED):
             reply = self.query("SYST:ERR?")
             code_text, _, message = reply.partition(",")
@@ -348,7 +350,7 @@ class ScpiFunctionGenerator:
         except Exception as exc:  # noqa: BLE001
             log.warning("closing %s: %s", self.url, exc)
 
-    def __enter__(self) -> "ScpiFunctionGenerator":
+    def __enter__(self) -> ScpiFunctionGenerator:
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,

@@ -25,6 +25,7 @@ from __future__ import annotations
 import re
 import socket
 import time
+from typing import Any
 
 VISA_RESOURCE = re.compile(
     r"""^(?:
@@ -62,7 +63,7 @@ class VisaTransport:
         self._timeout_code = constants.StatusCode.error_timeout
         try:
             self._rm = pyvisa.ResourceManager("@py")
-            self._res = self._rm.open_resource(resource, open_timeout=max(1, int(self._timeout * 1000)))
+            self._res: Any = self._rm.open_resource(resource, open_timeout=max(1, int(self._timeout * 1000)))
         except (pyvisa.errors.Error, ValueError, OSError, Exception) as exc:  # noqa: BLE001 - backends raise anything
             raise ConnectionError(f"cannot open VISA resource {resource!r}: {exc}") from exc
         self._res.read_termination = "\n"        # a read returns at the end of a reply line ...

@@ -45,7 +45,7 @@ class Plan:
         down = ("down", tuple(reversed(self.freqs_Hz)))
         return {"up": [up], "down": [down], "both": [up, down]}[self.direction]
 
-    def schedule(self) -> list["StepSpec"]:
+    def schedule(self) -> list[StepSpec]:
         """Every step of the test in order; a step's key identifies it across resumes."""
         steps, index = [], 0
         skip = set(self.skip)

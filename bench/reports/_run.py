@@ -14,7 +14,6 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-
 from ..storage import Accounting, RunDirError, RunStore
 from ._identification import IdentificationData, identification_data
 from ._model import ModelComparison, model_comparison

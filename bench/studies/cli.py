@@ -6,19 +6,21 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
+from sim.errors import ConfigurationError
+
 log = logging.getLogger(__name__)
 
 
 def _floats(text: str) -> tuple[float, ...]:
     """"0.5,1.5" or "0.1:0.9:9" (start:stop:count, linear)."""
     import numpy as np
-    if text.count(":") == 2:
-        a, b, k = text.split(":")
-        return tuple(float(x) for x in np.round(np.linspace(float(a), float(b), int(k)), 12))
     try:
+        if text.count(":") == 2:
+            a, b, k = text.split(":")
+            return tuple(float(x) for x in np.round(np.linspace(float(a), float(b), int(k)), 12))
         return tuple(float(x) for x in text.split(",") if x.strip())
     except ValueError:
-        raise ValueError(f"expected numbers like '0.5,1.5' or 'start:stop:count', got {text!r}") from None
+        raise ConfigurationError(f"expected numbers like '0.5,1.5' or 'start:stop:count', got {text!r}") from None
 
 
 def _dask_info(record: logging.LogRecord) -> bool:
@@ -90,7 +92,7 @@ def is_batch(args) -> bool:
 def cmd_analyze_batch(args, progress) -> int:
     _quiet_dask()
     if not args.out:
-        raise ValueError("analysing several sources needs --out DIR (the summary table and one report per source)")
+        raise ConfigurationError("analysing several sources needs --out DIR (the summary table and one report per source)")
     from .batch import ANALYZE, IDENTIFY, analyze_batch
     out = analyze_batch([Path(s) for s in args.sources], Path(args.out), rig=Path(args.rig) if args.rig else None,
                         function=IDENTIFY if args.identify_only else ANALYZE, scheduler=args.scheduler,

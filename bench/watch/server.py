@@ -29,6 +29,7 @@ from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
+from ..storage import RunStatus
 from . import stop
 from .snapshot import RunReader
 
@@ -98,7 +99,7 @@ class WatchServer(ThreadingHTTPServer):
             self._plotly = _plotly_js()
         return self._plotly
 
-    def start(self) -> "WatchServer":
+    def start(self) -> WatchServer:
         """Serve from a daemon thread (beside a run in this process)."""
         self._thread = threading.Thread(target=self.serve_forever, name="bench-watch", daemon=True)
         self._thread.start()
@@ -189,7 +190,7 @@ class _Handler(BaseHTTPRequestHandler):
             return self._send_json(HTTPStatus.FORBIDDEN, {"error": "a valid stop token is needed "
                                                           "(the one printed with the page's URL)"})
         state = self.server.reader.snapshot()
-        if state.get("status") != "running" or state.get("process_gone"):
+        if state.get("status") != RunStatus.RUNNING or state.get("process_gone"):
             shown = "process gone" if state.get("process_gone") else state.get("status")
             return self._send_json(HTTPStatus.CONFLICT, {"error": f"the run is not running ({shown})"})
         try:

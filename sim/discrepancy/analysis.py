@@ -23,13 +23,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..identify import Identifier, displacement_harmonics, synthesize
+from ..errors import ConfigurationError
+from ..identify import Estimate, Identifier, displacement_harmonics, synthesize
 from .fit import Fit, Weights, fit, whitened
-from .gain import frf, heldout_error
+from .gain import frf
 from .models import BASE_PARAMS, EFFECTS, Data, Model
 from .rounding import interval_text
-from .terms import accelerance_pair, second_mode_phrase, speed_friction, speed_friction_phrase
 from .select import Selection, select, settle_final
+from .terms import accelerance_pair, second_mode_phrase, speed_friction, speed_friction_phrase
 
 log = logging.getLogger(__name__)
 
@@ -57,7 +58,7 @@ def data_from_steps(steps, harmonics: int = 9) -> Data:
     both motion channels with their inverse-variance weights (the friction along x,
     :func:`sim.identify.displacement_harmonics`)."""
     if not steps:
-        raise ValueError("no steps to analyse")
+        raise ConfigurationError("no steps to analyse")
     H = [s.harmonics for s in steps]
     K = min([harmonics] + [min(h.force.size, h.accel.size, h.disp.size) for h in H])
     Kf = max(K, max(min(h.force.size, h.accel.size, h.disp.size) for h in H))
@@ -91,7 +92,8 @@ def guess_from_data(d: Data) -> dict:
 
 def base_fit(steps, d: Data, guess: dict | None, harmonics: int) -> tuple[Fit, Weights]:
     starts = [guess] if guess else [dict(guess_from_data(d), n=n) for n in (0.5, 1.5, 2.5)]
-    best, best_ident = None, None
+    best: Estimate | None = None
+    best_ident: Identifier | None = None
     for g in starts:
         ident = Identifier(g, harmonics)
         for s in steps:
@@ -99,6 +101,7 @@ def base_fit(steps, d: Data, guess: dict | None, harmonics: int) -> tuple[Fit, W
         est = ident.fit(max_nfev=200)
         if best is None or est.cost < best.cost:
             best, best_ident = est, ident
+    assert best is not None and best_ident is not None      # at least one start
     v = best.values
     theta = np.array([math.log(v["F_s_N"]), math.log(v["x_s_m"]), v["n"], math.log(v["mass_kg"])])
     W = Weights.from_data(d, v["mass_kg"], friction_noise=best_ident.residual_noise(d.X.shape[1]))
@@ -358,7 +361,7 @@ def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, sourc
     steps = list(steps)
     d = data_from_steps(steps, harmonics)
     if np.unique(d.level).size < 2:
-        raise ValueError("need steps at two force levels at least (held-out checks leave one level out)")
+        raise ConfigurationError("need steps at two force levels at least (held-out checks leave one level out)")
     base, W = base_fit(steps, d, guess, harmonics)
     log.info("base fit: reduced chi2 %.2f", base.reduced_chi2)
     sel = settle_final(select(base, d, W), d)

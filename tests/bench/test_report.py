@@ -10,8 +10,15 @@ import shutil
 import numpy as np
 import pytest
 
-from bench.reports import (ID_PARAMS, UNSETTLED_RESIDUAL, identification_data, plot_identification, residual_ratio,
-                           write_analysis_html, write_report)
+from bench.reports import (
+    ID_PARAMS,
+    UNSETTLED_RESIDUAL,
+    identification_data,
+    plot_identification,
+    residual_ratio,
+    write_analysis_html,
+    write_report,
+)
 from bench.storage import RunStore
 from sim.rig import RigModel
 from sim.shooting import frf_shooting

@@ -10,14 +10,13 @@ import os
 import shutil
 import subprocess
 import sys
-import textwrap
 import time
 import uuid
 from pathlib import Path
 
 import pytest
 
-from bench.cli import build_parser, main
+from bench.cli import build_parser
 from bench.terminal import setup_logging
 
 REPO = Path(__file__).resolve().parents[2]

@@ -16,10 +16,9 @@ import socket
 import subprocess
 import sys
 import textwrap
-import time
-from datetime import datetime
 import urllib.error
 import urllib.request
+from datetime import datetime
 from pathlib import Path
 
 import pytest

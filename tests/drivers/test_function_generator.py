@@ -6,8 +6,7 @@ import time
 
 import pytest
 
-from drivers import (ConnectionLost, InstrumentTimeout, SafetyInterlock, ScpiError,
-                     ScpiFunctionGenerator)
+from drivers import ConnectionLost, InstrumentTimeout, SafetyInterlock, ScpiError, ScpiFunctionGenerator
 from drivers._scpi_twin_server import ScpiSerialServer
 from tests.drivers.expected_protocol import expected_scpi_protocol
 

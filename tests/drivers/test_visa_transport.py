@@ -9,8 +9,7 @@ import time
 
 import pytest
 
-from drivers import (ConnectionLost, ScpiError, ScpiFunctionGenerator, VisaTransport, is_visa_resource,
-                     start_twins)
+from drivers import ConnectionLost, ScpiError, ScpiFunctionGenerator, VisaTransport, is_visa_resource, start_twins
 from sim.rig import RigModel, SimulatedRig
 
 pytestmark = pytest.mark.timeout(60)

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from sim.discrepancy.analysis import interval_text     # what the verdict uses
+from sim.discrepancy.analysis import interval_text  # what the verdict uses
 from sim.discrepancy.rounding import last_digit, percent_text, round_to_interval, value_text
 
 
