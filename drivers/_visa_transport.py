@@ -63,9 +63,10 @@ class VisaTransport:
         self._timeout_code = constants.StatusCode.error_timeout
         try:
             self._rm = pyvisa.ResourceManager("@py")
-            self._res: Any = self._rm.open_resource(resource, open_timeout=max(1, int(self._timeout * 1000)))
+            res: Any = self._rm.open_resource(resource, open_timeout=max(1, int(self._timeout * 1000)))
         except (pyvisa.errors.Error, ValueError, OSError, Exception) as exc:  # noqa: BLE001 - backends raise anything
             raise ConnectionError(f"cannot open VISA resource {resource!r}: {exc}") from exc
+        self._res = res
         self._res.read_termination = "\n"        # a read returns at the end of a reply line ...
         self._res.write_termination = ""         # ... and writes send the driver's bytes as they are
         if self._res.resource_class == "SOCKET":
