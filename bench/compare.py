@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.errors import ConfigurationError
+
 from .sources import MeasuredStep, Source, load_source
 from .storage import write_json
 
@@ -109,22 +111,22 @@ def compare_sources(reference, other, tolerance: float = 0.02) -> dict:
     """The comparison as a dict (compare.json's schema).  ``reference``, ``other``: paths, or
     sources already read by :func:`bench.sources.load_source`."""
     if not (math.isfinite(tolerance) and tolerance > 0):
-        raise ValueError(f"--tolerance must be a positive fraction (0.02 = 2 %), got {tolerance!r}")
+        raise ConfigurationError(f"--tolerance must be a positive fraction (0.02 = 2 %), got {tolerance!r}")
     srcs = []
     for p in (reference, other):
         if isinstance(p, Source):
             srcs.append(p)
             continue
         if not Path(p).exists():
-            raise ValueError(f"{p}: no such run directory or file")
+            raise ConfigurationError(f"{p}: no such run directory or file")
         srcs.append(load_source(Path(p)))
     ref, oth = srcs
     for s in srcs:
         if not s.steps:
-            raise ValueError(f"{s.path}: no usable steps to compare")
+            raise ConfigurationError(f"{s.path}: no usable steps to compare")
     pairs = match_steps(ref.steps, oth.steps)
     if not pairs:
-        raise ValueError(f"no step of {ref.path} matches one of {oth.path} in force level (within "
+        raise ConfigurationError(f"no step of {ref.path} matches one of {oth.path} in force level (within "
                          f"{100 * LEVEL_TOL:g} %), frequency (within {100 * FREQ_TOL:g} %) and direction")
     steps = []
     for i, j in pairs:

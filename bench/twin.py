@@ -32,10 +32,12 @@ from pathlib import Path
 import numpy as np
 
 from sim.discrepancy.analysis import level_groups
+from sim.errors import ConfigurationError
 from sim.rig import RigModel
 
 from .analyze import _version, analyze_source
-from .config import DEFAULTS, MAX_FREQ_HZ, load_rig, parse_plan, parse_rig
+from .config import (DEFAULTS, MAX_FREQ_HZ, MAX_LEVEL_N, MIN_FREQ_HZ, MIN_LEVEL_N, load_rig, parse_plan, parse_rig,
+                     plan_toml, rig_toml)
 from .sources import Source, load_source
 from .storage import write_json
 
@@ -229,14 +231,21 @@ def plan_from_steps(src: Source) -> tuple[dict, list[str]]:
     levels_N = np.array([s.level_N for s in src.steps])
     group = level_groups(levels_N)
     levels = [_sig(float(np.median(levels_N[group == g])), 4) for g in np.unique(group)]
+    out = [lv for lv in levels if not MIN_LEVEL_N <= lv <= MAX_LEVEL_N]
+    if out:
+        notes.append(f"force levels {out} N outside the bench's range {MIN_LEVEL_N:g}-{MAX_LEVEL_N:g} N left out")
+        levels = [lv for lv in levels if MIN_LEVEL_N <= lv <= MAX_LEVEL_N]
     freqs: list[float] = []
     for f in sorted(s.freq_Hz for s in src.steps):
         if not freqs or f > freqs[-1] * (1 + FREQ_MERGE):
             freqs.append(f)
-    high = [f for f in freqs if f > MAX_FREQ_HZ]
-    if high:
-        notes.append(f"{len(high)} frequencies above the plan limit {MAX_FREQ_HZ:g} Hz left out")
-    freqs = [_sig(f) for f in freqs if f <= MAX_FREQ_HZ]
+    out = [f for f in freqs if not MIN_FREQ_HZ <= f <= MAX_FREQ_HZ]
+    if out:
+        notes.append(f"{len(out)} frequencies outside the bench's range {MIN_FREQ_HZ:g}-{MAX_FREQ_HZ:g} Hz left out")
+    freqs = [_sig(f) for f in freqs if MIN_FREQ_HZ <= f <= MAX_FREQ_HZ]
+    if not (levels and freqs):
+        raise ConfigurationError(f"{src.path}: no force level or frequency within the bench's range "
+                                 f"({MIN_LEVEL_N:g}-{MAX_LEVEL_N:g} N, {MIN_FREQ_HZ:g}-{MAX_FREQ_HZ:g} Hz)")
     dirs = {s.direction for s in src.steps if s.direction}
     if dirs:
         direction = "both" if dirs >= {"up", "down"} else dirs.pop()
@@ -293,13 +302,13 @@ def load_analysis(path: Path) -> dict:
     p = Path(path)
     f = p / "analysis.json" if p.is_dir() else p
     if not f.is_file():
-        raise ValueError(f"{path}: no analysis.json (run `bench analyze SOURCE` or leave --analysis out)")
+        raise ConfigurationError(f"{path}: no analysis.json (run `bench analyze SOURCE` or leave --analysis out)")
     try:
         d = json.loads(f.read_text())
     except json.JSONDecodeError as e:
-        raise ValueError(f"{f}: not valid JSON: {e}") from None
+        raise ConfigurationError(f"{f}: not valid JSON: {e}") from None
     if not str(d.get("schema", "")).startswith("guideway-bench/analysis/"):
-        raise ValueError(f"{f}: not an analysis.json (schema {d.get('schema')!r})")
+        raise ConfigurationError(f"{f}: not an analysis.json (schema {d.get('schema')!r})")
     return d
 
 
@@ -310,7 +319,7 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source
     source = Path(source)
     src = src if src is not None else load_source(source)
     if not src.steps:
-        raise ValueError(f"{source}: no usable steps to build a twin from")
+        raise ConfigurationError(f"{source}: no usable steps to build a twin from")
     params = analysis["base"]["parameters"] if plain else analysis["parameters"]
     causes = [] if plain else list(analysis.get("causes", []))
     notes: list[str] = []
@@ -320,8 +329,7 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source
 
     # rig file: the source's own, or defaults for a file
     if meta_rig:
-        from .cli import _rig_toml
-        rig = _rig_toml(meta_rig)
+        rig = rig_toml(meta_rig)
         rig.pop("model", None)
         rig["instruments"] = {}
     else:
@@ -363,8 +371,7 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source
 
     # plan
     if src.kind == "run":
-        from .cli import _plan_toml
-        plan = _plan_toml(src.metadata["plan"])
+        plan = plan_toml(src.metadata["plan"])
         plan["name"] = f"twin of {plan['name']}"
     else:
         plan, n = plan_from_steps(src)
@@ -464,7 +471,7 @@ def make_twin(source: Path, analysis_dir: Path | None = None, out: Path | None =
     build the twin and write rig.toml, plan.toml and twin.json to OUT."""
     source = Path(source)
     if not source.exists():
-        raise ValueError(f"{source}: no such run directory or file")
+        raise ConfigurationError(f"{source}: no such run directory or file")
     out = Path(out) if out else default_out_dir(source)
     src = src if src is not None else load_source(source)
     if analysis_dir is not None:
