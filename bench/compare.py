@@ -52,7 +52,7 @@ class Frf:
     sigma_accelerance: float
 
     @classmethod
-    def of(cls, s: MeasuredStep) -> "Frf":
+    def of(cls, s: MeasuredStep) -> Frf:
         h = s.harmonics
         P, A, X = complex(h.force[0]), complex(h.accel[0]), complex(h.disp[0])
         rel_P = h.sigma_force / abs(P)
@@ -187,7 +187,7 @@ def default_out_dir(other: Path) -> Path:
 
 def write_compare(reference: Path, other: Path, out: Path | None = None, tolerance: float = 0.02) -> tuple[dict, Path]:
     """Compare, write compare.json and compare.html to ``out``; (result, out)."""
-    from .reports._compare import write_compare_html
+    from .reports import write_compare_html
     result = compare_sources(reference, other, tolerance)
     out = Path(out) if out else default_out_dir(Path(other))
     out.mkdir(parents=True, exist_ok=True)

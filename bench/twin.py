@@ -36,8 +36,18 @@ from sim.errors import ConfigurationError
 from sim.rig import RigModel
 
 from .analyze import _version, analyze_source
-from .config import (DEFAULTS, MAX_FREQ_HZ, MAX_LEVEL_N, MIN_FREQ_HZ, MIN_LEVEL_N, load_rig, parse_plan, parse_rig,
-                     plan_toml, rig_toml)
+from .config import (
+    DEFAULTS,
+    MAX_FREQ_HZ,
+    MAX_LEVEL_N,
+    MIN_FREQ_HZ,
+    MIN_LEVEL_N,
+    load_rig,
+    parse_plan,
+    parse_rig,
+    plan_toml,
+    rig_toml,
+)
 from .sources import Source, load_source
 from .storage import write_json
 
