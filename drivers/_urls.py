@@ -5,20 +5,26 @@ A rig file or a stored ``run.json`` names the instruments by URL, and pyserial's
 adapters) opens far more than instruments: ``spy://PORT?file=PATH`` truncates PATH,
 ``hwgrep://`` opens whatever port matches, ``alt://`` picks a backend class.  So every URL
 is checked here, before anything is opened, against the schemes this bench uses; anything
-else raises :class:`ValueError` naming the URL and the allowed forms (the configuration
-adds the key: ``[rig.instruments] generator``).  See docs/decisions/0028-hardening.md.
+else raises :class:`ConfigurationError` (a ValueError) naming the URL and the allowed forms
+(the configuration adds the key: ``[rig.instruments] generator``).  See
+docs/decisions/0028-hardening.md.
 """
 
 from __future__ import annotations
 
 import urllib.parse
 
-# Generator: a serial device path (no scheme), a raw SCPI socket, or pyserial's loopback
-# (the driver tests use it).  VISA resource strings (``TCPIP0::host::INSTR``, opened
-# through pyvisa) are a separate transport: add their pattern to GENERATOR_FORMS and
-# accept them in check_generator_url before the pyserial branch.
+from sim.errors import ConfigurationError
+
+from ._visa_transport import is_visa_resource
+
+# Generator: a serial device path (no scheme), a raw SCPI socket, pyserial's loopback (the
+# driver tests use it), or a VISA resource string opened through pyvisa-py
+# (drivers/_visa_transport.py; an ASRL resource's port must be a device path too).
 GENERATOR_SCHEMES = ("socket", "loop")
-GENERATOR_FORMS = ("/dev/<serial port> (or COM<n>)", "socket://host:port", "loop://")
+GENERATOR_FORMS = ("/dev/<serial port> (or COM<n>)", "socket://host:port", "loop://",
+                   "a VISA resource (TCPIP0::host::5025::SOCKET, TCPIP0::host::inst0::INSTR, "
+                   "USB0::...::INSTR, ASRL/dev/<port>::INSTR, GPIB0::<n>::INSTR)")
 
 SENSOR_SCHEMES = ("modbus-tcp", "modbus-rtu")
 SENSOR_FORMS = ("modbus-tcp://host:port?unit=N", "modbus-rtu:///dev/<port>?baud=B&unit=N")
@@ -33,8 +39,8 @@ DAQ_FORMS = ("virtual:<channel>", "tcp://host:port", "<interface>:<channel> with
              + ", ".join(CAN_INTERFACES))
 
 
-def _refuse(url: str, what: str, forms) -> ValueError:
-    return ValueError(f"{url!r} is not an allowed {what} URL; allowed: {', '.join(forms)}")
+def _refuse(url: str, what: str, forms) -> ConfigurationError:
+    return ConfigurationError(f"{url!r} is not an allowed {what} URL; allowed: {', '.join(forms)}")
 
 
 def _is_device_path(path: str) -> bool:
@@ -45,6 +51,11 @@ def _is_device_path(path: str) -> bool:
 def check_generator_url(url: str) -> str:
     if not isinstance(url, str):
         raise _refuse(repr(url), "function generator", GENERATOR_FORMS)
+    if is_visa_resource(url):
+        board = url.strip()[4:-len("::INSTR")] if url.strip().upper().startswith("ASRL") else None
+        if board is not None and not _is_device_path(board):
+            raise ConfigurationError(f"{url!r}: an ASRL resource names a serial port (ASRL/dev/<port>::INSTR)")
+        return url
     if "://" not in url:
         if _is_device_path(url):
             return url
@@ -55,7 +66,7 @@ def check_generator_url(url: str) -> str:
     if scheme == "socket":
         parts = urllib.parse.urlsplit(url)
         if parts.hostname is None or parts.port is None:
-            raise ValueError(f"{url!r}: expected socket://host:port")
+            raise ConfigurationError(f"{url!r}: expected socket://host:port")
     return url
 
 
@@ -64,9 +75,9 @@ def check_sensor_url(url: str) -> str:
     if parts is None or parts.scheme not in SENSOR_SCHEMES:
         raise _refuse(url, "displacement sensor", SENSOR_FORMS)
     if parts.scheme == "modbus-tcp" and (parts.hostname is None or parts.port is None or parts.path not in ("", "/")):
-        raise ValueError(f"{url!r}: expected modbus-tcp://host:port")
+        raise ConfigurationError(f"{url!r}: expected modbus-tcp://host:port")
     if parts.scheme == "modbus-rtu" and (parts.netloc or not _is_device_path(parts.path)):
-        raise ValueError(f"{url!r}: expected modbus-rtu:///dev/<port> (a serial device path)")
+        raise ConfigurationError(f"{url!r}: expected modbus-rtu:///dev/<port> (a serial device path)")
     return url
 
 
@@ -78,12 +89,12 @@ def check_daq_url(url: str) -> str:
     if url.startswith("tcp://"):
         parts = urllib.parse.urlsplit(url)
         if parts.hostname is None or parts.port is None or parts.path or parts.query:
-            raise ValueError(f"{url!r}: expected tcp://host:port")
+            raise ConfigurationError(f"{url!r}: expected tcp://host:port")
         return url
     interface, sep, channel = url.partition(":")
     if not sep or not channel or interface not in CAN_INTERFACES:
         raise _refuse(url, "DAQ", DAQ_FORMS)
     if interface in CAN_SERIAL_INTERFACES and not _is_device_path(channel.split("@", 1)[0]):
-        raise ValueError(f"{url!r}: the {interface} interface takes a serial device path "
+        raise ConfigurationError(f"{url!r}: the {interface} interface takes a serial device path "
                          f"(/dev/<port>), not {channel!r}")
     return url

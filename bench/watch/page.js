@@ -72,7 +72,7 @@ function renderCurrent(s) {
     rows.push(["force", `${num(l.force_N, 4)} N, error ${pct2(l.force_error)}${ok}`]);
     rows.push(["control iterations", esc(l.control_iterations ?? "–")]);
     rows.push(["THD", `force ${pct(l.thd_force)} · acceleration ${pct(l.thd_accel)} · displacement ${pct(l.thd_disp)}`]);
-    rows.push(["drive", `${num(l.drive_Vpp)} Vpp`]);
+    rows.push(["drive", `${num(l.drive_V)} V amplitude`]);
   }
   $("current").innerHTML = rows.map(([k, v]) => `<tr><th>${k}</th><td>${v}</td></tr>`).join("");
 }
@@ -193,8 +193,32 @@ function render(s) {
   renderEvents(s);
 }
 
+function locked(why) {
+  // the run's data need the link's token: say so where the technician looks, and stop trying
+  const a = $("access");
+  a.innerHTML = `<b>No access to the run's data.</b> ${esc(why)}. It looks like ` +
+    `<code>http://127.0.0.1:PORT/?token=...</code>; the token changes each time the page is started.`;
+  a.hidden = false;
+  $("status").textContent = "token needed";
+  $("status").className = "badge locked";
+  $("conn").textContent = "not connected";
+  $("conn").className = "lost";
+  $("stop").disabled = true;
+  $("stop").title = "open the URL printed by bench (with ?token=...) to enable stop";
+}
+
+async function refused(es) {
+  // an event stream that ended on an HTTP error: ask the state endpoint why
+  try {
+    const r = await fetch("/api/state?token=" + encodeURIComponent(token));
+    if (r.status === 403) { if (es) es.close(); locked((await r.json()).error || "the server refused this link's token"); return; }
+  } catch (err) { /* the server is away: keep waiting for it */ }
+  setTimeout(connect, 2000);
+}
+
 function connect() {
-  const es = new EventSource("/api/stream");
+  if (!token) { refused(null); return; }           // the server says what is needed
+  const es = new EventSource("/api/stream?token=" + encodeURIComponent(token));
   es.onopen = () => { $("conn").textContent = "live"; $("conn").className = ""; };
   es.onmessage = (ev) => { try { render(JSON.parse(ev.data)); } catch (err) { console.error(err); } };
   es.addEventListener("bye", () => {
@@ -203,6 +227,7 @@ function connect() {
     $("conn").className = "lost";
   });
   es.onerror = () => {
+    if (es.readyState === EventSource.CLOSED) { refused(es); return; }   // an HTTP error, not a lost link
     if (es.readyState !== EventSource.OPEN && !$("conn").textContent.startsWith("server closed")) {
       $("conn").textContent = "connection lost: showing the last state, reconnecting…";
       $("conn").className = "lost";

@@ -1,16 +1,19 @@
 """The watch page's HTTP server (standard library ``ThreadingHTTPServer``).
 
-    GET  /                  the page (bench/watch/page.html)
+    GET  /                  the page (bench/watch/page.html); needs no token
     GET  /plotly.min.js     plotly's own bundle from the installed Python package (no CDN)
-    GET  /api/state         the run as JSON (bench.watch.snapshot)
-    GET  /api/stream        the same as server-sent events, pushed whenever the directory changes
+    GET  /api/state         the run as JSON (bench.watch.snapshot); needs ?token=
+    GET  /api/stream        the same as server-sent events, pushed whenever the directory
+                            changes; needs ?token=
     POST /api/stop          ask the run to stop safely; needs the header X-Stop-Token
 
 Binds to 127.0.0.1 unless another host is given explicitly (``::1`` too; any address off
-loopback is served with a warning).  The stop token is random per server
+loopback is served with a warning).  The token is random per server
 (``secrets.token_urlsafe``), printed with the URL (``?token=...``) and compared in
-constant time; reading needs no token.  Requests naming a foreign Host are refused while
-bound to loopback (a web page elsewhere cannot reach the server by DNS rebinding).
+constant time.  The page itself is answered without it, so opened from a link without the
+token (or an earlier server's) it can say what is needed, while the run's data are refused
+(403 with that message; decision record 0030).  Requests naming a foreign Host are refused
+while bound to loopback (a web page elsewhere cannot reach the server by DNS rebinding).
 
 Bounds (docs/decisions/0028-hardening.md): at most :data:`MAX_CONNECTIONS` connections are
 served at once (one more is closed unanswered) and :data:`MAX_STREAMS` of them event
@@ -19,7 +22,7 @@ request, or between requests, is dropped; a request body must have a valid
 ``Content-Length`` (400 otherwise) of at most :data:`MAX_BODY` bytes (413), and is read
 whole, never taken for a next request.  Every answer carries a Content-Security-Policy
 (scripts from this server only, no framing), ``X-Frame-Options: DENY`` and
-``Referrer-Policy: no-referrer`` (the page's URL holds the stop token).
+``Referrer-Policy: no-referrer`` (the page's URL holds the token).
 """
 
 from __future__ import annotations
@@ -34,10 +37,12 @@ import secrets
 import socket
 import threading
 import time
+import urllib.parse
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
+from ..storage import RunStatus
 from . import stop
 from .snapshot import RunReader
 
@@ -73,6 +78,10 @@ def is_loopback(host: str) -> bool:
         return False
     mapped = getattr(ip, "ipv4_mapped", None)
     return (mapped or ip).is_loopback
+NO_TOKEN = ("this link has no token: open the link with ?token=... that `bench watch` or "
+            "`bench run --watch` printed")
+WRONG_TOKEN = ("this link's token is not this server's (the page was restarted?): open the link "
+               "that `bench watch` or `bench run --watch` printed last")
 
 
 def _plotly_js() -> bytes:
@@ -156,7 +165,7 @@ class WatchServer(ThreadingHTTPServer):
             self._plotly = _plotly_js()
         return self._plotly
 
-    def start(self) -> "WatchServer":
+    def start(self) -> WatchServer:
         """Serve from a daemon thread (beside a run in this process)."""
         self._thread = threading.Thread(target=self.serve_forever, args=(0.05,), name="bench-watch", daemon=True)
         self._thread.start()
@@ -230,6 +239,14 @@ class _Handler(BaseHTTPRequestHandler):
     def _send_json(self, code: int, obj) -> None:
         self._send(code, _json(obj), "application/json")
 
+    def _token_problem(self, given: str) -> str | None:
+        """Why ``given`` does not open the run's data (None: it does)."""
+        if not given:
+            return NO_TOKEN
+        if not hmac.compare_digest(given.encode(), self.server.token.encode()):
+            return WRONG_TOKEN
+        return None
+
     def _host_ok(self) -> bool:
         if not self.server.loopback:
             return True
@@ -243,7 +260,11 @@ class _Handler(BaseHTTPRequestHandler):
             return
         if not self._host_ok():
             return self._send_json(HTTPStatus.FORBIDDEN, {"error": "unexpected Host header"})
-        path = self.path.split("?", 1)[0]
+        path, _, query = self.path.partition("?")
+        if path.startswith("/api/"):
+            problem = self._token_problem(urllib.parse.parse_qs(query).get("token", [""])[0])
+            if problem:
+                return self._send_json(HTTPStatus.FORBIDDEN, {"error": problem})
         if path in ("/", "/index.html"):
             self._send(HTTPStatus.OK, PAGE.read_bytes(), "text/html; charset=utf-8")
         elif path == "/page.js":
@@ -271,7 +292,7 @@ class _Handler(BaseHTTPRequestHandler):
             return self._send_json(HTTPStatus.FORBIDDEN, {"error": "a valid stop token is needed "
                                                           "(the one printed with the page's URL)"})
         state = self.server.reader.snapshot()
-        if state.get("status") != "running" or state.get("process_gone"):
+        if state.get("status") != RunStatus.RUNNING or state.get("process_gone"):
             shown = "process gone" if state.get("process_gone") else state.get("status")
             return self._send_json(HTTPStatus.CONFLICT, {"error": f"the run is not running ({shown})"})
         try:

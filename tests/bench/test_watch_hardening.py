@@ -96,20 +96,21 @@ def test_connections_and_streams_are_capped(small_run, monkeypatch):
         streams = []
         for _ in range(2):
             s = socket.create_connection(addr, timeout=5)
-            s.sendall(b"GET /api/stream HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+            s.sendall(f"GET /api/stream?token={server.token} HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n".encode())
             assert s.recv(100).startswith(b"HTTP/1.1 200")
             streams.append(s)
         wait_until(lambda: server.streams == 2, 5, "two streams")
-        third = exchange(server, b"GET /api/stream HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+        third = exchange(server, f"GET /api/stream?token={server.token} HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n".encode())
         assert statuses(third) == [503]
         idle = socket.create_connection(addr, timeout=5)       # the third connection: held
         time.sleep(0.1)
-        assert exchange(server, b"GET /api/state HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n") == b""   # a fourth: closed
+        assert exchange(server, b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n") == b""   # a fourth: closed
         idle.close()
         for s in streams:
             s.close()
-        ok = wait_until(lambda: statuses(exchange(server, b"GET /api/state HTTP/1.1\r\nHost: 127.0.0.1\r\n"
-                                                  b"Connection: close\r\n\r\n")) == [200], 10, "a free slot")
+        ok = wait_until(lambda: statuses(exchange(server, f"GET /api/state?token={server.token} HTTP/1.1\r\n"
+                                                  "Host: 127.0.0.1\r\nConnection: close\r\n\r\n".encode())) == [200],
+                        10, "a free slot")
         assert ok
 
 
@@ -157,7 +158,7 @@ def test_ipv6_loopback_is_served(small_run, caplog):
             port = server.server_address[1]
             assert server.url.startswith(f"http://[::1]:{port}/?token=")
             assert listening_addresses(port) == {"00000000000000000000000001000000"}
-            with urllib.request.urlopen(server.url.split("?")[0] + "api/state", timeout=5) as r:
+            with urllib.request.urlopen(server.url.split("?")[0] + "api/state?token=" + server.token, timeout=5) as r:
                 assert json.loads(r.read())["status"] == "completed"
     assert "off loopback" not in caplog.text
 
