@@ -123,7 +123,7 @@ def open_append(path: Path):
     """``path`` opened for appending text, never through a symbolic link (``O_NOFOLLOW``)."""
     try:
         fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o666)
-    except OSError as e:
+    except OSError:
         if os.path.islink(path):
             raise RunDirError(f"{path}: is a symbolic link; a run writes nothing through links "
                               f"(remove it)") from None

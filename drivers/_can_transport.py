@@ -206,6 +206,7 @@ def open_can_bus(url: str) -> can.BusABC:
         return can.Bus(interface="virtual", channel=url[len("virtual:"):])
     if url.startswith("tcp://"):
         parts = urllib.parse.urlsplit(url)
+        assert parts.hostname is not None and parts.port is not None     # check_daq_url made sure
         return TcpCanBus(parts.hostname, parts.port)
     interface, _, channel = url.partition(":")
     return can.Bus(interface=interface, channel=channel, fd=True)

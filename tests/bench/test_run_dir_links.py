@@ -14,11 +14,10 @@ import stat
 import pytest
 
 from bench.cli import main
-from bench.storage import RunDirError, RunStore
-from bench.watch.stop import request_stop
-
 from bench.config import DEFAULTS, load_rig
 from bench.session import run_plan
+from bench.storage import RunDirError, RunStore
+from bench.watch.stop import request_stop
 
 from .test_exit_paths import small_plan
 
