@@ -125,6 +125,7 @@ class WatchServer(ThreadingHTTPServer):
         self._plotly: bytes | None = None
         self._thread: threading.Thread | None = None
         self._slots = threading.BoundedSemaphore(MAX_CONNECTIONS)
+        self.connections = 0              # served now (each holds a slot)
         super().__init__((host, port), _Handler)
         if not self.loopback:
             log.warning("the watch page is served on %s, off loopback: anyone who can reach this "
@@ -138,17 +139,24 @@ class WatchServer(ThreadingHTTPServer):
                         client_address[0])
             self.shutdown_request(request)
             return
+        with self._streams_lock:
+            self.connections += 1
         try:
             super().process_request(request, client_address)
         except BaseException:
-            self._slots.release()
+            self._release()
             raise
 
     def process_request_thread(self, request, client_address):
         try:
             super().process_request_thread(request, client_address)
         finally:
-            self._slots.release()
+            self._release()
+
+    def _release(self) -> None:
+        with self._streams_lock:
+            self.connections -= 1
+        self._slots.release()
 
     @property
     def loopback(self) -> bool:

@@ -69,7 +69,11 @@ def test_a_stored_run_json_naming_spy_is_refused_by_resume_and_writes_nothing(tm
     meta = json.loads((run / "run.json").read_text())
     meta["rig"].update(simulated=False, generator_url=f"spy:///dev/null?file={victim}",
                        sensor_url="modbus-tcp://127.0.0.1:9", daq_url="virtual:x", model={})
+    meta["status"] = "interrupted"
     (run / "run.json").write_text(json.dumps(meta))
+    last = sorted((run / "steps").glob("*.json"))[-1]
+    last.unlink()
+    last.with_suffix(".npz").unlink()                          # a step left to measure
     assert main(["resume", str(run)]) == 2
     err = capsys.readouterr().err
     assert "run.json" in err and "[rig.instruments] generator" in err and "spy://" in err

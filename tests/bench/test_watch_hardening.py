@@ -102,8 +102,9 @@ def test_connections_and_streams_are_capped(small_run, monkeypatch):
         wait_until(lambda: server.streams == 2, 5, "two streams")
         third = exchange(server, f"GET /api/stream?token={server.token} HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n".encode())
         assert statuses(third) == [503]
+        wait_until(lambda: server.connections == 2, 5, "the refused stream's connection to end")
         idle = socket.create_connection(addr, timeout=5)       # the third connection: held
-        time.sleep(0.1)
+        wait_until(lambda: server.connections == 3, 5, "the third connection served")
         assert exchange(server, b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n") == b""   # a fourth: closed
         idle.close()
         for s in streams:
