@@ -498,6 +498,15 @@ def assess_step(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None
                 need = max(need, cyc)
             tr_arts.append(Artefact("unsettled_transient", ch, A0, "removed" if removed else "kept",
                                     freq_Hz=ftr, decay_per_s=sigma, settle_cycles=cyc, evidence=ev))
+    # a "line" at the frequency of a transient on another channel is that transient (a free
+    # vibration of the carriage shows on several sensors; it decays below significance on some)
+    guard = HARMONIC_GUARD * fs_Hz / n
+    for i, a in enumerate(q.artefacts):
+        tr = [t for t in tr_arts if a.kind == "line_interference" and abs(t.freq_Hz - a.freq_Hz) <= guard]
+        if tr:
+            cyc = settle_cycles(a.size, tr[0].decay_per_s, noise[a.channel], n, fs_Hz, f)
+            q.artefacts[i] = replace(a, kind="unsettled_transient", decay_per_s=tr[0].decay_per_s, settle_cycles=cyc,
+                                     evidence=f"at the frequency of the transient on the {LABEL[tr[0].channel]}")
     if need > 0 and periods - need >= max(MIN_PERIODS, periods // 4):
         start = int(math.ceil(need * fs_Hz / f - 1e-9))
         for ch in CHANNELS:           # clean the kept part again: the fit is no longer biased by the transient
