@@ -340,7 +340,7 @@ def _line_search(q: np.ndarray, fs: float, f: float, skip: list[float]) -> list[
     k = np.round(freqs / f)
     ok = (np.abs(freqs - k * f) > guard) & (freqs > guard) & (freqs < fs / 2 - guard)
     for fk in skip:
-        ok &= np.abs(freqs - fk) > 2 * guard
+        ok &= np.abs(freqs - fk) > guard
     if ok.sum() < 16:
         return []
     floor = float(np.median(S[ok])) / math.log(2.0)
@@ -399,6 +399,8 @@ def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
             break
         removed = new
     cleaned = x - new
+    rest = r - new
+    noise = float(1.4826 * np.median(np.abs(rest - np.median(rest)))) or noise    # what is left: the noise
     arts = []
     if z > 0:
         arts.append(Artefact("offset_drift", ch, change, "removed",
@@ -536,3 +538,139 @@ def assess_step(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None
                        f"(limit {100 * NOISY_RESIDUAL:g} %; used with its noise as weight)")
     q.status = "flagged" if q.notes else "usable"
     return Assessment(q, rec, cleaned, start)
+
+
+# ---------------------------------------------------------------------------- many steps
+
+
+MAINS_HZ = (50.0, 60.0)
+LABELS = {"line_interference": "interference line", "unsettled_transient": "unsettled transient",
+          "clipping": "clipping", "dropout": "drop-outs", "offset_drift": "offset drift"}
+FORMULAS = {"line_interference": "y_measured = y + a sin(2 pi f_l t + phi), f_l not a multiple of the drive",
+            "unsettled_transient": "y_measured = y_periodic + A_0 exp(-sigma t) sin(2 pi f_t t + phi) at the record start",
+            "clipping": "y_measured = clip(y, low, high)",
+            "dropout": "y_measured = y(t_0) held (or 0) for a time",
+            "offset_drift": "y_measured = y + b t + c t^2"}
+
+
+def mains(freq_Hz: float) -> str:
+    """'50 Hz mains' when the frequency is a harmonic 1-10 of 50 or 60 Hz (within 0.5 %), else ''."""
+    for base in MAINS_HZ:
+        m = round(freq_Hz / base)
+        if 1 <= m <= 10 and abs(freq_Hz / (m * base) - 1) < 0.005:
+            return f"{base:g} Hz mains" + (f" (harmonic {m})" if m > 1 else "")
+    return ""
+
+
+def _span(values, unit: str, fmt: str = ".3g") -> str:
+    lo, hi = min(values), max(values)
+    return f"{lo:{fmt}} {unit}" if f"{lo:{fmt}}" == f"{hi:{fmt}}" else f"{lo:{fmt}}-{hi:{fmt}} {unit}"
+
+
+def _param(values, unit: str) -> dict:
+    v = np.asarray(values, float)
+    return dict(value=float(np.median(v)), low=float(v.min()), high=float(v.max()), unit=unit)
+
+
+def _where(qs: list[StepQuality]) -> str:
+    f = [q.freq_Hz for q in qs if math.isfinite(q.freq_Hz)]
+    lv = [q.level_N for q in qs if math.isfinite(q.level_N)]
+    parts = ([f"at {_span(f, 'Hz')}"] if f else []) + ([_span(lv, "N")] if lv else [])
+    return ", ".join(parts)
+
+
+def artefact_causes(quality: list[tuple[str, StepQuality]], total: int | None = None) -> list[dict]:
+    """``analysis.json`` causes of kind "artefact", aggregated over steps (module doc).
+
+    ``quality``: (step key, quality) of every step whose records were read; ``total``: the
+    number of steps in the source (default: len(quality))."""
+    total = len(quality) if total is None else total
+    hits: dict[tuple, list[tuple[str, StepQuality, Artefact]]] = {}
+    lines: dict[str, list[tuple[str, StepQuality, Artefact]]] = {}
+    for key, q in quality:
+        for a in q.artefacts:
+            if a.kind == "line_interference":
+                lines.setdefault(a.channel, []).append((key, q, a))
+            elif a.kind == "unsettled_transient":
+                hits.setdefault(("unsettled_transient",), []).append((key, q, a))
+            else:
+                hits.setdefault((a.kind, a.channel), []).append((key, q, a))
+    out = []
+    for ch, items in lines.items():           # clusters of nearby frequencies on one channel
+        items.sort(key=lambda it: it[2].freq_Hz)
+        groups, cur = [], [items[0]]
+        for it in items[1:]:
+            f0 = cur[-1][2].freq_Hz
+            if it[2].freq_Hz - f0 <= max(0.05, 0.002 * f0):
+                cur.append(it)
+            else:
+                groups.append(cur)
+                cur = [it]
+        groups.append(cur)
+        for g in groups:
+            out.append(_line_cause(ch, g, total))
+    for (kind, *rest), items in hits.items():
+        out.append(_other_cause(kind, rest[0] if rest else "", items, total))
+    out.sort(key=lambda c: -len(c["evidence"]["steps"]))
+    return out
+
+
+def _entry(kind: str, channel: str, items, total: int, parameters: dict, sentence: str) -> dict:
+    steps = list(dict.fromkeys(k for k, _, _ in items))
+    rejected = list(dict.fromkeys(k for k, q, _ in items if q.status == "rejected"))
+    return dict(id=kind, kind="artefact", label=LABELS[kind], formula=FORMULAS[kind], channel=channel,
+                parameters=parameters, gain=dict(steps_kept=len(steps) - len(rejected), steps_rejected=len(rejected)),
+                sentence=sentence,
+                evidence=dict(steps=steps, steps_total=total, steps_rejected=rejected,
+                              per_step=[dict(step=k, **a.as_dict()) for k, _, a in items]))
+
+
+def _line_cause(ch: str, items, total: int) -> dict:
+    f = [a.freq_Hz for _, _, a in items]
+    amp = [a.size for _, _, a in items]
+    n = len({k for k, _, _ in items})
+    src = mains(float(np.median(f)))
+    what = f"{src} interference" if src else "interference from another source (a pump, a fan, a switching supply)"
+    sentence = (f"a {np.median(f):.4g} Hz line of {si(float(np.median(amp)), UNIT[ch])} on the {LABEL[ch]} in {n} of "
+                f"{total} steps, not locked to the drive: {what}; removed before the fit")
+    return _entry("line_interference", ch, items, total,
+                  dict(frequency=_param(f, "Hz"), amplitude=_param(amp, UNIT[ch])), sentence)
+
+
+def _other_cause(kind: str, ch: str, items, total: int) -> dict:
+    qs = list({id(q): q for _, q, _ in items}.values())
+    n = len(qs)
+    arts = [a for _, _, a in items]
+    rej = sum(q.status == "rejected" for q in qs)
+    fate = (f"{n - rej} kept" if n > rej else "") + (", " if 0 < rej < n else "") + (f"{rej} rejected" if rej else "")
+    where = _where(qs)
+    if kind == "unsettled_transient":
+        chans = sorted({a.channel for a in arts})
+        cyc = max(a.settle_cycles for a in arts)
+        tau = [1e3 / a.decay_per_s for a in arts if a.decay_per_s > 0]
+        ft = [a.freq_Hz for a in arts if math.isfinite(a.freq_Hz)]
+        vib = f"a free vibration near {np.median(ft):.3g} Hz" if ft else "a free vibration"
+        sentence = (f"steps {where} still decaying at the record start ({vib}, time constant {_span(tau, 'ms')}, on the "
+                    f"{' and '.join(LABEL[c] for c in chans)}) in {n} of {total} steps: settle {cyc} more cycles; "
+                    f"{fate} (transient removed or first periods dropped where the record allowed)")
+        params = dict(decay_rate=_param([a.decay_per_s for a in arts], "1/s"),
+                      settle_cycles_needed=_param([a.settle_cycles for a in arts], "cycles"))
+        if ft:
+            params["frequency"] = _param(ft, "Hz")
+        return _entry(kind, ",".join(chans), items, total, params, sentence)
+    size = [abs(a.size) for a in arts]
+    if kind == "clipping":
+        sentence = (f"clipping on the {LABEL[ch]} in {n} of {total} steps ({where}): flat at "
+                    f"{si(max(size), UNIT[ch])}, the range of the sensor or its input; {fate}: use a larger range "
+                    f"or a lower level")
+        params = dict(level=_param(size, UNIT[ch]), time_at_limit=_param([a.duration_s for a in arts], "s"))
+    elif kind == "dropout":
+        sentence = (f"drop-outs on the {LABEL[ch]} in {n} of {total} steps ({where}): the signal held for up to "
+                    f"{1e3 * max(a.duration_s for a in arts):.3g} ms; {fate}: check the cable, connector and "
+                    f"acquisition")
+        params = dict(duration=_param([a.duration_s for a in arts], "s"))
+    else:
+        sentence = (f"an offset drift on the {LABEL[ch]} in {n} of {total} steps, up to {si(max(size), UNIT[ch])} "
+                    f"over a record (thermal drift of the sensor, or the carriage creeping); removed before the fit")
+        params = dict(change=_param(size, UNIT[ch]))
+    return _entry(kind, ch, items, total, params, sentence)
