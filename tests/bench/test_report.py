@@ -345,7 +345,8 @@ def test_every_plant_effect_the_engine_leaves_out_is_named_in_the_model_notes():
     companions = {      # parameters only meaningful with a main one
         "friction_alpha": dict(friction_v_ref_m_per_s=0.01),
         "pitch_inertia_kg_m2": dict(pitch_stiffness_N_m_per_rad=1e4, pitch_damping_N_m_s_per_rad=1.0,
-                                    drive_height_m=0.05, cg_height_m=0.03)}
+                                    drive_height_m=0.05, cg_height_m=0.03),
+        "line_amplitude": dict(line_channel="disp", line_freq_Hz=50.0)}
     sub_parameters = {k for c in companions.values() for k in c}
     effects = [f.name for f in fields(RigModel) if f.default == 0.0 and f.name not in sub_parameters
                and f.name != "seed"]
