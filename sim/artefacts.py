@@ -61,7 +61,7 @@ log = logging.getLogger(__name__)
 DRIFT_LIMIT = 10.0            # periodicity gate: standard errors between the halves of a record
 NOISY_RESIDUAL = 0.02         # displacement residual rms / fundamental amplitude above which a step is flagged
 LINE_FALSE_ALARM = 1e-4       # per record and channel
-HARMONIC_GUARD = 3.0          # record resolutions (fs / N) around each drive harmonic not searched for lines
+HARMONIC_GUARD = 1.5          # record resolutions (fs / N) around each drive harmonic not searched for lines
 MAX_LINES = 6
 TREND_Z = 6.0                 # offset drift: sqrt(chi-square, 2 dof) of the trend coefficients
 DECAY_Z = 6.0                 # a line's decay rate, in standard errors, above which it is a transient
@@ -384,7 +384,7 @@ def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
     n = x.size
     zero = np.zeros(n)
     removed = zero
-    for _pass in range(2):
+    for _pass in range(4):        # a trend converges more slowly than lines: more passes only for it
         r = x - _periodic_part(x - removed, fs, f)
         noise = _robust_noise(r)
         lines, transients = _find_lines(r, fs, f)
@@ -392,10 +392,14 @@ def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
         trend, change, z = _trend(r - found, noise)
         if not z > TREND_Z:
             trend, change, z = zero, 0.0, 0.0
-        elif lines or transients:
+        elif lines or transients:     # what the trend's low-frequency leakage made look like a line goes
             lines, transients = _find_lines(r - trend, fs, f)
+            found = sum((ln.model for ln in lines + transients), zero)
+            trend, change, z = _trend(r - found, noise)
+            if not z > TREND_Z:
+                trend, change, z = zero, 0.0, 0.0
         new = trend + sum((ln.model for ln in lines + transients), zero)
-        if _pass == 0 and not lines and not transients and z == 0.0:
+        if (_pass == 0 and not lines and not transients and z == 0.0) or (_pass == 1 and z == 0.0):
             break
         removed = new
     cleaned = x - new
@@ -585,6 +589,7 @@ def artefact_causes(quality: list[tuple[str, StepQuality]], total: int | None = 
     ``quality``: (step key, quality) of every step whose records were read; ``total``: the
     number of steps in the source (default: len(quality))."""
     total = len(quality) if total is None else total
+    order = {key: i for i, (key, _) in enumerate(quality)}
     hits: dict[tuple, list[tuple[str, StepQuality, Artefact]]] = {}
     lines: dict[str, list[tuple[str, StepQuality, Artefact]]] = {}
     for key, q in quality:
@@ -608,7 +613,7 @@ def artefact_causes(quality: list[tuple[str, StepQuality]], total: int | None = 
                 cur = [it]
         groups.append(cur)
         for g in groups:
-            out.append(_line_cause(ch, g, total))
+            out.append(_line_cause(ch, sorted(g, key=lambda it: order[it[0]]), total))
     for (kind, *rest), items in hits.items():
         out.append(_other_cause(kind, rest[0] if rest else "", items, total))
     out.sort(key=lambda c: -len(c["evidence"]["steps"]))
