@@ -233,21 +233,21 @@ def find_dropouts(ch: str, x: np.ndarray, fs: float, clipped: list[Artefact]) ->
 # ---------------------------------------------------------------------------- periodic part
 
 
-def _periodic_part(x: np.ndarray, fs: float, f: float) -> np.ndarray:
+def _periodic_part(x: np.ndarray, fs: float, f: float, fit_from: int = 0) -> np.ndarray:
     """Offset + every harmonic below Nyquist (at most 200), fitted over the whole periods of
-    ``x`` as :mod:`sim.records` does, evaluated at every sample."""
+    ``x[fit_from:]`` as :mod:`sim.records` does, evaluated at every sample of ``x``."""
     n = x.size
     ratio = fs / f
-    periods = int(math.floor(n / ratio + 1e-9))
+    periods = int(math.floor((n - fit_from) / ratio + 1e-9))
     spp = int(round(ratio)) if abs(ratio - round(ratio)) * periods < 0.02 else None
-    ch = _analyse_channel(x, fs, f, periods, spp, 200)
+    ch = _analyse_channel(x[fit_from:], fs, f, periods, spp, 200)
     if spp is not None:
-        return np.resize(ch.mean_period, n)
+        return ch.mean_period[(np.arange(n) - fit_from) % spp]
     M = 1 << max(12, int(math.ceil(math.log2(16 * ch.harmonics.size + 1))))
     spec = np.zeros(M // 2 + 1, complex)
     spec[1:ch.harmonics.size + 1] = -1j * ch.harmonics * (M / 2)      # C_k = A e^(i phi) of A sin(k w t + phi)
     one = np.fft.irfft(spec, M)
-    phase = (np.arange(n) * (f / fs)) % 1.0 * M
+    phase = ((np.arange(n) - fit_from) * (f / fs)) % 1.0 * M
     return ch.offset + np.interp(phase, np.arange(M + 1), np.append(one, one[0]))
 
 
@@ -403,8 +403,8 @@ def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
             break
         removed = new
     cleaned = x - new
-    rest = r - new
-    noise = float(1.4826 * np.median(np.abs(rest - np.median(rest)))) or noise    # what is left: the noise
+    rest = (r - new)[n // 2:]          # what is left, in the second half (after any transient): the noise
+    noise = float(1.4826 * np.median(np.abs(rest - np.median(rest)))) or noise
     arts = []
     if z > 0:
         arts.append(Artefact("offset_drift", ch, change, "removed",
@@ -416,43 +416,59 @@ def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
     found = [(ln.amp, ln.decay, ln.freq_Hz, f"a decaying sinusoid fitted, decay rate {ln.decay:.3g} +- "
               f"{ln.decay_se:.2g} /s", True) for ln in transients]
     if not found:
-        env = _envelope_transient(r - new, fs, f)
+        # the periodic part of the second half (the most settled), extrapolated to the whole
+        # record: what is left in the first half and not in the second is still settling
+        base = x - sum((ln.model for ln in lines), zero)
+        env = _envelope_transient(base, fs, f, _robust_noise(r))
         if env is not None:
             found.append(env + (False,))
+            if z > 0:                  # the trend was the transient seen over the whole record
+                cleaned = base
+                arts = [a for a in arts if a.kind != "offset_drift"]
     return cleaned, arts, found, noise
 
 
-def _envelope_transient(q: np.ndarray, fs: float, f: float):
-    """A decaying residual power: (A_0, sigma, nan, evidence) or None."""
-    n = q.size
-    periods = int(n * f / fs)
-    nb = int(min(64, max(8, 2 * periods)))
-    B = n // nb
-    if B < 8:
+def _envelope_transient(x: np.ndarray, fs: float, f: float, noise: float):
+    """A response still settling: the difference between consecutive drive periods,
+    x(t + T) - x(t), holds no periodic part and only noise once settled; its mean square
+    per period falling over the record gives the decay; ``noise`` (rms per sample, from
+    sample-to-sample differences, which a slow transient barely moves) sets the settled
+    level 2 noise^2.  (A_0, sigma, nan, evidence) or None."""
+    n = x.size
+    T = fs / f                                   # samples per period (not necessarily whole)
+    P = int(math.floor(n / T + 1e-9)) - 1
+    B = int(math.floor(T))
+    if P < 4 or B < 8:
         return None
-    p = (q[:nb * B].reshape(nb, B) ** 2).mean(axis=1)
-    s2 = float(np.median(p[nb // 2:]))
-    if not s2 > 0:
+    j = np.arange(n - int(math.ceil(T)))
+    d = np.interp(j + T, np.arange(n), x) - x[j]
+    starts = (np.arange(P) * T).astype(int)
+    D = np.array([np.mean(d[s:s + B] ** 2) for s in starts if s + B <= d.size])
+    P = D.size
+    floor = min(2 * noise ** 2, float(np.median(D[P // 2:]))) if noise > 0 else float(np.median(D[P // 2:]))
+    if not floor > 0:
         return None
-    sd = s2 * math.sqrt(2.0 / B)
-    z = (p - s2) / sd
+    sd = floor * math.sqrt(2.0 / B)
+    z = (D - floor) / sd
     if z[0] < ENVELOPE_Z:
         return None
     m = 0
-    while m < nb and z[m] > 3:
+    while m < P and z[m] > 3:
         m += 1
-    tc = (np.arange(nb) + 0.5) * B / fs
+    tc = (np.arange(P) + 0.5) / f
     if m >= 2:
-        slope, icpt = np.polyfit(tc[:m], np.log(p[:m] - s2), 1)
+        slope, icpt = np.polyfit(tc[:m], np.log(D[:m] - floor), 1)
         sigma = -slope / 2
-        A0 = math.sqrt(2 * math.exp(icpt))
-    else:
-        sigma = math.log((p[0] - s2) / (3 * sd)) / (2 * tc[0] * 2)
-        A0 = math.sqrt(2 * (p[0] - s2)) * math.exp(sigma * tc[0])
-    if not (sigma > 0 and math.isfinite(A0)):
+        e0 = math.exp(icpt)
+    else:                                        # gone after one period: a lower bound of the rate
+        sigma = math.log((D[0] - floor) / (3 * sd)) / 2 * f
+        e0 = (D[0] - floor) * math.exp(2 * sigma * tc[0])
+    if not (sigma > 0 and math.isfinite(e0)):
         return None
-    return (A0, float(sigma), math.nan, f"residual power of the first {m} of {nb} blocks above the noise "
-                                        f"(first by {z[0]:.0f} standard errors)")
+    # a transient of amplitude A e^(-sigma t) at the drive frequency differs between periods by A (1 - e^(-sigma T))
+    A0 = math.sqrt(2 * e0) / max(1 - math.exp(-sigma / f), 1e-12)
+    return (A0, float(sigma), math.nan, f"the difference between consecutive periods falls over the first {m} "
+                                        f"of {P} periods (first by {z[0]:.0f} standard errors above the noise)")
 
 
 # ---------------------------------------------------------------------------- one step
