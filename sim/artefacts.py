@@ -404,7 +404,7 @@ def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
         removed = new
     cleaned = x - new
     rest = (r - new)[n // 2:]          # what is left, in the second half (after any transient): the noise
-    noise = float(1.4826 * np.median(np.abs(rest - np.median(rest)))) or noise
+    noise = min(float(1.4826 * np.median(np.abs(rest - np.median(rest)))) or noise, noise)
     arts = []
     if z > 0:
         arts.append(Artefact("offset_drift", ch, change, "removed",
@@ -484,7 +484,7 @@ def _fundamental(x: np.ndarray, fs: float, f: float) -> float:
 def settle_cycles(A0: float, sigma: float, noise: float, n: int, fs: float, f: float) -> int:
     """Drive cycles from the record start until the transient is harmless (module doc)."""
     T = n / fs
-    tol = DRIFT_LIMIT * noise * math.sqrt(2.0 / n) * max(1.0, sigma * T / 2)
+    tol = noise * math.sqrt(2.0 / n) * max(1.0, sigma * T / 2)
     if not (A0 > tol and sigma > 0):
         return 0
     return int(math.ceil(f * math.log(A0 / tol) / sigma))

@@ -74,10 +74,11 @@ def test_lines_on_force_and_accelerometer_are_named_with_their_channel():
     assert mains(180.0) == "60 Hz mains (harmonic 3)" and mains(123.4) == ""
 
 
-def test_a_decaying_free_vibration_is_found_with_its_rate_and_the_settle_cycles_it_needs():
+@pytest.mark.parametrize("sigma, f_t, A0", [(15.0, 61.0, 2e-6),     # its own frequency: fitted and removed
+                                             (5.0, 37.5, 2e-7)])    # unresolvable from the drive: kept, named
+def test_a_decaying_free_vibration_is_found_with_its_rate_and_the_settle_cycles_it_needs(sigma, f_t, A0):
     fs = 25600.0
     t, clean, noise = records(fs)
-    sigma, f_t, A0 = 15.0, 61.0, 2e-6
 
     def with_transient(delay_cycles):        # the vibration started delay_cycles drive periods before the record
         tt = t + delay_cycles / F_DRIVE
@@ -86,20 +87,27 @@ def test_a_decaying_free_vibration_is_found_with_its_rate_and_the_settle_cycles_
     a = assess(with_transient(0))
     tr = of_kind(a.quality, "unsettled_transient")
     assert len(tr) == 1 and tr[0].channel == "disp"
-    assert tr[0].decay_per_s == pytest.approx(sigma, rel=0.03)
-    assert tr[0].freq_Hz == pytest.approx(f_t, rel=0.005)
-    assert tr[0].size == pytest.approx(A0, rel=0.05)
-    assert a.quality.status == "flagged"                     # removed: the step is kept
-    d = a.records.channels["disp"]
-    assert abs(d.harmonics[0] - AMPS["disp"][0]) < 5 * d.sigma
+    assert tr[0].decay_per_s == pytest.approx(sigma, rel=0.05)
+    assert tr[0].size == pytest.approx(A0, rel=0.2)
+    if tr[0].action == "removed":
+        assert tr[0].freq_Hz == pytest.approx(f_t, rel=0.005)
+        assert a.quality.status == "flagged"                 # removed: the step is kept
+        d = a.records.channels["disp"]
+        assert abs(d.harmonics[0] - AMPS["disp"][0]) < 5 * d.sigma
+    else:
+        assert a.quality.status == "rejected" and "settle" in a.quality.reason
     need = tr[0].settle_cycles
     assert need > 0 and f"settle {need} more cycles" in tr[0].describe()
+
     # an independent check of the advice: with that many more settle cycles the raw record
-    # passes the periodicity gate; with a third of them it does not
-    late = with_transient(need)
-    assert analyse_records(late["force"], late["accel"], late["disp"], fs, F_DRIVE).drift_sigma < DRIFT_LIMIT
-    early = with_transient(need // 3)
-    assert analyse_records(early["force"], early["accel"], early["disp"], fs, F_DRIVE).drift_sigma > DRIFT_LIMIT
+    # passes the periodicity gate and its fundamental is within 3 standard errors; with a
+    # third of them one of the two fails
+    def raw(delay):
+        s = with_transient(delay)
+        r = analyse_records(s["force"], s["accel"], s["disp"], fs, F_DRIVE)
+        d = r.channels["disp"]
+        return r.drift_sigma < DRIFT_LIMIT and abs(d.harmonics[0] - AMPS["disp"][0]) < 3 * d.sigma
+    assert raw(need) and not raw(need // 3)
 
 
 def test_an_amplitude_still_converging_at_the_drive_frequency_is_a_transient_named_on_its_channel():
