@@ -463,8 +463,8 @@ def _envelope_transient(x: np.ndarray, fs: float, f: float, noise: float):
     else:                                        # gone after one period: a lower bound of the rate
         sigma = math.log((D[0] - floor) / (3 * sd)) / 2 * f
         e0 = (D[0] - floor) * math.exp(2 * sigma * tc[0])
-    if not (sigma > 0 and math.isfinite(e0)):
-        return None
+    if not (sigma > 0 and math.isfinite(e0)) or math.exp(-sigma * n / fs) > DECAY_FRACTION:
+        return None                              # not falling over the record: a drift or a line, not a transient
     # a transient of amplitude A e^(-sigma t) at the drive frequency differs between periods by A (1 - e^(-sigma T))
     A0 = math.sqrt(2 * e0) / max(1 - math.exp(-sigma / f), 1e-12)
     return (A0, float(sigma), math.nan, f"the difference between consecutive periods falls over the first {m} "
