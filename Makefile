@@ -43,6 +43,7 @@ bench: setup
 	$(PY) benchmarks/bench_procedure.py
 	$(PY) benchmarks/bench_studies.py
 	$(PY) benchmarks/bench_analysis.py
+	$(PY) benchmarks/bench_artefacts.py
 	$(PY) benchmarks/bench_identification.py
 
 # Soak test (by hand, not in `make test`): 2000 steps, ~3 h of rig time, twins hammered by
