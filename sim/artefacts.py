@@ -481,6 +481,22 @@ def _fundamental(x: np.ndarray, fs: float, f: float) -> float:
     return float(2.0 / n * abs(np.dot(x[:n] - x[:n].mean(), np.exp(-2j * np.pi * f * t))))
 
 
+def _mains_hint(f: float, periods: int) -> str:
+    """Mains (50/60 Hz, harmonics 1-3) too close to a drive harmonic to be separated in
+    ``periods`` periods: what to do, or ''."""
+    guard = HARMONIC_GUARD * f / periods
+    for base in MAINS_HZ:
+        for m in (1, 2, 3):
+            fm = m * base
+            k = max(1, round(fm / f))
+            gap = abs(fm - k * f)
+            if 0 < gap <= guard:
+                return (f"mains hum, if present, at {fm:g} Hz lies {gap:.2g} Hz from drive harmonic {k} "
+                        f"({k * f:.4g} Hz) and cannot be separated from the response in {periods} periods: "
+                        f"measure at least {math.ceil(HARMONIC_GUARD * f / gap)} periods")
+    return ""
+
+
 def settle_cycles(A0: float, sigma: float, noise: float, n: int, fs: float, f: float) -> int:
     """Drive cycles from the record start until the transient is harmless (module doc)."""
     T = n / fs
@@ -543,6 +559,9 @@ def assess_step(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None
         q.reason = (f"not periodic enough on the {LABEL.get(ch, ch)} ({ch}): its {what} changes by "
                     f"{rec.drift_sigma:.0f} standard errors between the two halves of the record "
                     f"(limit {DRIFT_LIMIT:g})")
+        hint = _mains_hint(f, periods)
+        if hint:
+            q.reason += f"; {hint}"
         if tr_arts:
             worst = max(tr_arts, key=lambda a: a.settle_cycles)
             q.reason += f"; {worst.describe()}"

@@ -200,3 +200,21 @@ def test_artefacts_of_many_steps_become_causes_a_technician_reads():
     assert tr["evidence"]["steps"] == ["step5"]
     assert f"settle {int(tr['parameters']['settle_cycles_needed']['value'])} more cycles" in tr["sentence"]
     assert tr["parameters"]["decay_rate"]["value"] == pytest.approx(15.0, rel=0.03)
+
+
+def test_hum_too_close_to_the_drive_to_separate_is_named_in_the_rejection():
+    """53 Hz drive, 10 periods (resolution 5.3 Hz), 50 Hz hum: not separable in this record."""
+    f = 53.0
+    t, clean, noise = records(periods=10, f=f)
+    sig = {ch: clean[ch] + noise[ch] for ch in clean}
+    sig["disp"] = sig["disp"] + 100e-9 * np.sin(2 * np.pi * 50.0 * t)
+    q = assess(sig, f=f).quality
+    assert q.status == "rejected" and "displacement probe (disp)" in q.reason
+    assert "mains hum, if present, at 50 Hz lies 3 Hz from drive harmonic 1" in q.reason
+    assert "measure at least 27 periods" in q.reason
+    # the advice holds: with 27 periods the line is found and removed, and the step kept
+    t, clean, noise = records(periods=27, f=f)
+    sig = {ch: clean[ch] + noise[ch] for ch in clean}
+    sig["disp"] = sig["disp"] + 100e-9 * np.sin(2 * np.pi * 50.0 * t)
+    q = assess(sig, f=f).quality
+    assert q.status == "flagged" and [round(a.freq_Hz, 1) for a in of_kind(q, "line_interference")] == [50.0]
