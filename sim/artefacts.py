@@ -18,23 +18,26 @@ Nyquist, :mod:`sim.records`):
 - **offset drift**: a linear + quadratic trend over the record, kept when its two
   coefficients differ from zero by more than 6 standard errors together (chi-square, 2
   degrees of freedom); removed, the step is flagged.
-- **interference line**: a spectral peak of the residual (Hann window) at a frequency not
-  within 3 record-resolutions (3 fs/N) of a drive harmonic, above the noise floor by a
-  factor that gives a false alarm probability of 1e-4 per record and channel; its
-  frequency, amplitude and phase are fitted by least squares (with a decay rate, to tell a
-  line from a transient), and a steady line is **removed** from the record: the step stays
-  usable (flagged).  Up to ``MAX_LINES`` per channel.
-- **unsettled transient**: a decaying component, either a spectral peak whose fitted decay
-  rate is positive by more than 6 standard errors and loses more than 20 % of its
-  amplitude over the record, or a residual power that falls over the record (first
-  blocks above the noise by more than 10 standard errors; decay from the block powers).
-  The transient is harmless once its amplitude has fallen to ``A_tol = s sqrt(2/N)
+- **interference line**: a spectral peak of the residual (Hann window) at a frequency more
+  than ``HARMONIC_GUARD`` record resolutions (fs/N) from every drive harmonic, above the
+  noise floor by a factor that gives a false alarm probability of 1e-4 per record and
+  channel; its frequency, amplitude and phase are fitted by least squares (with a decay
+  rate, to tell a line from a transient), and a steady line is **removed** from the record:
+  the step stays usable (flagged).  Up to ``MAX_LINES`` per channel.
+- **unsettled transient**: a spectral peak whose fitted decay rate is positive by more
+  than 6 standard errors and which loses more than 20 % of its amplitude over the record
+  is a transient with its own frequency: it is **removed** like a line.  A transient the
+  record cannot tell from the drive shows in the difference between consecutive periods,
+  x(t + T) - x(t), where the periodic part cancels: its mean square per period falling
+  (the first above the noise by more than 10 standard errors) gives the decay.
+  A transient is harmless once its amplitude has fallen to ``A_tol = s sqrt(2/N)
   max(1, sigma T / 2)`` (s the noise rms, N samples, T the record length, sigma the decay
   rate): then the bias it leaves on any harmonic is below that harmonic's standard error.
-  The settle cycles the plan needs are ``ceil(f ln(A_0 / A_tol) / sigma)``.  When what is
-  left after that holds at least ``max(MIN_PERIODS, periods / 4)`` whole periods, the
-  first periods are dropped and the step is kept (flagged); otherwise it is rejected
-  with the settle cycles it needs.
+  The settle cycles the plan needs are ``ceil(f ln(A_0 / A_tol) / sigma)``.  A transient
+  that was not removed: when what is left after that holds at least
+  ``max(MIN_PERIODS, periods / 4)`` whole periods, the first periods are dropped and the
+  step is kept (flagged); otherwise the periodicity gate decides, and a rejection names
+  the transient and the settle cycles it needs.
 
 Finally the cleaned records pass the periodicity gate of :mod:`sim.records` (harmonics 1-3
 and offset of each channel, first half against second, at most ``DRIFT_LIMIT`` standard
@@ -531,7 +534,7 @@ def assess_step(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None
         for A0, sigma, ftr, ev, removed in transients[ch]:
             cyc = settle_cycles(A0, sigma, noise[ch], n, fs_Hz, f)
             if cyc == 0 and not removed:
-                continue             # below what the periodicity gate can see: harmless
+                continue             # below one standard error of a harmonic already: harmless
             if not removed:
                 need = max(need, cyc)
             tr_arts.append(Artefact("unsettled_transient", ch, A0, "removed" if removed else "kept",
