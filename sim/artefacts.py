@@ -19,7 +19,8 @@ Nyquist, :mod:`sim.records`):
   coefficients differ from zero by more than 6 standard errors together (chi-square, 2
   degrees of freedom); removed, the step is flagged.
 - **interference line**: a spectral peak of the residual (Hann window) at a frequency more
-  than ``HARMONIC_GUARD`` record resolutions (fs/N) from every drive harmonic, above the
+  than ``HARMONIC_GUARD`` record resolutions (fs/N) from every drive harmonic (and from
+  where harmonics above Nyquist fold back, when the record has content up there), above the
   noise floor by a factor that gives a false alarm probability of 1e-4 per record and
   channel; its frequency, amplitude and phase are fitted by least squares (with a decay
   rate, to tell a line from a transient), and a steady line is **removed** from the record:
@@ -237,21 +238,45 @@ def find_dropouts(ch: str, x: np.ndarray, fs: float, clipped: list[Artefact]) ->
 
 
 def _periodic_part(x: np.ndarray, fs: float, f: float, fit_from: int = 0) -> np.ndarray:
+    return _periodic_fit(x, fs, f, fit_from)[0]
+
+
+def _periodic_fit(x: np.ndarray, fs: float, f: float, fit_from: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Offset + every harmonic below Nyquist (at most 200), fitted over the whole periods of
-    ``x[fit_from:]`` as :mod:`sim.records` does, evaluated at every sample of ``x``."""
+    ``x[fit_from:]`` as :mod:`sim.records` does, evaluated at every sample of ``x``; and
+    the fitted harmonics."""
     n = x.size
     ratio = fs / f
     periods = int(math.floor((n - fit_from) / ratio + 1e-9))
     spp = int(round(ratio)) if abs(ratio - round(ratio)) * periods < 0.02 else None
     ch = _analyse_channel(x[fit_from:], fs, f, periods, spp, 200)
     if spp is not None:
-        return ch.mean_period[(np.arange(n) - fit_from) % spp]
+        return ch.mean_period[(np.arange(n) - fit_from) % spp], ch.harmonics
     M = 1 << max(12, int(math.ceil(math.log2(16 * ch.harmonics.size + 1))))
     spec = np.zeros(M // 2 + 1, complex)
     spec[1:ch.harmonics.size + 1] = -1j * ch.harmonics * (M / 2)      # C_k = A e^(i phi) of A sin(k w t + phi)
     one = np.fft.irfft(spec, M)
     phase = ((np.arange(n) - fit_from) * (f / fs)) % 1.0 * M
-    return ch.offset + np.interp(phase, np.arange(M + 1), np.append(one, one[0]))
+    return ch.offset + np.interp(phase, np.arange(M + 1), np.append(one, one[0])), ch.harmonics
+
+
+def _aliases(C: np.ndarray, se: float, f: float, fs: float) -> np.ndarray:
+    """Frequencies (Hz, in 0..fs/2) where drive harmonics above Nyquist fold back, when the
+    fitted harmonics show the response still has content there: the top tenth of them above
+    3 standard errors; how far up is extrapolated from their power-law decay (at most 8 x)."""
+    K = C.size
+    if K < 6 or (K + 1) * f < 0.45 * fs:          # harmonics capped below Nyquist: nothing folds
+        return np.zeros(0)
+    a = np.abs(C)
+    top = float(np.median(a[-max(3, K // 10):]))
+    if not top > 3 * se:
+        return np.zeros(0)
+    k = np.arange(1, K + 1)
+    upper = (k >= K // 2) & (a > 3 * se)
+    b = np.polyfit(np.log(k[upper]), np.log(a[upper]), 1)[0] if upper.sum() >= 3 else 0.0
+    kmax = K * min(8.0, (top / se) ** (1 / -b) if b < -0.5 else 8.0)
+    kk = np.arange(K + 1, int(kmax) + 1) * f
+    return np.sort(np.abs(kk - np.round(kk / fs) * fs))
 
 
 def _trend(r: np.ndarray, noise: float) -> tuple[np.ndarray, float, float]:
@@ -333,8 +358,10 @@ def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Lin
                  model=scale * (p[nd] * s + p[nd + 1] * c))
 
 
-def _line_search(q: np.ndarray, fs: float, f: float, skip: list[float]) -> list[tuple[float, float]]:
-    """Candidate (frequency, peak power / noise floor) of the residual, strongest first."""
+def _line_search(q: np.ndarray, fs: float, f: float, skip: list[float],
+                 aliases: np.ndarray = np.zeros(0)) -> list[tuple[float, float]]:
+    """Candidate (frequency, peak power / noise floor) of the residual, strongest first,
+    away from the drive harmonics, their ``aliases`` and the frequencies in ``skip``."""
     n = q.size
     nfft = 1 << int(math.ceil(math.log2(2 * n)))
     S = np.abs(np.fft.rfft((q - q.mean()) * np.hanning(n), nfft)) ** 2
@@ -344,6 +371,10 @@ def _line_search(q: np.ndarray, fs: float, f: float, skip: list[float]) -> list[
     ok = (np.abs(freqs - k * f) > guard) & (freqs > guard) & (freqs < fs / 2 - guard)
     for fk in skip:
         ok &= np.abs(freqs - fk) > guard
+    if aliases.size:
+        i = np.clip(np.searchsorted(aliases, freqs), 0, aliases.size - 1)
+        near = np.minimum(np.abs(freqs - aliases[i]), np.abs(freqs - aliases[np.maximum(i - 1, 0)]))
+        ok &= near > guard
     if ok.sum() < 16:
         return []
     floor = float(np.median(S[ok])) / math.log(2.0)
@@ -354,7 +385,8 @@ def _line_search(q: np.ndarray, fs: float, f: float, skip: list[float]) -> list[
     return [(float(freqs[i]), float(S[i] / floor)) for i in idx[np.argsort(S[idx])[::-1]]]
 
 
-def _find_lines(q: np.ndarray, fs: float, f: float) -> tuple[list[_Line], list[_Line]]:
+def _find_lines(q: np.ndarray, fs: float, f: float,
+                aliases: np.ndarray = np.zeros(0)) -> tuple[list[_Line], list[_Line]]:
     """Steady lines and decaying components of the residual ``q``, strongest first."""
     n = q.size
     guard = HARMONIC_GUARD * fs / n
@@ -362,7 +394,7 @@ def _find_lines(q: np.ndarray, fs: float, f: float) -> tuple[list[_Line], list[_
     transients: list[_Line] = []
     found = np.zeros(n)
     while len(lines) < MAX_LINES and len(transients) < 2:
-        cands = _line_search(q - found, fs, f, [ln.freq_Hz for ln in lines + transients])
+        cands = _line_search(q - found, fs, f, [ln.freq_Hz for ln in lines + transients], aliases)
         if not cands:
             break
         steady = _fit_sinusoid(q - found, fs, cands[0][0], with_decay=False)
@@ -374,6 +406,8 @@ def _find_lines(q: np.ndarray, fs: float, f: float) -> tuple[list[_Line], list[_
         ln = decaying if is_transient else steady
         k = round(ln.freq_Hz / f)
         if k >= 1 and abs(ln.freq_Hz - k * f) <= guard:       # moved onto a drive harmonic: not separable
+            break
+        if aliases.size and np.min(np.abs(aliases - ln.freq_Hz)) <= guard:    # onto an aliased harmonic
             break
         (transients if is_transient else lines).append(ln)
         found = found + ln.model
@@ -388,15 +422,17 @@ def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
     zero = np.zeros(n)
     removed = zero
     for _pass in range(4):        # a trend converges more slowly than lines: more passes only for it
-        r = x - _periodic_part(x - removed, fs, f)
+        periodic, C = _periodic_fit(x - removed, fs, f)
+        r = x - periodic
         noise = _robust_noise(r)
-        lines, transients = _find_lines(r, fs, f)
+        aliases = _aliases(C, noise * math.sqrt(2.0 / n), f, fs)
+        lines, transients = _find_lines(r, fs, f, aliases)
         found = sum((ln.model for ln in lines + transients), zero)
         trend, change, z = _trend(r - found, noise)
         if not z > TREND_Z:
             trend, change, z = zero, 0.0, 0.0
         elif lines or transients:     # what the trend's low-frequency leakage made look like a line goes
-            lines, transients = _find_lines(r - trend, fs, f)
+            lines, transients = _find_lines(r - trend, fs, f, aliases)
             found = sum((ln.model for ln in lines + transients), zero)
             trend, change, z = _trend(r - found, noise)
             if not z > TREND_Z:
