@@ -262,13 +262,13 @@ def _periodic_fit(x: np.ndarray, fs: float, f: float, fit_from: int = 0) -> tupl
 
 def _aliases(C: np.ndarray, se: float, f: float, fs: float) -> np.ndarray:
     """Frequencies (Hz, in 0..fs/2) where drive harmonics above Nyquist fold back, when the
-    fitted harmonics show the response still has content there: the top tenth of them above
-    3 standard errors; how far up is extrapolated from their power-law decay (at most 8 x)."""
+    fitted harmonics show the response still has content there (one of the top tenth above
+    3 standard errors); how far up is extrapolated from their power-law decay (at most 8 x)."""
     K = C.size
     if K < 6 or (K + 1) * f < 0.45 * fs:          # harmonics capped below Nyquist: nothing folds
         return np.zeros(0)
     a = np.abs(C)
-    top = float(np.median(a[-max(3, K // 10):]))
+    top = float(np.max(a[-max(3, K // 10):]))
     if not top > 3 * se:
         return np.zeros(0)
     k = np.arange(1, K + 1)
