@@ -263,13 +263,15 @@ def _periodic_fit(x: np.ndarray, fs: float, f: float, fit_from: int = 0) -> tupl
 def _aliases(C: np.ndarray, se: float, f: float, fs: float) -> np.ndarray:
     """Frequencies (Hz, in 0..fs/2) where drive harmonics above Nyquist fold back, when the
     fitted harmonics show the response still has content there (one of the top tenth above
-    3 standard errors); how far up is extrapolated from their power-law decay (at most 8 x)."""
+    what noise alone reaches with probability 1e-3); how far up is extrapolated from their
+    power-law decay (at most 8 x)."""
     K = C.size
     if K < 6 or (K + 1) * f < 0.45 * fs:          # harmonics capped below Nyquist: nothing folds
         return np.zeros(0)
     a = np.abs(C)
-    top = float(np.max(a[-max(3, K // 10):]))
-    if not top > 3 * se:
+    m = max(3, K // 10)
+    top = float(np.max(a[-m:]))
+    if not top > math.sqrt(2 * math.log(m / 1e-3)) * se:     # noise alone: probability 1e-3 (Rayleigh)
         return np.zeros(0)
     k = np.arange(1, K + 1)
     upper = (k >= K // 2) & (a > 3 * se)

@@ -125,7 +125,7 @@ def test_hum_on_the_probe_in_a_foreign_file_keeps_the_steps_and_is_named_as_main
     fs, freqs = 8192.0, [23.0, 31.0, 71.0, 97.0]
     sets = []
     for i, f in enumerate(freqs):
-        F, a, x = closed_form_step(f, fs, 24, i, hum=20e-9 if i < 3 else 0.0, clip_force=(i == 3))
+        F, a, x = closed_form_step(f, fs, 16, i, hum=20e-9 if i < 3 else 0.0, clip_force=(i == 3))
         sets += [uff_set(i + 1, 13, F, fs), uff_set(i + 1, 12, a, fs), uff_set(i + 1, 8, x, fs)]
     src = load_source(write(tmp_path / "hum.uff", sets))
     assert [s.key for s in src.steps] == ["LC0001", "LC0002", "LC0003"]
