@@ -119,6 +119,9 @@ class Artefact:
         if self.kind == "unsettled_transient":
             what = f"{self.freq_Hz:.4g} Hz " if math.isfinite(self.freq_Hz) else ""
             done = {"removed": "; removed", "trimmed": "; the first periods were dropped"}.get(self.action, "")
+            if not self.decay_per_s > 0:
+                return (f"an unsettled {what}vibration of {si(self.size, self.unit)} {where} ({self.evidence}), "
+                        f"not decaying measurably within the record: settle longer{done}")
             return (f"an unsettled {what}transient of {si(self.size, self.unit)} {where} at the record start, "
                     f"decaying at {self.decay_per_s:.3g} /s (time constant {1e3 / self.decay_per_s:.3g} ms; "
                     f"{self.evidence}): settle {self.settle_cycles} more cycles{done}")
@@ -586,6 +589,19 @@ def assess_step(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None
             cyc = settle_cycles(a.size, tr[0].decay_per_s, noise[a.channel], n, fs_Hz, f)
             q.artefacts[i] = replace(a, kind="unsettled_transient", decay_per_s=tr[0].decay_per_s, settle_cycles=cyc,
                                      evidence=f"at the frequency of the transient on the {LABEL[tr[0].channel]}")
+    # a "line" seen by the probe and the accelerometer alike (a = -(2 pi f)^2 x) is motion of
+    # the carriage, a free vibration too slow to decay measurably within the record, not interference
+    motion = set()
+    for i, x in enumerate(q.artefacts):
+        for j, acc in enumerate(q.artefacts):
+            if (x.kind == acc.kind == "line_interference" and x.channel == "disp" and acc.channel == "accel"
+                    and abs(x.freq_Hz - acc.freq_Hz) <= guard
+                    and 0.7 < acc.size / ((2 * math.pi * x.freq_Hz) ** 2 * x.size) < 1.4):
+                motion |= {i, j}
+    for i in motion:
+        q.artefacts[i] = replace(q.artefacts[i], kind="unsettled_transient", settle_cycles=0, evidence=(
+            "seen by the probe and the accelerometer alike, a = -(2 pi f)^2 x: a free vibration of the "
+            "carriage, not interference"))
     if need > 0 and periods - need >= max(MIN_PERIODS, periods // 4):
         start = int(math.ceil(need * fs_Hz / f - 1e-9))
         for ch in CHANNELS:           # clean the kept part again: the fit is no longer biased by the transient
@@ -731,11 +747,15 @@ def _other_cause(kind: str, ch: str, items, total: int) -> dict:
         tau = [1e3 / a.decay_per_s for a in arts if a.decay_per_s > 0]
         ft = [a.freq_Hz for a in arts if math.isfinite(a.freq_Hz)]
         vib = f"a free vibration near {np.median(ft):.3g} Hz" if ft else "a free vibration"
-        sentence = (f"steps {where} still decaying at the record start ({vib}, time constant {_span(tau, 'ms')}, on the "
-                    f"{' and '.join(LABEL[c] for c in chans)}) in {n} of {total} steps: settle {cyc} more cycles; "
+        const = f", time constant {_span(tau, 'ms')}" if tau else ""
+        advice = f"settle {cyc} more cycles" if cyc else "settle longer"
+        sentence = (f"steps {where} still vibrating at the record start ({vib}{const}, on the "
+                    f"{' and '.join(LABEL[c] for c in chans)}) in {n} of {total} steps: {advice}; "
                     f"{fate} (transient removed or first periods dropped where the record allowed)")
-        params = dict(decay_rate=_param([a.decay_per_s for a in arts], "1/s"),
-                      settle_cycles_needed=_param([a.settle_cycles for a in arts], "cycles"))
+        rates = [a.decay_per_s for a in arts if a.decay_per_s > 0]
+        params = dict(settle_cycles_needed=_param([a.settle_cycles for a in arts], "cycles"))
+        if rates:
+            params["decay_rate"] = _param(rates, "1/s")
         if ft:
             params["frequency"] = _param(ft, "Hz")
         return _entry(kind, ",".join(chans), items, total, params, sentence)

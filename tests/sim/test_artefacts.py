@@ -218,3 +218,19 @@ def test_hum_too_close_to_the_drive_to_separate_is_named_in_the_rejection():
     sig["disp"] = sig["disp"] + 100e-9 * np.sin(2 * np.pi * 50.0 * t)
     q = assess(sig, f=f).quality
     assert q.status == "flagged" and [round(a.freq_Hz, 1) for a in of_kind(q, "line_interference")] == [50.0]
+
+
+def test_a_steady_vibration_seen_by_probe_and_accelerometer_alike_is_carriage_motion_not_hum():
+    fs = 10371.0
+    t, clean, noise = records(fs, periods=12)
+    sig = {ch: clean[ch] + noise[ch] for ch in clean}
+    w = 2 * np.pi * 84.0
+    sig["disp"] = sig["disp"] + 30e-9 * np.sin(w * t)
+    sig["accel"] = sig["accel"] - w ** 2 * 30e-9 * np.sin(w * t)       # the same motion, a = -w^2 x
+    q = assess(sig, fs).quality
+    assert not of_kind(q, "line_interference")
+    vib = of_kind(q, "unsettled_transient")
+    assert {a.channel for a in vib} == {"disp", "accel"} and all("free vibration of the carriage" in a.evidence
+                                                                 for a in vib)
+    causes = {c["id"]: c for c in artefact_causes([("s", q)])}
+    assert set(causes) == {"unsettled_transient"} and "settle longer" in causes["unsettled_transient"]["sentence"]
