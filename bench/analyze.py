@@ -2,7 +2,8 @@
 
 SOURCE (a run directory or a UFF58 file of time records) is read into steps by
 :func:`bench.sources.load_source`; :func:`sim.discrepancy.analyze_steps` does the physics;
-this module only picks the starting values (``--rig`` file, else the run's own rig, else
+the measurement artefacts found in the time records (:mod:`sim.artefacts`, through the
+source) are added to the causes with ``kind: "artefact"``; this module only picks the starting values (``--rig`` file, else the run's own rig, else
 estimated from the data) and writes ``analysis.json`` (schema in docs/analysis.md) and
 ``analysis.html``.  Nothing in SOURCE is modified.
 """
@@ -13,6 +14,7 @@ import logging
 from importlib import metadata
 from pathlib import Path
 
+from sim.artefacts import artefact_causes
 from sim.discrepancy import analyze_steps
 from sim.errors import ConfigurationError
 
@@ -64,8 +66,11 @@ def analyze_source(source: Path, out_dir: Path | None = None, rig: Path | None =
                          + (f", first: {rejected[0]['step']}: {rejected[0]['reason']}" if rejected else "") + ")")
     guess, v_ref = _guess(source, Path(rig) if rig else None)
     log.info("analysing %d steps of %s (%d rejected)", len(steps), source, len(rejected))
+    artefacts = artefact_causes(src.quality(), total=len(src.steps) + len(src.rejected))
+    for c in artefacts:
+        log.info("artefact: %s", c["sentence"])
     analysis = analyze_steps(steps, guess, source=str(source), software_version=_version(), rejected=rejected,
-                             v_ref_m_per_s=v_ref)
+                             v_ref_m_per_s=v_ref, artefacts=artefacts)
     result = analysis.to_dict()
     out = Path(out_dir) if out_dir else default_out_dir(source)
     out.mkdir(parents=True, exist_ok=True)

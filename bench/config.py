@@ -221,6 +221,9 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
     return plan
 
 
+# [rig.model] keys that take one of a few words, key -> allowed values
+MODEL_CHOICES = {"line_channel": ("", "disp", "force", "accel")}
+
 # [rig.model]: sim.rig.RigModel's parameters, key -> (unit, low, high, low open, integer).
 # Ranges are what a real carriage rig can have; cross-field rules (n != 1, J > m e^2, ...)
 # are the model's own and reach the user through the same error.
@@ -252,6 +255,8 @@ MODEL_SCHEMA = {
     "drive_height_m": ("m", 0, 10, False, False),
     "cg_height_m": ("m", 0, 10, False, False),
     "cubic_spring_N_per_m3": ("N/m^3", 0, 1e20, False, False),
+    "line_freq_Hz": ("Hz", 0, 1e5, False, False),
+    "line_amplitude": ("unit of line_channel: m, N or m/s^2", 0, 1e4, False, False),
     "steps_per_period": ("steps", 20, 1e5, False, True),
     "seed": ("", 0, 2**63 - 1, False, True),
 }
@@ -261,8 +266,11 @@ def _check_model(sec: _Section) -> None:
     """Each [rig.model] key against its unit and range, then the model's own rules."""
     from sim.rig import RigModel
 
-    sec.unknown(MODEL_SCHEMA)
+    sec.unknown(set(MODEL_SCHEMA) | set(MODEL_CHOICES))
     for key in sec.data:
+        if key in MODEL_CHOICES:
+            sec.choice(key, None, MODEL_CHOICES[key])
+            continue
         unit, lo, hi, lo_open, integer = MODEL_SCHEMA[key]
         try:
             sec.number(key, None, lo, hi, lo_open=lo_open, integer=integer)

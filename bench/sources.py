@@ -15,10 +15,17 @@ one-period averaged records (for loop plots), and a periodicity score.
   needed: the frequency is estimated from the force record and the level is the measured
   force amplitude.  ``bench export`` tags (``bench step=... f=...``) are used when present.
 
+Before the harmonics, :func:`sim.artefacts.assess_step` looks at the time records for
+measurement artefacts: interference lines (fitted and removed), offset drift (removed),
+unsettled transients (the first periods dropped, or the step rejected with the settle
+cycles it needs), clipping and drop-outs (rejected).  Its :class:`~sim.artefacts.StepQuality`
+(usable / flagged / rejected, reasons naming the channel) is the one notion of step
+quality: ``bench analyze`` and the run report both show it (``Source.quality``).
+
 A step whose records are missing, inconsistent (lengths, sample rates), non-finite, too
-short, or not periodic enough (harmonics or offset changing between the two halves of the
-record by more than DRIFT_LIMIT standard errors) is rejected with a reason, never
-silently dropped.  An unreadable file raises ValueError naming the record.  Nothing is
+short, spoiled by an artefact, or not periodic enough after cleaning (harmonics or offset
+changing between the two halves of the record by more than DRIFT_LIMIT standard errors)
+is rejected with a reason, never silently dropped.  An unreadable file raises ValueError naming the record.  Nothing is
 written: the user's files are left as they are.
 """
 
@@ -32,15 +39,14 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.artefacts import DRIFT_LIMIT, StepQuality, assess_step
 from sim.errors import ConfigurationError, RunDirectoryError
 from sim.identify import StepHarmonics
-from sim.records import analyse_records
 
 from .storage import RunStore
 
 log = logging.getLogger(__name__)
 
-DRIFT_LIMIT = 10.0          # standard errors between the halves of a record
 SDT = {13: "force", 12: "accel", 8: "disp"}      # UFF58 record 8 ordinate specific data type
 SDT_NAME = {13: "force (type 13)", 12: "acceleration (type 12)", 8: "displacement (type 8)"}
 FUNC_TIME = 1
@@ -60,12 +66,22 @@ class MeasuredStep:
     direction: str = ""         # "up", "down", or "" when unknown
     periods: int = 0
     drift_sigma: float = 0.0
+    quality: StepQuality = field(default_factory=StepQuality)
 
 
 @dataclass
 class Rejected:
     step: str
     reason: str
+    quality: StepQuality | None = None      # None when the records could not be read at all
+
+
+class StepRejected(ValueError):
+    """A step's records are readable but not usable; ``quality`` says why."""
+
+    def __init__(self, quality: StepQuality):
+        super().__init__(quality.reason)
+        self.quality = quality
 
 
 @dataclass
@@ -75,6 +91,19 @@ class Source:
     steps: list[MeasuredStep] = field(default_factory=list)
     rejected: list[Rejected] = field(default_factory=list)
     metadata: dict = field(default_factory=dict)   # run.json for a run
+
+    def quality(self) -> list[tuple[str, StepQuality]]:
+        """(step key, quality) of every step whose records could be read, kept or rejected,
+        in the source's order of kept steps then rejected ones."""
+        return ([(s.key, s.quality) for s in self.steps]
+                + [(r.step, r.quality) for r in self.rejected if r.quality is not None])
+
+    def attention(self) -> list[tuple[str, str, str]]:
+        """(step, "rejected" | "flagged", reason) of every step that is not simply usable:
+        what ``bench analyze`` writes as steps_rejected / steps_flagged and the report lists."""
+        out = [(r.step, "rejected", r.reason) for r in self.rejected]
+        out += [(s.key, "flagged", s.quality.text) for s in self.steps if s.quality.status == "flagged"]
+        return out
 
 
 def load_source(path: Path) -> Source:
@@ -89,18 +118,20 @@ def load_source(path: Path) -> Source:
 
 def measured_step(key: str, force, accel, disp, fs_Hz: float, freq_Hz: float | None = None,
                   level_N: float | None = None, direction: str = "") -> MeasuredStep:
-    """One step from its three records; ValueError names what is wrong with them."""
-    rec = analyse_records(force, accel, disp, fs_Hz, freq_Hz)
-    if rec.drift_sigma > DRIFT_LIMIT:
-        raise ValueError(f"not periodic enough: {rec.drift_detail} changes by {rec.drift_sigma:.0f} "
-                         f"standard errors between the two halves of the record (limit {DRIFT_LIMIT:g})")
+    """One step from its three records, cleaned of the artefacts that can be removed;
+    ValueError names what is wrong with them (:class:`StepRejected` with the step's quality
+    when an artefact or the periodicity gate rejects it)."""
+    a = assess_step(force, accel, disp, fs_Hz, freq_Hz)
+    if a.records is None:
+        raise StepRejected(a.quality)
+    rec = a.records
     h = StepHarmonics.from_records(rec)
     c = rec.channels
     level = float(abs(h.force[0])) if level_N is None or not math.isfinite(level_N) else float(level_N)
     return MeasuredStep(key=key, level_N=level, freq_Hz=rec.freq_Hz, harmonics=h, fs_Hz=rec.fs_Hz,
                         force_N=c["force"].mean_period, accel_m_s2=c["accel"].mean_period,
                         disp_m=c["disp"].mean_period, direction=direction, periods=rec.periods,
-                        drift_sigma=rec.drift_sigma)
+                        drift_sigma=rec.drift_sigma, quality=a.quality)
 
 
 # ---------------------------------------------------------------------------- run directories
@@ -130,7 +161,7 @@ def _load_run(path: Path) -> Source:
                                            float(raw["fs_Hz"]), float(r["freq_Hz"]),
                                            r.get("target_force_N"), r.get("direction", "")))
         except (ValueError, KeyError, TypeError) as e:
-            src.rejected.append(Rejected(key, str(e)))
+            src.rejected.append(Rejected(key, str(e), getattr(e, "quality", None)))
     _log_rejections(src)
     return src
 
@@ -259,7 +290,7 @@ def _load_uff(path: Path) -> Source:
         try:
             src.steps.append(_uff_step(key, recs))
         except ValueError as e:
-            src.rejected.append(Rejected(key, str(e)))
+            src.rejected.append(Rejected(key, str(e), getattr(e, "quality", None)))
     _log_rejections(src)
     return src
 

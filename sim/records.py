@@ -182,9 +182,9 @@ def _analyse_channel(x: np.ndarray, fs: float, f: float, periods: int, spp: int 
     return ChannelHarmonics(C, off, noise, noise * math.sqrt(2.0 / N), mean)
 
 
-def analyse_records(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None = None,
-                    max_harmonics: int = MAX_HARMONICS) -> PeriodicRecords:
-    """Harmonics, noise and a periodicity score of one step's three records."""
+def checked_records(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None = None) -> tuple[dict, float]:
+    """The three records as float arrays and the drive frequency (estimated when None);
+    ValueError names what makes them unusable (lengths, NaN, rate, too few periods)."""
     sig = {"force": np.asarray(force_N, float), "accel": np.asarray(accel_m_s2, float),
            "disp": np.asarray(disp_m, float)}
     sizes = {k: v.size for k, v in sig.items()}
@@ -204,6 +204,16 @@ def analyse_records(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | 
         raise ValueError(f"record holds {n / ratio:.2f} periods of {f:.6g} Hz; at least 2 are needed")
     if ratio < 4:
         raise ValueError(f"{ratio:.2f} samples per period of {f:.6g} Hz: not enough to resolve a harmonic")
+    return sig, f
+
+
+def analyse_records(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None = None,
+                    max_harmonics: int = MAX_HARMONICS) -> PeriodicRecords:
+    """Harmonics, noise and a periodicity score of one step's three records."""
+    sig, f = checked_records(force_N, accel_m_s2, disp_m, fs_Hz, freq_Hz)
+    n = sig["force"].size
+    ratio = fs_Hz / f
+    periods = int(math.floor(n / ratio + 1e-9))
     spp = int(round(ratio)) if abs(ratio - round(ratio)) * periods < 0.02 else None
     chans = {k: _analyse_channel(v, fs_Hz, f, periods, spp, max_harmonics) for k, v in sig.items()}
     # periodicity: the two halves of the window against each other

@@ -26,7 +26,9 @@ Sensors: impedance-head force (V/N), accelerometer (V/(m/s^2)), eddy-current pro
 (V/m about a stand-off gap).  Each has Gaussian noise and clips at +-10 V; the DAQ twin
 quantises.  Optional effects (all off by default): viscous damping, a linear spring,
 a displacement-channel delay, sensor gain errors, velocity-dependent friction, the
-pitching mode and a hardening cubic spring.  The amplifier's saturation is
+pitching mode, a hardening cubic spring, and an interference line on one sensor
+(``line_channel``, ``line_freq_Hz``, ``line_amplitude``: mains hum, at the rig's absolute
+time, so not locked to the drive).  The amplifier's saturation is
 modelled as a limit on the force amplitude (the drive stays sinusoidal).
 """
 
@@ -49,6 +51,7 @@ from .virgin import SakaiCurve, check_positive_finite
 log = logging.getLogger(__name__)
 
 OUTPUT_RANGE_V = 10.0
+LINE_CHANNELS = ("", "disp", "force", "accel")
 REVERSAL_RESOLUTION = 16      # extra RK4 steps at small-force n < 1 reversals
 
 
@@ -84,6 +87,10 @@ class RigModel:
     drive_height_m: float = 0.0             # h: shaker force and accelerometer above the guideway
     cg_height_m: float = 0.0                # e: centre of gravity above the guideway
     cubic_spring_N_per_m3: float = 0.0      # hardening spring k3 x^3
+    # an interference line on one sensor (mains hum), not locked to the drive: off when ""
+    line_channel: str = ""                  # "disp" | "force" | "accel"
+    line_freq_Hz: float = 0.0
+    line_amplitude: float = 0.0             # SI unit of that channel (m, N, m/s^2)
     steps_per_period: int = 400             # RK4 resolution of the drive period (minimum)
     seed: int = 0
 
@@ -98,6 +105,17 @@ class RigModel:
                 raise ConfigurationError(f"{name} must be finite and >= 0, got {v!r}")
         SakaiCurve(self.n)  # validates n
         plant_effects.validate(self)
+        self._validate_line()
+
+    def _validate_line(self) -> None:
+        if self.line_channel not in LINE_CHANNELS:
+            raise ValueError(f"line_channel must be one of {list(LINE_CHANNELS)}, got {self.line_channel!r}")
+        for name in ("line_freq_Hz", "line_amplitude"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+        if self.line_channel and not self.line_freq_Hz > 0:
+            raise ValueError(f"line_freq_Hz must be > 0 when line_channel is set, got {self.line_freq_Hz!r}")
 
     @classmethod
     def from_dict(cls, d: dict) -> RigModel:
@@ -256,6 +274,10 @@ class SimulatedRig:
         disp = rec[:, 1] * m.x_s_m
         if m.disp_delay_s > 0:
             disp = self._delayed(disp, fs)
+        if m.line_channel and m.line_amplitude > 0:      # on the sensor, at the rig's absolute time
+            line = m.line_amplitude * np.sin(2 * math.pi * m.line_freq_Hz * (self._t + t_rel))
+            force, accel, disp = (v + line if name == m.line_channel else v
+                                  for name, v in (("force", force), ("accel", accel), ("disp", disp)))
         rng = self._rng
         out = RigBlock(
             t0_s=self._t, fs_Hz=fs,

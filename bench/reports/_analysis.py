@@ -99,6 +99,7 @@ class AnalysisData:
     candidates: list[Candidate] = field(default_factory=list)
     steps_used: list[str] = field(default_factory=list)
     steps_rejected: list[tuple[str, str]] = field(default_factory=list)
+    steps_flagged: list[tuple[str, str]] = field(default_factory=list)     # optional: used, with notes
     steps: list[StepFRF] = field(default_factory=list)
     loops: list[Loop] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)   # parts that could not be read
@@ -213,6 +214,7 @@ def analysis_data(d: dict) -> AnalysisData:
     a.candidates = _items(a, d, "candidates", _candidate)
     a.steps_used = [str(k) for k in d.get("steps_used") or []]
     a.steps_rejected = _items(a, d, "steps_rejected", lambda r: (str(r["step"]), str(r.get("reason", "?"))))
+    a.steps_flagged = _items(a, d, "steps_flagged", lambda r: (str(r["step"]), str(r.get("reason", "?"))))
     a.steps = _items(a, d, "steps", _step)
     a.loops = _items(a, d, "loops", _loop)
     for p in a.problems:

@@ -220,10 +220,14 @@ def _sort_key(v: float) -> float:
 
 def _steps(a: AnalysisData) -> str:
     out = ['<section aria-labelledby="steps-h"><h2 id="steps-h">Steps</h2>',
-           f"<p>{len(a.steps_used)} steps used, {len(a.steps_rejected)} rejected.</p>"]
+           f"<p>{len(a.steps_used)} steps used, {len(a.steps_rejected)} rejected"
+           + (f"; {len(a.steps_flagged)} of the used steps flagged" if a.steps_flagged else "") + ".</p>"]
     if a.steps_rejected:
         out.append(_table(["step", "reason"], [[escape(s), escape(r)] for s, r in a.steps_rejected],
                           caption="steps rejected, with the reason"))
+    if a.steps_flagged:
+        out.append(_table(["step", "why"], [[escape(s), escape(r)] for s, r in a.steps_flagged],
+                          caption="steps used but flagged (artefacts removed, or noisy), with the reason"))
     return "".join(out) + "</section>"
 
 

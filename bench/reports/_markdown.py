@@ -27,7 +27,7 @@ from . import _figures as figures
 from ._analysis import analysis_data
 from ._identification import ID_PARAMS, IdentificationData, determined_from, finite, steps_of
 from ._run import ANALYSIS_HTML, RunData, load_run
-from ._steps import UNSETTLED_RESIDUAL, pp_source, residual_ratio
+from ._steps import UNSETTLED_RESIDUAL, pp_source
 
 log = logging.getLogger(__name__)
 
@@ -368,19 +368,20 @@ def _results_md(run: RunData, out: Path, files: list[tuple[str, str]]) -> list[s
                        r["control_iterations"]] for r in failed])
     else:
         md.append("Force control reached the tolerance at every step.")
-    caveat = ("compliance_pp of these steps, from the raw record, is biased high; |X1/F1| much less affected"
-              if legacy else "the record is not only the steady periodic response; the harmonic fit, from which "
-              "compliance_pp and |X1/F1| come, rejects most of it, but treat these steps with care")
-    md += ["", f"Displacement residual above {100 * UNSETTLED_RESIDUAL:g} % of the fundamental (noise or "
-           f"non-periodic motion such as an unsettled free vibration; {caveat}):", ""]
-    rows = []
-    for s in run.series:
-        bad = [st for st in s.steps if residual_ratio(st) > UNSETTLED_RESIDUAL]
-        if bad:
-            worst = max(bad, key=residual_ratio)
-            rows.append([f"{s.level_N:g}", s.direction, f"{len(bad)} / {len(s.steps)}",
-                         ", ".join(f"{st['freq_Hz']:.4g}" for st in bad),
-                         f"{100 * residual_ratio(worst):.3g} % at {worst['freq_Hz']:.4g} Hz"])
-    md += _table(["level (N)", "sweep", "steps", "frequencies (Hz)", "worst"], rows) if rows else ["none"]
+    md += ["", "Step quality, from the time records (`sim.artefacts`: interference lines and offset drift "
+           "removed, unsettled transients removed or their first periods dropped, clipping and drop-outs "
+           "rejected, periodicity gate, displacement residual above "
+           f"{100 * UNSETTLED_RESIDUAL:g} % of the fundamental flagged as noisy). `bench analyze` uses the "
+           "same check: it leaves out the rejected steps and uses the flagged ones.", ""]
+    if run.attention_error:
+        md.append(f"The step quality could not be computed: {run.attention_error}")
+    elif run.attention:
+        md += _table(["step", "status", "why"], [[k, status, why] for k, status, why in run.attention])
+    else:
+        md.append("Every step is usable: no artefact found and no step flagged.")
+    if legacy:
+        md += ["", "This run stored compliance_pp from the raw record: at flagged steps (noise or non-periodic "
+               "motion) compliance_pp of these steps, from the raw record, is biased high; |X1/F1| much less "
+               "affected."]
     md.append("")
     return md

@@ -26,7 +26,7 @@ class LevelComparison:
     level_N: float
     gamma0: float
     n_steps: int
-    n_flagged: int               # steps with residual ratio > UNSETTLED_RESIDUAL
+    n_flagged: int               # steps flagged or rejected by the step quality check
     median: float                # of the stored compliance_pp, all steps
     max: float
     max_unflagged: float         # unflagged steps only
@@ -59,12 +59,16 @@ def _model_effects(model) -> list[str]:
              "disp_delay_s": "displacement-channel delay", "force_gain_error": "force gain error",
              "accel_gain_error": "acceleration gain error", "disp_gain_error": "displacement gain error",
              "friction_alpha": "speed-dependent friction", "pitch_inertia_kg_m2": "pitching mode",
-             "cubic_spring_N_per_m3": "cubic spring"}
+             "cubic_spring_N_per_m3": "cubic spring",
+             "line_amplitude": f"interference line on the {model.line_channel or '?'} sensor at "
+                               f"{model.line_freq_Hz:g} Hz"}
     return [f"{label} ({k} = {getattr(model, k):g})" for k, label in names.items() if getattr(model, k, 0)]
 
 
-def model_comparison(meta: dict, results: list[dict]) -> ModelComparison | None:
-    """None unless the run is on a simulated rig with a stored model."""
+def model_comparison(meta: dict, results: list[dict], flagged: set[str] | None = None) -> ModelComparison | None:
+    """None unless the run is on a simulated rig with a stored model.  ``flagged``: keys of
+    the steps the step quality check (sim.artefacts) did not find simply usable; None
+    flags by the stored displacement residual instead."""
     rig = meta.get("rig") or {}
     if not (rig.get("simulated") and rig.get("model")) or not results:
         return None
@@ -120,10 +124,11 @@ def model_comparison(meta: dict, results: list[dict]) -> ModelComparison | None:
             i = int(np.argmin(np.abs(f_model - s["freq_Hz"])))
             at_steps[s["key"]] = float(C[i])
             diff.append(s["compliance_pp_m_per_N"] / C[i] - 1.0)
-        flagged = np.array([residual_ratio(s) > UNSETTLED_RESIDUAL for s in steps])
+        bad = np.array([s["key"] in flagged if flagged is not None else residual_ratio(s) > UNSETTLED_RESIDUAL
+                        for s in steps])
         diff = np.array(diff)
-        levels.append(LevelComparison(level, gamma0, len(steps), int(flagged.sum()), _median(diff), _signed_max(diff),
-                                      _signed_max(diff[~flagged]), notes))
+        levels.append(LevelComparison(level, gamma0, len(steps), int(bad.sum()), _median(diff), _signed_max(diff),
+                                      _signed_max(diff[~bad]), notes))
     return ModelComparison(model.__dict__.copy(), ws, curves, at_steps, levels, engine_notes)
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..storage import Accounting, RunDirError, RunStore
@@ -69,6 +69,8 @@ class RunData:
     analysis: dict | None                     # analysis/analysis.json, when `bench analyze` wrote it
     analysis_error: str | None                # why analysis.json could not be read, if so
     accounting: Accounting | None = None      # the steps counted against the plan (None: no plan stored)
+    attention: list[tuple[str, str, str]] = field(default_factory=list)   # (step, rejected|flagged, why)
+    attention_error: str | None = None        # why the step quality could not be computed, if so
 
     @property
     def plan(self) -> dict:
@@ -111,10 +113,12 @@ def load_run(run_dir: Path) -> RunData:
     plan, rig = meta.get("plan") or {}, meta.get("rig") or {}
     levels_N = plan.get("levels_N") or sorted({r["target_force_N"] for r in results})
     series = series_of(results, levels_N)
+    attention, attention_error = step_attention(store.path)
+    flagged = None if attention_error else {k for k, _, _ in attention}
     cmp, cmp_error = None, None
     if results and rig.get("simulated") and rig.get("model"):
         try:
-            cmp = model_comparison(meta, results)
+            cmp = model_comparison(meta, results, flagged)
         except Exception as e:
             log.warning("model comparison failed: %s", e)
             cmp_error = f"{type(e).__name__}: {e}"
@@ -124,4 +128,16 @@ def load_run(run_dir: Path) -> RunData:
     except RunDirError:
         accounting = None
     return RunData(store.path, meta, results, events, list(levels_N), series, identification_data(store.path, meta),
-                   cmp, cmp_error, resonances(series, cmp) if results else [], analysis, analysis_error, accounting)
+                   cmp, cmp_error, resonances(series, cmp) if results else [], analysis, analysis_error,
+                   accounting, attention, attention_error)
+
+
+def step_attention(run_dir: Path) -> tuple[list[tuple[str, str, str]], str | None]:
+    """(step, "rejected" | "flagged", why) of every step that is not simply usable, by the
+    one step quality check ``bench analyze`` applies (:meth:`bench.sources.Source.attention`)."""
+    from ..sources import load_source
+    try:
+        return load_source(run_dir).attention(), None
+    except Exception as e:  # noqa: BLE001 - the report must come out; say why the check is missing
+        log.warning("step quality of %s could not be computed: %s", run_dir, e)
+        return [], f"{type(e).__name__}: {e}"

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-UNSETTLED_RESIDUAL = 0.02      # displacement residual rms / fundamental amplitude above which a step is flagged
+from sim.artefacts import NOISY_RESIDUAL as UNSETTLED_RESIDUAL  # residual / fundamental: flagged above
 
 
 @dataclass

@@ -79,7 +79,10 @@ def flatten(result: dict) -> dict:
     base = result.get("base") or {}
     row["reduced_chi2"] = base.get("reduced_chi2", result.get("reduced_chi2"))
     causes = result.get("causes")
-    row["causes"] = ",".join(c.get("id", "") for c in causes) if causes is not None else None
+    row["causes"] = (",".join(c.get("id", "") for c in causes if c.get("kind") != "artefact")
+                     if causes is not None else None)
+    row["artefacts"] = (",".join(dict.fromkeys(c.get("id", "") for c in causes if c.get("kind") == "artefact"))
+                        if causes is not None else None)
     row["unexplained"] = result.get("unexplained")
     row["verdict"] = result.get("verdict")
     used = result.get("steps_used")

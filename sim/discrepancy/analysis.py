@@ -118,6 +118,7 @@ class Analysis:
     software_version: str = ""
     rejected: list = field(default_factory=list)
     v_ref_m_per_s: float | None = None     # the rig file's friction_v_ref_m_per_s: alpha is stated there
+    artefacts: list = field(default_factory=list)   # causes of kind "artefact" (sim.artefacts.artefact_causes)
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -217,6 +218,7 @@ class Analysis:
         caveat = self._spring_caveat()
         if caveat:
             parts.append(caveat)
+        parts += artefact_verdict(self.artefacts)
         return " ".join(parts)
 
     def largest_amplitude_over_x_s(self) -> float:
@@ -313,8 +315,9 @@ class Analysis:
                                        largest_amplitude_over_x_s=self.largest_amplitude_over_x_s(),
                                        spring_separable=self.spring_separable())),
             final=dict(effects=list(self.final.model.effects), reduced_chi2=self.final.reduced_chi2),
-            causes=causes, unexplained=sel.unexplained, verdict=self.verdict(), candidates=candidates,
-            steps_used=[s.key for s in self.steps], steps_rejected=list(self.rejected),
+            causes=causes + list(self.artefacts), unexplained=sel.unexplained, verdict=self.verdict(),
+            candidates=candidates, steps_used=[s.key for s in self.steps], steps_rejected=list(self.rejected),
+            steps_flagged=steps_flagged(self.steps),
             steps=steps, loops=self.loops())
 
     def loops(self, count: int = LOOPS) -> list[dict]:
@@ -350,14 +353,34 @@ class Analysis:
         return out
 
 
+def artefact_verdict(artefacts: list) -> list[str]:
+    """The verdict's sentence on measurement artefacts (causes of kind "artefact")."""
+    if not artefacts:
+        return []
+    return ["Measurement artefacts, found in the time records before the fit: "
+            + "; ".join(c["sentence"] for c in artefacts) + "."]
+
+
+def steps_flagged(steps) -> list[dict]:
+    """``{step, reason}`` of the used steps the step quality check flagged (sim.artefacts)."""
+    out = []
+    for s in steps:
+        q = getattr(s, "quality", None)
+        if q is not None and q.status == "flagged":
+            out.append(dict(step=s.key, reason=q.text))
+    return out
+
+
 def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, source: str = "",
                   software_version: str = "", rejected: list | None = None,
-                  v_ref_m_per_s: float | None = None) -> Analysis:
+                  v_ref_m_per_s: float | None = None, artefacts: list | None = None) -> Analysis:
     """Fit the base model, try the catalog, name what survives both gates (see module doc).
 
     ``guess``: rough F_s_N, x_s_m, n, mass_kg (e.g. a rig file's expected values); None
     estimates them from the data.  ``v_ref_m_per_s``: the speed at which to state a
-    velocity-dependent friction (the rig file's); None: the speed at the friction resonance."""
+    velocity-dependent friction (the rig file's); None: the speed at the friction resonance.
+    ``artefacts``: causes of kind "artefact" found in the time records
+    (:func:`sim.artefacts.artefact_causes`), reported beside the physics."""
     steps = list(steps)
     d = data_from_steps(steps, harmonics)
     if np.unique(d.level).size < 2:
@@ -366,4 +389,5 @@ def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, sourc
     log.info("base fit: reduced chi2 %.2f", base.reduced_chi2)
     sel = settle_final(select(base, d, W), d)
     return Analysis(steps=steps, data=d, weights=W, selection=sel, source=source,
-                    software_version=software_version, rejected=list(rejected or []), v_ref_m_per_s=v_ref_m_per_s)
+                    software_version=software_version, rejected=list(rejected or []), v_ref_m_per_s=v_ref_m_per_s,
+                    artefacts=list(artefacts or []))

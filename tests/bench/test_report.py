@@ -365,7 +365,8 @@ def test_every_plant_effect_the_engine_leaves_out_is_named_in_the_model_notes():
     companions = {      # parameters only meaningful with a main one
         "friction_alpha": dict(friction_v_ref_m_per_s=0.01),
         "pitch_inertia_kg_m2": dict(pitch_stiffness_N_m_per_rad=1e4, pitch_damping_N_m_s_per_rad=1.0,
-                                    drive_height_m=0.05, cg_height_m=0.03)}
+                                    drive_height_m=0.05, cg_height_m=0.03),
+        "line_amplitude": dict(line_channel="disp", line_freq_Hz=50.0)}
     sub_parameters = {k for c in companions.values() for k in c}
     effects = [f.name for f in fields(RigModel) if f.default == 0.0 and f.name not in sub_parameters
                and f.name != "seed"]
@@ -373,3 +374,38 @@ def test_every_plant_effect_the_engine_leaves_out_is_named_in_the_model_notes():
     for name in effects:
         notes = _model_effects(RigModel(**{name: 0.01}, **companions.get(name, {})))
         assert len(notes) == 1 and name in notes[0], name
+
+
+def test_the_report_lists_the_same_rejected_and_flagged_steps_as_bench_analyze(run_dir, tmp_path):
+    """One notion of step quality (issue 19): a step whose force clips is rejected and one
+    with hum on the probe is kept with the hum removed, in the report exactly as in the
+    source that `bench analyze` reads."""
+    from bench.sources import load_source
+    run = _copy(run_dir, tmp_path)
+    store = RunStore.open(run)
+    results = store.results()
+    # hum 20 Hz from the 30 Hz drive: separable in its 10 periods (at 53 Hz it would not be)
+    hummed = next(r["key"] for r in results if r["freq_Hz"] == 30.0 and r["target_force_N"] == 5.0)
+    clipped = next(r["key"] for r in results if r["freq_Hz"] > 100 and r["target_force_N"] == 5.0)
+    for key, edit in ((clipped, "clip"), (hummed, "hum")):
+        r = next(x for x in results if x["key"] == key)
+        raw = dict(store.raw(key))
+        if edit == "clip":
+            raw["force_N"] = np.minimum(raw["force_N"], 0.9 * raw["force_N"].max())
+        else:
+            t = np.arange(raw["disp_m"].size) / float(raw["fs_Hz"])
+            raw["disp_m"] = raw["disp_m"] + 40e-9 * np.sin(2 * np.pi * 50.0 * t + 0.3)
+        store.write_step(key, r, raw)
+    src = load_source(run)
+    assert [x.step for x in src.rejected] == [clipped] and "force sensor (force)" in src.rejected[0].reason
+    lines = [a for s in src.steps if s.key == hummed for a in s.quality.artefacts if a.kind == "line_interference"]
+    assert len(lines) == 1 and lines[0].freq_Hz == pytest.approx(50.0, abs=0.05)
+    section = _section(write_report(run).read_text(), "Steps needing attention")
+    listed = {}
+    for line in section.splitlines():
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        if len(cells) == 3 and cells[1] in ("rejected", "flagged"):
+            listed[cells[0]] = (cells[1], cells[2])
+    assert listed == {k: (status, why.replace("|", "\\|")) for k, status, why in src.attention()}
+    assert listed[clipped][0] == "rejected" and "clipping" in listed[clipped][1]
+    assert listed[hummed][0] == "flagged" and "50 Hz line" in listed[hummed][1]

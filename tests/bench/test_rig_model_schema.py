@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from bench.config import DEFAULTS, MODEL_SCHEMA, ConfigError, load_rig
+from bench.config import DEFAULTS, MODEL_CHOICES, MODEL_SCHEMA, ConfigError, load_rig
 from sim.rig import RigModel
 
 BASE = (DEFAULTS / "sim_rig.toml").read_text()
@@ -20,7 +20,7 @@ def rig_with(tmp_path: Path, model_lines: str) -> Path:
 
 
 def test_the_schema_covers_every_model_field():
-    assert set(MODEL_SCHEMA) == {f.name for f in fields(RigModel)}
+    assert set(MODEL_SCHEMA) | set(MODEL_CHOICES) == {f.name for f in fields(RigModel)}
 
 
 def test_the_pitch_demo_rig_parses_with_its_effects_on():
@@ -38,6 +38,9 @@ def test_the_pitch_demo_rig_parses_with_its_effects_on():
      ["[rig.model]", "pitch_inertia_kg_m2 must be > mass_kg * cg_height_m^2 = 0.1"]),
     ("pitch_inertia_kg_m2 = 0.3", ["pitch_stiffness_N_m_per_rad must be > 0 when the pitch is on"]),
     ("steps_per_period = 10.5", ["[rig.model] steps_per_period", "integer"]),
+    ('line_channel = "probe"', ["[rig.model] line_channel", "must be one of", "'disp'", "'probe'"]),
+    ("line_amplitude = -1e-9", ["[rig.model] line_amplitude", ">= 0", "unit of line_channel"]),
+    ('line_channel = "disp"\nline_amplitude = 1e-8', ["line_freq_Hz must be > 0 when line_channel is set"]),
 ])
 def test_a_bad_model_value_names_the_key_and_what_is_allowed(tmp_path, line, fragments):
     with pytest.raises(ConfigError) as err:

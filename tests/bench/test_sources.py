@@ -57,6 +57,9 @@ def test_untagged_uff58_steps_are_read_with_frequency_and_level_from_the_data(st
     before = digest(path)
     src = load_source(path)
     assert src.kind == "uff58" and not src.rejected and len(src.steps) == 4
+    # no false alarm on Masing records with sharp reversals (n < 1) and noise
+    assert all(s.quality.status == "usable" and not s.quality.artefacts for s in src.steps), \
+        [s.quality.notes for s in src.steps]
     for s, (f, F, a, x) in zip(src.steps, steps):
         assert s.freq_Hz == pytest.approx(f, rel=5e-5)    # ASCII UFF keeps 6 digits of 1/fs
         assert s.level_N == pytest.approx(5.0, rel=2e-3)             # measured |F_1|, not assumed
@@ -94,7 +97,52 @@ def test_a_record_that_never_settles_is_rejected_as_not_periodic(steps, tmp_path
     t = np.arange(F.size) / FS
     drifting = x * (1 + 0.2 * np.exp(-t * f / 3))                  # amplitude still growing into place
     src = load_source(write(tmp_path / "drift.uff", [uff_set(1, 13, F), uff_set(1, 12, a), uff_set(1, 8, drifting)]))
-    assert not src.steps and "not periodic enough" in src.rejected[0].reason
+    reason = src.rejected[0].reason
+    assert not src.steps and "not periodic enough on the displacement probe (disp)" in reason
+    assert "unsettled transient" in reason and "settle" in reason and "more cycles" in reason
+    (art,) = src.rejected[0].quality.artefacts
+    assert art.kind == "unsettled_transient" and art.channel == "disp"
+    assert art.decay_per_s == pytest.approx(f / 3, rel=0.15)       # the amplitude decay rate
+
+
+def closed_form_step(f, fs, periods, seed, hum=0.0, clip_force=False):
+    """Records of a periodic response (odd harmonics) with noise; optional 50 Hz hum on the probe."""
+    t = np.arange(int(periods * fs / f)) / fs
+    rng = np.random.default_rng(seed)
+    wave = lambda a1, a3: a1 * np.sin(2 * np.pi * f * t) + a3 * np.sin(6 * np.pi * f * t + 0.5)   # noqa: E731
+    F = wave(5.0, 0.2) + 0.003 * rng.standard_normal(t.size)
+    a = wave(20.0, 2.0) + 0.01 * rng.standard_normal(t.size)
+    x = wave(10e-6, 0.5e-6) + 2e-9 * rng.standard_normal(t.size) + hum * np.sin(2 * np.pi * 50.0 * t + seed)
+    if clip_force:
+        F = np.clip(F, -4.5, 4.5)
+    return F, a, x
+
+
+def test_hum_on_the_probe_in_a_foreign_file_keeps_the_steps_and_is_named_as_mains(tmp_path):
+    """Written with pyuff as other software writes it; 50 Hz hum on the probe in every step
+    but the last, whose force clips."""
+    from sim.artefacts import artefact_causes
+    fs, freqs = 8192.0, [23.0, 31.0, 71.0, 97.0]
+    sets = []
+    for i, f in enumerate(freqs):
+        F, a, x = closed_form_step(f, fs, 16, i, hum=20e-9 if i < 3 else 0.0, clip_force=(i == 3))
+        sets += [uff_set(i + 1, 13, F, fs), uff_set(i + 1, 12, a, fs), uff_set(i + 1, 8, x, fs)]
+    src = load_source(write(tmp_path / "hum.uff", sets))
+    assert [s.key for s in src.steps] == ["LC0001", "LC0002", "LC0003"]
+    for s in src.steps:
+        (line,) = s.quality.artefacts
+        assert line.kind == "line_interference" and line.channel == "disp"
+        assert line.freq_Hz == pytest.approx(50.0, abs=0.02) and line.size == pytest.approx(20e-9, rel=0.05)
+        assert s.quality.status == "flagged"
+    (rej,) = src.rejected
+    assert rej.step == "LC0004" and "clipping on the force sensor (force)" in rej.reason
+    causes = {c["id"]: c for c in artefact_causes(src.quality())}
+    assert set(causes) == {"line_interference", "clipping"}
+    assert "in 3 of 4 steps" in causes["line_interference"]["sentence"]
+    assert "50 Hz mains interference" in causes["line_interference"]["sentence"]
+    assert causes["clipping"]["channel"] == "force" and causes["clipping"]["evidence"]["steps_rejected"] == ["LC0004"]
+    assert [(k, status) for k, status, _ in src.attention()] == [("LC0004", "rejected"), ("LC0001", "flagged"),
+                                                                  ("LC0002", "flagged"), ("LC0003", "flagged")]
 
 
 def test_an_unreadable_file_is_a_clear_error_naming_the_record(steps, tmp_path):

@@ -110,3 +110,23 @@ def test_a_step_mark_makes_the_noise_independent_of_what_ran_before():
         blocks[name] = rig.run(2048, 25600.0).force_V
     assert np.array_equal(blocks["a"], blocks["b"])
     assert not np.array_equal(blocks["a"], blocks["c"])
+
+
+def test_an_interference_line_on_the_probe_is_added_at_the_rig_time_not_locked_to_the_drive():
+    """The line reads line_amplitude on its channel only, and keeps its phase across a change
+    of drive frequency (it runs on the rig's clock, like mains)."""
+    kw = dict(disp_noise_m=0.0, force_noise_N=0.0, accel_noise_m_s2=0.0, seed=3)
+    rigs = {amp: SimulatedRig(RigModel(line_channel="disp", line_freq_Hz=50.0, line_amplitude=amp, **kw))
+            for amp in (0.0, 30e-9)}
+    blocks = {amp: [drive(r, f, 2.0, settle_s=0.2, periods=25) for f in (37.0, 71.0)] for amp, r in rigs.items()}
+    m = rigs[0.0].model
+    for i in range(2):
+        with_line, without = blocks[30e-9][i], blocks[0.0][i]
+        diff = (with_line.disp_V - without.disp_V) / m.disp_sens_V_per_m
+        amp, phase = fit(diff, with_line.fs_Hz, 50.0)
+        assert amp == pytest.approx(30e-9, rel=1e-3)
+        # the phase at the block start is the rig clock's, whatever the drive frequency
+        want = (2 * math.pi * 50.0 * with_line.t0_s) % (2 * math.pi)
+        assert math.cos(phase - want) == pytest.approx(1.0, abs=1e-4)
+        assert np.array_equal(with_line.force_V, without.force_V)
+        assert np.array_equal(with_line.accel_V, without.accel_V)

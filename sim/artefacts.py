@@ -1,0 +1,777 @@
+"""Measurement artefacts in one step's time records, found before any physics.
+
+    assess_step(force_N, accel_m_s2, disp_m, fs_Hz, freq_Hz=None) -> Assessment
+
+One function decides what a step is worth, for ``bench analyze`` (which steps it uses)
+and for the run report (which steps it lists): the :class:`StepQuality` it returns is
+``usable``, ``flagged`` (used, with notes) or ``rejected`` (with the reason, naming the
+channel).  Per channel (force, accel, disp), on the raw samples:
+
+- **clipping**: samples piled up at the record's extreme value (a flat top at the
+  range); rejects the step (the harmonics of a clipped record are wrong).
+- **drop-out**: a run of identical samples (held value or zeros) longer than the
+  channel's own quantisation makes likely (probability < 1e-4 per record); rejects.
+
+Then, on the residual of the periodic fit (offset and every harmonic of the drive below
+Nyquist, :mod:`sim.records`):
+
+- **offset drift**: a linear + quadratic trend over the record, kept when its two
+  coefficients differ from zero by more than 6 standard errors together (chi-square, 2
+  degrees of freedom); removed, the step is flagged.
+- **interference line**: a spectral peak of the residual (Hann window) at a frequency more
+  than ``HARMONIC_GUARD`` record resolutions (fs/N) from every drive harmonic (and from
+  where harmonics above Nyquist fold back, when the record has content up there), above the
+  noise floor by a factor that gives a false alarm probability of 1e-4 per record and
+  channel; its frequency, amplitude and phase are fitted by least squares (with a decay
+  rate, to tell a line from a transient), and a steady line is **removed** from the record:
+  the step stays usable (flagged).  Up to ``MAX_LINES`` per channel.
+- **unsettled transient**: a spectral peak whose fitted decay rate is positive by more
+  than 6 standard errors and which loses more than 20 % of its amplitude over the record
+  is a transient with its own frequency: it is **removed** like a line.  A transient the
+  record cannot tell from the drive shows in the difference between consecutive periods,
+  x(t + T) - x(t), where the periodic part cancels: its mean square per period falling
+  (the first above the noise by more than 10 standard errors) gives the decay.
+  A transient is harmless once its amplitude has fallen to ``A_tol = s sqrt(2/N)
+  max(1, sigma T / 2)`` (s the noise rms, N samples, T the record length, sigma the decay
+  rate): then the bias it leaves on any harmonic is below that harmonic's standard error.
+  The settle cycles the plan needs are ``ceil(f ln(A_0 / A_tol) / sigma)``.  A transient
+  that was not removed: when what is left after that holds at least
+  ``max(MIN_PERIODS, periods / 4)`` whole periods, the first periods are dropped and the
+  step is kept (flagged); otherwise the periodicity gate decides, and a rejection names
+  the transient and the settle cycles it needs.
+
+Finally the cleaned records pass the periodicity gate of :mod:`sim.records` (harmonics 1-3
+and offset of each channel, first half against second, at most ``DRIFT_LIMIT`` standard
+errors), and a step whose displacement residual (noise) is above ``NOISY_RESIDUAL`` of its
+fundamental is flagged as noisy (used, with its noise as weight).
+
+:func:`artefact_causes` aggregates the artefacts of many steps into ``analysis.json``
+causes of ``kind: "artefact"`` (docs/analysis.md, decision record 0024).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .records import CHANNELS, PeriodicRecords, _analyse_channel, analyse_records, checked_records
+
+log = logging.getLogger(__name__)
+
+DRIFT_LIMIT = 10.0            # periodicity gate: standard errors between the halves of a record
+NOISY_RESIDUAL = 0.02         # displacement residual rms / fundamental amplitude above which a step is flagged
+LINE_FALSE_ALARM = 1e-4       # per record and channel
+HARMONIC_GUARD = 1.5          # record resolutions (fs / N) around each drive harmonic not searched for lines
+MAX_LINES = 6
+TREND_Z = 6.0                 # offset drift: sqrt(chi-square, 2 dof) of the trend coefficients
+DECAY_Z = 6.0                 # a line's decay rate, in standard errors, above which it is a transient
+DECAY_FRACTION = 0.8          # ... and its amplitude at the end / at the start below this
+ENVELOPE_Z = 10.0             # first block's residual power above the noise, in standard errors
+MIN_PERIODS = 4
+DROPOUT_FALSE_ALARM = 1e-4
+
+LABEL = {"force": "force sensor", "accel": "accelerometer", "disp": "displacement probe"}
+UNIT = {"force": "N", "accel": "m/s^2", "disp": "m"}
+KINDS = ("line_interference", "unsettled_transient", "clipping", "dropout", "offset_drift")
+
+
+def si(value: float, unit: str) -> str:
+    """'12 nm', '3.1 mN', '0.25 m/s^2': a size in the channel's unit with an SI prefix."""
+    if not math.isfinite(value):
+        return f"{value} {unit}"
+    if unit in ("m", "N"):
+        for scale, p in ((1.0, ""), (1e-3, "m"), (1e-6, "u"), (1e-9, "n"), (1e-12, "p")):
+            if abs(value) >= scale or scale == 1e-12:
+                return f"{value / scale:.3g} {p}{unit}"
+    return f"{value:.3g} {unit}"
+
+
+@dataclass(frozen=True)
+class Artefact:
+    """One artefact on one channel of one step.  ``size`` is in the channel's SI unit:
+    a line's or a transient's amplitude (at the record start), a drift's change over the
+    record, the clipping level, a drop-out's held value."""
+
+    kind: str                        # one of KINDS
+    channel: str                     # force | accel | disp
+    size: float
+    action: str                      # "removed" | "trimmed" | "rejected"
+    freq_Hz: float = math.nan        # line / transient frequency
+    time_s: float = math.nan         # clipping / drop-out: first sample, from the record start
+    duration_s: float = math.nan     # drop-out length; clipping: time spent at the limit
+    decay_per_s: float = math.nan    # transient: amplitude decay rate sigma (A = A_0 exp(-sigma t))
+    settle_cycles: int = 0           # transient: drive cycles from the record start until harmless
+    evidence: str = ""
+
+    @property
+    def unit(self) -> str:
+        return UNIT[self.channel]
+
+    def describe(self) -> str:
+        where = f"on the {LABEL[self.channel]} ({self.channel})"
+        if self.kind == "line_interference":
+            return (f"a {self.freq_Hz:.4g} Hz line of {si(self.size, self.unit)} {where}, not locked to the drive "
+                    f"({self.evidence}); removed")
+        if self.kind == "unsettled_transient":
+            what = f"{self.freq_Hz:.4g} Hz " if math.isfinite(self.freq_Hz) else ""
+            done = {"removed": "; removed", "trimmed": "; the first periods were dropped"}.get(self.action, "")
+            if not self.decay_per_s > 0:
+                return (f"an unsettled {what}vibration of {si(self.size, self.unit)} {where} ({self.evidence}), "
+                        f"not decaying measurably within the record: settle longer{done}")
+            return (f"an unsettled {what}transient of {si(self.size, self.unit)} {where} at the record start, "
+                    f"decaying at {self.decay_per_s:.3g} /s (time constant {1e3 / self.decay_per_s:.3g} ms; "
+                    f"{self.evidence}): settle {self.settle_cycles} more cycles{done}")
+        if self.kind == "clipping":
+            return (f"clipping {where}: flat at {si(self.size, self.unit)} for {1e3 * self.duration_s:.3g} ms "
+                    f"from t = {self.time_s:.4g} s ({self.evidence})")
+        if self.kind == "dropout":
+            return (f"a drop-out {where}: the value {si(self.size, self.unit)} held for {1e3 * self.duration_s:.3g} ms "
+                    f"from t = {self.time_s:.4g} s ({self.evidence})")
+        if self.kind == "offset_drift":
+            return f"an offset drift {where} of {si(self.size, self.unit)} over the record ({self.evidence}); removed"
+        return f"{self.kind} {where}"
+
+    def as_dict(self) -> dict:
+        f = lambda v: None if not math.isfinite(v) else float(v)      # noqa: E731
+        return dict(kind=self.kind, channel=self.channel, size=float(self.size), unit=self.unit,
+                    action=self.action, freq_Hz=f(self.freq_Hz), time_s=f(self.time_s),
+                    duration_s=f(self.duration_s), decay_per_s=f(self.decay_per_s),
+                    settle_cycles=int(self.settle_cycles), evidence=self.evidence, text=self.describe())
+
+
+@dataclass
+class StepQuality:
+    """What a step is worth: ``usable``, ``flagged`` (used, ``notes`` say why) or
+    ``rejected`` (``reason`` says why, naming the channel)."""
+
+    status: str = "usable"
+    artefacts: list[Artefact] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    reason: str = ""
+    freq_Hz: float = math.nan
+    level_N: float = math.nan        # force fundamental amplitude, when it could be measured
+
+    @property
+    def text(self) -> str:
+        return self.reason if self.status == "rejected" else "; ".join(self.notes)
+
+    def as_dict(self) -> dict:
+        return dict(status=self.status, reason=self.reason, notes=list(self.notes),
+                    artefacts=[a.as_dict() for a in self.artefacts])
+
+
+@dataclass
+class Assessment:
+    quality: StepQuality
+    records: PeriodicRecords | None      # of the cleaned (and possibly trimmed) records; None if rejected
+    cleaned: dict | None = None          # channel -> cleaned samples
+    start: int = 0                       # first sample kept
+
+
+# ---------------------------------------------------------------------------- raw-sample faults
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """(start, length) of the runs of True."""
+    if not mask.any():
+        return []
+    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    return list(zip(starts.tolist(), (ends - starts).tolist()))
+
+
+def find_clipping(ch: str, x: np.ndarray, fs: float) -> list[Artefact]:
+    """Samples piled up at the record's largest or smallest value (a flat top): at least 5,
+    in flat runs, and 5 times more than at the next value inwards (a quantised record
+    that is not clipped has about as many there)."""
+    out = []
+    span = float(x.max() - x.min())
+    if not span > 0:
+        return out
+    tol = 1e-9 * span
+    q = _quantum(x)
+    for level in (float(x.max()), float(x.min())):
+        at = np.abs(x - level) <= tol
+        n_at = int(at.sum())
+        if n_at < 5:
+            continue
+        inward = level - math.copysign(q, level - float(np.median(x)))
+        n_next = int((np.abs(x - inward) <= tol).sum()) if q > 10 * tol else 0
+        runs = [r for r in _runs(at) if r[1] >= 2]
+        if n_at >= 5 * (n_next + 1) and runs:
+            out.append(Artefact("clipping", ch, level, "rejected", time_s=runs[0][0] / fs, duration_s=n_at / fs,
+                                evidence=f"{n_at} samples ({100 * n_at / x.size:.2g} % of the record) flat at the "
+                                         f"extreme value in {len(runs)} runs"))
+    return out
+
+
+def _quantum(x: np.ndarray) -> float:
+    """The smallest step between distinct values (the ADC's resolution, if quantised)."""
+    u = np.unique(x)
+    d = np.diff(u)
+    d = d[d > 1e-12 * max(float(np.ptp(x)), 1e-300)]
+    return float(d.min()) if d.size else 0.0
+
+
+def find_dropouts(ch: str, x: np.ndarray, fs: float, clipped: list[Artefact]) -> list[Artefact]:
+    """Runs of identical samples longer than the record's own quantisation makes likely
+    (not at a clipping level); one artefact per channel: the first, with the count."""
+    same = np.diff(x) == 0
+    runs = _runs(same)                     # a run of r equal diffs = r + 1 equal samples
+    short = sum(r for _, r in runs if r < 8)
+    p0 = short / max(1, same.size)         # chance that a sample repeats the previous one
+    min_len = 4 if p0 <= 0 else max(4, math.ceil(1 + math.log(DROPOUT_FALSE_ALARM / x.size) / math.log(p0)))
+    tol = 1e-9 * max(float(np.ptp(x)), 1e-300)
+    bad = [(s_, r + 1) for s_, r in runs
+           if r + 1 >= min_len and not any(abs(x[s_] - a.size) <= tol for a in clipped)]
+    if not bad:
+        return []
+    s0, n0 = bad[0]
+    total = sum(n for _, n in bad)
+    return [Artefact("dropout", ch, float(x[s0]), "rejected", time_s=s0 / fs, duration_s=n0 / fs,
+                     evidence=f"{len(bad)} run(s) of identical samples, {total} samples in all, longest "
+                              f"{max(n for _, n in bad)}; {min_len} in a row are already unlikely in this record")]
+
+
+# ---------------------------------------------------------------------------- periodic part
+
+
+def _periodic_part(x: np.ndarray, fs: float, f: float, fit_from: int = 0) -> np.ndarray:
+    return _periodic_fit(x, fs, f, fit_from)[0]
+
+
+def _periodic_fit(x: np.ndarray, fs: float, f: float, fit_from: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Offset + every harmonic below Nyquist (at most 200), fitted over the whole periods of
+    ``x[fit_from:]`` as :mod:`sim.records` does, evaluated at every sample of ``x``; and
+    the fitted harmonics."""
+    n = x.size
+    ratio = fs / f
+    periods = int(math.floor((n - fit_from) / ratio + 1e-9))
+    spp = int(round(ratio)) if abs(ratio - round(ratio)) * periods < 0.02 else None
+    ch = _analyse_channel(x[fit_from:], fs, f, periods, spp, 200)
+    if spp is not None:
+        return ch.mean_period[(np.arange(n) - fit_from) % spp], ch.harmonics
+    M = 1 << max(12, int(math.ceil(math.log2(16 * ch.harmonics.size + 1))))
+    spec = np.zeros(M // 2 + 1, complex)
+    spec[1:ch.harmonics.size + 1] = -1j * ch.harmonics * (M / 2)      # C_k = A e^(i phi) of A sin(k w t + phi)
+    one = np.fft.irfft(spec, M)
+    phase = ((np.arange(n) - fit_from) * (f / fs)) % 1.0 * M
+    return ch.offset + np.interp(phase, np.arange(M + 1), np.append(one, one[0])), ch.harmonics
+
+
+def _aliases(C: np.ndarray, se: float, f: float, fs: float) -> np.ndarray:
+    """Frequencies (Hz, in 0..fs/2) where drive harmonics above Nyquist fold back, when the
+    fitted harmonics show the response still has content there (one of the top tenth above
+    what noise alone reaches with probability 1e-3); how far up is extrapolated from their
+    power-law decay (at most 8 x)."""
+    K = C.size
+    if K < 6 or (K + 1) * f < 0.45 * fs:          # harmonics capped below Nyquist: nothing folds
+        return np.zeros(0)
+    a = np.abs(C)
+    m = max(3, K // 10)
+    top = float(np.max(a[-m:]))
+    if not top > math.sqrt(2 * math.log(m / 1e-3)) * se:     # noise alone: probability 1e-3 (Rayleigh)
+        return np.zeros(0)
+    k = np.arange(1, K + 1)
+    upper = (k >= K // 2) & (a > 3 * se)
+    b = np.polyfit(np.log(k[upper]), np.log(a[upper]), 1)[0] if upper.sum() >= 3 else 0.0
+    kmax = K * min(8.0, (top / se) ** (1 / -b) if b < -0.5 else 8.0)
+    kk = np.arange(K + 1, int(kmax) + 1) * f
+    return np.sort(np.abs(kk - np.round(kk / fs) * fs))
+
+
+def _trend(r: np.ndarray, noise: float) -> tuple[np.ndarray, float, float]:
+    """Linear + quadratic trend of the residual: (trend, change over the record, z score)."""
+    n = r.size
+    tau = np.arange(n) / max(n - 1, 1) - 0.5
+    A = np.column_stack([np.ones(n), tau, tau * tau - 1.0 / 12.0])
+    coef, *_ = np.linalg.lstsq(A, r, rcond=None)
+    cov = noise ** 2 * np.linalg.inv(A.T @ A)[1:, 1:]
+    b = coef[1:]
+    z = math.sqrt(max(float(b @ np.linalg.solve(cov, b)), 0.0)) if noise > 0 else math.inf
+    trend = A[:, 1:] @ b
+    return trend, float(trend[-1] - trend[0]), z
+
+
+def _robust_noise(r: np.ndarray) -> float:
+    """Noise rms per sample from the median absolute difference of neighbours (lines,
+    transients and slow trends barely move it)."""
+    d = np.diff(r)
+    return float(np.median(np.abs(d - np.median(d))) / 0.6745 / math.sqrt(2.0))
+
+
+# ---------------------------------------------------------------------------- lines and transients
+
+
+@dataclass
+class _Line:
+    freq_Hz: float
+    amp: float
+    decay: float          # sigma, 1/s (0 for a steady line)
+    decay_se: float
+    model: np.ndarray     # samples
+
+
+def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Line | None:
+    """Least squares of e^(-sigma t) (a sin wt + b cos wt) + c on ``r`` from the frequency
+    ``f0`` (sigma = 0 unless ``with_decay``); t from the record start."""
+    n = r.size
+    scale = float(np.std(r)) or 1.0
+    r = r / scale
+    t = np.arange(n) / fs
+    T = n / fs
+    tt = t / T
+    w0 = 2 * np.pi * f0
+    nd = 2 if with_decay else 1                # nonlinear parameters: (w - w0) T [, sigma T]
+
+    def parts(p):
+        w = w0 + p[0] / T
+        sig = p[1] / T if with_decay else 0.0
+        e = np.exp(-sig * t)
+        return w, sig, e * np.sin(w * t), e * np.cos(w * t)
+
+    def resid(p):
+        _, _, s, c = parts(p)
+        return p[nd] * s + p[nd + 1] * c + p[nd + 2] - r
+
+    def jac(p):
+        _, _, s, c = parts(p)
+        a, b = p[nd], p[nd + 1]
+        cols = [tt * (a * c - b * s)]
+        if with_decay:
+            cols.append(-tt * (a * s + b * c))
+        return np.column_stack(cols + [s, c, np.ones(n)])
+
+    ab, *_ = np.linalg.lstsq(np.column_stack([np.sin(w0 * t), np.cos(w0 * t), np.ones(n)]), r, rcond=None)
+    p0 = np.concatenate([np.zeros(nd), ab])
+    try:
+        sol = least_squares(resid, p0, jac=jac, method="lm", x_scale="jac", max_nfev=40)
+        J = jac(sol.x)
+        cov = float(sol.fun @ sol.fun) / max(1, n - p0.size) * np.linalg.pinv(J.T @ J)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    p = sol.x
+    w, sig, s, c = parts(p)
+    if not (math.isfinite(w) and w > 0):
+        return None
+    return _Line(freq_Hz=w / (2 * np.pi), amp=scale * float(math.hypot(p[nd], p[nd + 1])), decay=sig,
+                 decay_se=math.sqrt(max(cov[1, 1], 0.0)) / T if with_decay else 0.0,
+                 model=scale * (p[nd] * s + p[nd + 1] * c))
+
+
+def _line_search(q: np.ndarray, fs: float, f: float, skip: list[float],
+                 aliases: np.ndarray = np.zeros(0)) -> list[tuple[float, float]]:
+    """Candidate (frequency, peak power / noise floor) of the residual, strongest first,
+    away from the drive harmonics, their ``aliases`` and the frequencies in ``skip``."""
+    n = q.size
+    nfft = 1 << int(math.ceil(math.log2(2 * n)))
+    S = np.abs(np.fft.rfft((q - q.mean()) * np.hanning(n), nfft)) ** 2
+    freqs = np.arange(S.size) * fs / nfft
+    guard = HARMONIC_GUARD * fs / n
+    k = np.round(freqs / f)
+    ok = (np.abs(freqs - k * f) > guard) & (freqs > guard) & (freqs < fs / 2 - guard)
+    for fk in skip:
+        ok &= np.abs(freqs - fk) > guard
+    if aliases.size:
+        i = np.clip(np.searchsorted(aliases, freqs), 0, aliases.size - 1)
+        near = np.minimum(np.abs(freqs - aliases[i]), np.abs(freqs - aliases[np.maximum(i - 1, 0)]))
+        ok &= near > guard
+    if ok.sum() < 16:
+        return []
+    floor = float(np.median(S[ok])) / math.log(2.0)
+    thr = floor * (math.log(n / 2) - math.log(LINE_FALSE_ALARM))
+    peak = ok & (S > thr)
+    peak[1:-1] &= (S[1:-1] >= S[:-2]) & (S[1:-1] >= S[2:])
+    idx = np.flatnonzero(peak)
+    return [(float(freqs[i]), float(S[i] / floor)) for i in idx[np.argsort(S[idx])[::-1]]]
+
+
+def _find_lines(q: np.ndarray, fs: float, f: float,
+                aliases: np.ndarray = np.zeros(0)) -> tuple[list[_Line], list[_Line]]:
+    """Steady lines and decaying components of the residual ``q``, strongest first."""
+    n = q.size
+    guard = HARMONIC_GUARD * fs / n
+    lines: list[_Line] = []
+    transients: list[_Line] = []
+    found = np.zeros(n)
+    while len(lines) < MAX_LINES and len(transients) < 2:
+        cands = _line_search(q - found, fs, f, [ln.freq_Hz for ln in lines + transients], aliases)
+        if not cands:
+            break
+        steady = _fit_sinusoid(q - found, fs, cands[0][0], with_decay=False)
+        if steady is None:
+            break
+        decaying = _fit_sinusoid(q - found, fs, steady.freq_Hz, with_decay=True)
+        is_transient = (decaying is not None and decaying.decay > DECAY_Z * decaying.decay_se
+                        and math.exp(-decaying.decay * n / fs) < DECAY_FRACTION)
+        ln = decaying if is_transient else steady
+        k = round(ln.freq_Hz / f)
+        if k >= 1 and abs(ln.freq_Hz - k * f) <= guard:       # moved onto a drive harmonic: not separable
+            break
+        if aliases.size and np.min(np.abs(aliases - ln.freq_Hz)) <= guard:    # onto an aliased harmonic
+            break
+        (transients if is_transient else lines).append(ln)
+        found = found + ln.model
+    return lines, transients
+
+
+def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
+    """Remove offset drift and steady lines; find transients.  Returns (cleaned samples,
+    artefacts removed, transients found as (A_0, sigma, freq or nan, evidence), noise rms).
+    A second pass refits the drive harmonics without what the first pass found."""
+    n = x.size
+    zero = np.zeros(n)
+    removed = zero
+    for _pass in range(4):        # a trend converges more slowly than lines: more passes only for it
+        periodic, C = _periodic_fit(x - removed, fs, f)
+        r = x - periodic
+        noise = _robust_noise(r)
+        aliases = _aliases(C, noise * math.sqrt(2.0 / n), f, fs)
+        lines, transients = _find_lines(r, fs, f, aliases)
+        found = sum((ln.model for ln in lines + transients), zero)
+        trend, change, z = _trend(r - found, noise)
+        if not z > TREND_Z:
+            trend, change, z = zero, 0.0, 0.0
+        elif lines or transients:     # what the trend's low-frequency leakage made look like a line goes
+            lines, transients = _find_lines(r - trend, fs, f, aliases)
+            found = sum((ln.model for ln in lines + transients), zero)
+            trend, change, z = _trend(r - found, noise)
+            if not z > TREND_Z:
+                trend, change, z = zero, 0.0, 0.0
+        new = trend + sum((ln.model for ln in lines + transients), zero)
+        if (_pass == 0 and not lines and not transients and z == 0.0) or (_pass == 1 and z == 0.0):
+            break
+        removed = new
+    cleaned = x - new
+    rest = (r - new)[n // 2:]          # what is left, in the second half (after any transient): the noise
+    noise = min(float(1.4826 * np.median(np.abs(rest - np.median(rest)))) or noise, noise)
+    arts = []
+    if z > 0:
+        arts.append(Artefact("offset_drift", ch, change, "removed",
+                             evidence=f"linear + quadratic trend {z:.0f} standard errors from zero"))
+    se = noise * math.sqrt(2.0 / n)
+    for ln in lines:
+        arts.append(Artefact("line_interference", ch, ln.amp, "removed", freq_Hz=ln.freq_Hz,
+                             evidence=f"{ln.amp / se:.0f} standard errors, {ln.freq_Hz / f:.3f} x the drive frequency"))
+    found = [(ln.amp, ln.decay, ln.freq_Hz, f"a decaying sinusoid fitted, decay rate {ln.decay:.3g} +- "
+              f"{ln.decay_se:.2g} /s", True) for ln in transients]
+    if not found:
+        # the periodic part of the second half (the most settled), extrapolated to the whole
+        # record: what is left in the first half and not in the second is still settling
+        base = x - sum((ln.model for ln in lines), zero)
+        env = _envelope_transient(base, fs, f, _robust_noise(r))
+        if env is not None:
+            found.append(env + (False,))
+            if z > 0:                  # the trend was the transient seen over the whole record
+                cleaned = base
+                arts = [a for a in arts if a.kind != "offset_drift"]
+    return cleaned, arts, found, noise
+
+
+def _envelope_transient(x: np.ndarray, fs: float, f: float, noise: float):
+    """A response still settling: the difference between consecutive drive periods,
+    x(t + T) - x(t), holds no periodic part and only noise once settled; its mean square
+    per period falling over the record gives the decay; ``noise`` (rms per sample, from
+    sample-to-sample differences, which a slow transient barely moves) sets the settled
+    level 2 noise^2.  (A_0, sigma, nan, evidence) or None."""
+    n = x.size
+    T = fs / f                                   # samples per period (not necessarily whole)
+    P = int(math.floor(n / T + 1e-9)) - 1
+    B = int(math.floor(T))
+    if P < 4 or B < 8:
+        return None
+    j = np.arange(n - int(math.ceil(T)))
+    d = np.interp(j + T, np.arange(n), x) - x[j]
+    starts = (np.arange(P) * T).astype(int)
+    D = np.array([np.mean(d[s:s + B] ** 2) for s in starts if s + B <= d.size])
+    P = D.size
+    floor = min(2 * noise ** 2, float(np.median(D[P // 2:]))) if noise > 0 else float(np.median(D[P // 2:]))
+    if not floor > 0:
+        return None
+    sd = floor * math.sqrt(2.0 / B)
+    z = (D - floor) / sd
+    if z[0] < ENVELOPE_Z:
+        return None
+    m = 0
+    while m < P and z[m] > 3:
+        m += 1
+    tc = (np.arange(P) + 0.5) / f
+    if m >= 2:
+        slope, icpt = np.polyfit(tc[:m], np.log(D[:m] - floor), 1)
+        sigma = -slope / 2
+        e0 = math.exp(icpt)
+    else:                                        # gone after one period: a lower bound of the rate
+        sigma = math.log((D[0] - floor) / (3 * sd)) / 2 * f
+        e0 = (D[0] - floor) * math.exp(2 * sigma * tc[0])
+    if not (sigma > 0 and math.isfinite(e0)) or math.exp(-sigma * n / fs) > DECAY_FRACTION:
+        return None                              # not falling over the record: a drift or a line, not a transient
+    # a transient of amplitude A e^(-sigma t) at the drive frequency differs between periods by A (1 - e^(-sigma T))
+    A0 = math.sqrt(2 * e0) / max(1 - math.exp(-sigma / f), 1e-12)
+    return (A0, float(sigma), math.nan, f"the difference between consecutive periods falls over the first {m} "
+                                        f"of {P} periods (first by {z[0]:.0f} standard errors above the noise)")
+
+
+# ---------------------------------------------------------------------------- one step
+
+
+def _fundamental(x: np.ndarray, fs: float, f: float) -> float:
+    """Amplitude of the drive-frequency component over the whole periods of ``x``."""
+    n = int(math.floor(x.size * f / fs + 1e-9) * fs / f)
+    t = np.arange(n) / fs
+    return float(2.0 / n * abs(np.dot(x[:n] - x[:n].mean(), np.exp(-2j * np.pi * f * t))))
+
+
+def _mains_hint(f: float, periods: int) -> str:
+    """Mains (50/60 Hz, harmonics 1-3) too close to a drive harmonic to be separated in
+    ``periods`` periods: what to do, or ''."""
+    guard = HARMONIC_GUARD * f / periods
+    for base in MAINS_HZ:
+        for m in (1, 2, 3):
+            fm = m * base
+            k = max(1, round(fm / f))
+            gap = abs(fm - k * f)
+            if 0 < gap <= guard:
+                return (f"mains hum, if present, at {fm:g} Hz lies {gap:.2g} Hz from drive harmonic {k} "
+                        f"({k * f:.4g} Hz) and cannot be separated from the response in {periods} periods: "
+                        f"measure at least {math.ceil(HARMONIC_GUARD * f / gap)} periods")
+    return ""
+
+
+def settle_cycles(A0: float, sigma: float, noise: float, n: int, fs: float, f: float) -> int:
+    """Drive cycles from the record start until the transient is harmless (module doc)."""
+    T = n / fs
+    tol = noise * math.sqrt(2.0 / n) * max(1.0, sigma * T / 2)
+    if not (A0 > tol and sigma > 0):
+        return 0
+    return int(math.ceil(f * math.log(A0 / tol) / sigma))
+
+
+def assess_step(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None = None) -> Assessment:
+    """Artefacts, cleaning and the usable/flagged/rejected decision for one step (module doc).
+    Records that cannot be analysed at all (lengths, NaN, too short) raise ValueError."""
+    sig, f = checked_records(force_N, accel_m_s2, disp_m, fs_Hz, freq_Hz)
+    q = StepQuality(freq_Hz=f, level_N=_fundamental(sig["force"], fs_Hz, f))
+    for ch in CHANNELS:
+        clip = find_clipping(ch, sig[ch], fs_Hz)
+        q.artefacts += clip + find_dropouts(ch, sig[ch], fs_Hz, clip)
+    if q.artefacts:
+        q.status = "rejected"
+        q.reason = "; ".join(a.describe() for a in q.artefacts)
+        return Assessment(q, None)
+    n = sig["force"].size
+    cleaned, transients, noise = {}, {}, {}
+    for ch in CHANNELS:
+        cleaned[ch], arts, transients[ch], noise[ch] = _clean_channel(ch, sig[ch], fs_Hz, f)
+        q.artefacts += arts
+    start = 0
+    tr_arts = []
+    need = 0                         # periods to drop for transients that could not be removed
+    periods = int(math.floor(n * f / fs_Hz + 1e-9))
+    for ch in CHANNELS:
+        for A0, sigma, ftr, ev, removed in transients[ch]:
+            cyc = settle_cycles(A0, sigma, noise[ch], n, fs_Hz, f)
+            if cyc == 0 and not removed:
+                continue             # below one standard error of a harmonic already: harmless
+            if not removed:
+                need = max(need, cyc)
+            tr_arts.append(Artefact("unsettled_transient", ch, A0, "removed" if removed else "kept",
+                                    freq_Hz=ftr, decay_per_s=sigma, settle_cycles=cyc, evidence=ev))
+    # a "line" at the frequency of a transient on another channel is that transient (a free
+    # vibration of the carriage shows on several sensors; it decays below significance on some)
+    guard = HARMONIC_GUARD * fs_Hz / n
+    for i, a in enumerate(q.artefacts):
+        tr = [t for t in tr_arts if a.kind == "line_interference" and abs(t.freq_Hz - a.freq_Hz) <= guard]
+        if tr:
+            cyc = settle_cycles(a.size, tr[0].decay_per_s, noise[a.channel], n, fs_Hz, f)
+            q.artefacts[i] = replace(a, kind="unsettled_transient", decay_per_s=tr[0].decay_per_s, settle_cycles=cyc,
+                                     evidence=f"at the frequency of the transient on the {LABEL[tr[0].channel]}")
+    # a "line" seen by the probe and the accelerometer alike (a = -(2 pi f)^2 x) is motion of
+    # the carriage, a free vibration too slow to decay measurably within the record, not interference
+    motion = set()
+    for i, x in enumerate(q.artefacts):
+        for j, acc in enumerate(q.artefacts):
+            if (x.kind == acc.kind == "line_interference" and x.channel == "disp" and acc.channel == "accel"
+                    and abs(x.freq_Hz - acc.freq_Hz) <= guard
+                    and 0.7 < acc.size / ((2 * math.pi * x.freq_Hz) ** 2 * x.size) < 1.4):
+                motion |= {i, j}
+    for i in motion:
+        q.artefacts[i] = replace(q.artefacts[i], kind="unsettled_transient", settle_cycles=0, evidence=(
+            "seen by the probe and the accelerometer alike, a = -(2 pi f)^2 x: a free vibration of the "
+            "carriage, not interference"))
+    if need > 0 and periods - need >= max(MIN_PERIODS, periods // 4):
+        start = int(math.ceil(need * fs_Hz / f - 1e-9))
+        for ch in CHANNELS:           # clean the kept part again: the fit is no longer biased by the transient
+            cleaned[ch], _a, _t, noise[ch] = _clean_channel(ch, sig[ch][start:], fs_Hz, f)
+        tr_arts = [a if a.action == "removed" else replace(a, action="trimmed") for a in tr_arts]
+        q.notes.append(f"first {need} of {periods} periods dropped (unsettled transient)")
+    q.artefacts += tr_arts
+    rec = analyse_records(cleaned["force"], cleaned["accel"], cleaned["disp"], fs_Hz, f)
+    if rec.drift_sigma > DRIFT_LIMIT:
+        ch, what = rec.drift_detail.split(" ", 1)
+        q.status = "rejected"
+        q.reason = (f"not periodic enough on the {LABEL.get(ch, ch)} ({ch}): its {what} changes by "
+                    f"{rec.drift_sigma:.0f} standard errors between the two halves of the record "
+                    f"(limit {DRIFT_LIMIT:g})")
+        hint = _mains_hint(f, periods)
+        if hint:
+            q.reason += f"; {hint}"
+        if tr_arts:
+            worst = max(tr_arts, key=lambda a: a.settle_cycles)
+            q.reason += f"; {worst.describe()}"
+            q.artefacts = [replace(a, action="rejected") if a.kind == "unsettled_transient" else a
+                           for a in q.artefacts]
+        return Assessment(q, None)
+    q.notes = [a.describe() for a in q.artefacts] + q.notes
+    d = rec.channels["disp"]
+    a1 = abs(d.harmonics[0]) if d.harmonics.size else 0.0
+    ratio = d.noise_rms / a1 if a1 > 0 else math.inf
+    if ratio > NOISY_RESIDUAL:
+        q.notes.append(f"noisy: displacement residual {100 * ratio:.3g} % of the fundamental "
+                       f"(limit {100 * NOISY_RESIDUAL:g} %; used with its noise as weight)")
+    q.status = "flagged" if q.notes else "usable"
+    return Assessment(q, rec, cleaned, start)
+
+
+# ---------------------------------------------------------------------------- many steps
+
+
+MAINS_HZ = (50.0, 60.0)
+LABELS = {"line_interference": "interference line", "unsettled_transient": "unsettled transient",
+          "clipping": "clipping", "dropout": "drop-outs", "offset_drift": "offset drift"}
+FORMULAS = {"line_interference": "y_measured = y + a sin(2 pi f_l t + phi), f_l not a multiple of the drive",
+            "unsettled_transient": "y_measured = y_periodic + A_0 exp(-sigma t) sin(2 pi f_t t + phi) at the record start",
+            "clipping": "y_measured = clip(y, low, high)",
+            "dropout": "y_measured = y(t_0) held (or 0) for a time",
+            "offset_drift": "y_measured = y + b t + c t^2"}
+
+
+def mains(freq_Hz: float) -> str:
+    """'50 Hz mains' when the frequency is a harmonic 1-10 of 50 or 60 Hz (within 0.5 %), else ''."""
+    for base in MAINS_HZ:
+        m = round(freq_Hz / base)
+        if 1 <= m <= 10 and abs(freq_Hz / (m * base) - 1) < 0.005:
+            return f"{base:g} Hz mains" + (f" (harmonic {m})" if m > 1 else "")
+    return ""
+
+
+def _span(values, unit: str, fmt: str = ".3g") -> str:
+    lo, hi = min(values), max(values)
+    return f"{lo:{fmt}} {unit}" if f"{lo:{fmt}}" == f"{hi:{fmt}}" else f"{lo:{fmt}}-{hi:{fmt}} {unit}"
+
+
+def _param(values, unit: str) -> dict:
+    v = np.asarray(values, float)
+    return dict(value=float(np.median(v)), low=float(v.min()), high=float(v.max()), unit=unit)
+
+
+def _where(qs: list[StepQuality]) -> str:
+    f = [q.freq_Hz for q in qs if math.isfinite(q.freq_Hz)]
+    lv = [q.level_N for q in qs if math.isfinite(q.level_N)]
+    parts = ([f"at {_span(f, 'Hz')}"] if f else []) + ([_span(lv, "N")] if lv else [])
+    return ", ".join(parts)
+
+
+def artefact_causes(quality: list[tuple[str, StepQuality]], total: int | None = None) -> list[dict]:
+    """``analysis.json`` causes of kind "artefact", aggregated over steps (module doc).
+
+    ``quality``: (step key, quality) of every step whose records were read; ``total``: the
+    number of steps in the source (default: len(quality))."""
+    total = len(quality) if total is None else total
+    order = {key: i for i, (key, _) in enumerate(quality)}
+    hits: dict[tuple, list[tuple[str, StepQuality, Artefact]]] = {}
+    lines: dict[str, list[tuple[str, StepQuality, Artefact]]] = {}
+    for key, q in quality:
+        for a in q.artefacts:
+            if a.kind == "line_interference":
+                lines.setdefault(a.channel, []).append((key, q, a))
+            elif a.kind == "unsettled_transient":
+                hits.setdefault(("unsettled_transient",), []).append((key, q, a))
+            else:
+                hits.setdefault((a.kind, a.channel), []).append((key, q, a))
+    out = []
+    for ch, items in lines.items():           # clusters of nearby frequencies on one channel
+        items.sort(key=lambda it: it[2].freq_Hz)
+        groups, cur = [], [items[0]]
+        for it in items[1:]:
+            f0 = cur[-1][2].freq_Hz
+            if it[2].freq_Hz - f0 <= max(0.05, 0.002 * f0):
+                cur.append(it)
+            else:
+                groups.append(cur)
+                cur = [it]
+        groups.append(cur)
+        for g in groups:
+            out.append(_line_cause(ch, sorted(g, key=lambda it: order[it[0]]), total))
+    for (kind, *rest), items in hits.items():
+        out.append(_other_cause(kind, rest[0] if rest else "", items, total))
+    out.sort(key=lambda c: -len(c["evidence"]["steps"]))
+    return out
+
+
+def _entry(kind: str, channel: str, items, total: int, parameters: dict, sentence: str) -> dict:
+    steps = list(dict.fromkeys(k for k, _, _ in items))
+    rejected = list(dict.fromkeys(k for k, q, _ in items if q.status == "rejected"))
+    return dict(id=kind, kind="artefact", label=LABELS[kind], formula=FORMULAS[kind], channel=channel,
+                parameters=parameters, gain=dict(steps_kept=len(steps) - len(rejected), steps_rejected=len(rejected)),
+                sentence=sentence,
+                evidence=dict(steps=steps, steps_total=total, steps_rejected=rejected,
+                              per_step=[dict(step=k, **a.as_dict()) for k, _, a in items]))
+
+
+def _line_cause(ch: str, items, total: int) -> dict:
+    f = [a.freq_Hz for _, _, a in items]
+    amp = [a.size for _, _, a in items]
+    n = len({k for k, _, _ in items})
+    src = mains(float(np.median(f)))
+    what = f"{src} interference" if src else "interference from another source (a pump, a fan, a switching supply)"
+    sentence = (f"a {np.median(f):.4g} Hz line of {si(float(np.median(amp)), UNIT[ch])} on the {LABEL[ch]} in {n} of "
+                f"{total} steps, not locked to the drive: {what}; removed before the fit")
+    return _entry("line_interference", ch, items, total,
+                  dict(frequency=_param(f, "Hz"), amplitude=_param(amp, UNIT[ch])), sentence)
+
+
+def _other_cause(kind: str, ch: str, items, total: int) -> dict:
+    qs = list({id(q): q for _, q, _ in items}.values())
+    n = len(qs)
+    arts = [a for _, _, a in items]
+    rej = sum(q.status == "rejected" for q in qs)
+    fate = (f"{n - rej} kept" if n > rej else "") + (", " if 0 < rej < n else "") + (f"{rej} rejected" if rej else "")
+    where = _where(qs)
+    if kind == "unsettled_transient":
+        chans = sorted({a.channel for a in arts})
+        cyc = max(a.settle_cycles for a in arts)
+        tau = [1e3 / a.decay_per_s for a in arts if a.decay_per_s > 0]
+        ft = [a.freq_Hz for a in arts if math.isfinite(a.freq_Hz)]
+        vib = f"a free vibration near {np.median(ft):.3g} Hz" if ft else "a free vibration"
+        const = f", time constant {_span(tau, 'ms')}" if tau else ""
+        advice = f"settle {cyc} more cycles" if cyc else "settle longer"
+        sentence = (f"steps {where} still vibrating at the record start ({vib}{const}, on the "
+                    f"{' and '.join(LABEL[c] for c in chans)}) in {n} of {total} steps: {advice}; "
+                    f"{fate} (transient removed or first periods dropped where the record allowed)")
+        rates = [a.decay_per_s for a in arts if a.decay_per_s > 0]
+        params = dict(settle_cycles_needed=_param([a.settle_cycles for a in arts], "cycles"))
+        if rates:
+            params["decay_rate"] = _param(rates, "1/s")
+        if ft:
+            params["frequency"] = _param(ft, "Hz")
+        return _entry(kind, ",".join(chans), items, total, params, sentence)
+    size = [abs(a.size) for a in arts]
+    if kind == "clipping":
+        sentence = (f"clipping on the {LABEL[ch]} in {n} of {total} steps ({where}): flat at "
+                    f"{si(max(size), UNIT[ch])}, the range of the sensor or its input; {fate}: use a larger range "
+                    f"or a lower level")
+        params = dict(level=_param(size, UNIT[ch]), time_at_limit=_param([a.duration_s for a in arts], "s"))
+    elif kind == "dropout":
+        sentence = (f"drop-outs on the {LABEL[ch]} in {n} of {total} steps ({where}): the signal held for up to "
+                    f"{1e3 * max(a.duration_s for a in arts):.3g} ms; {fate}: check the cable, connector and "
+                    f"acquisition")
+        params = dict(duration=_param([a.duration_s for a in arts], "s"))
+    else:
+        sentence = (f"an offset drift on the {LABEL[ch]} in {n} of {total} steps, up to {si(max(size), UNIT[ch])} "
+                    f"over a record (thermal drift of the sensor, or the carriage creeping); removed before the fit")
+        params = dict(change=_param(size, UNIT[ch]))
+    return _entry(kind, ch, items, total, params, sentence)

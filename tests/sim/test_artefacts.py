@@ -1,0 +1,236 @@
+"""Measurement artefacts in time records (sim.artefacts), on records built here from closed
+forms that share no code with the detector: a periodic response (odd harmonics, as a
+friction loop makes), white noise, and the artefact added by its own formula."""
+import math
+
+import numpy as np
+import pytest
+
+from sim.artefacts import DRIFT_LIMIT, artefact_causes, assess_step, mains
+from sim.records import analyse_records
+
+F_DRIVE = 37.0
+AMPS = {"force": [5.0, 0.0, 0.3, 0.0, 0.1], "accel": [20.0, 0.0, 3.0, 0.0, 1.0],
+        "disp": [10e-6, 0.0, 1e-6, 0.0, 0.2e-6]}
+NOISE = {"force": 0.003, "accel": 0.01, "disp": 2e-9}
+
+
+def records(fs=25600.0, periods=20, seed=0, f=F_DRIVE):
+    """(t, {channel: clean periodic record}, {channel: noise}) of ``periods`` drive periods."""
+    t = np.arange(int(round(periods * fs / f))) / fs
+    rng = np.random.default_rng(seed)
+    clean = {ch: sum(a * np.sin(2 * np.pi * (k + 1) * f * t + 0.3 * k) for k, a in enumerate(amps))
+             for ch, amps in AMPS.items()}
+    noise = {ch: NOISE[ch] * rng.standard_normal(t.size) for ch in AMPS}
+    return t, clean, noise
+
+
+def assess(sig, fs=25600.0, f=F_DRIVE):
+    return assess_step(sig["force"], sig["accel"], sig["disp"], fs, f)
+
+
+def of_kind(q, kind):
+    return [a for a in q.artefacts if a.kind == kind]
+
+
+@pytest.mark.parametrize("fs", [25600.0, 10371.0])          # integer and non-integer samples per period
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_clean_records_give_no_artefact(fs, seed):
+    _, clean, noise = records(fs, seed=seed)
+    a = assess({ch: clean[ch] + noise[ch] for ch in clean}, fs)
+    assert a.quality.status == "usable" and a.quality.artefacts == [], a.quality.notes
+
+
+@pytest.mark.parametrize("fs", [25600.0, 10371.0])
+def test_hum_on_the_probe_is_found_with_its_frequency_and_size_removed_and_the_step_kept(fs):
+    t, clean, noise = records(fs)
+    hum = 30e-9 * np.sin(2 * np.pi * 50.0 * t + 1.0)        # 15 x the probe noise, 1.35 x the drive frequency
+    sig = {ch: clean[ch] + noise[ch] + (hum if ch == "disp" else 0) for ch in clean}
+    raw = analyse_records(sig["force"], sig["accel"], sig["disp"], fs, F_DRIVE)
+    a = assess(sig, fs)
+    lines = of_kind(a.quality, "line_interference")
+    assert a.quality.status == "flagged" and len(lines) == 1 and len(a.quality.artefacts) == 1
+    ln = lines[0]
+    assert ln.channel == "disp" and ln.action == "removed"
+    assert ln.freq_Hz == pytest.approx(50.0, abs=0.01)
+    assert ln.size == pytest.approx(30e-9, rel=0.03)
+    assert np.std(sig["disp"] - a.cleaned["disp"] - hum) < 0.05 * 30e-9    # what was removed is the hum
+    want = AMPS["disp"][0] * np.exp(1j * 0.0)
+    d = a.records.channels["disp"]
+    assert abs(d.harmonics[0] - want) < 5 * d.sigma            # the fundamental is the hum-free one
+    assert raw.channels["disp"].noise_rms > 5 * NOISE["disp"]     # the hum counted as noise before,
+    assert d.noise_rms == pytest.approx(NOISE["disp"], rel=0.1)  # now the probe's own noise is left
+    assert "displacement probe" in ln.describe() and "50 Hz" in ln.describe()
+
+
+def test_lines_on_force_and_accelerometer_are_named_with_their_channel():
+    t, clean, noise = records()
+    sig = {ch: clean[ch] + noise[ch] for ch in clean}
+    sig["force"] = sig["force"] + 0.02 * np.sin(2 * np.pi * 180.0 * t)          # 60 Hz mains, harmonic 3
+    sig["accel"] = sig["accel"] + 0.05 * np.sin(2 * np.pi * 123.4 * t + 2)
+    q = assess(sig).quality
+    got = {(a.channel, round(a.freq_Hz, 1)) for a in of_kind(q, "line_interference")}
+    assert got == {("force", 180.0), ("accel", 123.4)}, q.notes
+    assert mains(180.0) == "60 Hz mains (harmonic 3)" and mains(123.4) == ""
+
+
+@pytest.mark.parametrize("sigma, f_t, A0", [(15.0, 61.0, 2e-6),     # its own frequency: fitted and removed
+                                             (5.0, 37.5, 2e-7)])    # unresolvable from the drive: kept, named
+def test_a_decaying_free_vibration_is_found_with_its_rate_and_the_settle_cycles_it_needs(sigma, f_t, A0):
+    fs = 10371.0
+    t, clean, noise = records(fs)
+
+    def with_transient(delay_cycles):        # the vibration started delay_cycles drive periods before the record
+        tt = t + delay_cycles / F_DRIVE
+        tr = A0 * np.exp(-sigma * tt) * np.sin(2 * np.pi * f_t * tt)
+        return {ch: clean[ch] + noise[ch] + (tr if ch == "disp" else 0) for ch in clean}
+    a = assess(with_transient(0), fs)
+    tr = of_kind(a.quality, "unsettled_transient")
+    assert len(tr) == 1 and tr[0].channel == "disp"
+    assert tr[0].decay_per_s == pytest.approx(sigma, rel=0.05)
+    assert tr[0].size == pytest.approx(A0, rel=0.25)      # near the drive: from period differences
+    if tr[0].action == "removed":
+        assert tr[0].freq_Hz == pytest.approx(f_t, rel=0.005)
+        assert a.quality.status == "flagged"                 # removed: the step is kept
+        d = a.records.channels["disp"]
+        assert abs(d.harmonics[0] - AMPS["disp"][0]) < 5 * d.sigma
+    else:
+        assert a.quality.status == "rejected" and "settle" in a.quality.reason
+    need = tr[0].settle_cycles
+    assert need > 0 and f"settle {need} more cycles" in tr[0].describe()
+
+    # an independent check of the advice: with that many more settle cycles the raw record
+    # passes the periodicity gate and its fundamental is within 3 standard errors; with a
+    # third of them one of the two fails
+    def raw(delay):
+        s = with_transient(delay)
+        r = analyse_records(s["force"], s["accel"], s["disp"], fs, F_DRIVE)
+        d = r.channels["disp"]
+        return r.drift_sigma < DRIFT_LIMIT and abs(d.harmonics[0] - AMPS["disp"][0]) < 3 * d.sigma
+    assert raw(need) and not raw(need // 3)
+
+
+def test_an_amplitude_still_converging_at_the_drive_frequency_is_a_transient_named_on_its_channel():
+    """No separate frequency to fit: the residual power decays (the envelope test)."""
+    fs = 25600.0
+    t, clean, noise = records(fs, periods=12)
+    sig = {ch: clean[ch] + noise[ch] for ch in clean}
+    tau = 0.04
+    sig["accel"] = sig["accel"] + 0.1 * clean["accel"] * np.exp(-t / tau)
+    q = assess(sig).quality
+    tr = of_kind(q, "unsettled_transient")
+    assert tr and {a.channel for a in tr} == {"accel"}
+    assert tr[0].decay_per_s == pytest.approx(1 / tau, rel=0.15)
+    if q.status == "rejected":
+        assert "accelerometer (accel)" in q.reason and "settle" in q.reason
+    else:
+        assert any("periods dropped" in n for n in q.notes)
+
+
+def test_clipping_is_found_and_rejects_the_step_naming_the_channel():
+    t, clean, noise = records()
+    sig = {ch: clean[ch] + noise[ch] for ch in clean}
+    top = 0.9 * sig["disp"].max()
+    sig["disp"] = np.minimum(sig["disp"], top)
+    q = assess(sig).quality
+    assert q.status == "rejected" and "clipping on the displacement probe (disp)" in q.reason
+    (c,) = of_kind(q, "clipping")
+    assert c.size == pytest.approx(top) and c.time_s < 1 / F_DRIVE
+
+
+def test_a_quantised_record_that_is_not_clipped_gives_no_clipping_or_dropout():
+    _, clean, noise = records(seed=4)
+    sig = {ch: clean[ch] + noise[ch] for ch in clean}
+    q_step = 2 * max(np.abs(sig["disp"])) / 2 ** 14            # a 14-bit converter over the signal's range
+    sig["disp"] = np.round(sig["disp"] / q_step) * q_step
+    q = assess(sig).quality
+    assert not of_kind(q, "clipping") and not of_kind(q, "dropout"), q.reason
+
+
+def test_dropouts_are_found_with_channel_and_time():
+    fs = 25600.0
+    t, clean, noise = records(fs)
+    sig = {ch: clean[ch] + noise[ch] for ch in clean}
+    sig["force"][5000:5040] = sig["force"][5000]                # held for 40 samples
+    sig["accel"][9000:9030] = 0.0                               # a run of zeros
+    q = assess(sig, fs).quality
+    assert q.status == "rejected"
+    drops = {a.channel: a for a in of_kind(q, "dropout")}
+    assert set(drops) == {"force", "accel"}
+    assert drops["force"].time_s == pytest.approx(5000 / fs, abs=1.5 / fs)
+    assert drops["force"].duration_s == pytest.approx(40 / fs, abs=1.5 / fs)
+    assert drops["accel"].time_s == pytest.approx(9000 / fs, abs=1.5 / fs) and drops["accel"].size == 0.0
+    assert "force sensor (force)" in q.reason and "accelerometer (accel)" in q.reason
+
+
+def test_an_offset_drift_is_found_removed_and_the_step_kept():
+    t, clean, noise = records()
+    sig = {ch: clean[ch] + noise[ch] for ch in clean}
+    sig["disp"] = sig["disp"] + 30e-9 * t / t[-1]
+    a = assess(sig)
+    (d,) = of_kind(a.quality, "offset_drift")
+    assert d.channel == "disp" and d.size == pytest.approx(30e-9, rel=0.05)
+    assert a.quality.status == "flagged"
+    assert abs(a.records.channels["disp"].offset - 15e-9) < 1e-9       # the record's mean is kept
+    raw = analyse_records(sig["force"], sig["accel"], sig["disp"], 25600.0, F_DRIVE)
+    assert raw.drift_sigma > DRIFT_LIMIT and a.records.drift_sigma < DRIFT_LIMIT
+
+
+def test_artefacts_of_many_steps_become_causes_a_technician_reads():
+    fs = 10371.0
+    quality = []
+    for i in range(6):
+        t, clean, noise = records(fs, periods=12, seed=10 + i)
+        sig = {ch: clean[ch] + noise[ch] for ch in clean}
+        if i < 4:
+            sig["disp"] = sig["disp"] + 12e-9 * np.sin(2 * np.pi * 50.0 * t + i)
+        if i == 5:
+            sig["disp"] = sig["disp"] + 2e-6 * np.exp(-15 * t) * np.sin(2 * np.pi * 61 * t)
+        quality.append((f"step{i}", assess(sig, fs).quality))
+    causes = {c["id"]: c for c in artefact_causes(quality)}
+    assert set(causes) == {"line_interference", "unsettled_transient"}
+    line = causes["line_interference"]
+    assert line["kind"] == "artefact" and line["channel"] == "disp"
+    assert line["evidence"]["steps"] == ["step0", "step1", "step2", "step3"]
+    assert line["parameters"]["frequency"]["value"] == pytest.approx(50.0, abs=0.01)
+    assert line["parameters"]["amplitude"]["value"] == pytest.approx(12e-9, rel=0.05)
+    assert line["sentence"].startswith("a 50 Hz line of 1") and "in 4 of 6 steps" in line["sentence"]
+    assert "50 Hz mains" in line["sentence"] and "removed before the fit" in line["sentence"]
+    tr = causes["unsettled_transient"]
+    assert tr["evidence"]["steps"] == ["step5"]
+    assert f"settle {int(tr['parameters']['settle_cycles_needed']['value'])} more cycles" in tr["sentence"]
+    assert tr["parameters"]["decay_rate"]["value"] == pytest.approx(15.0, rel=0.03)
+
+
+def test_hum_too_close_to_the_drive_to_separate_is_named_in_the_rejection():
+    """53 Hz drive, 10 periods (resolution 5.3 Hz), 50 Hz hum: not separable in this record."""
+    f = 53.0
+    t, clean, noise = records(periods=10, f=f)
+    sig = {ch: clean[ch] + noise[ch] for ch in clean}
+    sig["disp"] = sig["disp"] + 100e-9 * np.sin(2 * np.pi * 50.0 * t)
+    q = assess(sig, f=f).quality
+    assert q.status == "rejected" and "displacement probe (disp)" in q.reason
+    assert "mains hum, if present, at 50 Hz lies 3 Hz from drive harmonic 1" in q.reason
+    assert "measure at least 27 periods" in q.reason
+    # the advice holds: with 27 periods the line is found and removed, and the step kept
+    t, clean, noise = records(periods=27, f=f)
+    sig = {ch: clean[ch] + noise[ch] for ch in clean}
+    sig["disp"] = sig["disp"] + 100e-9 * np.sin(2 * np.pi * 50.0 * t)
+    q = assess(sig, f=f).quality
+    assert q.status == "flagged" and [round(a.freq_Hz, 1) for a in of_kind(q, "line_interference")] == [50.0]
+
+
+def test_a_steady_vibration_seen_by_probe_and_accelerometer_alike_is_carriage_motion_not_hum():
+    fs = 10371.0
+    t, clean, noise = records(fs, periods=12)
+    sig = {ch: clean[ch] + noise[ch] for ch in clean}
+    w = 2 * np.pi * 84.0
+    sig["disp"] = sig["disp"] + 30e-9 * np.sin(w * t)
+    sig["accel"] = sig["accel"] - w ** 2 * 30e-9 * np.sin(w * t)       # the same motion, a = -w^2 x
+    q = assess(sig, fs).quality
+    assert not of_kind(q, "line_interference")
+    vib = of_kind(q, "unsettled_transient")
+    assert {a.channel for a in vib} == {"disp", "accel"} and all("free vibration of the carriage" in a.evidence
+                                                                 for a in vib)
+    causes = {c["id"]: c for c in artefact_causes([("s", q)])}
+    assert set(causes) == {"unsettled_transient"} and "settle longer" in causes["unsettled_transient"]["sentence"]
