@@ -31,8 +31,10 @@ def relative_errors(model: Model, theta: np.ndarray, d: Data) -> np.ndarray:
     return np.sqrt(0.5 * (eC ** 2 + eA ** 2))
 
 
-def heldout_error(model: Model, theta: np.ndarray, d: Data, W: Weights, max_nfev: int = 20) -> float:
-    """Leave-one-level-out prediction error (rms relative error, a fraction)."""
+def heldout_error(model: Model, theta: np.ndarray, d: Data, W: Weights, max_nfev: int = 20,
+                  thetas: list | None = None) -> float:
+    """Leave-one-level-out prediction error (rms relative error, a fraction).  ``thetas``,
+    when given, receives each refit's parameter vector (a jackknife over force levels)."""
     levels = np.unique(d.level)
     if levels.size < 2:
         raise ValueError("need at least two force levels to hold one out")
@@ -41,5 +43,7 @@ def heldout_error(model: Model, theta: np.ndarray, d: Data, W: Weights, max_nfev
         train = d.level != lv
         f = fit(model, theta, d.subset(train), W.subset(train), max_nfev=max_nfev)
         errs.append(relative_errors(model, f.theta, d.subset(~train)))
+        if thetas is not None:
+            thetas.append(f.theta)
     e = np.concatenate(errs)
     return float(np.sqrt(np.mean(e ** 2)))
