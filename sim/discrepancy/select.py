@@ -277,6 +277,8 @@ def select(base: Fit, d: Data, W: Weights, catalog: tuple[str, ...] = CATALOG, m
             break
         chosen.named = True
         named.append(chosen)
+        # the selection's fits stop early; the next round starts from a converged model
+        chosen.fit = fit(chosen.fit.model, chosen.fit.theta, d, W, max_nfev=100)
         current, held_cur = chosen.fit, chosen.heldout_error
     return Selection(base=base, final=current, named=named, tried=tried, heldout_base=held_base,
                      screened=screened, base_heldout_thetas=base_thetas)
