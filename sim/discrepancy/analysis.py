@@ -26,7 +26,7 @@ import numpy as np
 from ..identify import Identifier, displacement_harmonics, synthesize
 from .fit import Fit, Weights, fit, whitened
 from .gain import frf, heldout_error
-from .models import BASE_PARAMS, EFFECTS, Data, Model
+from .models import BASE_PARAMS, EFFECTS, LIBRARY, Data, Model
 from .select import Selection, select, settle_final
 
 log = logging.getLogger(__name__)
@@ -418,17 +418,19 @@ class Analysis:
 
 
 def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, source: str = "",
-                  software_version: str = "", rejected: list | None = None) -> Analysis:
+                  software_version: str = "", rejected: list | None = None,
+                  library: tuple[str, ...] | None = None) -> Analysis:
     """Fit the base model, try the catalog, name what survives both gates (see module doc).
 
     ``guess``: rough F_s_N, x_s_m, n, mass_kg (e.g. a rig file's expected values); None
-    estimates them from the data."""
+    estimates them from the data.  ``library``: the library terms to search (default all of
+    :data:`~sim.discrepancy.terms.LIBRARY`; ``()`` for the catalog alone)."""
     steps = list(steps)
     d = data_from_steps(steps, harmonics)
     if np.unique(d.level).size < 2:
         raise ValueError("need steps at two force levels at least (held-out checks leave one level out)")
     base, W = base_fit(steps, d, guess, harmonics)
     log.info("base fit: reduced chi2 %.2f", base.reduced_chi2)
-    sel = settle_final(select(base, d, W), d)
+    sel = settle_final(select(base, d, W, library=LIBRARY if library is None else tuple(library)), d)
     return Analysis(steps=steps, data=d, weights=W, selection=sel, source=source,
                     software_version=software_version, rejected=list(rejected or []))
