@@ -510,10 +510,10 @@ def plot_restoring_force(rf) -> Figure:
     ax_x, ax_v = fig.subplots(1, 2, sharey=True)
     lv = rf.level_index
     levels = sorted(set(lv.tolist()))
-    colours = level_colours([float(x) for x in levels])
+    colours = level_colours([float(x) + 1.0 for x in levels])      # by level number 1, 2, ...
     for g in levels:
         sel = lv == g
-        c = colours[float(g)]
+        c = colours[float(g) + 1.0]
         ax_x.plot(1e6 * rf.x_m[sel], rf.force_N[sel], ls="none", marker=".", ms=2, color=c)
         ax_v.plot(1e3 * rf.v_m_s[sel], rf.force_N[sel], ls="none", marker=".", ms=2, color=c)
     ax_x.set(xlabel="displacement x  (um)", ylabel="force the base model leaves out  (N)")
@@ -521,7 +521,7 @@ def plot_restoring_force(rf) -> Figure:
     for ax in (ax_x, ax_v):
         ax.axhline(0, color="0.5", lw=0.8)
         ax.grid(True, alpha=0.3)
-    ax_v.legend(handles=[Patch(color=colours[float(g)], label=f"level {int(g) + 1}") for g in levels],
+    ax_v.legend(handles=[Patch(color=colours[float(g) + 1.0], label=f"level {int(g) + 1}") for g in levels],
                 fontsize=8, frameon=False)
     fig.suptitle("Restoring force: P - m a - F_Masing(x) of the base model, over one period of every step")
     return fig

@@ -31,6 +31,11 @@ candidates test.  Each catalog effect changes one of these:
   (from m x'' + m e theta'' = P - F and m e x'' + J theta'' = h P - k_th theta - c_th theta';
   the accelerometer at h reads x'' + h theta'', the probe reads x).
 
+The force effects (viscous damping, spring, velocity-dependent friction) and the library
+of force terms outside the catalog are :class:`~sim.discrepancy.terms.Effect` objects with
+a ``force`` function, added to G in :meth:`Model.terms`; only the kinematic effects are
+written out here.
+
 Everything is affine in P, so a model also predicts P and A from the measured X alone
 (:meth:`Model.predict`): that is how compliance and accelerance are predicted for held-out
 steps.
