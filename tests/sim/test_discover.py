@@ -74,7 +74,7 @@ def test_a_form_hidden_in_independently_simulated_uff_is_named_by_form(effect, n
     top = 0.3 if effect == "asymmetric_friction" else 0.85       # asymmetric friction ratchets in rolling
     path = tmp_path / "rig.uff"
     generate_uff(path, **truth, levels_N=np.linspace(0.1, top, 3) * F_s,
-                 freqs_Hz=np.geomspace(0.4, 2.5, 6) * w / (2 * math.pi), settle=10, measure=6, seed=7, **forms)
+                 freqs_Hz=np.geomspace(0.4, 2.5, 6) * w / (2 * math.pi), settle=6, measure=4, seed=7, **forms)
     src = load_source(path)
     d = analyze_steps(src.steps, {k: v * 1.15 for k, v in truth.items()}).to_dict()
     name = EFFECTS[FORMS[effect]].names[0]
