@@ -2,7 +2,7 @@
 
 Public surface: :func:`analyze_steps` -> :class:`Analysis` (``to_dict()`` is the
 analysis.json schema of docs/analysis.md), the catalog :data:`CATALOG`, the library of
-force terms :data:`LIBRARY` (both in :data:`EFFECTS`, :mod:`sim.discrepancy.terms`), and the test-case
+force terms :data:`LIBRARY` (both in :data:`EFFECTS`, :mod:`sim.discrepancy.effects`), and the test-case
 generator in :mod:`sim.discrepancy.cases`.
 """
 

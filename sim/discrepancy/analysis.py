@@ -424,7 +424,7 @@ def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, sourc
 
     ``guess``: rough F_s_N, x_s_m, n, mass_kg (e.g. a rig file's expected values); None
     estimates them from the data.  ``library``: the library terms to search (default all of
-    :data:`~sim.discrepancy.terms.LIBRARY`; ``()`` for the catalog alone)."""
+    :data:`~sim.discrepancy.effects.LIBRARY`; ``()`` for the catalog alone)."""
     steps = list(steps)
     d = data_from_steps(steps, harmonics)
     if np.unique(d.level).size < 2:

@@ -32,7 +32,7 @@ candidates test.  Each catalog effect changes one of these:
   the accelerometer at h reads x'' + h theta'', the probe reads x).
 
 The force effects (viscous damping, spring, velocity-dependent friction) and the library
-of force terms outside the catalog are :class:`~sim.discrepancy.terms.Effect` objects with
+of force terms outside the catalog are :class:`~sim.discrepancy.effects.Effect` objects with
 a ``force`` function, added to G in :meth:`Model.terms`; only the kinematic effects are
 written out here.
 
@@ -49,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..identify import POINTS_PER_PERIOD, _path_friction, _path_harmonics, _paths
-from .terms import CATALOG, EFFECTS, LIBRARY, Effect, Path  # noqa: F401  (re-exported)
+from .effects import CATALOG, EFFECTS, LIBRARY, Effect, Path  # noqa: F401  (re-exported)
 
 BASE_PARAMS = ("F_s_N", "x_s_m", "n", "mass_kg")
 MOTION_EFFECTS = ("sensor_delay", "sensor_gain_error", "second_mode")   # they change the rebuilt x

@@ -1,5 +1,5 @@
 """Which causes the data need: greedy forward selection with two gates over the catalog and
-the library of force terms together (:mod:`sim.discrepancy.terms`), and the test for
+the library of force terms together (:mod:`sim.discrepancy.effects`), and the test for
 structure that none of them explains.
 
 Each round fits every catalog effect not yet in the model (warm-started from the current

@@ -16,7 +16,7 @@ import pytest
 
 from sim.discrepancy import analyze_steps
 from sim.discrepancy.cases import FORMS, make_case, truth_size
-from sim.discrepancy.terms import EFFECTS
+from sim.discrepancy.effects import EFFECTS
 
 # (seed, plant effect): seeds fix the rig and the strength; n of each noted
 PLANT = [(5, "quadratic_damping"),     # n = 2.48
