@@ -31,7 +31,7 @@ import math
 
 from numba import njit
 
-from ._kernel import _velocity_root
+from ._kernel import velocity_root
 from .masing import active_depth, branch_force, friction, push_reversal
 
 N_COEF = 13
@@ -136,7 +136,7 @@ def plant_run(u, v, th, w, t0, k, d, su, sF, lam, kind, p, gamma, omega, phase, 
             if d * v > 0.0:
                 Pe = gamma * math.sin(omega * (t + h) + phase) + bias
                 a_end, _, _ = _deriv(un, vn, tn, wn, Pe, k, su, sF, d, lam, kind, p, coef)
-                theta = _velocity_root(v, vn, a0 * h, a_end * h)
+                theta = velocity_root(v, vn, a0 * h, a_end * h)
             else:
                 theta = 0.0
             h1 = theta * h

@@ -52,7 +52,7 @@ class Grids:
     fig13_gamma0: tuple[float, ...]
 
     @classmethod
-    def for_run(cls, quick: bool) -> "Grids":
+    def for_run(cls, quick: bool) -> Grids:
         if quick:
             return cls(np.linspace(0.2, 2.0, 37), np.linspace(0.2, 3.0, 29), (0.4, 0.8),
                        np.geomspace(0.4, 5.0, 25), 7, (0.2, 0.6, 0.9))
@@ -231,6 +231,7 @@ def steady_cycles() -> dict[tuple[float, str], Cycle]:
             s = steady_state(GAMMA0_FIG6, beta, n, history_samples=HISTORY_SAMPLES)
             if not s.converged:
                 log.warning("cycle at %s (n=%g, beta=%g) is not steady", letter, n, beta)
+            assert s.history is not None          # asked for with history_samples
             cycles[n, letter] = Cycle(n, letter, s, cycle_features(s.history))
     return cycles
 
@@ -277,7 +278,9 @@ def _two_periods(c: Cycle):
     it = Integrator(n=c.n)
     every = max(1, it.steps_per_period // HISTORY_SAMPLES)
     rec = np.empty((2 * it.steps_per_period // every + 1, 5))
-    it.run(c.steady.state.copy(), GAMMA0_FIG6, c.steady.beta, 2, every, rec)
+    state = c.steady.state
+    assert state is not None                  # steady_state returns its final state
+    it.run(state.copy(), GAMMA0_FIG6, c.steady.beta, 2, every, rec)
     return rec
 
 

@@ -35,6 +35,7 @@ import math
 import numpy as np
 
 from ._plant_kernel import N_COEF
+from .errors import ConfigurationError
 
 log = logging.getLogger(__name__)
 
@@ -49,20 +50,20 @@ def validate(model) -> None:
     for name in EFFECT_FIELDS:
         v = getattr(model, name)
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
-            raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+            raise ConfigurationError(f"{name} must be finite and >= 0, got {v!r}")
     a = model.friction_asymmetry
     if isinstance(a, bool) or not isinstance(a, (int, float)) or not (math.isfinite(a) and abs(a) < ASYMMETRY_LIMIT):
-        raise ValueError(f"friction_asymmetry must be finite with |a| < {ASYMMETRY_LIMIT}, got {a!r}")
+        raise ConfigurationError(f"friction_asymmetry must be finite with |a| < {ASYMMETRY_LIMIT}, got {a!r}")
     if model.friction_alpha > 0 and model.friction_v_ref_m_per_s <= 0:
-        raise ValueError(f"friction_v_ref_m_per_s must be > 0 when friction_alpha > 0, "
+        raise ConfigurationError(f"friction_v_ref_m_per_s must be > 0 when friction_alpha > 0, "
                          f"got {model.friction_v_ref_m_per_s!r}")
     if pitch_on(model):
         if model.pitch_stiffness_N_m_per_rad <= 0:
-            raise ValueError(f"pitch_stiffness_N_m_per_rad must be > 0 when the pitch is on "
+            raise ConfigurationError(f"pitch_stiffness_N_m_per_rad must be > 0 when the pitch is on "
                              f"(pitch_inertia_kg_m2 > 0), got {model.pitch_stiffness_N_m_per_rad!r}")
         m_e2 = model.mass_kg * model.cg_height_m ** 2
         if model.pitch_inertia_kg_m2 <= m_e2:
-            raise ValueError(f"pitch_inertia_kg_m2 must be > mass_kg * cg_height_m^2 = {m_e2:g} "
+            raise ConfigurationError(f"pitch_inertia_kg_m2 must be > mass_kg * cg_height_m^2 = {m_e2:g} "
                              f"(positive-definite mass matrix), got {model.pitch_inertia_kg_m2!r}")
 
 

@@ -19,6 +19,8 @@ import math
 from html import escape
 from pathlib import Path
 
+from sim.discrepancy.rounding import round_to_interval
+
 from . import _figures as figures
 from ._analysis import AnalysisData, Interval, analysis_data
 
@@ -81,9 +83,10 @@ def _figure(fig, alt: str, caption: str) -> str:
 
 
 def _param_row(key: str, p: Interval) -> list[str]:
+    """label, unit, value, low, high: each figure to the digit its interval supports."""
     label, unit, scale = PARAM_DISPLAY.get(key, (key, p.unit, 1.0))
-    return [escape(label), escape(unit or p.unit or "-"), _num(p.value * scale), _num(p.low * scale),
-            _num(p.high * scale)]
+    return [escape(label), escape(unit or p.unit or "-"), *round_to_interval(p.value * scale, p.low * scale,
+                                                                              p.high * scale)]
 
 
 def _verdict(a: AnalysisData) -> str:
@@ -112,9 +115,7 @@ def _causes(a: AnalysisData) -> str:
         return "".join(out) + "</section>"
     rows = []
     for i, c in enumerate(a.causes, 1):
-        size = "<br>".join(f"{escape(k)} = {_num(p.value)} {escape('' if p.unit in ('', '1') else p.unit)}"
-                           + (f" (95 %: {_num(p.low)} to {_num(p.high)})" if math.isfinite(p.low) else "")
-                           for k, p in c.parameters.items()) or "-"
+        size = "<br>".join(_size(k, p) for k, p in c.parameters.items()) or "-"
         gain = (f"{_pct(c.heldout_error_before)} &rarr; {_pct(c.heldout_error_after)}"
                 + (f"<br>&Delta;BIC {_num(c.delta_bic, '.3g')}" if math.isfinite(c.delta_bic) else ""))
         rows.append([str(i), escape(KIND_TEXT.get(c.kind, c.kind)),
@@ -125,6 +126,13 @@ def _causes(a: AnalysisData) -> str:
                       caption="Every cause named, in the order the selection took them; the held-out error is "
                               "the prediction error on force levels left out of the fit."))
     return "".join(out) + "</section>"
+
+
+def _size(name: str, p: Interval) -> str:
+    """'c = 41 N s/m (95 %: 37 to 45)', each figure to the digit its interval supports."""
+    unit = "" if p.unit in ("", "1") else f" {p.unit}"
+    value, low, high = round_to_interval(p.value, p.low, p.high)
+    return escape(f"{name} = {value}{unit}" + (f" (95 %: {low} to {high})" if math.isfinite(p.low) else ""))
 
 
 def _overview(a: AnalysisData) -> str:

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..errors import ConfigurationError
 from ..identify import StepHarmonics
 from ..rig import RigModel, SimulatedRig
 from ..synthetic import draw_rig, grid
@@ -86,7 +87,7 @@ class Case:
         return tuple(FORMS[e] for e in self.effects if e in FORMS)
 
 
-def truth_size(case: "Case", effect: str) -> tuple[str | None, float | None]:
+def truth_size(case: Case, effect: str) -> tuple[str | None, float | None]:
     """(parameter name in the analysis' cause parameters, its true value) for the effects
     whose reported size maps one to one onto the plant's settings; (None, None) otherwise."""
     fx = case.effects[effect]
@@ -112,7 +113,7 @@ def truth_size(case: "Case", effect: str) -> tuple[str | None, float | None]:
     return None, None
 
 
-def observable_rig(case: "Case") -> dict:
+def observable_rig(case: Case) -> dict:
     """The rig's F_s_N, x_s_m, n, mass_kg as measurements can show them.  The analysis takes
     the accelerometer as the reference of scale (a gain error is the displacement's scale
     relative to it), so an accelerometer gain error g_a shows as x_s (1 + g_a) and
@@ -163,7 +164,7 @@ def draw_effect(effect: str, rig: dict, rng: np.random.Generator, margin: tuple[
         return dict(quadratic_damping_N_s2_per_m2=2 * 0.03 * s * m * 3 * math.pi / (8 * x_s))
     if effect == "asymmetric_friction":
         return dict(friction_asymmetry=float(0.05 * s * rng.choice([-1.0, 1.0])))
-    raise ValueError(f"unknown effect {effect!r}; known: {CATALOG + OUTSIDE}")
+    raise ConfigurationError(f"unknown effect {effect!r}; known: {CATALOG + OUTSIDE}")
 
 
 # With friction higher one way than the other, a carriage driven into gross rolling walks off

@@ -46,7 +46,7 @@ from typing import Callable
 import numpy as np
 from numba import njit
 
-from ..identify import _path_friction, _path_harmonics
+from ..identify import path_friction, path_harmonics
 from ..masing import active_depth, push_reversal
 
 EXP_RATE = 3.0          # the other virgin family: g(s) = 1 - exp(-EXP_RATE s)
@@ -120,7 +120,7 @@ class Path:
         return self._v
 
     def harm(self, samples: np.ndarray) -> np.ndarray:
-        return _path_harmonics(samples, self.starts, self.K)
+        return path_harmonics(samples, self.starts, self.K)
 
     def basis(self, name: str, make, friction: bool = False) -> np.ndarray:
         key = self.mkey + ((self.x_s, self.n) if friction else ()) + (name,)
@@ -137,7 +137,7 @@ def _g_exp(s, c):
 
 @njit(cache=True, nogil=True)
 def _loop_friction_exp(paths, lam, c, out):
-    """As :func:`sim.identify._loop_friction`, with the virgin curve g_exp (the Masing rule
+    """As :func:`sim.identify`'s loop friction, with the virgin curve g_exp (the Masing rule
     is the same; only g differs)."""
     su = np.empty(16)
     sF = np.empty(16)
@@ -190,12 +190,12 @@ def _similarity(ctx: Path, p):
     if lam == 2.0:
         return np.zeros_like(ctx.X)
     paths = ctx.x
-    other = ctx.basis(f"lam={lam!r}", lambda: _path_friction(paths, ctx.x_s, ctx.n, lam), friction=True)
+    other = ctx.basis(f"lam={lam!r}", lambda: path_friction(paths, ctx.x_s, ctx.n, lam), friction=True)
     return ctx.F_s * (other - ctx.basis("M", lambda: ctx.M_dimless, friction=True))
 
 
 def _amplitude_n(ctx: Path):
-    dM = (_path_friction(ctx.x, ctx.x_s, ctx.n + DN) - _path_friction(ctx.x, ctx.x_s, ctx.n - DN)) / (2 * DN)
+    dM = (path_friction(ctx.x, ctx.x_s, ctx.n + DN) - path_friction(ctx.x, ctx.x_s, ctx.n - DN)) / (2 * DN)
     amp = 0.5 * (ctx.x.max(axis=1) - ctx.x.min(axis=1))
     return dM * np.log(np.maximum(amp, 1e-300) / ctx.x_s)[:, None]
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import ConfigurationError
 from .fit import Weights, fit
 from .models import Data, Model
 
@@ -45,7 +46,7 @@ def heldout_error(model: Model, theta: np.ndarray, d: Data, W: Weights, max_nfev
     when given, receives each refit's parameter vector (a jackknife over force levels)."""
     levels = np.unique(d.level)
     if levels.size < 2:
-        raise ValueError("need at least two force levels to hold one out")
+        raise ConfigurationError("need at least two force levels to hold one out")
     errs = []
     for lv in levels:
         train = d.level != lv

@@ -48,7 +48,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..identify import POINTS_PER_PERIOD, _path_friction, _path_harmonics, _paths
+from ..errors import ConfigurationError
+from ..identify import POINTS_PER_PERIOD, path_friction, period_paths
 from .effects import CATALOG, EFFECTS, LIBRARY, Effect, Path  # noqa: F401  (re-exported)
 
 BASE_PARAMS = ("F_s_N", "x_s_m", "n", "mass_kg")
@@ -85,12 +86,13 @@ class Data:
 
     def friction_channels(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(X, XA, wD, P) over every harmonic at hand (the probe alone when only it is)."""
-        if self.Xf is None:
+        if self.Xf is None or self.XAf is None or self.wDf is None or self.Pf is None:
             return self.X, np.zeros_like(self.X), np.ones(self.X.shape), self.P
         return self.Xf, self.XAf, self.wDf, self.Pf
 
-    def subset(self, mask: np.ndarray) -> "Data":
-        return Data(*(None if getattr(self, f) is None else getattr(self, f)[mask] for f in self.FIELDS))
+    def subset(self, mask: np.ndarray) -> Data:
+        return Data(*(None if getattr(self, f) is None else getattr(self, f)[mask]   # type: ignore[arg-type]
+                      for f in self.FIELDS))
 
 
 class Model:
@@ -103,7 +105,7 @@ class Model:
                  scales: dict | None = None):
         unknown = [e for e in effects if e not in EFFECTS]
         if unknown:
-            raise ValueError(f"unknown effects {unknown}; catalog: {CATALOG}; library: {LIBRARY}")
+            raise ConfigurationError(f"unknown effects {unknown}; catalog: {CATALOG}; library: {LIBRARY}")
         self.effects = tuple(effects)
         self.M = points_per_period
         self.K = harmonics
@@ -136,7 +138,7 @@ class Model:
                 out[f"{e}.{name}"] = math.exp(v) if name == "f_p" else float(v) * self.scales[e]
         return out
 
-    def extend(self, theta: np.ndarray, effect: str, init: np.ndarray, scale: float = 1.0) -> tuple["Model", np.ndarray]:
+    def extend(self, theta: np.ndarray, effect: str, init: np.ndarray, scale: float = 1.0) -> tuple[Model, np.ndarray]:
         """This model with one more effect, and the parameter vector warm-started from ``theta``
         (``scale``: the new effect's coefficient unit, see ``scales``)."""
         m = Model(self.effects + (effect,), self.K, self.M, dict(self.scales, **{effect: scale}))
@@ -208,11 +210,11 @@ class Model:
 
         def motion():
             x = self._displacement(v, d)
-            paths, starts = _paths(x, self.M)
+            paths, starts = period_paths(x, self.M)
             return x, paths, starts
         x, paths, starts = self._cached(d, mkey, motion)
         n = v["n"] if abs(v["n"] - 1.0) >= 1e-6 else 1.0 + 1e-6
-        M = self._cached(d, mkey + (float(theta[1]), n), lambda: _path_friction(paths, v["x_s_m"], n))
+        M = self._cached(d, mkey + (float(theta[1]), n), lambda: path_friction(paths, v["x_s_m"], n))
         K = d.X.shape[1]
         ctx = Path(X=x[:, :K], Om=d.Omega, x=paths, starts=starts, x0=d.x0, F_s=v["F_s_N"], x_s=v["x_s_m"], n=n,
                    M_dimless=M, xf=x, omega=d.omega, cache=lambda key, make: self._cached(d, key, make), mkey=mkey)

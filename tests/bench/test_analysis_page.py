@@ -104,7 +104,14 @@ def test_page_leads_with_the_verdict_and_names_the_cause(page, analysis_example)
     assert headings[0] == "h1" and headings.count("h1") == 1
     assert ("Unexplained" in text) == analysis_example["unexplained"]
     c = analysis_example["causes"][0]["parameters"]["c"]
-    assert f"c = {c['value']:.4g} N s/m (95 %: {c['low']:.4g} to {c['high']:.4g})" in text
+    # each figure to the digit its interval supports: the last digit shown is where the
+    # interval's half-width has its first or second significant digit, no further
+    row = re.search(r"c = ([^ ]+) N s/m \(95 %: ([^ ]+) to ([^ )]+)\)", text)
+    value, low, high = row.groups()
+    step = 10.0 ** -(len(value.split(".")[1]) if "." in value else 0)
+    assert step <= (c["high"] - c["low"]) / 2 < 100 * step, (row.groups(), c)
+    for shown, exact in zip((value, low, high), (c["value"], c["low"], c["high"])):
+        assert abs(float(shown) - exact) <= step / 2 * (1 + 1e-9)
     # the details come after the causes, collapsed
     assert text.index("Causes named</h2>") < text.index('<details id="details">') < text.index("Candidates tried</h2>")
 

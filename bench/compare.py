@@ -1,0 +1,196 @@
+"""``bench compare REFERENCE OTHER``: do two measurements show the same rig?
+
+Both sources (run directories or UFF58 files, in any combination) are read into steps by
+:func:`bench.sources.load_source`.  Steps are matched by force level (within
+``LEVEL_TOL``), frequency (within ``FREQ_TOL``) and sweep direction (when both know it);
+for each matched pair the first-harmonic compliance X1/P1 and accelerance A1/P1 are
+compared: the relative complex difference |H_o - H_r| / |H_r| (magnitude and phase
+together), the magnitude difference in per cent, the phase difference in degrees, and
+the difference in units of its noise (both steps' standard errors propagated).
+
+A step is *judged* when the noise of the two measurements alone gives a relative
+difference of at most half the tolerance (``JUDGED_NOISE``): a noisier step (a tiny
+displacement far above resonance, an unsettled free vibration) cannot tell a difference
+of the tolerance from noise, and is reported but not gated.  The overall figure per
+quantity is the rms of the relative complex difference over the judged steps (the rms
+over all matched steps is reported beside it); ``within_tolerance`` holds when both the
+compliance's and the accelerance's are at most the tolerance (CLI exit 0, else 1; no
+judged step is exit 1).  Writes ``compare.json``
+(schema in docs/twin.md) and ``compare.html``.  Decision record 0026.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from sim.errors import ConfigurationError
+
+from .sources import MeasuredStep, Source, load_source
+from .storage import write_json
+
+log = logging.getLogger(__name__)
+
+SCHEMA = "guideway-bench/compare/1"
+LEVEL_TOL = 0.05       # relative force-level difference of matched steps
+FREQ_TOL = 0.005       # relative frequency difference of matched steps
+QUANTITIES = ("compliance", "accelerance")
+JUDGED_NOISE = 0.5     # a step is judged when its noise alone gives at most half the tolerance
+
+
+@dataclass(frozen=True)
+class Frf:
+    """First-harmonic compliance and accelerance of a step, with their standard errors."""
+
+    compliance: complex
+    accelerance: complex
+    sigma_compliance: float
+    sigma_accelerance: float
+
+    @classmethod
+    def of(cls, s: MeasuredStep) -> Frf:
+        h = s.harmonics
+        P, A, X = complex(h.force[0]), complex(h.accel[0]), complex(h.disp[0])
+        rel_P = h.sigma_force / abs(P)
+        C, Acc = X / P, A / P
+        return cls(C, Acc, abs(C) * math.hypot(h.sigma_disp / abs(X), rel_P),
+                   abs(Acc) * math.hypot(h.sigma_accel / abs(A), rel_P))
+
+
+def match_steps(ref: list[MeasuredStep], other: list[MeasuredStep]) -> list[tuple[int, int]]:
+    """Pairs (i_ref, i_other): each reference step with the nearest unused other step of the
+    same level, frequency and direction (directions are ignored when either is unknown)."""
+    pairs, used = [], set()
+    for i, r in enumerate(ref):
+        best, best_d = None, math.inf
+        for j, o in enumerate(other):
+            if j in used or (r.direction and o.direction and r.direction != o.direction):
+                continue
+            dl = abs(o.level_N / r.level_N - 1)
+            df = abs(o.freq_Hz / r.freq_Hz - 1)
+            if dl <= LEVEL_TOL and df <= FREQ_TOL:
+                d = dl / LEVEL_TOL + df / FREQ_TOL
+                if d < best_d:
+                    best, best_d = j, d
+        if best is not None:
+            used.add(best)
+            pairs.append((i, best))
+    return pairs
+
+
+def _ri(z: complex) -> list[float]:
+    return [float(z.real), float(z.imag)]
+
+
+def _difference(hr: complex, ho: complex, sr: float, so: float, tolerance: float) -> dict:
+    dphi = math.degrees(math.remainder(np.angle(ho) - np.angle(hr), 2 * math.pi))
+    sigma = math.hypot(sr, so)
+    rel_noise = math.sqrt(2) * sigma / abs(hr)        # rms of rel_diff from the noise alone
+    return dict(reference=_ri(hr), other=_ri(ho), rel_diff=abs(ho - hr) / abs(hr),
+                mag_diff_pct=100 * (abs(ho) / abs(hr) - 1), phase_diff_deg=dphi,
+                noise_units=abs(ho - hr) / sigma if sigma > 0 else None, rel_noise=rel_noise,
+                judged=bool(rel_noise <= JUDGED_NOISE * tolerance))
+
+
+def _rms(x) -> float:
+    x = np.asarray(list(x), float)
+    return float(np.sqrt(np.mean(x ** 2))) if x.size else math.nan
+
+
+def _describe(src: Source) -> dict:
+    from .twin import source_sha256
+    return dict(path=str(src.path), kind=src.kind, sha256=source_sha256(src.path), steps=len(src.steps),
+                rejected=[dict(step=r.step, reason=r.reason) for r in src.rejected])
+
+
+def compare_sources(reference, other, tolerance: float = 0.02) -> dict:
+    """The comparison as a dict (compare.json's schema).  ``reference``, ``other``: paths, or
+    sources already read by :func:`bench.sources.load_source`."""
+    if not (math.isfinite(tolerance) and tolerance > 0):
+        raise ConfigurationError(f"--tolerance must be a positive fraction (0.02 = 2 %), got {tolerance!r}")
+    srcs = []
+    for p in (reference, other):
+        if isinstance(p, Source):
+            srcs.append(p)
+            continue
+        if not Path(p).exists():
+            raise ConfigurationError(f"{p}: no such run directory or file")
+        srcs.append(load_source(Path(p)))
+    ref, oth = srcs
+    for s in srcs:
+        if not s.steps:
+            raise ConfigurationError(f"{s.path}: no usable steps to compare")
+    pairs = match_steps(ref.steps, oth.steps)
+    if not pairs:
+        raise ConfigurationError(f"no step of {ref.path} matches one of {oth.path} in force level (within "
+                         f"{100 * LEVEL_TOL:g} %), frequency (within {100 * FREQ_TOL:g} %) and direction")
+    steps = []
+    for i, j in pairs:
+        r, o = ref.steps[i], oth.steps[j]
+        fr, fo = Frf.of(r), Frf.of(o)
+        steps.append(dict(reference_key=r.key, other_key=o.key, level_N=float(r.level_N),
+                          other_level_N=float(o.level_N), freq_Hz=float(r.freq_Hz), direction=r.direction or o.direction,
+                          **{q: _difference(getattr(fr, q), getattr(fo, q), getattr(fr, f"sigma_{q}"),
+                                            getattr(fo, f"sigma_{q}"), tolerance) for q in QUANTITIES}))
+    overall = {}
+    for q in QUANTITIES:
+        d = [s[q] for s in steps]
+        judged = [x["rel_diff"] for x in d if x["judged"]]
+        overall[q] = dict(rms_rel_diff=_rms(judged) if judged else None, judged=len(judged),
+                          rms_rel_diff_all=_rms(x["rel_diff"] for x in d),
+                          max_rel_diff=float(max(judged)) if judged else None,
+                          rms_mag_diff_pct=_rms(x["mag_diff_pct"] for x in d),
+                          rms_phase_diff_deg=_rms(x["phase_diff_deg"] for x in d),
+                          rms_noise_units=_rms(x["noise_units"] for x in d if x["noise_units"] is not None))
+    rms = [overall[q]["rms_rel_diff"] for q in QUANTITIES]
+    worst = None if None in rms else max(rms)
+    matched_r, matched_o = {i for i, _ in pairs}, {j for _, j in pairs}
+    return dict(schema=SCHEMA, reference=_describe(ref), other=_describe(oth), tolerance=tolerance,
+                matching=dict(level_rel=LEVEL_TOL, freq_rel=FREQ_TOL), matched=len(pairs),
+                unmatched_reference=[s.key for k, s in enumerate(ref.steps) if k not in matched_r],
+                unmatched_other=[s.key for k, s in enumerate(oth.steps) if k not in matched_o],
+                overall=dict(overall, rms_rel_diff=worst, within_tolerance=worst is not None and worst <= tolerance),
+                steps=steps)
+
+
+def _pct(x) -> str:
+    return "n/a" if x is None else f"{100 * x:.3g} %"
+
+
+def summary(result: dict) -> str:
+    o = result["overall"]
+    lines = [f"{result['matched']} steps matched ({len(result['unmatched_reference'])} of the reference and "
+             f"{len(result['unmatched_other'])} of the other unmatched)"]
+    for q in QUANTITIES:
+        x = o[q]
+        lines.append(f"{q:>11}: rms difference {_pct(x['rms_rel_diff'])} over the {x['judged']} steps precise enough "
+                     f"to judge ({_pct(x['rms_rel_diff_all'])} over all; magnitude {x['rms_mag_diff_pct']:.3g} %, "
+                     f"phase {x['rms_phase_diff_deg']:.3g} deg; {x['rms_noise_units']:.3g} x noise), "
+                     f"largest judged {_pct(x['max_rel_diff'])}")
+    if o["rms_rel_diff"] is None:
+        lines.append(f"OUTSIDE: no step is precise enough to judge a difference of {100 * result['tolerance']:g} % "
+                     f"(its noise alone would give more than {100 * JUDGED_NOISE * result['tolerance']:g} %)")
+    else:
+        lines.append(f"{'within' if o['within_tolerance'] else 'OUTSIDE'} the tolerance of "
+                     f"{100 * result['tolerance']:g} % (larger rms {_pct(o['rms_rel_diff'])})")
+    return "\n".join(lines) + "\n"
+
+
+def default_out_dir(other: Path) -> Path:
+    """OTHER/compare for a run directory, <stem>_compare next to a file."""
+    return other / "compare" if other.is_dir() else other.parent / f"{other.stem}_compare"
+
+
+def write_compare(reference: Path, other: Path, out: Path | None = None, tolerance: float = 0.02) -> tuple[dict, Path]:
+    """Compare, write compare.json and compare.html to ``out``; (result, out)."""
+    from .reports import write_compare_html
+    result = compare_sources(reference, other, tolerance)
+    out = Path(out) if out else default_out_dir(Path(other))
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "compare.json", result)
+    write_compare_html(result, out / "compare.html")
+    return result, out

@@ -1,0 +1,494 @@
+"""``bench twin SOURCE``: a simulated rig (and its plan) that behaves like the measured one.
+
+SOURCE is a run directory or a UFF58 file of time records (:mod:`bench.sources`).  The
+analysis (:mod:`bench.analyze`, or an existing ``analysis.json`` given with ``--analysis``)
+supplies F_s, x_s, n, m and the causes it named; this module turns them into
+
+- ``rig.toml``: ``[rig.model]`` with the identified friction and mass, every named cause
+  as a plant or sensor effect (:data:`CAUSE_KEYS`), the measured noise of each channel, the
+  measured drive-voltage-to-force ratio; the source rig's calibration, limits and
+  expected values when the source is a run (documented defaults for a foreign file);
+  ``simulated = true``;
+- ``plan.toml``: the source's force levels, frequencies, sweep direction and
+  settle/measure cycles (a run's plan verbatim; a file's rebuilt from its steps);
+- ``twin.json``: the same in machine-readable form, with provenance, the parameters'
+  intervals and ``not_in_plant``: every named cause (or part of one) the plant cannot
+  represent, with the reason.  Nothing is dropped silently; the TOML files list them too.
+
+Both TOML files carry their provenance (source path, its SHA-256, the analysis' and this
+software's version) in header comments: the config loaders accept no extra tables, so the
+files stay loadable by every ``bench`` command.  Decision record 0026.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import math
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+
+import numpy as np
+
+from sim.discrepancy.analysis import level_groups
+from sim.errors import ConfigurationError
+from sim.rig import RigModel
+
+from .analyze import _version, analyze_source
+from .config import (
+    DEFAULTS,
+    MAX_FREQ_HZ,
+    MAX_LEVEL_N,
+    MIN_FREQ_HZ,
+    MIN_LEVEL_N,
+    load_rig,
+    parse_plan,
+    parse_rig,
+    plan_toml,
+    rig_toml,
+)
+from .sources import Source, load_source
+from .storage import write_json
+
+log = logging.getLogger(__name__)
+
+SCHEMA = "guideway-bench/twin/1"
+PITCH_DRIVE_HEIGHT_M = 0.1     # h of a foreign rig's pitching mode (only h^2/J, e/h, k_th/J, c_th/J are observable)
+FOREIGN_MIN_AMP_GAIN = 20.0    # N/V, the simulated rig's amplifier, raised if the largest level needs more than 5 V
+FOREIGN_SIGNAL_V = 5.0         # a foreign file's largest reading is put at this voltage (the DAQ clips at 10 V)
+FREQ_MERGE = 1e-3              # a file's step frequencies within 0.1 % are one plan frequency
+RATIO_SPREAD = 0.05            # drive-to-force ratio varying more than this over frequency: a shaker response
+
+
+def _value(params: dict, name: str, scale: float = 1.0) -> float:
+    return float(params[name]["value"]) * scale
+
+
+# ---------------------------------------------------------------------------- causes -> [rig.model]
+# cause id -> function(cause parameters, context) -> {[rig.model] key: value}.  The context
+# holds the twin's mass (kg) and the source rig model's drive height (m) if it has one.  A
+# KeyError (a parameter the analysis does not give) lists the cause as not in the plant.
+# Adding a form is one line here (and its keys in bench.config.MODEL_SCHEMA/sim.rig.RigModel).
+
+
+def _second_mode(p: dict, ctx: dict) -> dict:
+    """The analysis' pitching mode (f_p, zeta, coupling m h^2/J, r = e/h) as plant fields.
+    Only h^2/J, e/h, k_th/J and c_th/J are observable; h is the source rig's, else 0.1 m."""
+    h = ctx.get("drive_height_m") or PITCH_DRIVE_HEIGHT_M
+    w_p = 2 * math.pi * _value(p, "frequency")
+    J = ctx["mass_kg"] * h * h / _value(p, "coupling")
+    e = _value(p, "cg_over_drive_height") * h
+    return dict(pitch_inertia_kg_m2=J, pitch_stiffness_N_m_per_rad=J * w_p ** 2,
+                pitch_damping_N_m_s_per_rad=2 * _value(p, "damping_ratio") * w_p * J,
+                drive_height_m=h, cg_height_m=e)
+
+
+CAUSE_KEYS = {
+    # catalog (sim.discrepancy.models)
+    "viscous_damping": lambda p, ctx: {"viscous_N_s_per_m": _value(p, "c")},
+    "linear_spring": lambda p, ctx: {"spring_N_per_m": _value(p, "k")},
+    "velocity_dependent_friction": lambda p, ctx: {"friction_alpha": _value(p, "alpha"),
+                                                   "friction_v_ref_m_per_s": _value(p, "v_ref")},
+    "sensor_delay": lambda p, ctx: {"disp_delay_s": _value(p, "delay")},
+    "sensor_gain_error": lambda p, ctx: {"disp_gain_error": _value(p, "gain_error")},
+    "second_mode": _second_mode,
+    # forms beyond the catalog (discovered terms and artefacts)
+    "cubic_stiffness": lambda p, ctx: {"cubic_spring_N_per_m3": _value(p, "k3")},
+    "quadratic_damping": lambda p, ctx: {"quadratic_damping_N_s2_per_m2": _value(p, "c2")},
+    "asymmetric_friction": lambda p, ctx: {"friction_asymmetry": _value(p, "asymmetry")},
+    "line_interference": lambda p, ctx: {"line_channel": str(p["channel"]["value"]),
+                                         "line_freq_Hz": _value(p, "frequency"),
+                                         "line_amplitude": _value(p, "amplitude")},
+}
+
+
+def shaker_model(freqs_Hz: np.ndarray, ratio_N_per_V: np.ndarray) -> tuple[dict, str]:
+    """Hook: [rig.model] keys of a frequency-dependent shaker fitted to the source's
+    measured force per drive volt, and a note.  This plant's amplifier has one gain
+    (``amp_gain_N_per_V``, set to the median ratio by the caller), so no keys yet; the
+    note lists a spread the plant cannot reproduce.  Decision record 0025 (the shaker
+    model: Bl, R, L, armature mass, suspension, damping) gives the linear force per volt
+    P/V = amp_gain R/(R + j w L) Z_s/(Z_s + Z_a + Bl^2/(R + j w L)) to fit here; the
+    ratios are kept in twin.json (``drive_ratio``) for that."""
+    if ratio_N_per_V.size == 0:
+        return {}, ""
+    lo, hi = float(ratio_N_per_V.min()), float(ratio_N_per_V.max())
+    med = float(np.median(ratio_N_per_V))
+    if hi - lo <= RATIO_SPREAD * med:
+        return {}, ""
+    return {}, (f"drive-voltage-to-force ratio varies from {lo:.4g} to {hi:.4g} N/V over "
+                f"{freqs_Hz.min():g}-{freqs_Hz.max():g} Hz; this plant's amplifier has one gain "
+                f"(amp_gain_N_per_V = median {med:.4g} N/V); hook: bench.twin.shaker_model")
+
+
+def check_model(model: dict) -> None:
+    """ValueError naming the key when ``model`` is not a valid [rig.model] (as `bench run`
+    would load it: the simulated rig's file with this model)."""
+    import tomllib
+    rig = tomllib.loads((DEFAULTS / "sim_rig.toml").read_text())
+    rig["rig"]["model"] = model
+    parse_rig(rig, "twin")
+
+
+def apply_causes(model: dict, causes: list[dict], ctx: dict) -> tuple[dict, dict, list[dict]]:
+    """``model`` ([rig.model] keys) with every cause of ``causes`` (analysis.json's
+    ``causes``) that the plant can represent: (new model, {cause id: keys written},
+    [{cause, reason}] for the rest).  ``ctx``: the twin's ``mass_kg`` and the source rig's
+    ``drive_height_m`` (or None)."""
+    known = {f.name for f in fields(RigModel)}
+    applied, missed = {}, []
+    for c in causes:
+        cid = c["id"]
+        if cid not in CAUSE_KEYS:
+            missed.append(dict(cause=cid, reason="no plant or sensor form for this cause (bench.twin.CAUSE_KEYS)"))
+            continue
+        try:
+            keys = CAUSE_KEYS[cid](c.get("parameters", {}), ctx)
+        except KeyError as e:
+            missed.append(dict(cause=cid, reason=f"the analysis gives no parameter {e} for it"))
+            continue
+        absent = sorted(set(keys) - known)
+        if absent:
+            missed.append(dict(cause=cid, reason=f"this version's plant has no {', '.join(absent)} "
+                                                 f"(keys {', '.join(f'{k} = {v}' for k, v in keys.items())})"))
+            continue
+        trial = dict(model, **keys)
+        try:
+            check_model(trial)
+        except ValueError as e:
+            missed.append(dict(cause=cid, reason=f"its identified values are not a valid plant: {e}"))
+            continue
+        model = trial
+        applied[cid] = keys
+    return model, applied, missed
+
+
+@dataclass
+class Twin:
+    rig: dict                    # the TOML layout of rig.toml (top table "rig")
+    plan: dict                   # the TOML layout of plan.toml (top table "plan")
+    provenance: dict
+    parameters: dict             # F_s_N, x_s_m, n, m_kg: {value, low, high}
+    causes: list[str]
+    applied: dict                # cause id -> {key: value} written to [rig.model]
+    not_in_plant: list[dict] = field(default_factory=list)    # {cause, reason}
+    notes: list[str] = field(default_factory=list)            # defaults used, and why
+    drive_ratio: list[dict] = field(default_factory=list)     # {freq_Hz, N_per_V} per step of a run
+
+    def to_dict(self) -> dict:
+        return dict(schema=SCHEMA, provenance=self.provenance, parameters=self.parameters, causes=self.causes,
+                    applied=self.applied, not_in_plant=self.not_in_plant, notes=self.notes,
+                    drive_ratio=self.drive_ratio, rig=self.rig, plan=self.plan)
+
+
+# ---------------------------------------------------------------------------- provenance
+
+
+def source_sha256(path: Path) -> str:
+    """SHA-256 of a file; of a run directory, over the names and bytes of steps/* in sorted
+    order (the measurement: run.json changes when a run is identified again)."""
+    h = hashlib.sha256()
+    if path.is_dir():
+        for f in sorted((path / "steps").glob("*")):
+            if f.is_file():
+                h.update(f.name.encode() + b"\0")
+                h.update(f.read_bytes())
+    else:
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+# ---------------------------------------------------------------------------- measured quantities
+
+
+def channel_noise(src: Source) -> dict:
+    """Median per-sample noise rms of each channel over the steps (from the harmonics'
+    standard errors: sigma = rms sqrt(2 / N), N the samples analysed)."""
+    out = {}
+    for key, attr in (("force_noise_N", "sigma_force"), ("accel_noise_m_s2", "sigma_accel"),
+                      ("disp_noise_m", "sigma_disp")):
+        vals = [getattr(s.harmonics, attr) * math.sqrt(s.periods * s.fs_Hz / s.freq_Hz / 2.0)
+                for s in src.steps if s.periods > 0]
+        vals = [v for v in vals if math.isfinite(v)]
+        out[key] = float(np.median(vals)) if vals else 0.0
+    return out
+
+
+def drive_ratio(src: Source) -> tuple[np.ndarray, np.ndarray]:
+    """(frequencies, measured force amplitude per drive volt amplitude) of a run's steps."""
+    if src.kind != "run":
+        return np.zeros(0), np.zeros(0)
+    from .storage import RunStore
+    f, r = [], []
+    for res in RunStore.open(src.path).results(warn=False):
+        vpp, force = res.get("drive_Vpp"), res.get("force_N")
+        if vpp and force and vpp > 0:
+            f.append(float(res["freq_Hz"]))
+            r.append(float(force) / (0.5 * float(vpp)))
+    return np.array(f), np.array(r)
+
+
+def _sig(x: float, digits: int = 6) -> float:
+    return float(f"{x:.{digits}g}")
+
+
+def plan_from_steps(src: Source) -> tuple[dict, list[str]]:
+    """A file's plan: levels (median force amplitude per level group), frequencies (merged
+    within 0.1 %), sweep direction (the steps' tags, else their order), measure cycles (the
+    records' periods); settle cycles and the rest are the plan defaults (listed in notes)."""
+    notes = []
+    levels_N = np.array([s.level_N for s in src.steps])
+    group = level_groups(levels_N)
+    levels = [_sig(float(np.median(levels_N[group == g])), 4) for g in np.unique(group)]
+    out = [lv for lv in levels if not MIN_LEVEL_N <= lv <= MAX_LEVEL_N]
+    if out:
+        notes.append(f"force levels {out} N outside the bench's range {MIN_LEVEL_N:g}-{MAX_LEVEL_N:g} N left out")
+        levels = [lv for lv in levels if MIN_LEVEL_N <= lv <= MAX_LEVEL_N]
+    freqs: list[float] = []
+    for f in sorted(s.freq_Hz for s in src.steps):
+        if not freqs or f > freqs[-1] * (1 + FREQ_MERGE):
+            freqs.append(f)
+    out = [f for f in freqs if not MIN_FREQ_HZ <= f <= MAX_FREQ_HZ]
+    if out:
+        notes.append(f"{len(out)} frequencies outside the bench's range {MIN_FREQ_HZ:g}-{MAX_FREQ_HZ:g} Hz left out")
+    freqs = [_sig(f) for f in freqs if MIN_FREQ_HZ <= f <= MAX_FREQ_HZ]
+    if not (levels and freqs):
+        raise ConfigurationError(f"{src.path}: no force level or frequency within the bench's range "
+                                 f"({MIN_LEVEL_N:g}-{MAX_LEVEL_N:g} N, {MIN_FREQ_HZ:g}-{MAX_FREQ_HZ:g} Hz)")
+    dirs = {s.direction for s in src.steps if s.direction}
+    if dirs:
+        direction = "both" if dirs >= {"up", "down"} else dirs.pop()
+    else:       # the order of the steps in the file, within each level
+        trend = 0
+        for g in np.unique(group):
+            fs = [s.freq_Hz for s, gg in zip(src.steps, group) if gg == g]
+            trend += int(np.sign(np.sum(np.sign(np.diff(fs))))) if len(fs) > 1 else 0
+        direction = "down" if trend < 0 else "up"
+        notes.append(f"sweep direction '{direction}' from the order of the steps in the file (no tags)")
+    periods = [s.periods for s in src.steps if s.periods > 0]
+    fs_min = min(s.fs_Hz for s in src.steps)
+    min_rate = float(min(204800.0, max(25600.0, _sig(fs_min, 4))))
+    nyquist = math.ceil(min_rate / (2 * max(freqs))) - 1
+    control = dict(settle_cycles=20, measure_cycles=int(np.median(periods)) if periods else 10,
+                   min_sample_rate_Hz=min_rate, harmonics=int(max(1, min(9, nyquist))))
+    notes.append("settle cycles (20) and force control from the plan defaults: a file does not record them")
+    plan = dict(name=f"twin of {src.path.name}", levels_N=levels, infeasible="skip",
+                frequencies=dict(list_Hz=freqs, direction=direction), control=control)
+    return plan, notes
+
+
+def _foreign_rig(src: Source, params: dict, noise: dict) -> tuple[dict, list[str]]:
+    """Calibration, limits and expected values for a file: the simulated rig's calibration,
+    sensitivities lowered so the largest reading stays at 5 V, an amplifier gain that
+    reaches the largest level with at most 5 V of drive, limits twice the plan's envelope
+    and three times the largest measured peaks."""
+    rig = load_rig(DEFAULTS / "sim_rig.toml")
+    peak = {k: max(float(np.max(np.abs(getattr(s, k)))) for s in src.steps)
+            for k in ("force_N", "accel_m_s2", "disp_m")}
+    F_max = max(s.level_N for s in src.steps)
+    f_min = min(s.freq_Hz for s in src.steps)
+    m, x_s = params["m_kg"]["value"], params["x_s_m"]["value"]
+    amp = max(FOREIGN_MIN_AMP_GAIN, 1.25 * F_max / 5.0)
+    cal = dict(force_V_per_N=min(rig.force_V_per_N, FOREIGN_SIGNAL_V / peak["force_N"]),
+               accel_V_per_m_s2=min(rig.accel_V_per_m_s2, FOREIGN_SIGNAL_V / peak["accel_m_s2"]),
+               disp_V_per_m=min(rig.disp_V_per_m, FOREIGN_SIGNAL_V / peak["disp_m"]), amp_gain_N_per_V=amp)
+    cal = {k: _sig(v, 4) for k, v in cal.items()}
+    Fp = 1.25 * F_max
+    env_disp = Fp / (m * (2 * math.pi * f_min) ** 2) + 3 * x_s
+    limits = dict(drive_V=10.0, force_N=_sig(min(1000.0, 2 * Fp), 4),
+                  disp_m=_sig(min(0.01, max(2 * env_disp, 3 * peak["disp_m"])), 4),
+                  accel_m_s2=_sig(min(1e4, max(2 * Fp / m, 3 * peak["accel_m_s2"])), 4))
+    notes = ["a foreign file: calibration from bench/defaults/sim_rig.toml (sensitivities lowered so the largest "
+             "reading is at most 5 V), amplifier gain reaching the largest level with 5 V, limits twice the plan's "
+             "envelope and three times the largest measured peaks, drive limit 10 V"]
+    return dict(calibration=cal, limits=limits), notes
+
+
+# ---------------------------------------------------------------------------- the twin
+
+
+def load_analysis(path: Path) -> dict:
+    p = Path(path)
+    f = p / "analysis.json" if p.is_dir() else p
+    if not f.is_file():
+        raise ConfigurationError(f"{path}: no analysis.json (run `bench analyze SOURCE` or leave --analysis out)")
+    try:
+        d = json.loads(f.read_text())
+    except json.JSONDecodeError as e:
+        raise ConfigurationError(f"{f}: not valid JSON: {e}") from None
+    if not str(d.get("schema", "")).startswith("guideway-bench/analysis/"):
+        raise ConfigurationError(f"{f}: not an analysis.json (schema {d.get('schema')!r})")
+    return d
+
+
+def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source | None = None) -> Twin:
+    """The twin of SOURCE from its analysis dict (``plain``: only the base model's F_s, x_s,
+    n, m and the noise: a plain Masing twin, to show what the named causes buy).  ``src``:
+    SOURCE already read by :func:`bench.sources.load_source`."""
+    source = Path(source)
+    src = src if src is not None else load_source(source)
+    if not src.steps:
+        raise ConfigurationError(f"{source}: no usable steps to build a twin from")
+    params = analysis["base"]["parameters"] if plain else analysis["parameters"]
+    causes = [] if plain else list(analysis.get("causes", []))
+    notes: list[str] = []
+    meta_rig = src.metadata.get("rig") if src.kind == "run" else None
+    src_model = (meta_rig or {}).get("model") or {}
+    noise = channel_noise(src)
+
+    # rig file: the source's own, or defaults for a file
+    if meta_rig:
+        rig = rig_toml(meta_rig)
+        rig.pop("model", None)
+        rig["instruments"] = {}
+    else:
+        rig, n = _foreign_rig(src, params, noise)
+        rig.update(expected=dict(mass_kg=_sig(params["m_kg"]["value"]), x_s_m=_sig(params["x_s_m"]["value"]),
+                                 F_s_N=_sig(params["F_s_N"]["value"]), n=_sig(min(10.0, max(0.05, params["n"]["value"])))))
+        notes += n
+    rig["name"] = f"twin of {source.name}" + (" (plain Masing)" if plain else "")
+    rig["notes"] = f"bench twin of {source}" + (f" (rig '{meta_rig['name']}')" if meta_rig else " (foreign file)")
+    rig["simulated"] = True
+    cal = rig["calibration"]
+
+    model = dict(F_s_N=params["F_s_N"]["value"], x_s_m=params["x_s_m"]["value"], n=params["n"]["value"],
+                 mass_kg=params["m_kg"]["value"], force_sens_V_per_N=cal["force_V_per_N"],
+                 accel_sens_V_per_m_s2=cal["accel_V_per_m_s2"], disp_sens_V_per_m=cal["disp_V_per_m"], **noise)
+    f_r, ratio = drive_ratio(src)
+    model["amp_gain_N_per_V"] = float(np.median(ratio)) if ratio.size else cal["amp_gain_N_per_V"]
+    shaker_keys, shaker_note = shaker_model(f_r, ratio)
+    model.update(shaker_keys)
+    not_in_plant = [dict(cause="shaker_response", reason=shaker_note)] if shaker_note else []
+    if "amp_force_limit_N" in src_model:
+        model["amp_force_limit_N"] = src_model["amp_force_limit_N"]
+    model["amp_force_limit_N"] = max(model.get("amp_force_limit_N", RigModel.amp_force_limit_N),
+                                     2 * max(s.level_N for s in src.steps))
+    for k in ("probe_standoff_m", "steps_per_period"):
+        if k in src_model:
+            model[k] = src_model[k]
+    # a noise realisation of its own: a simulated source's seed + 1
+    model["seed"] = int(src_model.get("seed", 0)) + 1
+
+    ctx = dict(mass_kg=model["mass_kg"], drive_height_m=src_model.get("drive_height_m"))
+    model, applied, missed = apply_causes(model, causes, ctx)
+    not_in_plant += missed
+    if analysis.get("unexplained") and not plain:
+        reasons = analysis.get("base", {}).get("diagnostics", {}).get("unexplained_reasons", [])
+        not_in_plant.append(dict(cause="unexplained", reason="structure the analysis could not name"
+                                 + (f": {'; '.join(reasons[:3])}" if reasons else "")))
+    rig["model"] = {k: (_sig(v, 8) if isinstance(v, float) else v) for k, v in model.items()}
+
+    # plan
+    if src.kind == "run":
+        plan = plan_toml(src.metadata["plan"])
+        plan["name"] = f"twin of {plan['name']}"
+    else:
+        plan, n = plan_from_steps(src)
+        notes += n
+
+    prov = dict(source=str(source), source_kind=src.kind, source_sha256=source_sha256(source),
+                analysis_source=analysis.get("source", ""),
+                analysis_software_version=analysis.get("software_version", ""), software_version=_version(),
+                steps_used=len(src.steps), steps_rejected=len(src.rejected), plain=plain)
+    twin = Twin(rig={"rig": rig}, plan={"plan": plan}, provenance=prov,
+                parameters={k: dict(v) for k, v in params.items()}, causes=[c["id"] for c in causes],
+                applied=applied, not_in_plant=not_in_plant, notes=notes,
+                drive_ratio=[dict(freq_Hz=float(f), N_per_V=float(r)) for f, r in zip(f_r, ratio)])
+    # both files must load as the commands will load them
+    parse_rig(twin.rig, "twin rig.toml")
+    parse_plan(twin.plan, "twin plan.toml")
+    return twin
+
+
+# ---------------------------------------------------------------------------- TOML output
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        return repr(v) if math.isfinite(v) else "nan"
+    if isinstance(v, str):
+        return json.dumps(v)          # a JSON string is a valid TOML basic string
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"no TOML form for {type(v).__name__}")
+
+
+def to_toml(data: dict, prefix: str = "") -> str:
+    """Nested dicts as TOML tables (scalars first, then sub-tables)."""
+    lines, subs = [], []
+    for k, v in data.items():
+        if isinstance(v, dict):
+            subs.append((k, v))
+        else:
+            lines.append(f"{k} = {_toml_value(v)}")
+    out = ("\n".join(lines) + "\n") if lines else ""
+    for k, v in subs:
+        name = f"{prefix}.{k}" if prefix else k
+        out += f"\n[{name}]\n" + to_toml(v, name)
+    return out
+
+
+def _header(twin: Twin, what: str) -> str:
+    p = twin.provenance
+    lines = [f"# {what}, written by `bench twin` (decision record 0026)",
+             f"# source: {p['source']} ({p['source_kind']}, {p['steps_used']} steps used, "
+             f"{p['steps_rejected']} rejected)",
+             f"# source sha256: {p['source_sha256']}",
+             f"# analysis: software {p['analysis_software_version'] or 'unknown'}; bench twin: software "
+             f"{p['software_version']}" + ("; plain Masing twin (base parameters only)" if p["plain"] else "")]
+    return "\n".join(lines) + "\n"
+
+
+def _rig_comments(twin: Twin) -> str:
+    v = twin.parameters
+    lines = ["# identified (95 %): " + ", ".join(
+        f"{k} {v[k]['value']:.5g} [{v[k]['low']:.5g}, {v[k]['high']:.5g}]" for k in ("F_s_N", "x_s_m", "n", "m_kg"))]
+    for cid, keys in twin.applied.items():
+        lines.append(f"# cause {cid} -> " + ", ".join(f"{k} = {val:.5g}" if isinstance(val, float) else f"{k} = {val}"
+                                                       for k, val in keys.items()))
+    for item in twin.not_in_plant:
+        lines.append(f"# NOT IN THE PLANT: {item['cause']}: {item['reason']}")
+    for n in twin.notes:
+        lines.append(f"# note: {n}")
+    lines.append("# channel noise (force_noise_N, accel_noise_m_s2, disp_noise_m): median per-sample rms of the source")
+    return "\n".join(lines) + "\n"
+
+
+def write_twin(twin: Twin, out: Path) -> dict[str, Path]:
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = dict(rig=out / "rig.toml", plan=out / "plan.toml", twin=out / "twin.json")
+    paths["rig"].write_text(_header(twin, "Simulated twin of a measured rig") + _rig_comments(twin) + "\n"
+                            + to_toml(twin.rig))
+    paths["plan"].write_text(_header(twin, "The source's plan, to run on its twin") + "\n" + to_toml(twin.plan))
+    write_json(paths["twin"], twin.to_dict())
+    return paths
+
+
+def default_out_dir(source: Path) -> Path:
+    """SOURCE/twin for a run directory, <stem>_twin next to a file."""
+    return source / "twin" if source.is_dir() else source.parent / f"{source.stem}_twin"
+
+
+def make_twin(source: Path, analysis_dir: Path | None = None, out: Path | None = None, *,
+              plain: bool = False, src: Source | None = None) -> tuple[Twin, dict[str, Path]]:
+    """Analyse SOURCE (into OUT/analysis) unless ``analysis_dir`` holds its analysis.json;
+    build the twin and write rig.toml, plan.toml and twin.json to OUT."""
+    source = Path(source)
+    if not source.exists():
+        raise ConfigurationError(f"{source}: no such run directory or file")
+    out = Path(out) if out else default_out_dir(source)
+    src = src if src is not None else load_source(source)
+    if analysis_dir is not None:
+        analysis = load_analysis(analysis_dir)
+        if analysis.get("source") and Path(analysis["source"]).resolve() != source.resolve():
+            log.warning("the analysis in %s is of %s, not of %s", analysis_dir, analysis["source"], source)
+    else:
+        analysis = analyze_source(source, out / "analysis", src=src)
+    twin = build_twin(source, analysis, plain=plain, src=src)
+    return twin, write_twin(twin, out)
