@@ -117,7 +117,7 @@ def _causes(a: AnalysisData) -> str:
     for i, c in enumerate(a.causes, 1):
         size = "<br>".join(_size(k, p) for k, p in c.parameters.items()) or "-"
         gain = (f"{_pct(c.heldout_error_before)} &rarr; {_pct(c.heldout_error_after)}"
-                + (f"<br>&Delta;BIC {_num(c.delta_bic, '.3g')}" if math.isfinite(c.delta_bic) else ""))
+                + f"<br>&Delta;BIC = {_num(c.delta_bic, '.3g')}")
         rows.append([str(i), escape(KIND_TEXT.get(c.kind, c.kind)),
                      f"{escape(c.label)}<br><code>{escape(c.id)}</code>", escape(c.formula or "-"), size, gain,
                      escape(c.sentence or "")])
