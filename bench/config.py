@@ -257,6 +257,8 @@ MODEL_SCHEMA = {
     "cubic_spring_N_per_m3": ("N/m^3", 0, 1e20, False, False),
     "line_freq_Hz": ("Hz", 0, 1e5, False, False),
     "line_amplitude": ("unit of line_channel: m, N or m/s^2", 0, 1e4, False, False),
+    "quadratic_damping_N_s2_per_m2": ("N s^2/m^2", 0, 1e9, False, False),
+    "friction_asymmetry": ("1", -0.5, 0.5, True, False),     # |a| < 0.5 (the model's own rule)
     "steps_per_period": ("steps", 20, 1e5, False, True),
     "seed": ("", 0, 2**63 - 1, False, True),
 }

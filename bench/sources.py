@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.artefacts import DRIFT_LIMIT, StepQuality, assess_step
+from sim.artefacts import StepQuality, assess_step
 from sim.errors import ConfigurationError, RunDirectoryError
 from sim.identify import StepHarmonics
 

@@ -5,9 +5,9 @@ The plain rig (Masing friction, viscous damping, a linear spring) runs on
 below is switched on, :class:`sim.rig.SimulatedRig` runs this kernel instead.  State:
 feed displacement u = x / x_s and its rate v, pitch angle th (rad) and its rate w.
 
-    m x'' + m e th'' = P - F(x, x') - c x' - k x - k3 x^3     (feed)
-    m e x'' + J th'' = h P - k_th th - c_th th'                (pitch)
-    F(x, x')         = F_Masing(x) * (1 + alpha |x'| / v_ref)
+    m x'' + m e th'' = P - F(x, x') - c x' - c2 x'|x'| - k x - k3 x^3     (feed)
+    m e x'' + J th'' = h P - k_th th - c_th th'                            (pitch)
+    F(x, x')         = F_Masing(x) * (1 + alpha |x'| / v_ref) * (1 + a sign F_Masing)
 
 Both right-hand sides are scaled by 1/F_s, r1 (dimensionless) and r2 (m); the constant
 mass matrix [[m, m e], [m e, J]] is inverted once (:mod:`sim.plant_effects`), so
@@ -21,7 +21,8 @@ depends on u only).
 
 ``coef`` layout (float64 array, built by :func:`sim.plant_effects.coefficients`):
 0 a11, 1 a12, 2 a21, 3 a22, 4 c x_s/F_s, 5 k x_s/F_s, 6 k3 x_s^3/F_s,
-7 alpha x_s/v_ref, 8 h (m), 9 k_th/F_s, 10 c_th/F_s.
+7 alpha x_s/v_ref, 8 h (m), 9 k_th/F_s, 10 c_th/F_s,
+11 c2 x_s^2/F_s (quadratic damping), 12 a (friction asymmetry).
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from numba import njit
 from ._kernel import velocity_root
 from .masing import active_depth, branch_force, friction, push_reversal
 
-N_COEF = 11
+N_COEF = 13
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -64,7 +65,8 @@ def accelerations(r1, r2, coef):
 def _deriv(u, v, th, w, Pn, k, su, sF, d, lam, kind, p, coef):
     """(u'', th'', F_Masing/F_s) for the scaled drive force Pn = P / F_s."""
     F = friction(u, k, su, sF, d, lam, kind, p)
-    r1 = Pn - F * rate_factor(v, coef[7]) - coef[4] * v - coef[5] * u - cubic_spring(u, coef[6])
+    r1 = (Pn - F * rate_factor(v, coef[7]) * (1.0 + coef[12] * math.copysign(1.0, F)) - coef[4] * v
+          - coef[11] * v * abs(v) - coef[5] * u - cubic_spring(u, coef[6]))
     r2 = pitch_moment(Pn, th, w, coef)
     a, al = accelerations(r1, r2, coef)
     return a, al, F

@@ -10,13 +10,16 @@ Fields of :class:`sim.rig.RigModel` (SI units, all 0 = off):
   acts and the impedance head's accelerometer sits), ``cg_height_m`` (e, inertial coupling
   m e).  Off when J = 0.  Equations (:mod:`sim._plant_kernel`):
 
-      m x'' + m e th'' = P - F(x, x') - c x' - k x - k3 x^3
+      m x'' + m e th'' = P - F(x, x') - c x' - c2 x'|x'| - k x - k3 x^3
       m e x'' + J th'' = h P - k_th th - c_th th'
 
   the accelerometer reads x'' + h th'', the eddy-current probe reads x.  The mass matrix
   is positive definite when J > m e^2 (a column's J about the contact line is its J about
   the centre of gravity plus m e^2, so every real carriage satisfies it).
-- a hardening spring k3 x^3: ``cubic_spring_N_per_m3``.
+- a hardening spring k3 x^3: ``cubic_spring_N_per_m3``;
+- quadratic damping c2 x'|x'| (oil, air): ``quadratic_damping_N_s2_per_m2``;
+- asymmetric friction, F_Masing (1 + a sign F_Masing) (saturates at +F_s (1 + a) and
+  -F_s (1 - a)): ``friction_asymmetry`` (a, dimensionless, |a| < 0.5).
 
 :func:`coefficients` turns a model into the kernel's coefficient array (``None`` when
 none of these effects is on: the rig then keeps the plain, faster kernel), and
@@ -38,7 +41,8 @@ log = logging.getLogger(__name__)
 
 EFFECT_FIELDS = ("friction_alpha", "friction_v_ref_m_per_s", "pitch_inertia_kg_m2",
                  "pitch_stiffness_N_m_per_rad", "pitch_damping_N_m_s_per_rad",
-                 "drive_height_m", "cg_height_m", "cubic_spring_N_per_m3")
+                 "drive_height_m", "cg_height_m", "cubic_spring_N_per_m3", "quadratic_damping_N_s2_per_m2")
+ASYMMETRY_LIMIT = 0.5
 
 
 def validate(model) -> None:
@@ -47,6 +51,9 @@ def validate(model) -> None:
         v = getattr(model, name)
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
             raise ConfigurationError(f"{name} must be finite and >= 0, got {v!r}")
+    a = model.friction_asymmetry
+    if isinstance(a, bool) or not isinstance(a, (int, float)) or not (math.isfinite(a) and abs(a) < ASYMMETRY_LIMIT):
+        raise ConfigurationError(f"friction_asymmetry must be finite with |a| < {ASYMMETRY_LIMIT}, got {a!r}")
     if model.friction_alpha > 0 and model.friction_v_ref_m_per_s <= 0:
         raise ConfigurationError(f"friction_v_ref_m_per_s must be > 0 when friction_alpha > 0, "
                          f"got {model.friction_v_ref_m_per_s!r}")
@@ -65,7 +72,8 @@ def pitch_on(model) -> bool:
 
 
 def any_on(model) -> bool:
-    return model.friction_alpha > 0 or model.cubic_spring_N_per_m3 > 0 or pitch_on(model)
+    return (model.friction_alpha > 0 or model.cubic_spring_N_per_m3 > 0 or pitch_on(model)
+            or model.quadratic_damping_N_s2_per_m2 > 0 or model.friction_asymmetry != 0)
 
 
 def mass_matrix(model) -> np.ndarray:
@@ -94,6 +102,8 @@ def coefficients(model) -> np.ndarray | None:
     c[6] = model.cubic_spring_N_per_m3 * x_s ** 3 / F_s
     if model.friction_alpha > 0:
         c[7] = model.friction_alpha * x_s / model.friction_v_ref_m_per_s
+    c[11] = model.quadratic_damping_N_s2_per_m2 * x_s ** 2 / F_s
+    c[12] = model.friction_asymmetry
     return c
 
 

@@ -6,9 +6,10 @@
     m x'' = -F_Masing(x) - c x' - k x + P(t)
 
 With the optional effects of :mod:`sim.plant_effects` on (velocity-dependent friction, a
-pitching mode, a cubic spring) the plant becomes
+pitching mode, a cubic spring, quadratic damping, asymmetric friction) the plant becomes
 
-    m x'' + m e th'' = P - F_Masing(x) (1 + alpha |x'| / v_ref) - c x' - k x - k3 x^3
+    m x'' + m e th'' = P - F_Masing(x) (1 + alpha |x'| / v_ref) (1 + a sign F_Masing)
+                       - c x' - c2 x'|x'| - k x - k3 x^3
     m e x'' + J th'' = h P - k_th th - c_th th'
 
 and the accelerometer (at the drive point, height h) reads x'' + h th'' while the
@@ -91,6 +92,8 @@ class RigModel:
     line_channel: str = ""                  # "disp" | "force" | "accel"
     line_freq_Hz: float = 0.0
     line_amplitude: float = 0.0             # SI unit of that channel (m, N, m/s^2)
+    quadratic_damping_N_s2_per_m2: float = 0.0  # c2 x'|x'| (oil, air)
+    friction_asymmetry: float = 0.0         # a: friction saturates at +F_s(1+a), -F_s(1-a); |a| < 0.5
     steps_per_period: int = 400             # RK4 resolution of the drive period (minimum)
     seed: int = 0
 

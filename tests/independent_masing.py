@@ -50,10 +50,18 @@ class MasingCarriage:
 
 
 def simulate_level(n: float, gamma0: float, betas, periods_settle: int, periods_measure: int,
-                   samples_per_unit_time: float, rtol: float = 1e-10):
+                   samples_per_unit_time: float, rtol: float = 1e-10, cubic: float = 0.0, quadratic: float = 0.0,
+                   asymmetry: float = 0.0):
     """Up-sweep through frequency ratios ``betas`` at force gamma0 (dimensionless).
-    Yields per step (t', u, u'', force) sampled over the measured periods at a fixed rate."""
+    Yields per step (t', u, u'', force) sampled over the measured periods at a fixed rate.
+
+    Forms outside the Masing model (dimensionless, 0 = off): a spring ``cubic`` u^3, a
+    damping ``quadratic`` u'|u'|, and friction higher one way, F (1 + ``asymmetry`` sign F)."""
     car = MasingCarriage(n)
+
+    def total(u, v):
+        F = car.force(u)
+        return F * (1.0 + asymmetry * math.copysign(1.0, F)) + cubic * u ** 3 + quadratic * v * abs(v)
     y = np.array([0.0, 0.0])
     t = 0.0
     phase = 0.0
@@ -64,7 +72,7 @@ def simulate_level(n: float, gamma0: float, betas, periods_settle: int, periods_
 
         def rhs(tt, yy):
             P = gamma0 * math.sin(beta * (tt - t_start) + ph0)
-            return [yy[1], P - car.force(yy[0])]
+            return [yy[1], P - total(yy[0], yy[1])]
 
         def ev_rev(tt, yy):
             return yy[1]
@@ -97,7 +105,7 @@ def simulate_level(n: float, gamma0: float, betas, periods_settle: int, periods_
                 yy = sol.sol(grid[j:k])
                 u_s[j:k] = yy[0]
                 v_s[j:k] = yy[1]
-                f_s[j:k] = [car.force(u) for u in yy[0]]
+                f_s[j:k] = [total(u, v) for u, v in zip(yy[0], yy[1])]
                 j = k
             y = sol.y[:, -1].copy()
             t = t_stop
@@ -122,9 +130,10 @@ def simulate_level(n: float, gamma0: float, betas, periods_settle: int, periods_
 
 
 def generate_uff(path, F_s_N, x_s_m, n, mass_kg, levels_N, freqs_Hz, *, fs_Hz=None, settle=25, measure=8,
-                 noise=(0.003, 0.005, 0.002), seed=0):
+                 noise=(0.003, 0.005, 0.002), seed=0, cubic_N_per_m3=0.0, quadratic_N_s2_per_m2=0.0,
+                 asymmetry=0.0):
     """Simulate the up-sweeps and write them to ``path`` as UFF58 (no tags). Returns the
-    number of steps written."""
+    number of steps written.  Optional forms in SI: k3 x^3, c2 v|v|, friction asymmetry a."""
     import pyuff
 
     rng = np.random.default_rng(seed)
@@ -134,7 +143,9 @@ def generate_uff(path, F_s_N, x_s_m, n, mass_kg, levels_N, freqs_Hz, *, fs_Hz=No
     case = 0
     for level in levels_N:
         betas = [2 * math.pi * f / w_s for f in sorted(freqs_Hz)]
-        for _t, u, acc, P in simulate_level(n, level / F_s_N, betas, settle, measure, fs / w_s):
+        forms = dict(cubic=cubic_N_per_m3 * x_s_m ** 3 / F_s_N,
+                     quadratic=quadratic_N_s2_per_m2 * (x_s_m * w_s) ** 2 / F_s_N, asymmetry=asymmetry)
+        for _t, u, acc, P in simulate_level(n, level / F_s_N, betas, settle, measure, fs / w_s, **forms):
             case += 1
             force = P * F_s_N
             accel = acc * F_s_N / mass_kg

@@ -41,6 +41,19 @@ class Cause:
     heldout_error_before: float
     heldout_error_after: float
     delta_bic: float
+    kind: str = "catalog"                    # catalog | discovered | artefact
+    formula: str = ""
+    sentence: str = ""
+
+
+@dataclass(frozen=True)
+class RestoringForce:
+    """Samples of the base model's residual force against displacement and velocity."""
+
+    x_m: np.ndarray
+    v_m_s: np.ndarray
+    force_N: np.ndarray
+    level_index: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -102,6 +115,7 @@ class AnalysisData:
     steps_flagged: list[tuple[str, str]] = field(default_factory=list)     # optional: used, with notes
     steps: list[StepFRF] = field(default_factory=list)
     loops: list[Loop] = field(default_factory=list)
+    restoring_force: RestoringForce | None = None
     problems: list[str] = field(default_factory=list)   # parts that could not be read
 
 
@@ -137,7 +151,17 @@ def _cause(d: dict) -> Cause:
     gain = d.get("gain") or {}
     return Cause(str(d["id"]), str(d.get("label") or d["id"]), _intervals(d.get("parameters")),
                  _float(gain.get("heldout_error_before")), _float(gain.get("heldout_error_after")),
-                 _float(gain.get("delta_bic")))
+                 _float(gain.get("delta_bic")), str(d.get("kind") or "catalog"), str(d.get("formula") or ""),
+                 str(d.get("sentence") or ""))
+
+
+def _restoring(d) -> RestoringForce | None:
+    if d is None:
+        return None
+    arrays = [np.asarray(d[k], dtype=float) for k in ("x_m", "v_m_s", "force_N", "level_index")]
+    if len({a.shape for a in arrays}) != 1 or arrays[0].ndim != 1:
+        raise ValueError("x_m, v_m_s, force_N and level_index must be lists of one length")
+    return RestoringForce(*arrays[:3], arrays[3].astype(int))
 
 
 def _candidate(d: dict) -> Candidate:
@@ -217,6 +241,10 @@ def analysis_data(d: dict) -> AnalysisData:
     a.steps_flagged = _items(a, d, "steps_flagged", lambda r: (str(r["step"]), str(r.get("reason", "?"))))
     a.steps = _items(a, d, "steps", _step)
     a.loops = _items(a, d, "loops", _loop)
+    try:
+        a.restoring_force = _restoring(d.get("restoring_force"))
+    except (KeyError, TypeError, ValueError) as e:
+        a.problems.append(f"'restoring_force' cannot be read ({type(e).__name__}: {e}): not shown")
     for p in a.problems:
         log.warning("analysis: %s", p)
     return a

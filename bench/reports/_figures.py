@@ -466,3 +466,62 @@ def _plain_log_y(ax) -> None:
     ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     ax.yaxis.set_minor_formatter(FuncFormatter(lambda v, _: f"{v:g}" if f"{v:e}"[0] in "25" else "")
                                  if lo > 0 and hi / lo < 100 else NullFormatter())
+
+
+def plot_analysis_overview(steps) -> Figure:
+    """One figure: compliance magnitude against frequency, every force level on one axis
+    (colour by level): measured (markers), base model (dashed), extended model (solid)."""
+    groups = sorted(_group_levels(steps).values(), key=lambda g: np.median([s.level_N for s in g]))
+    fig = Figure(figsize=(8, 4.2), layout="constrained")
+    ax = fig.subplots()
+    colours = level_colours([float(np.median([s.level_N for s in g])) for g in groups])
+    drawn = set()
+    for g in groups:
+        c = colours[float(np.median([s.level_N for s in g]))]
+        run = sorted(g, key=lambda s: s.freq_Hz)
+        f = np.array([s.freq_Hz for s in run])
+        ax.plot(f, np.abs([s.get("measured", "compliance") for s in run]), ls="none", marker="o", mfc="none",
+                mec=c, ms=5)
+        base = np.array([s.get("base", "compliance") for s in run])
+        for model in ("base", "final"):
+            v = np.array([s.get(model, "compliance") for s in run])
+            if model == "final" and np.allclose(v, base, rtol=1e-9, atol=0, equal_nan=True):
+                continue
+            if np.isfinite(v).any():
+                drawn.add(model)
+                ax.plot(f, np.abs(v), color=c, ls="--" if model == "base" else "-", lw=1.4)
+    ax.set(xscale="log", yscale="log", xlabel="frequency (Hz)", ylabel="compliance |x/P|  (m/N)")
+    ax.grid(True, which="both", alpha=0.3)
+    handles = [Line2D([], [], color="k", marker="o", mfc="none", ls="none", label="measured")]
+    handles += [Line2D([], [], color="k", ls="--" if m == "base" else "-",
+                       label="base model (Masing)" if m == "base" else "extended model (causes named)")
+                for m in ("base", "final") if m in drawn]
+    handles += [Patch(color=c, label=f"{lv:.3g} N") for lv, c in colours.items()]
+    ax.legend(handles=handles, fontsize=8, loc="best", frameon=False)
+    ax.set_title("Compliance: measured, base model and extended model, all force levels", fontsize=10)
+    return fig
+
+
+def plot_restoring_force(rf) -> Figure:
+    """The force the base model leaves out against displacement and velocity, coloured by
+    force level: a stiffness term is a curve in x, a damping term a curve in v, an
+    asymmetry shows as a shift between the two signs."""
+    fig = Figure(figsize=(10, 4.0), layout="constrained")
+    ax_x, ax_v = fig.subplots(1, 2, sharey=True)
+    lv = rf.level_index
+    levels = sorted(set(lv.tolist()))
+    colours = level_colours([float(x) + 1.0 for x in levels])      # by level number 1, 2, ...
+    for g in levels:
+        sel = lv == g
+        c = colours[float(g) + 1.0]
+        ax_x.plot(1e6 * rf.x_m[sel], rf.force_N[sel], ls="none", marker=".", ms=2, color=c)
+        ax_v.plot(1e3 * rf.v_m_s[sel], rf.force_N[sel], ls="none", marker=".", ms=2, color=c)
+    ax_x.set(xlabel="displacement x  (um)", ylabel="force the base model leaves out  (N)")
+    ax_v.set(xlabel="velocity v  (mm/s)")
+    for ax in (ax_x, ax_v):
+        ax.axhline(0, color="0.5", lw=0.8)
+        ax.grid(True, alpha=0.3)
+    ax_v.legend(handles=[Patch(color=colours[float(g) + 1.0], label=f"level {int(g) + 1}") for g in levels],
+                fontsize=8, frameon=False)
+    fig.suptitle("Restoring force: P - m a - F_Masing(x) of the base model, over one period of every step")
+    return fig

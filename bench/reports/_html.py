@@ -2,9 +2,12 @@
 
 Figures are PNGs embedded as base64 ``data:`` URIs and the style sheet is inline, so the
 page has no external resource and opens offline, by mail or from a USB stick; it has no
-script.  Order: the verdict first (what a technician reads), then the causes with their
-parameters and gain, the final parameters, the figures (FRFs per force level, loops,
-residuals), the candidates with their scores and the steps rejected.  Every part but the
+script.  Order: the verdict first (what a technician reads), one figure of measured, base
+and extended compliance, the causes table (kind, formula, size with 95 % intervals, held-out
+gain, a sentence), the restoring-force plot (the force the base model leaves out against
+displacement and velocity); then, collapsed in a ``<details>`` section, the parameters,
+the figures per force level (FRFs, loops, residuals), the candidates, the diagnostics as
+tables and the steps rejected.  Every part but the
 verdict may be missing; the page then says so in place.
 """
 
@@ -46,6 +49,8 @@ td.num { text-align: right; font-variant-numeric: tabular-nums; }
 figure { margin: 1rem 0; }
 figure img { max-width: 100%; height: auto; border: 1px solid #ddd; }
 figcaption { font-size: 0.9rem; color: #333; }
+details { margin-top: 2rem; }
+summary { cursor: pointer; font-weight: bold; font-size: 1.1rem; }
 .problems { border: 1px solid #b00; padding: 0.5rem 1rem; background: #fff0f0; }
 @media print {
   body { max-width: none; margin: 0; font-size: 10pt; }
@@ -97,21 +102,63 @@ def _verdict(a: AnalysisData) -> str:
            + "".join(lines) + "</div></section>"
 
 
+KIND_TEXT = {"catalog": "catalog effect", "discovered": "discovered (not in the catalog)",
+             "artefact": "measurement artefact"}
+
+
 def _causes(a: AnalysisData) -> str:
     out = ['<section aria-labelledby="causes-h"><h2 id="causes-h">Causes named</h2>']
     if not a.causes:
         out.append("<p>None: " + ("no candidate explains what remains (see the verdict)."
                                   if a.unexplained else "the base model explains the data within the noise.")
                    + "</p>")
+        return "".join(out) + "</section>"
+    rows = []
     for i, c in enumerate(a.causes, 1):
-        out.append(f"<h3>{i}. {escape(c.label)} <code>{escape(c.id)}</code></h3>")
-        rows = [[escape(k), escape(p.unit or "-"), *round_to_interval(p.value, p.low, p.high)]
-                for k, p in c.parameters.items()]
-        out.append(_table(["parameter", "unit", "value", "95 % low", "95 % high"], rows, {2, 3, 4})
-                   if rows else "<p>No parameters given.</p>")
-        out.append(f"<p>Gain: held-out prediction error {_pct(c.heldout_error_before)} without it, "
-                   f"{_pct(c.heldout_error_after)} with it; change of the information criterion "
-                   f"&Delta;BIC = {_num(c.delta_bic)} (negative favours the cause).</p>")
+        size = "<br>".join(_size(k, p) for k, p in c.parameters.items()) or "-"
+        gain = (f"{_pct(c.heldout_error_before)} &rarr; {_pct(c.heldout_error_after)}"
+                + f"<br>&Delta;BIC = {_num(c.delta_bic, '.3g')}")
+        rows.append([str(i), escape(KIND_TEXT.get(c.kind, c.kind)),
+                     f"{escape(c.label)}<br><code>{escape(c.id)}</code>", escape(c.formula or "-"), size, gain,
+                     escape(c.sentence or "")])
+    out.append(_table(["#", "kind", "cause", "formula", "size (SI units, 95 % interval)",
+                       "held-out error before \u2192 after", "in words"], rows,
+                      caption="Every cause named, in the order the selection took them; the held-out error is "
+                              "the prediction error on force levels left out of the fit."))
+    return "".join(out) + "</section>"
+
+
+def _size(name: str, p: Interval) -> str:
+    """'c = 41 N s/m (95 %: 37 to 45)', each figure to the digit its interval supports."""
+    unit = "" if p.unit in ("", "1") else f" {p.unit}"
+    value, low, high = round_to_interval(p.value, p.low, p.high)
+    return escape(f"{name} = {value}{unit}" + (f" (95 %: {low} to {high})" if math.isfinite(p.low) else ""))
+
+
+def _overview(a: AnalysisData) -> str:
+    if not a.steps:
+        return ""
+    final = "the extended model (solid)" if a.causes else "no cause named: the base model is the final model"
+    return _figure(figures.plot_analysis_overview(a.steps),
+                   f"Compliance magnitude against frequency for every force level on one axis ({len(a.steps)} "
+                   f"steps): measured circles, base Masing model dashed, extended model solid.",
+                   f"Measured compliance (circles) against the base Masing model (dashed) and {final}, colour "
+                   f"by force level.")
+
+
+def _restoring(a: AnalysisData) -> str:
+    out = ['<section aria-labelledby="rf-h"><h2 id="rf-h">The missing force</h2>']
+    rf = a.restoring_force
+    if rf is None or rf.x_m.size == 0:
+        out.append("<p>No restoring-force samples in the analysis.</p>")
+    else:
+        out.append(_figure(figures.plot_restoring_force(rf),
+                           "Force the base model leaves out (N) against displacement and against velocity, "
+                           "points coloured by force level.",
+                           "What the base model leaves out, P - m a - F_Masing(x), against displacement (left) "
+                           "and velocity (right). A curve in x alone is a stiffness (an S-shape: cubic), a curve "
+                           "in v alone is a damping (straight: viscous, parabola-like: quadratic), a shift between "
+                           "the two directions is an asymmetry; a cloud around zero is noise."))
     return "".join(out) + "</section>"
 
 
@@ -135,8 +182,41 @@ def _parameters(a: AnalysisData) -> str:
                + (f" Held-out error of the base model: {_pct(a.base_heldout_error)}."
                   if math.isfinite(a.base_heldout_error) else "") + "</p>")
     if a.base_diagnostics:
-        out.append(f"<p>Residual diagnostics of the base model:</p>{_nested(a.base_diagnostics)}")
+        out.append(_diagnostics(a.base_diagnostics))
     return "".join(out) + "</section>"
+
+
+def _diagnostics(diag: dict) -> str:
+    """Diagnostics as tables: scalars in one table, number lists as rows, lists of records
+    as tables, texts as lists."""
+    scalars, parts = [], []
+    for k, v in diag.items():
+        name = escape(str(k).replace("_", " "))
+        if isinstance(v, dict):
+            sub = {kk: vv for kk, vv in v.items() if not isinstance(vv, dict)}
+            rows = [[escape(str(kk).replace("_", " ")), _cell(vv)] for kk, vv in sub.items()]
+            parts.append(_table(["quantity", "values"], rows, caption=name))
+        elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
+            head = list(dict.fromkeys(kk for x in v for kk in x))
+            parts.append(_table(head, [[_cell(x.get(h)) for h in head] for x in v], caption=name))
+        elif isinstance(v, list) and v and all(isinstance(x, str) for x in v):
+            parts.append(f"<p>{name}:</p><ul>" + "".join(f"<li>{escape(x)}</li>" for x in v) + "</ul>")
+        else:
+            scalars.append([name, _cell(v)])
+    if scalars:
+        parts.insert(0, _table(["quantity", "value"], scalars, caption="diagnostics of the fit"))
+    return "".join(parts)
+
+
+def _cell(v) -> str:
+    if isinstance(v, bool) or v is None:
+        return escape(str(v))
+    if isinstance(v, (int, float)):
+        return _num(float(v))
+    if isinstance(v, (list, tuple)):
+        return escape(", ".join(_cell(x) if not isinstance(x, (list, tuple)) else
+                                "[" + ", ".join(_cell(y) for y in x) + "]" for x in v)) if v else "none"
+    return escape(str(v))
 
 
 def _nested(v) -> str:
@@ -243,8 +323,9 @@ def render_analysis_html(analysis: dict) -> str:
         problems = (f'<section class="problems" aria-labelledby="prob-h"><h2 id="prob-h">Parts of the analysis that '
                     f"could not be shown</h2><ul>{items}</ul></section>")
     body = (f"<header><h1>{escape(title)}</h1>" + (f'<p class="meta">{escape(meta)}</p>' if meta else "")
-            + "</header><main>" + _verdict(a) + problems + _causes(a) + _parameters(a) + _figures(a)
-            + _candidates(a) + _steps(a) + "</main>")
+            + "</header><main>" + _verdict(a) + problems + _overview(a) + _causes(a) + _restoring(a)
+            + '<details id="details"><summary>Details: parameters, figures per level, candidates, diagnostics, '
+              "steps</summary>" + _parameters(a) + _figures(a) + _candidates(a) + _steps(a) + "</details></main>")
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
             f'<meta name="viewport" content="width=device-width, initial-scale=1">'
             f"<title>{escape(title)}</title><style>{CSS}</style></head>\n<body>{body}</body></html>\n")

@@ -7,8 +7,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.artefacts import NOISY_RESIDUAL as UNSETTLED_RESIDUAL  # residual / fundamental: flagged above
-
 
 @dataclass
 class Series:

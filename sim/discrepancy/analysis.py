@@ -27,7 +27,7 @@ from ..errors import ConfigurationError
 from ..identify import Estimate, Identifier, displacement_harmonics, synthesize
 from .fit import Fit, Weights, fit, whitened
 from .gain import frf
-from .models import BASE_PARAMS, EFFECTS, Data, Model
+from .models import BASE_PARAMS, EFFECTS, LIBRARY, Data, Model
 from .rounding import interval_text
 from .select import Selection, select, settle_final
 from .terms import accelerance_pair, second_mode_phrase, speed_friction, speed_friction_phrase
@@ -70,7 +70,10 @@ def data_from_steps(steps, harmonics: int = 9) -> Data:
         j = min(X.size, h.force.size)
         Xf[i, :j], wDf[i, :j], Pf[i, :j] = h.disp[:j], wD[:j], h.force[:j]
         XAf[i, :j] = -h.accel[:j] / (k[:j] * 2 * math.pi * h.freq_Hz) ** 2
-    return Data(omega=np.array([2 * math.pi * h.freq_Hz for h in H]),
+    means = np.array([float(np.mean(s.disp_m)) if np.size(getattr(s, "disp_m", None)) > 1 else math.nan
+                      for s in steps])
+    x0 = np.nan_to_num(means - np.nanmedian(means)) if np.isfinite(means).any() else np.zeros(len(steps))
+    return Data(omega=np.array([2 * math.pi * h.freq_Hz for h in H]), x0=x0,
                 P=np.array([h.force[:K] for h in H]), A=np.array([h.accel[:K] for h in H]),
                 X=np.array([h.disp[:K] for h in H]), sP=np.array([h.sigma_force for h in H]),
                 sA=np.array([h.sigma_accel for h in H]), sX=np.array([h.sigma_disp for h in H]),
@@ -184,7 +187,24 @@ class Analysis:
             for name, e in zip(("anti_resonance_Hz", "resonance_Hz"), pair):
                 if e is not None:        # as the measured accelerance shows it, between grid points
                     out[name] = dict(value=e.freq_Hz, low=e.low_Hz, high=e.high_Hz, unit="Hz")
+        elif effect == "similarity_ratio":
+            t = iv["similarity_ratio.d"]
+            put("lambda", (2 + t[0], 2 + t[1], 2 + t[2]), "1")
+        elif EFFECTS[effect].kind == "discovered":
+            e = EFFECTS[effect]
+            for name, unit in zip(e.names, e.units):
+                put(name, iv[f"{effect}.{name}"], unit)
+        if EFFECTS[effect].force is not None:
+            peak = self.term_peak_N(effect, f)
+            out["peak_force_relative_to_F_s"] = dict(value=peak / v["F_s_N"], low=math.nan, high=math.nan, unit="1")
         return out
+
+    def term_peak_N(self, effect: str, f: Fit) -> float:
+        """Largest force the term adds over any measured period (N), at its fitted size."""
+        ctx = f.model.context(f.theta, self.data)
+        sl = f.model.slices[effect]
+        G = EFFECTS[effect].force(ctx, f.theta[sl] * f.model.scales[effect])
+        return float(np.abs(synthesize(G, 256)).max())
 
     def _predicted_frf(self, f: Fit) -> tuple[np.ndarray, np.ndarray]:
         P, A = f.model.predict(f.theta, self.data)
@@ -201,20 +221,21 @@ class Analysis:
                          f"(rms over held-out force levels; reduced chi-square {self.base.reduced_chi2:.1f})"
                          f"{self._resonance_phrase()}.")
             for c in sel.named:
-                parts.append(f"The data are explained by {self._phrase(c)} "
-                             f"(BIC falls by {-c.delta_bic:.0f}).")
+                parts.append(self.sentence(c))
             last = sel.named[-1]
             parts.append(f"Out-of-sample error falls from {100 * first.heldout_before:.1f} % to "
                          f"{100 * last.heldout_error:.1f} %.")
         elif not sel.unexplained:
             parts.append(f"The Masing model explains the data within the noise (reduced chi-square "
                          f"{self.base.reduced_chi2:.2f}, held-out error {base_err:.2f} %); no effect in the "
-                         f"catalog improves both the BIC and the held-out prediction.")
+                         f"catalog and no term of the library improves both the BIC and the held-out prediction.")
         if sel.unexplained:
             what = "the extended model" if sel.named else "the Masing model"
-            parts.append(f"Structure remains that {what} does not explain: {'; '.join(sel.reasons[:4])}. "
-                         f"No effect in the catalog accounts for it; look for something else (a nonlinear "
-                         f"spring, a loose fixture, mains hum, an unsettled vibration).")
+            said = sel.explanations or sel.reasons
+            parts.append(f"Structure remains that {what} does not explain: {'; '.join(said[:4])}. "
+                         f"Neither the catalog nor the library of force terms accounts for it"
+                         + (f"; the intervals above are widened {sel.interval_inflation:.1f}x for it"
+                            if sel.interval_inflation > 1.05 else "") + ".")
         caveat = self._spring_caveat()
         if caveat:
             parts.append(caveat)
@@ -257,6 +278,35 @@ class Analysis:
         e = float(np.median(errs))
         return f", and {'over' if e > 0 else 'under'}-predicts the compliance at the resonance by {100 * abs(e):.1f} %"
 
+    def sentence(self, c) -> str:
+        """One sentence per named cause: what it is, its size with a 95 % interval, the gain."""
+        gain = f"held-out error {100 * c.heldout_before:.1f} % -> {100 * c.heldout_error:.1f} %"
+        if c.kind == "catalog":
+            return f"The data are explained by {self._phrase(c)} (BIC falls by {-c.delta_bic:.0f}; {gain})."
+        return f"Not in the catalog: {self._discovered_phrase(c)} explains it ({gain})."
+
+    def _discovered_phrase(self, c) -> str:
+        e = EFFECTS[c.id]
+        p = self.cause_parameters(c.id, self.final)
+        name = "lambda" if c.id == "similarity_ratio" else e.names[0]
+        q = p[name]
+        unit = "" if q["unit"] == "1" else f" {q['unit']}"
+        size = interval_text(q["value"], q["low"], q["high"], unit, signed=q["unit"] == "1")
+        peak = p.get("peak_force_relative_to_F_s", {}).get("value", math.nan)
+        peak_s = f", up to {100 * peak:.1f} % of F_s over the measured motion" if math.isfinite(peak) else ""
+        v = self.final.model.values(self.final.theta)
+        if c.id == "cubic_stiffness":
+            what = f"a {'hardening' if q['value'] > 0 else 'softening'} cubic stiffness k3 x^3, k3 = {size}"
+        elif c.id == "asymmetric_friction":
+            F_s = v["F_s_N"]
+            what = (f"asymmetric friction a = {size}: the friction saturates at +{F_s * (1 + q['value']):.3g} N "
+                    f"and -{F_s * (1 - q['value']):.3g} N ({e.words})")
+        elif c.id == "similarity_ratio":
+            what = f"a Masing similarity ratio lambda = {size} instead of 2 ({e.words})"
+        else:
+            what = f"{e.label} {e.formula}, {name} = {size} ({e.words})"
+        return what + peak_s
+
     def _phrase(self, c) -> str:
         p = self.cause_parameters(c.id, self.final)
 
@@ -298,19 +348,25 @@ class Analysis:
                       final=dict(compliance=ri(C_fin[i]), accelerance=ri(A_fin[i])),
                       residual_by_harmonic=[float(x) for x in res_h[i]])
                  for i, s in enumerate(self.steps)]
-        causes = [dict(id=c.id, label=EFFECTS[c.id].label, parameters=self.cause_parameters(c.id, self.final),
+        causes = [dict(id=c.id, kind=c.kind, label=EFFECTS[c.id].label, formula=EFFECTS[c.id].formula,
+                       parameters=self.cause_parameters(c.id, self.final),
                        gain=dict(heldout_error_before=c.heldout_before, heldout_error_after=c.heldout_error,
-                                 delta_bic=c.delta_bic))
+                                 delta_bic=c.delta_bic), sentence=self.sentence(c))
                   for c in sel.named]
-        candidates = [dict(id=c.id, round=c.round, delta_bic=c.delta_bic,
+        candidates = [dict(id=c.id, kind=c.kind, round=c.round, delta_bic=c.delta_bic,
                            heldout_error=None if math.isnan(c.heldout_error) else c.heldout_error,
-                           named=c.named) for c in sel.tried]
+                           named=c.named, **({} if math.isnan(c.screened_chi2_drop)
+                                             else dict(screened_chi2_drop=c.screened_chi2_drop)))
+                      for c in sel.tried]
         return dict(
             schema=SCHEMA, source=self.source, software_version=self.software_version,
             parameters=self._params(self.final),
             base=dict(parameters=self._params(self.base), reduced_chi2=self.base.reduced_chi2,
                       heldout_error=sel.heldout_base,
                       diagnostics=dict(structure_final=sel.structure, unexplained_reasons=sel.reasons,
+                                       unexplained_in_words=sel.explanations,
+                                       interval_inflation=sel.interval_inflation,
+                                       library_screen=[dict(round=r, id=t, chi2_drop=x) for r, t, x in sel.screened],
                                        f_res_Hz=self.f_res_Hz(self.base),
                                        largest_amplitude_over_x_s=self.largest_amplitude_over_x_s(),
                                        spring_separable=self.spring_separable())),
@@ -318,7 +374,22 @@ class Analysis:
             causes=causes + list(self.artefacts), unexplained=sel.unexplained, verdict=self.verdict(),
             candidates=candidates, steps_used=[s.key for s in self.steps], steps_rejected=list(self.rejected),
             steps_flagged=steps_flagged(self.steps),
-            steps=steps, loops=self.loops())
+            steps=steps, loops=self.loops(), restoring_force=self.restoring_force())
+
+    def restoring_force(self, points: int = 32) -> dict:
+        """The force the base model leaves out, r = P - m a - F_Masing(x), sampled over one
+        period of every step against the displacement and velocity (the restoring-force
+        surface: a function of x alone is a stiffness, of v alone a damping)."""
+        d, f = self.data, self.base
+        rF, _ = f.model.residuals(f.theta, d)
+        x = synthesize(d.X, points)
+        v = synthesize(1j * d.Omega * d.X, points)
+        r = synthesize(rF, points)
+        if d.x0 is not None:
+            x = x + d.x0[:, None]
+        lv = np.repeat(d.level, points)
+        return dict(x_m=[float(a) for a in x.ravel()], v_m_s=[float(a) for a in v.ravel()],
+                    force_N=[float(a) for a in r.ravel()], level_index=[int(a) for a in lv])
 
     def loops(self, count: int = LOOPS) -> list[dict]:
         """Measured and model friction loops at the most compliant step of a few levels."""
@@ -373,21 +444,24 @@ def steps_flagged(steps) -> list[dict]:
 
 def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, source: str = "",
                   software_version: str = "", rejected: list | None = None,
-                  v_ref_m_per_s: float | None = None, artefacts: list | None = None) -> Analysis:
+                  v_ref_m_per_s: float | None = None, artefacts: list | None = None,
+                  library: tuple[str, ...] | None = None) -> Analysis:
     """Fit the base model, try the catalog, name what survives both gates (see module doc).
 
     ``guess``: rough F_s_N, x_s_m, n, mass_kg (e.g. a rig file's expected values); None
     estimates them from the data.  ``v_ref_m_per_s``: the speed at which to state a
     velocity-dependent friction (the rig file's); None: the speed at the friction resonance.
     ``artefacts``: causes of kind "artefact" found in the time records
-    (:func:`sim.artefacts.artefact_causes`), reported beside the physics."""
+    (:func:`sim.artefacts.artefact_causes`), reported beside the physics.
+    ``library``: the library terms to search (default all of
+    :data:`~sim.discrepancy.effects.LIBRARY`; ``()`` for the catalog alone)."""
     steps = list(steps)
     d = data_from_steps(steps, harmonics)
     if np.unique(d.level).size < 2:
         raise ConfigurationError("need steps at two force levels at least (held-out checks leave one level out)")
     base, W = base_fit(steps, d, guess, harmonics)
     log.info("base fit: reduced chi2 %.2f", base.reduced_chi2)
-    sel = settle_final(select(base, d, W), d)
+    sel = settle_final(select(base, d, W, library=LIBRARY if library is None else tuple(library)), d)
     return Analysis(steps=steps, data=d, weights=W, selection=sel, source=source,
                     software_version=software_version, rejected=list(rejected or []), v_ref_m_per_s=v_ref_m_per_s,
                     artefacts=list(artefacts or []))

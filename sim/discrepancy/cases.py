@@ -31,7 +31,10 @@ log = logging.getLogger(__name__)
 
 CATALOG = ("viscous_damping", "linear_spring", "second_mode", "velocity_dependent_friction",
            "sensor_delay", "sensor_gain_error")
-OUTSIDE = ("cubic_spring",)
+OUTSIDE = ("cubic_spring", "quadratic_damping", "asymmetric_friction")
+# the plant's forms outside the catalog and the library term that names each
+FORMS = {"cubic_spring": "cubic_stiffness", "quadratic_damping": "quadratic_damping",
+         "asymmetric_friction": "asymmetric_friction"}
 # What the issue's sensitivity means for each effect (the strength drawn is above it):
 THRESHOLDS = {
     "viscous_damping": "equivalent damping ratio c / (2 m omega_res) of 3 %",
@@ -41,6 +44,8 @@ THRESHOLDS = {
     "sensor_delay": "a displacement delay of 1 % of the resonance period",
     "sensor_gain_error": "a displacement/acceleration gain inconsistency of 5 %",
     "cubic_spring": "a hardening spring of 15 % of F_s at 2 x_s",
+    "quadratic_damping": "c2 v|v| with the equivalent damping ratio of 3 % at the speed omega_res x_s",
+    "asymmetric_friction": "friction 5 % higher in one direction than F_s, 5 % lower in the other (a = 0.05)",
 }
 SAMPLES_PER_PERIOD = 2048      # measured blocks: fine enough that n < 1 reversals do not alias
 SETTLE_SAMPLES_PER_PERIOD = 64  # the plant still takes >= 400 RK4 steps per period
@@ -76,6 +81,11 @@ class Case:
     def causes(self) -> tuple[str, ...]:
         return tuple(e for e in self.effects if e in CATALOG)
 
+    @property
+    def forms(self) -> tuple[str, ...]:
+        """The library ids of the forms outside the catalog hidden in the case."""
+        return tuple(FORMS[e] for e in self.effects if e in FORMS)
+
 
 def truth_size(case: Case, effect: str) -> tuple[str | None, float | None]:
     """(parameter name in the analysis' cause parameters, its true value) for the effects
@@ -92,6 +102,12 @@ def truth_size(case: Case, effect: str) -> tuple[str | None, float | None]:
     if effect == "velocity_dependent_friction":
         w_res = 2 * math.pi * case.f_res_Hz
         return "alpha", fx["friction_alpha"] * (w_res * case.rig["x_s_m"]) / fx["friction_v_ref_m_per_s"]
+    if effect == "cubic_spring":
+        return "k3", fx["cubic_spring_N_per_m3"]
+    if effect == "quadratic_damping":
+        return "c2", fx["quadratic_damping_N_s2_per_m2"]
+    if effect == "asymmetric_friction":
+        return "a", fx["friction_asymmetry"]
     if effect == "second_mode":         # the model's f_p is the mode with x held: sqrt(k_th / J)
         return "frequency", math.sqrt(fx["pitch_stiffness_N_m_per_rad"] / fx["pitch_inertia_kg_m2"]) / (2 * math.pi)
     return None, None
@@ -144,12 +160,24 @@ def draw_effect(effect: str, rig: dict, rng: np.random.Generator, margin: tuple[
                     pitch_damping_N_m_s_per_rad=2 * zeta * J_eff * w_p, drive_height_m=h, cg_height_m=e)
     if effect == "cubic_spring":
         return dict(cubic_spring_N_per_m3=0.15 * s * F_s / (2 * x_s) ** 3)
+    if effect == "quadratic_damping":    # c_eq = 8/(3 pi) c2 V at V = omega_res x_s
+        return dict(quadratic_damping_N_s2_per_m2=2 * 0.03 * s * m * 3 * math.pi / (8 * x_s))
+    if effect == "asymmetric_friction":
+        return dict(friction_asymmetry=float(0.05 * s * rng.choice([-1.0, 1.0])))
     raise ConfigurationError(f"unknown effect {effect!r}; known: {CATALOG + OUTSIDE}")
 
 
-def plan_grid(rig: dict, levels: int = 5, freqs: int = 18) -> tuple[np.ndarray, np.ndarray]:
-    """Force levels 0.1-0.85 F_s (N) and log-spaced frequencies 0.3-3 f_res (Hz)."""
-    return grid(rig["F_s_N"], friction_resonance_Hz(rig), levels, freqs)
+# With friction higher one way than the other, a carriage driven into gross rolling walks off
+# towards the easier direction every cycle (ratcheting: 0.4 mm within one step at 0.35 F_s
+# near the resonance, until the probe clips); nothing holds it but friction.  Such cases are
+# planned at forces that keep it in pre-rolling.
+ASYMMETRIC_TOP_LEVEL = 0.3
+
+
+def plan_grid(rig: dict, levels: int = 5, freqs: int = 18, top_level: float = 0.85) -> tuple[np.ndarray, np.ndarray]:
+    """Force levels 0.1-``top_level`` F_s (N) and log-spaced frequencies 0.3-3 f_res (Hz)."""
+    lv, fr = grid(rig["F_s_N"], friction_resonance_Hz(rig), levels, freqs)
+    return 0.1 * rig["F_s_N"] + (lv - 0.1 * rig["F_s_N"]) * (top_level - 0.1) / 0.75, fr
 
 
 def _harmonics(x: np.ndarray, periods: int, K: int) -> tuple[np.ndarray, float, np.ndarray]:
@@ -238,6 +266,7 @@ def make_case(seed: int, effects: tuple[str, ...] | None = None, *, margin: tupl
     for d in fx.values():
         params.update(d)
     model = RigModel(**params, seed=seed)
-    levels_N, freqs_Hz = plan_grid(rig, levels, freqs)
+    top = ASYMMETRIC_TOP_LEVEL if "asymmetric_friction" in fx else 0.85
+    levels_N, freqs_Hz = plan_grid(rig, levels, freqs, top)
     steps = measure_steps(model, levels_N, freqs_Hz, noise=noise, seed=seed)
     return Case(seed=seed, rig=rig, effects=fx, f_res_Hz=friction_resonance_Hz(rig), steps=steps)

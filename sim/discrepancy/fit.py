@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import least_squares
 
-from .models import Data, Model
+from .models import EFFECTS, Data, Model
 
 log = logging.getLogger(__name__)
 
@@ -149,8 +149,10 @@ class Weights:
         pick = lambda b: b[mask] if np.ndim(b) else b       # noqa: E731
         return Weights(self.s_F[:, mask], self.c[:, mask], self.s_Kc[:, mask], pick(self.bias_F), pick(self.bias_K))
 
-    def whiten(self, rF: np.ndarray, rK: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        rF, rK = rF - self.bias_F, rK - self.bias_K
+    def whiten(self, rF: np.ndarray, rK: np.ndarray, bias: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Whitened residuals; ``bias=False`` for a change of the residuals (linear part only)."""
+        if bias:
+            rF, rK = rF - self.bias_F, rK - self.bias_K
         (fr, fi), (kr, ki), (cr, ci) = self.s_F, self.s_Kc, self.c
         wF = rF.real / fr + 1j * rF.imag / fi
         wK = (rK.real - cr / fr ** 2 * rF.real) / kr + 1j * (rK.imag - ci / fi ** 2 * rF.imag) / ki
@@ -164,6 +166,8 @@ class Fit:
     cov: np.ndarray
     chi2: float                  # sum of squared whitened residuals
     n_data: int                  # real numbers in the residual
+    jac: np.ndarray | None = None       # whitened residuals' Jacobian at theta (the screen's projection)
+    resid: np.ndarray | None = None     # whitened residuals at theta
 
     @property
     def dof(self) -> int:
@@ -183,7 +187,8 @@ class Fit:
         w = min(Z95 * s, 700.0)
         if i in (0, 1, 3) or self._is_log(i):
             return math.exp(th), math.exp(th - w), math.exp(th + w)
-        return float(th), float(th - w), float(th + w)
+        c = self.model.scale[i]
+        return float(th * c), float((th - w) * c), float((th + w) * c)
 
     def _is_log(self, i: int) -> bool:
         sl = self.model.slices.get("second_mode")
@@ -211,6 +216,8 @@ def bounds(model: Model) -> tuple[np.ndarray, np.ndarray]:
             lo[sl.start + 2] = 0.0
         if e == "sensor_gain_error":
             lo[sl.start] = -0.5
+        for j, (a, b) in enumerate(EFFECTS[e].bounds):
+            lo[sl.start + j], hi[sl.start + j] = a, b
     return lo, hi
 
 
@@ -223,4 +230,4 @@ def fit(model: Model, theta0: np.ndarray, d: Data, W: Weights, max_nfev: int = 1
     _, sv, Vt = np.linalg.svd(res.jac, full_matrices=False)
     sv = np.maximum(sv, sv.max() * 1e-12)
     cov = (Vt.T / sv ** 2) @ Vt * max(chi2 / max(1, res.fun.size - model.size), 1.0)
-    return Fit(model, res.x, cov, chi2, res.fun.size)
+    return Fit(model, res.x, cov, chi2, res.fun.size, res.jac, res.fun)

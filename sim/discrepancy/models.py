@@ -31,6 +31,11 @@ candidates test.  Each catalog effect changes one of these:
   (from m x'' + m e theta'' = P - F and m e x'' + J theta'' = h P - k_th theta - c_th theta';
   the accelerometer at h reads x'' + h theta'', the probe reads x).
 
+The force effects (viscous damping, spring, velocity-dependent friction) and the library
+of force terms outside the catalog are :class:`~sim.discrepancy.effects.Effect` objects with
+a ``force`` function, added to G in :meth:`Model.terms`; only the kinematic effects are
+written out here.
+
 Everything is affine in P, so a model also predicts P and A from the measured X alone
 (:meth:`Model.predict`): that is how compliance and accelerance are predicted for held-out
 steps.
@@ -44,32 +49,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ConfigurationError
-from ..identify import POINTS_PER_PERIOD, path_friction, path_harmonics, period_paths, synthesize
+from ..identify import POINTS_PER_PERIOD, path_friction, period_paths
+from .effects import CATALOG, EFFECTS, LIBRARY, Effect, Path  # noqa: F401  (re-exported)
 
 BASE_PARAMS = ("F_s_N", "x_s_m", "n", "mass_kg")
 MOTION_EFFECTS = ("sensor_delay", "sensor_gain_error", "second_mode")   # they change the rebuilt x
-MEMO_ENTRIES = 8
+MEMO_ENTRIES = 24
 
 
-@dataclass(frozen=True)
-class Effect:
-    """One catalog entry: its parameters (name, unit, typical scale) as the fit sees them."""
-
-    id: str
-    label: str
-    names: tuple[str, ...]
-    units: tuple[str, ...]
-
-
-EFFECTS = {e.id: e for e in (
-    Effect("viscous_damping", "viscous damping", ("c",), ("N s/m",)),
-    Effect("linear_spring", "linear spring", ("k",), ("N/m",)),
-    Effect("velocity_dependent_friction", "velocity-dependent friction", ("beta",), ("s/m",)),
-    Effect("sensor_delay", "displacement channel delay", ("delay",), ("s",)),
-    Effect("sensor_gain_error", "displacement/acceleration gain error", ("gain",), ("1",)),
-    Effect("second_mode", "second (pitching) mode", ("f_p", "zeta", "a", "r"), ("Hz", "1", "1/kg", "1")),
-)}
-CATALOG = tuple(EFFECTS)
 
 
 @dataclass(frozen=True)
@@ -89,8 +76,9 @@ class Data:
     XAf: np.ndarray | None = None   # accelerometer's, as a rigid carriage's displacement -A_k / (k w)^2
     wDf: np.ndarray | None = None   # the probe's weight in their inverse-variance mean
     Pf: np.ndarray | None = None    # force harmonics 1..Kf (the pitching mode's transfer needs them)
+    x0: np.ndarray | None = None    # mean displacement of each step about the median step's (m)
 
-    FIELDS = ("omega", "P", "A", "X", "sP", "sA", "sX", "level", "Xf", "XAf", "wDf", "Pf")
+    FIELDS = ("omega", "P", "A", "X", "sP", "sA", "sX", "level", "Xf", "XAf", "wDf", "Pf", "x0")
 
     @property
     def Omega(self) -> np.ndarray:
@@ -113,10 +101,11 @@ class Model:
     The vector holds log F_s, log x_s, n, log m, then each effect's parameters in the
     units of :data:`EFFECTS` (f_p in log Hz)."""
 
-    def __init__(self, effects: tuple[str, ...] = (), harmonics: int = 9, points_per_period: int = POINTS_PER_PERIOD):
+    def __init__(self, effects: tuple[str, ...] = (), harmonics: int = 9, points_per_period: int = POINTS_PER_PERIOD,
+                 scales: dict | None = None):
         unknown = [e for e in effects if e not in EFFECTS]
         if unknown:
-            raise ConfigurationError(f"unknown effects {unknown}; catalog: {CATALOG}")
+            raise ConfigurationError(f"unknown effects {unknown}; catalog: {CATALOG}; library: {LIBRARY}")
         self.effects = tuple(effects)
         self.M = points_per_period
         self.K = harmonics
@@ -126,6 +115,13 @@ class Model:
             self.slices[e] = slice(i, i + len(EFFECTS[e].names))
             i += len(EFFECTS[e].names)
         self.size = i
+        # library coefficients are fitted as multiples of a scale that makes them O(1)
+        # (a cubic stiffness in N/m^3 is ~1e16 on a micrometre rig: a finite-difference
+        # step of 1 would not move the force at all)
+        self.scales = {e: float((scales or {}).get(e, 1.0)) for e in self.effects}
+        self.scale = np.ones(i)
+        for e, sl in self.slices.items():
+            self.scale[sl] = self.scales[e]
         self._memo: dict = {}        # (data, key) -> what depends on the key only (see _cached)
 
     def __getstate__(self) -> dict:
@@ -139,12 +135,13 @@ class Model:
         for e in self.effects:
             p = theta[self.slices[e]]
             for name, v in zip(EFFECTS[e].names, p):
-                out[f"{e}.{name}"] = math.exp(v) if name == "f_p" else float(v)
+                out[f"{e}.{name}"] = math.exp(v) if name == "f_p" else float(v) * self.scales[e]
         return out
 
-    def extend(self, theta: np.ndarray, effect: str, init: np.ndarray) -> tuple[Model, np.ndarray]:
-        """This model with one more effect, and the parameter vector warm-started from ``theta``."""
-        m = Model(self.effects + (effect,), self.K, self.M)
+    def extend(self, theta: np.ndarray, effect: str, init: np.ndarray, scale: float = 1.0) -> tuple[Model, np.ndarray]:
+        """This model with one more effect, and the parameter vector warm-started from ``theta``
+        (``scale``: the new effect's coefficient unit, see ``scales``)."""
+        m = Model(self.effects + (effect,), self.K, self.M, dict(self.scales, **{effect: scale}))
         return m, np.concatenate([theta, init])
 
     # ------------------------------------------------------------------ physics
@@ -204,8 +201,8 @@ class Model:
             key.append(float(theta[3]))
         return ("x", *key)
 
-    def _friction(self, theta: np.ndarray, v: dict, d: Data) -> tuple[np.ndarray, np.ndarray]:
-        """(Harmonics 1..K of the friction, harmonics 1..Kf of the rebuilt displacement):
+    def _friction(self, theta: np.ndarray, v: dict, d: Data) -> tuple[np.ndarray, Path]:
+        """(Harmonics 1..K of the Masing friction, the :class:`Path` the force terms use):
         the friction along the displacement rebuilt from every harmonic (module doc).  The
         measured force enters only the pitching mode's map of the accelerometer, so the
         result does not depend on a trial force (:meth:`predict` relies on that)."""
@@ -217,17 +214,16 @@ class Model:
             return x, paths, starts
         x, paths, starts = self._cached(d, mkey, motion)
         n = v["n"] if abs(v["n"] - 1.0) >= 1e-6 else 1.0 + 1e-6
-        F = v["F_s_N"] * self._cached(d, mkey + (float(theta[1]), n),
-                                      lambda: path_friction(paths, v["x_s_m"], n))
-        beta = v.get("velocity_dependent_friction.beta", 0.0)
-        if beta != 0.0:       # friction level rising with speed: F (1 + beta |v|)
-            def speed():
-                Om = d.omega[:, None] * np.arange(1, x.shape[1] + 1)
-                vel = synthesize(1j * Om * x, self.M)
-                rows = np.arange(vel.shape[0])[:, None]
-                return np.abs(vel[rows, (starts[:, None] + np.arange(self.M)[None, :]) % self.M])
-            F = F * (1.0 + beta * self._cached(d, mkey + ("v",), speed))
-        return path_harmonics(F, starts, d.X.shape[1]), x
+        M = self._cached(d, mkey + (float(theta[1]), n), lambda: path_friction(paths, v["x_s_m"], n))
+        K = d.X.shape[1]
+        ctx = Path(X=x[:, :K], Om=d.Omega, x=paths, starts=starts, x0=d.x0, F_s=v["F_s_N"], x_s=v["x_s_m"], n=n,
+                   M_dimless=M, xf=x, omega=d.omega, cache=lambda key, make: self._cached(d, key, make), mkey=mkey)
+        F = v["F_s_N"] * ctx.basis("M", lambda: M, friction=True)
+        return F, ctx
+
+    def context(self, theta: np.ndarray, d: Data) -> Path:
+        """The :class:`Path` at ``theta`` (for screening terms not in the model)."""
+        return self._friction(theta, self.values(theta), d)[1]
 
     def terms(self, theta: np.ndarray, d: Data, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(G, A_pred) for force harmonics ``P`` (the measured ones, or a trial).
@@ -237,13 +233,11 @@ class Model:
         probe alone, so that the kinematic residual compares the two channels."""
         v = self.values(theta)
         Om = d.Omega
-        K = d.X.shape[1]
-        G, xr = self._friction(theta, v, d)
-        x = xr[:, :K]
-        if "viscous_damping" in self.effects:
-            G = G + 1j * Om * v["viscous_damping.c"] * x
-        if "linear_spring" in self.effects:
-            G = G + v["linear_spring.k"] * x
+        G, ctx = self._friction(theta, v, d)
+        x = ctx.X
+        for e in self.effects:
+            if EFFECTS[e].force is not None:
+                G = G + EFFECTS[e].force(ctx, theta[self.slices[e]] * self.scales[e])
         A_pred = -Om ** 2 * self._sensor(v, d.X, Om)
         if "second_mode" in self.effects:
             D, a, r, m = self._pitch(v, Om)

@@ -1,8 +1,11 @@
-"""Which catalog effects the data need: greedy forward selection with two gates, and the
-test for structure that nothing in the catalog explains.
+"""Which causes the data need: greedy forward selection with two gates over the catalog and
+the library of force terms together (:mod:`sim.discrepancy.effects`), and the test for
+structure that none of them explains.
 
-Each round fits every effect not yet in the model (warm-started from the current fit) and
-scores it by
+Each round fits every catalog effect not yet in the model (warm-started from the current
+fit) and the :data:`LIBRARY_FITS` library terms that a cheap screen ranks first
+(:func:`screen`: the score test of each term from the current residuals, one linear step
+with the current parameters free), and scores each by
 
 - delta BIC in quasi-likelihood form, delta chi2 / phi + delta p ln N, with phi the
   current model's reduced chi-square when above 1 (a model error the noise does not
@@ -25,22 +28,24 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .fit import Fit, Weights, fit, whitened
 from .gain import heldout_error
-from .models import CATALOG, Data
+from .models import CATALOG, EFFECTS, LIBRARY, Data
 from .rounding import percent_text
 
 log = logging.getLogger(__name__)
 
 BIC_GATE = -10.0
+SELECT_NFEV = 50                # a candidate's fit in the selection (the chosen model is refitted in full)
 HELDOUT_GATE = 0.10
 CHI2_UNEXPLAINED = 2.0
 GROUP_UNEXPLAINED = 3.0
 HELDOUT_CANDIDATES = 2          # per round, the best by BIC get the (costlier) held-out test
+LIBRARY_FITS = 3                # per round, the library terms the screen ranks first get a full fit
 
 
 @dataclass
@@ -52,6 +57,12 @@ class Candidate:
     heldout_before: float = math.nan
     heldout_error: float = math.nan
     named: bool = False
+    screened_chi2_drop: float = math.nan     # library terms: the screen's estimate
+    heldout_thetas: list = field(default_factory=list)
+
+    @property
+    def kind(self) -> str:
+        return EFFECTS[self.id].kind
 
 
 @dataclass
@@ -65,6 +76,10 @@ class Selection:
     final_weights: Weights | None = None
     unexplained: bool = False
     reasons: list[str] = field(default_factory=list)
+    explanations: list[str] = field(default_factory=list)   # the reasons in a technician's words
+    screened: list[tuple[int, str, float]] = field(default_factory=list)   # (round, term, chi2 drop)
+    base_heldout_thetas: list = field(default_factory=list)
+    interval_inflation: float = 1.0
 
 
 def init_effect(effect: str, current: Fit, d: Data, W: Weights) -> np.ndarray:
@@ -99,62 +114,161 @@ def init_effect(effect: str, current: Fit, d: Data, W: Weights) -> np.ndarray:
 
 
 def structure(f: Fit, d: Data, W: Weights, freq_bands: int = 3) -> dict:
-    """Mean square of the whitened residuals by harmonic, level and frequency band."""
+    """Mean square of the whitened residuals by harmonic (both residuals, and the force
+    balance and the kinematics apart), force level and frequency band."""
     r = whitened(f.theta, f.model, d, W).reshape(4, d.X.shape[0], d.X.shape[1])
     sq = (r ** 2).mean(axis=0)                         # steps x K
+    sqF, sqK = (r[:2] ** 2).mean(axis=0), (r[2:] ** 2).mean(axis=0)
     levels = np.unique(d.level)
     order = np.argsort(np.argsort(d.omega))
     band = np.minimum(order * freq_bands // max(1, d.omega.size), freq_bands - 1)
+    f_Hz = d.omega / (2 * math.pi)
     return dict(
         reduced_chi2=f.reduced_chi2,
         by_harmonic=[float(x) for x in sq.mean(axis=0)],
+        by_harmonic_force_balance=[float(x) for x in sqF.mean(axis=0)],
+        by_harmonic_kinematics=[float(x) for x in sqK.mean(axis=0)],
         by_level=[float(sq[d.level == lv].mean()) for lv in levels],
         by_frequency_band=[float(sq[band == b].mean()) for b in range(freq_bands)],
+        levels_N=[float(np.median(np.abs(d.P[d.level == lv, 0]))) for lv in levels],
+        bands_Hz=[[float(f_Hz[band == b].min()), float(f_Hz[band == b].max())] for b in range(freq_bands)],
         counts=dict(harmonic=int(4 * sq.shape[0]), level=[int(4 * sq[d.level == lv].size) for lv in levels],
                     band=[int(4 * sq[band == b].size) for b in range(freq_bands)]))
+
+
+def _flagged(values, counts) -> list[int]:
+    return [i for i, (v, n) in enumerate(zip(values, counts))
+            if v > GROUP_UNEXPLAINED and v > 1 + 6 * math.sqrt(2.0 / max(n, 1))]
 
 
 def _unexplained(s: dict) -> list[str]:
     reasons = []
     if s["reduced_chi2"] > CHI2_UNEXPLAINED:
         reasons.append(f"reduced chi-square {s['reduced_chi2']:.1f} (the noise alone gives about 1)")
-
-    def check(name, values, counts):
-        for i, (v, n) in enumerate(zip(values, counts)):
-            if v > GROUP_UNEXPLAINED and v > 1 + 6 * math.sqrt(2.0 / max(n, 1)):
-                reasons.append(f"{name} {i + 1}: mean square residual {v:.1f}")
-    check("harmonic", s["by_harmonic"], [s["counts"]["harmonic"]] * len(s["by_harmonic"]))
-    check("force level", s["by_level"], s["counts"]["level"])
-    check("frequency band", s["by_frequency_band"], s["counts"]["band"])
+    for name, values, counts in (("harmonic", s["by_harmonic"], [s["counts"]["harmonic"]] * len(s["by_harmonic"])),
+                                 ("force level", s["by_level"], s["counts"]["level"]),
+                                 ("frequency band", s["by_frequency_band"], s["counts"]["band"])):
+        reasons += [f"{name} {i + 1}: mean square residual {values[i]:.1f}" for i in _flagged(values, counts)]
     return reasons
 
 
-def select(base: Fit, d: Data, W: Weights, catalog: tuple[str, ...] = CATALOG, max_causes: int = 3) -> Selection:
+def explain(s: dict) -> list[str]:
+    """What remains, in a technician's words: which residual (force balance or the two
+    motion channels), which harmonic, level or band, and what that usually means."""
+    out = []
+    n_h = s["counts"]["harmonic"] // 2
+    for h in _flagged(s.get("by_harmonic_force_balance", []), [n_h] * 99):
+        v = s["by_harmonic_force_balance"][h]
+        where = f"the force balance (force minus mass x acceleration minus friction) at harmonic {h + 1}"
+        size = f"{math.sqrt(v):.1f} times the noise"
+        if h == 0:
+            out.append(f"{where}, the drive frequency, misses by {size}: a linear term is missing or wrong "
+                       f"(stiffness, damping or mass), or the response had not settled")
+        elif (h + 1) % 2 == 0:
+            out.append(f"{where} ({h + 1} x the drive frequency) misses by {size}: even harmonics mean the force "
+                       f"differs between the two directions of motion (asymmetric friction, a preload, a "
+                       f"one-sided spring or stop)")
+        else:
+            out.append(f"{where} ({h + 1} x the drive frequency) misses by {size}: odd harmonics mean a symmetric "
+                       f"nonlinearity the model lacks (a spring stiffening with amplitude, damping growing faster "
+                       f"than the speed, a friction curve of another shape)")
+    for h in _flagged(s.get("by_harmonic_kinematics", []), [n_h] * 99):
+        v = s["by_harmonic_kinematics"][h]
+        out.append(f"the accelerometer and the displacement probe disagree at harmonic {h + 1} by "
+                   f"{math.sqrt(v):.1f} times the noise: a sensor error (gain, delay, mounting) or a mode of the "
+                   f"carriage that one of them sees and the other does not")
+    levels = s.get("levels_N", [])
+    for i in _flagged(s["by_level"], s["counts"]["level"]):
+        at = f" ({levels[i]:.3g} N)" if i < len(levels) else ""
+        pos = "the highest" if i == len(s["by_level"]) - 1 else "the lowest" if i == 0 else "a middle"
+        out.append(f"force level {i + 1} of {len(s['by_level'])}{at}, {pos}, is fitted worse than the others: an "
+                   f"effect that grows or fades with the amplitude")
+    bands = s.get("bands_Hz", [])
+    flagged = _flagged(s["by_frequency_band"], s["counts"]["band"])
+    if flagged and len(flagged) < len(s["by_frequency_band"]):
+        for b in flagged:
+            rng = f" ({bands[b][0]:.3g} to {bands[b][1]:.3g} Hz)" if b < len(bands) else ""
+            out.append(f"the misfit sits in one frequency band{rng}: structure only near one frequency usually "
+                       f"means a resonance (a mode) of the rig, the carriage or the fixture")
+    if not out and s["reduced_chi2"] > CHI2_UNEXPLAINED:
+        out.append(f"the residual is {math.sqrt(s['reduced_chi2']):.1f} times the noise overall, spread over "
+                   f"harmonics, levels and frequencies: the noise may be underestimated, or the records were "
+                   f"disturbed")
+    return out
+
+
+def screen(current: Fit, d: Data, W: Weights, terms: tuple[str, ...]) -> list[tuple[str, float]]:
+    """Each library term's estimated fall of chi-square if it joined ``current`` (the score
+    test: the term's whitened force at a unit coefficient, projected off the current
+    Jacobian, against the current whitened residual), largest first.  Exact for a term
+    linear in its coefficient when the rest of the model is linear near the fit; it costs
+    one evaluation of the term, not a fit."""
+    if current.jac is None or current.resid is None:
+        raise ValueError("screening needs the current fit's Jacobian")
+    ctx = current.model.context(current.theta, d)
+    Q, _ = np.linalg.qr(current.jac)
+    r = current.resid
+    out = []
+    for t in terms:
+        e = EFFECTS[t]
+        dG = e.force(ctx, np.array([e.step])) / e.step
+        wF, wK = W.whiten(-dG, np.zeros_like(dG), bias=False)
+        b = np.concatenate([wF.real.ravel(), wF.imag.ravel(), wK.real.ravel(), wK.imag.ravel()])
+        b = b - Q @ (Q.T @ b)
+        bb = float(b @ b)
+        out.append((t, float((b @ r) ** 2 / bb) if bb > 1e-300 and np.isfinite(bb) else 0.0))
+    return sorted(out, key=lambda x: -x[1])
+
+
+def term_scale(current: Fit, d: Data, term: str) -> float:
+    """A library coefficient whose force is of the order of the drive force: the fit's unit
+    for it (nonlinear terms keep 1)."""
+    e = EFFECTS[term]
+    if e.step != 1.0:
+        return 1.0
+    dG = e.force(current.model.context(current.theta, d), np.ones(1))
+    size = float(np.sqrt(np.mean(np.abs(dG[:, 0]) ** 2)))
+    ref = float(np.sqrt(np.mean(np.abs(d.P[:, 0]) ** 2)))
+    return ref / size if size > 0 and np.isfinite(size) else 1.0
+
+
+def select(base: Fit, d: Data, W: Weights, catalog: tuple[str, ...] = CATALOG, max_causes: int = 3,
+           library: tuple[str, ...] = LIBRARY, library_fits: int = LIBRARY_FITS) -> Selection:
     current = base
-    held_cur = heldout_error(base.model, base.theta, d, W)
+    base_thetas: list = []
+    held_cur = heldout_error(base.model, base.theta, d, W, thetas=base_thetas)
     held_base = held_cur
     named: list[Candidate] = []
     tried: list[Candidate] = []
+    screened: list[tuple[int, str, float]] = []
     for rnd in range(1, max_causes + 1):
         phi = max(1.0, current.reduced_chi2)
         cands = []
-        for e in catalog:
+        lib = tuple(t for t in library if t not in current.model.effects)
+        scores = screen(current, d, W, lib) if lib else []
+        screened.extend((rnd, t, x) for t, x in scores)
+        gate = -BIC_GATE + math.log(current.n_data)            # a term must at least be able to pass
+        picks = [t for t, x in scores[:library_fits] if x / phi > gate]
+        screen_of = dict(scores)
+        scale_of = {t: term_scale(current, d, t) for t in picks}
+        for e in tuple(catalog) + tuple(picks):
             if e in current.model.effects:
                 continue
-            model, th0 = current.model.extend(current.theta, e, init_effect(e, current, d, W))
+            model, th0 = current.model.extend(current.theta, e, init_effect(e, current, d, W),
+                                              scale_of.get(e, 1.0))
             try:
-                f = fit(model, th0, d, W)
+                f = fit(model, th0, d, W, max_nfev=SELECT_NFEV)
             except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
                 log.warning("candidate %s did not fit: %s", e, exc)
                 continue
             dbic = (f.chi2 - current.chi2) / phi + (f.model.size - current.model.size) * math.log(f.n_data)
-            cands.append(Candidate(e, rnd, f, dbic))
+            cands.append(Candidate(e, rnd, f, dbic, screened_chi2_drop=screen_of.get(e, math.nan)))
         cands.sort(key=lambda c: c.delta_bic)
         tried.extend(cands)
         chosen = None
         for c in [c for c in cands if c.delta_bic < BIC_GATE][:HELDOUT_CANDIDATES]:
             c.heldout_before = held_cur
-            c.heldout_error = heldout_error(c.fit.model, c.fit.theta, d, W)
+            c.heldout_error = heldout_error(c.fit.model, c.fit.theta, d, W, thetas=c.heldout_thetas)
             if c.heldout_error < (1 - HELDOUT_GATE) * held_cur:
                 chosen = c
                 break
@@ -164,8 +278,11 @@ def select(base: Fit, d: Data, W: Weights, catalog: tuple[str, ...] = CATALOG, m
             break
         chosen.named = True
         named.append(chosen)
+        # the selection's fits stop early; the next round starts from a converged model
+        chosen.fit = fit(chosen.fit.model, chosen.fit.theta, d, W, max_nfev=100)
         current, held_cur = chosen.fit, chosen.heldout_error
-    return Selection(base=base, final=current, named=named, tried=tried, heldout_base=held_base)
+    return Selection(base=base, final=current, named=named, tried=tried, heldout_base=held_base,
+                     screened=screened, base_heldout_thetas=base_thetas)
 
 
 def settle_final(sel: Selection, d: Data, seed: int = 0) -> Selection:
@@ -179,5 +296,29 @@ def settle_final(sel: Selection, d: Data, seed: int = 0) -> Selection:
     final = fit(sel.final.model, sel.final.theta, d, W, max_nfev=100)
     s = structure(final, d, W)
     reasons = _unexplained(s)
+    if reasons:
+        final, sel.interval_inflation = widen(final, s, sel.named[-1].heldout_thetas if sel.named
+                                              else sel.base_heldout_thetas)
     sel.final, sel.final_weights, sel.structure, sel.unexplained, sel.reasons = final, W, s, bool(reasons), reasons
+    sel.explanations = explain(s) if reasons else []
     return sel
+
+
+def widen(f: Fit, s: dict, thetas: list) -> tuple[Fit, float]:
+    """Intervals of a model that still leaves structure: the covariance (already scaled by
+    the reduced chi-square) is scaled up to the worst group's mean square (harmonic, level,
+    band), and no standard error is smaller than the spread of the leave-one-level-out
+    refits (a jackknife over force levels: a model error that depends on the level moves
+    the parameters with the levels used).  Returns the fit and the largest factor applied
+    to a standard error."""
+    worst = max([s["reduced_chi2"]] + s["by_harmonic"] + s["by_level"] + s["by_frequency_band"])
+    factor = math.sqrt(max(1.0, worst / max(1.0, s["reduced_chi2"])))
+    sd = np.sqrt(np.maximum(np.diag(f.cov), 0.0)) * factor
+    if len(thetas) >= 2:
+        T = np.array(thetas)
+        L = T.shape[0]
+        jack = np.sqrt((L - 1) / L * ((T - T.mean(axis=0)) ** 2).sum(axis=0))
+        sd = np.maximum(sd, jack)
+    base_sd = np.sqrt(np.maximum(np.diag(f.cov), 1e-300))
+    D = sd / base_sd
+    return replace(f, cov=f.cov * np.outer(D, D)), float(D.max())

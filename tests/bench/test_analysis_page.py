@@ -90,7 +90,7 @@ def test_page_is_self_contained(page):
     assert not re.search(r"""(src|href)\s*=\s*["']?(https?:|//|file:)""", text)
     assert not [t for t, _ in tags if t in ("link", "script", "iframe", "object")]
     imgs = [a for t, a in tags if t == "img"]
-    assert len(imgs) == 4            # compliance, accelerance, loops, residuals
+    assert len(imgs) == 5            # overview, compliance, accelerance, loops, residuals (no restoring force here)
     for a in imgs:
         assert a["src"].startswith("data:image/png;base64,")
         assert len(a.get("alt", "")) > 40, "every figure needs a description for screen readers"
@@ -106,12 +106,14 @@ def test_page_leads_with_the_verdict_and_names_the_cause(page, analysis_example)
     c = analysis_example["causes"][0]["parameters"]["c"]
     # each figure to the digit its interval supports: the last digit shown is where the
     # interval's half-width has its first or second significant digit, no further
-    row = re.search(r'<td>c</td><td>[^<]*</td>' + 3 * r'<td class="num">([^<]+)</td>', text)
+    row = re.search(r"c = ([^ ]+) N s/m \(95 %: ([^ ]+) to ([^ )]+)\)", text)
     value, low, high = row.groups()
     step = 10.0 ** -(len(value.split(".")[1]) if "." in value else 0)
     assert step <= (c["high"] - c["low"]) / 2 < 100 * step, (row.groups(), c)
     for shown, exact in zip((value, low, high), (c["value"], c["low"], c["high"])):
         assert abs(float(shown) - exact) <= step / 2 * (1 + 1e-9)
+    # the details come after the causes, collapsed
+    assert text.index("Causes named</h2>") < text.index('<details id="details">') < text.index("Candidates tried</h2>")
 
 
 def test_page_lists_every_candidate_and_rejected_step(page, analysis_example):
@@ -158,8 +160,8 @@ def test_final_model_equal_to_the_base_is_not_drawn_twice(analysis_example):
 @needs_chromium
 def test_chromium_renders_the_page_with_every_figure_and_the_verdict(page, analysis_example, tmp_path):
     mark = _render_check(page, tmp_path)
-    assert int(mark["data-images"]) == 4
-    assert int(mark["data-loaded"]) == 4, f"image widths: {mark['data-widths']}"
+    assert int(mark["data-images"]) == 5
+    assert int(mark["data-loaded"]) == 5, f"image widths: {mark['data-widths']}"
     assert all(int(w) > 500 for w in mark["data-widths"].split(","))
     assert analysis_example["verdict"] in mark["data-verdict"]
     shot = tmp_path / "page.png"
@@ -187,7 +189,7 @@ def test_no_cause_and_unexplained_is_said_in_words_without_a_final_model(analysi
     assert 'class="verdict unexplained"' in text
     assert "No cause named." in text and "no candidate explains what remains" in text
     assert "<strong>yes</strong>" not in text
-    assert text.count("<img ") == 4
+    assert text.count("<img ") == 5
     fig = plot_analysis_frf(analysis_data(d).steps, "compliance")
     assert [t.get_text() for t in fig.legends[0].get_texts()] == ["measured", "base model (Masing)"]
 
@@ -221,7 +223,7 @@ def test_malformed_parts_are_named_on_the_page_and_the_rest_is_shown(analysis_ex
     assert "'causes' entry 0" in problems and "'loops' entry 0" in problems
     assert "'steps_rejected' is not a list" in problems and "analysis/9" in problems
     assert "viscous damping" in text.split("Causes named</h2>")[1]
-    assert text.count("<img ") == 3          # no loop figure, the others still there
+    assert text.count("<img ") == 4          # no loop figure, the others (with the overview) still there
 
 
 def test_not_a_dict_is_a_clear_error(tmp_path):

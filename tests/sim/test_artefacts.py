@@ -1,7 +1,6 @@
 """Measurement artefacts in time records (sim.artefacts), on records built here from closed
 forms that share no code with the detector: a periodic response (odd harmonics, as a
 friction loop makes), white noise, and the artefact added by its own formula."""
-import math
 
 import numpy as np
 import pytest

@@ -92,6 +92,9 @@ def test_no_effect_keeps_the_plain_kernel():
     (dict(PITCH, pitch_inertia_kg_m2=0.05), "pitch_inertia_kg_m2"),     # < m e^2 = 0.1
     (dict(cubic_spring_N_per_m3=float("nan")), "cubic_spring_N_per_m3"),
     (dict(drive_height_m=-1.0), "drive_height_m"),
+    (dict(quadratic_damping_N_s2_per_m2=-1.0), "quadratic_damping_N_s2_per_m2"),
+    (dict(friction_asymmetry=0.5), "friction_asymmetry"),
+    (dict(friction_asymmetry=float("nan")), "friction_asymmetry"),
 ])
 def test_bad_effect_parameters_are_refused_by_name(bad, key):
     with pytest.raises(ValueError, match=key):
@@ -256,3 +259,42 @@ def test_velocity_dependence_grows_loop_area_with_frequency_at_fixed_amplitude()
             assert W[1] > 1.2 * W[0]           # rate dependent: more area at higher speed
         else:
             assert W[1] == pytest.approx(W[0], rel=0.02)   # Masing: rate independent
+
+
+def test_quadratic_damping_dissipates_as_harmonic_balance_says():
+    # first harmonic of c2 v|v| for v = V cos: 8/(3 pi) c2 V^2 in phase with v, so
+    # Im(P/x) = c w + 8/(3 pi) c2 w^2 X: the damping grows with the amplitude
+    c2, f = 1e5, 10.0
+    model = RigModel(**LINEAR, quadratic_damping_N_s2_per_m2=c2, seed=7)
+    rig = SimulatedRig(model)
+    w = 2 * np.pi * f
+    got = []
+    for force in (5.0, 60.0):
+        P, _, x = measure(rig, f, force, periods=4)
+        expect = LINEAR["viscous_N_s_per_m"] * w + 8 / (3 * np.pi) * c2 * w ** 2 * abs(x)
+        assert (P / x).imag == pytest.approx(expect, rel=0.03)
+        got.append((P / x).imag)
+    assert got[1] > 1.3 * got[0]
+
+
+def test_asymmetric_friction_saturates_at_the_two_levels_the_definition_gives():
+    # slow, large strokes through gross rolling, held by a spring: the friction
+    # P - m a - k x sits at +F_s (1 + a) moving up and -F_s (1 - a) moving down
+    F_s, a, k, f = 5.0, 0.2, 1e5, 2.0
+    model = RigModel(F_s_N=F_s, x_s_m=10e-6, n=1.5, mass_kg=10.0, spring_N_per_m=k, friction_asymmetry=a,
+                     amp_gain_N_per_V=20.0, seed=3)
+    rig = SimulatedRig(model)
+    rig.set_generator(freq_Hz=f, amplitude_Vpp=2 * 20.0 / model.amp_gain_N_per_V, output_on=True)
+    rig.run(int(FS / f), FS)
+    b = rig.run(int(2 * FS / f), FS)
+    P = b.force_V / model.force_sens_V_per_N
+    acc = b.accel_V / model.accel_sens_V_per_m_s2
+    x = b.disp_V / model.disp_sens_V_per_m            # about the spring's origin (the probe reads x)
+    F = P - model.mass_kg * acc - k * x
+    v = np.gradient(x)
+    far = np.abs(x - 0.5 * (x.max() + x.min())) < 0.25 * (x.max() - x.min())   # mid-stroke: gross rolling
+    assert np.median(F[far & (v > 0)]) == pytest.approx(F_s * (1 + a), rel=0.03)
+    assert np.median(F[far & (v < 0)]) == pytest.approx(-F_s * (1 - a), rel=0.03)
+    sym = RigModel(**dict(model.__dict__, friction_asymmetry=0.0))
+    assert plant_effects.coefficients(sym) is None or plant_effects.coefficients(sym)[12] == 0.0
+    assert plant_effects.coefficients(model)[12] == a
