@@ -25,6 +25,7 @@ log = logging.getLogger(__name__)
 
 MIN_VPP = 2e-3       # the generator's smallest amplitude into a high-impedance load
 MAX_FACTOR = 10.0    # one control update changes the drive by at most this factor
+FIRST_DRIVE_MARGIN = 0.9   # a sweep starts 10 % below the force its gain estimate predicts
 
 
 class ForceUnreachable(LimitExceeded):
@@ -35,15 +36,20 @@ class ForceUnreachable(LimitExceeded):
 def next_drive(vpp: float, force: float, target: float, prev: tuple[float, float] | None) -> float:
     """The next drive amplitude (Vpp) of the force control (decision 0025).
 
-    Secant on the measured force against the drive through this and the previous
-    iteration, where that slope is positive and the two drives differ; otherwise the
-    measured force per volt of this iteration (exact for a linear rig).  The update is
-    bounded to a factor MAX_FACTOR either way."""
-    nxt = vpp * target / force
+    Secant in log-log: force ~ drive^s, s from this and the previous iteration (exact for a
+    linear rig, s = 1: the measured force per volt scales the drive; a resonance that moves
+    with the amplitude makes s < 1 at a force drop-out).  Without a previous iteration, with
+    drives within 5 % of each other (what the settling left in the force dominates) or a
+    force that did not grow with the drive, s = 1; otherwise s is kept within 0.25-2.  The
+    update is bounded to a factor MAX_FACTOR either way."""
+    s = 1.0
     if prev is not None:
         v0, f0 = prev
-        if abs(vpp - v0) > 1e-3 * vpp and (force - f0) / (vpp - v0) > 0:
-            nxt = vpp + (target - force) * (vpp - v0) / (force - f0)
+        if abs(math.log(vpp / v0)) > 0.05 and f0 > 0:
+            slope = math.log(force / f0) / math.log(vpp / v0)
+            if slope > 0:
+                s = min(max(slope, 0.25), 2.0)
+    nxt = vpp * (target / force) ** (1.0 / s)
     return min(max(nxt, vpp / MAX_FACTOR), vpp * MAX_FACTOR)
 
 
@@ -81,11 +87,17 @@ class SteppedSine:
         self.gain_at: dict[float, float] = {}     # frequency -> latest measured force per Vpp
         self.history: list[tuple[float, float]] = []   # (Vpp, force) of the last control
 
-    def _first_vpp(self, step: StepSpec) -> float:
-        """First drive of a step: the force per volt measured at this frequency before (an
-        earlier level), else the latest one; within the drive limit."""
+    def _first_vpp(self, step: StepSpec, new_sweep: bool = False) -> float:
+        """First drive of a step, within the drive limit: inside a sweep, from the force per
+        volt of the step before (same level, the next frequency); a new sweep (a new level)
+        from the force per volt measured at its first frequency before (an earlier level),
+        FIRST_DRIVE_MARGIN below it: the force per volt depends on the level (the rig's
+        resonance moves), and a ramp to a force above the target, plus the start's
+        transient, could reach the force limit."""
+        if not new_sweep:
+            return min(step.force_N / self.drive.gain_N_per_Vpp, self.max_vpp)
         gain = self.gain_at.get(step.freq_Hz, self.drive.gain_N_per_Vpp)
-        return min(step.force_N / gain, self.max_vpp)
+        return min(FIRST_DRIVE_MARGIN * step.force_N / gain, self.max_vpp)
 
     # ------------------------------------------------------------------ primitives
     def _acquire(self, freq_Hz: float, periods: int):
@@ -292,7 +304,7 @@ class SteppedSine:
             self.stop()
         if self.sensor_check:
             self.sensor_check()
-        self.ramp(self._first_vpp(step), step.freq_Hz)
+        self.ramp(self._first_vpp(step, new_sweep=True), step.freq_Hz)
         self.control_force(step)
         periods = max(self.plan.measure_cycles, math.ceil(self.plan.min_measure_s * step.freq_Hz))
         self._wait(step.freq_Hz, self.plan.min_settle_s, min_periods=self.plan.settle_cycles + periods)
@@ -302,7 +314,7 @@ class SteppedSine:
         the drive limit cannot reach is not measured: the plan's ``infeasible`` says whether
         that stops the test (``refuse``: ramp down, output off, ForceUnreachable) or the step
         is skipped (``skip``: ``on_skip`` is told why; returns None)."""
-        first_vpp = self._first_vpp(step)
+        first_vpp = self._first_vpp(step, new_sweep)
         if new_sweep:
             if self.drive.on:
                 self.stop()
