@@ -499,7 +499,9 @@ def write_index(rep: Report, checks: dict[float, str], quick: bool, seconds: flo
         f"Written by `sim.paper.reproduce` ({'quick, coarse grids' if quick else 'full grids'}; "
         f"{seconds:.1f} s). All quantities dimensionless: u = x/x_s, F/F_s, beta = omega/omega_s, "
         "G = u_0/gamma0. FRFs by half-period shooting (RK4 where it falls back); cycles by RK4 "
-        "with 10000 steps per period, as the seed. Each PNG has a CSV of the same name.",
+        "with 10000 steps per period, as the seed. Figs. 15-17 are in Hz and N, from stepped sweeps "
+        "of the simulated pitching rig (RK4 plant; beta = f/f_s and G = compliance F_s/x_s in the "
+        "key numbers). Each PNG has a CSV of the same name.",
         "",
         "| file | seed figure | content |",
         "|---|---|---|",
