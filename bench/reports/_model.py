@@ -59,7 +59,8 @@ def _model_effects(model) -> list[str]:
              "disp_delay_s": "displacement-channel delay", "force_gain_error": "force gain error",
              "accel_gain_error": "acceleration gain error", "disp_gain_error": "displacement gain error",
              "friction_alpha": "speed-dependent friction", "pitch_inertia_kg_m2": "pitching mode",
-             "cubic_spring_N_per_m3": "cubic spring"}
+             "cubic_spring_N_per_m3": "cubic spring",
+             "shaker_force_constant_N_per_A": "electrodynamic shaker (the force has harmonics)"}
     return [f"{label} ({k} = {getattr(model, k):g})" for k, label in names.items() if getattr(model, k, 0)]
 
 

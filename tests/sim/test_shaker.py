@@ -72,3 +72,14 @@ def test_shaker_off_is_the_ideal_force_source():
 def test_a_shaker_without_resistance_is_refused_by_name():
     with pytest.raises(ValueError, match="shaker_resistance_ohm must be > 0 when the shaker model is on"):
         RigModel(shaker_force_constant_N_per_A=10.0)
+
+
+def test_the_closed_form_for_bench_twin_is_the_network():
+    """plant_effects.shaker_frf (the formula decision 0025 gives for fitting a source's
+    force per volt) against the 2x2 network solve."""
+    from sim import plant_effects
+    model = RigModel(**LINEAR)
+    for f in (5.0, 31.83, 77.0, 1000.0):
+        w = 2 * math.pi * f
+        got = plant_effects.shaker_frf(model, f, 1j * w * M + C + K / (1j * w))
+        assert got == pytest.approx(force_per_volt_theory(f), rel=1e-12)
