@@ -1,9 +1,9 @@
 # The two quickstart commands are `make demo` and `make test`; everything else is theirs.
 VENV ?= .venv
 PY := $(VENV)/bin/python
-DEBS := socat mbpoll chromium
+DEBS := socat mbpoll chromium tmux
 
-.PHONY: setup system-deps demo test bench paper soak
+.PHONY: setup system-deps demo test check bench paper soak
 
 $(VENV)/.installed: pyproject.toml
 	python3 -m venv $(VENV)
@@ -19,7 +19,7 @@ $(VENV)/.kernels: $(VENV)/.installed $(wildcard sim/*.py)
 	touch $@
 
 # Test peers from Debian (pseudo-terminal pairs, an independent Modbus client, a real
-# browser for the HTML pages).
+# browser for the HTML pages, a terminal multiplexer for the 80-column progress line).
 system-deps:
 	@missing=""; for p in $(DEBS); do command -v $$p >/dev/null || missing="$$missing $$p"; done; \
 	if [ -n "$$missing" ]; then \
@@ -36,6 +36,13 @@ paper: setup
 
 test: setup
 	$(PY) -m pytest -q
+
+# Static checks (CI runs them before the tests): lint and import order, the layer
+# contract bench -> procedures -> drivers -> sim, types of sim/, drivers/, procedures/.
+check: $(VENV)/.installed
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/lint-imports
+	$(VENV)/bin/mypy
 
 bench: setup
 	$(PY) benchmarks/bench_sim.py

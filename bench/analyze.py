@@ -14,6 +14,7 @@ from importlib import metadata
 from pathlib import Path
 
 from sim.discrepancy import analyze_steps
+from sim.errors import ConfigurationError
 
 from .reports import write_analysis_html
 from .sources import load_source
@@ -27,17 +28,20 @@ def default_out_dir(source: Path) -> Path:
     return source / "analysis" if source.is_dir() else source.parent / f"{source.stem}_analysis"
 
 
-def _guess(source: Path, rig: Path | None) -> dict | None:
-    from .config import load_rig, parse_rig
+def _guess(source: Path, rig: Path | None) -> tuple[dict | None, float | None]:
+    """Starting values (None: from the data) and the rig file's friction_v_ref_m_per_s
+    (None: the file names none), at which a velocity-dependent friction is stated."""
+    from .config import load_rig, parse_rig, rig_toml
     if rig is not None:
         r = load_rig(rig)
     elif source.is_dir() and (source / "run.json").exists():
-        from .cli import _rig_toml
         from .storage import RunStore
-        r = parse_rig({"rig": _rig_toml(RunStore.open(source).metadata["rig"])}, f"{source}/run.json")
+        r = parse_rig({"rig": rig_toml(RunStore.open(source).metadata["rig"])}, f"{source}/run.json")
     else:
-        return None           # a foreign file: start from the data themselves
-    return dict(F_s_N=r.expected_F_s_N, x_s_m=r.expected_x_s_m, n=r.expected_n, mass_kg=r.expected_mass_kg)
+        return None, None     # a foreign file: start from the data themselves
+    v_ref = (r.model or {}).get("friction_v_ref_m_per_s")
+    return (dict(F_s_N=r.expected_F_s_N, x_s_m=r.expected_x_s_m, n=r.expected_n, mass_kg=r.expected_mass_kg),
+            float(v_ref) if v_ref else None)
 
 
 def _version() -> str:
@@ -51,15 +55,16 @@ def analyze_source(source: Path, out_dir: Path | None = None, rig: Path | None =
     """Analyse SOURCE, write ``analysis.json`` (and ``analysis.html``) to ``out_dir``; return the dict."""
     source = Path(source)
     if not source.exists():
-        raise ValueError(f"{source}: no such run directory or file")
+        raise ConfigurationError(f"{source}: no such run directory or file")
     src = load_source(source)
     steps, rejected = list(src.steps), [dict(step=r.step, reason=r.reason) for r in src.rejected]
     if not steps:
-        raise ValueError(f"{source}: no usable steps ({len(rejected)} rejected"
+        raise ConfigurationError(f"{source}: no usable steps ({len(rejected)} rejected"
                          + (f", first: {rejected[0]['step']}: {rejected[0]['reason']}" if rejected else "") + ")")
-    guess = _guess(source, Path(rig) if rig else None)
+    guess, v_ref = _guess(source, Path(rig) if rig else None)
     log.info("analysing %d steps of %s (%d rejected)", len(steps), source, len(rejected))
-    analysis = analyze_steps(steps, guess, source=str(source), software_version=_version(), rejected=rejected)
+    analysis = analyze_steps(steps, guess, source=str(source), software_version=_version(), rejected=rejected,
+                             v_ref_m_per_s=v_ref)
     result = analysis.to_dict()
     out = Path(out_dir) if out_dir else default_out_dir(source)
     out.mkdir(parents=True, exist_ok=True)

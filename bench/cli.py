@@ -1,10 +1,11 @@
 """Command line: `bench <command>`.  The application configures logging; libraries don't.
 
-Exit codes (docs/reliability.md): 0 done; 1 runtime failure (an instrument error, a failed
-run, `bench check` found problems, an unexpected error); 2 usage or configuration error
-(a bad argument, file or value: the message names it); 3 stopped by a limit (a plan the
-rig's limits refuse, or a run aborted by the safety supervisor); 130 interrupted (Ctrl-C,
-SIGTERM).  Errors are one line on stderr; `--debug` adds the traceback.
+Exit codes (docs/reliability.md), chosen by the error's class in the tree of
+sim/errors.py: 0 done; 1 runtime failure (an instrument error, a failed run, `bench check`
+found problems; an unexpected exception is reported as an internal error); 2 usage or
+configuration error (a bad argument, file or value: the message names it); 3 stopped by a
+limit (a plan the rig's limits refuse, or a run aborted by the safety supervisor); 130
+interrupted (Ctrl-C, SIGTERM).  Errors are one line on stderr; `--debug` adds the traceback.
 """
 
 from __future__ import annotations
@@ -16,6 +17,11 @@ import time
 from enum import IntEnum
 from pathlib import Path
 
+from sim.errors import BenchError, ConfigurationError, EnvelopeError, LimitError, RunDirectoryError
+
+from . import __version__
+from .terminal import Progress, end_line, setup_logging
+
 log = logging.getLogger(__name__)
 
 
@@ -25,34 +31,6 @@ class ExitCode(IntEnum):
     USAGE = 2            # bad argument, file or value
     LIMIT = 3            # refused or aborted by a limit
     INTERRUPTED = 130    # Ctrl-C or SIGTERM
-
-
-class Progress:
-    """One status line with a bar and an ETA, redrawn in place on a terminal."""
-
-    def __init__(self, label: str, stream=sys.stderr):
-        self.label, self.stream, self.t0 = label, stream, time.monotonic()
-        self.tty = stream.isatty()
-        self.t_start, self.done0 = self.t0, 0
-
-    def restart(self, done: int = 0) -> None:
-        """Count the ETA from now and from ``done`` steps (set-up and resumed steps excluded)."""
-        self.t_start, self.done0 = time.monotonic(), done
-
-    def __call__(self, done: int, total: int, note: str = "") -> None:
-        frac = done / max(total, 1)
-        now = time.monotonic()
-        el = now - self.t0
-        eta = (now - self.t_start) / (done - self.done0) * (total - done) if done > self.done0 else float("nan")
-        bar = "#" * int(30 * frac)
-        line = f"{self.label} [{bar:<30}] {done}/{total} {el:5.1f}s eta {eta:5.1f}s {note}"
-        if self.tty:
-            self.stream.write("\r" + line[:150].ljust(150))
-            if done >= total:
-                self.stream.write("\n")
-        elif done >= total or done == 1 or done % max(1, total // 10) == 0:
-            self.stream.write(line + "\n")
-        self.stream.flush()
 
 
 def cmd_paper(args) -> int:
@@ -71,7 +49,7 @@ def cmd_frf(args) -> int:
     from sim.shooting import frf_shooting
 
     if args.points < 1:
-        raise ValueError(f"--points must be >= 1, got {args.points}")
+        raise ConfigurationError(f"--points must be >= 1, got {args.points}")
     betas = np.linspace(args.beta_min, args.beta_max, args.points)
     prog = Progress(f"FRF gamma0={args.gamma0} n={args.n} ({args.engine})")
     if args.engine == "shooting":
@@ -120,29 +98,69 @@ def cmd_dry_run(args) -> int:
 
 def _run(args, resume: bool) -> int:
     from .session import run_plan
-    from .storage import RunStore
+    from .storage import RunStatus, RunStore
 
     if resume:
-        from .config import parse_plan, parse_rig
-        meta = RunStore.open(Path(args.run)).metadata
-        plan = parse_plan({"plan": _plan_toml(meta["plan"])}, f"{args.run}/run.json")
-        rig = parse_rig({"rig": _rig_toml(meta["rig"])}, f"{args.run}/run.json")
+        from .config import parse_plan, parse_rig, plan_toml, rig_toml
+        store = RunStore.open(Path(args.run))
+        meta, acc = store.metadata, store.account()
+        if acc.complete and meta.get("status") == RunStatus.COMPLETED:
+            print(f"resume: nothing to do: the run completed and its steps are all there "
+                  f"({acc.summary()})")
+            return ExitCode.OK
+        print(f"resume: {acc.resume_text()}" if acc.missing or acc.damaged else
+              f"resume: every planned step is there; finishing the run (it ended '{meta.get('status', '?')}')",
+              flush=True)
+        plan = parse_plan({"plan": plan_toml(meta["plan"])}, f"{args.run}/run.json")
+        rig = parse_rig({"rig": rig_toml(meta["rig"])}, f"{args.run}/run.json")
         out, seed = Path(args.run), meta.get("sim_seed")
     else:
         plan, rig = _load_configs(args)
         out, seed = Path(args.out), args.seed
+    if rig.simulated:
+        _warm_up()
     watch = _start_watch(out, args)
     try:
         store = run_plan(plan, rig, out, resume=resume, progress=Progress("stepped sine"), sim_seed=seed)
     finally:
         if watch:
             watch.close()
+        end_line()                 # an interrupted run's progress line ends where it stood
+        _say_output_state(out)
     meta = store.metadata
     print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/")
-    if meta["status"] == "completed" and not getattr(args, "no_report", False):
+    if meta["status"] == RunStatus.COMPLETED and not getattr(args, "no_report", False):
         from .reports import write_report
         print(f"report: {write_report(out)}")
-    return {"completed": ExitCode.OK, "aborted": ExitCode.LIMIT}.get(meta["status"], ExitCode.FAILURE)
+    return {RunStatus.COMPLETED: ExitCode.OK, RunStatus.ABORTED: ExitCode.LIMIT}.get(meta["status"], ExitCode.FAILURE)
+
+
+def _warm_up() -> None:
+    """Compile the simulation kernels first if they are not (so compiling never counts in
+    the progress line's ETA), with a one-line notice."""
+    from .warmup import kernels_warm, warm_up
+    if not kernels_warm():
+        log.warning("compiling the simulation kernels (first run only; `make setup` does it ahead)")
+        log.info("kernels compiled in %.0f s", warm_up())
+
+
+def _say_output_state(out: Path) -> None:
+    """On every ending (done, Ctrl-C, limit, error) say how this session left the output:
+    the last ``output_off`` event after its ``start``/``resume``."""
+    from .storage import RunStore
+    try:
+        events = RunStore.open(out).events()
+    except Exception:  # noqa: BLE001 - no run directory yet: nothing was switched on
+        return
+    starts = [i for i, e in enumerate(events) if e.get("event") in ("start", "resume")]
+    offs = [e for e in events[starts[-1] if starts else 0:] if e.get("event") == "output_off"]
+    if not offs:
+        return
+    if offs[-1].get("confirmed"):
+        print("output off, confirmed by the generator", file=sys.stderr, flush=True)
+    else:
+        print("WARNING: output off NOT confirmed by the generator: switch the amplifier off by hand "
+              "and check the generator", file=sys.stderr, flush=True)
 
 
 def _start_watch(run_dir: Path, args):
@@ -159,15 +177,21 @@ def _watch_server(run_dir: Path, host: str, port: int):
     try:
         return WatchServer(run_dir, host, port)
     except OSError as e:       # port taken, no such interface, privileged port
-        raise ValueError(f"cannot serve the watch page on {host}:{port}: {e}") from e
+        raise ConfigurationError(f"cannot serve the watch page on {host}:{port}: {e}") from e
 
 
 def cmd_watch(args) -> int:
     """Serve the live page of a run directory until Ctrl-C."""
     run_dir = Path(args.run)
-    if not run_dir.is_dir():
-        raise ValueError(f"{run_dir}: no such run directory")
-    if not (run_dir / "run.json").is_file():
+    if run_dir.exists() and not run_dir.is_dir():
+        raise ConfigurationError(f"{run_dir}: not a run directory (a file)")
+    absent = not run_dir.is_dir()
+    if absent and not run_dir.absolute().parent.is_dir():      # a mistyped path, not a run to come
+        raise ConfigurationError(f"{run_dir}: no such run directory, nor its parent {run_dir.absolute().parent} "
+                                 f"(bench watch waits for a run directory to appear inside an existing one)")
+    if absent:        # started before the run: the page shows "waiting" until the run creates it
+        print(f"waiting for {run_dir} to appear ... (Ctrl-C stops)", flush=True)
+    elif not (run_dir / "run.json").is_file():
         log.warning("%s has no run.json yet: the page waits for the run to start", run_dir)
     import signal
 
@@ -183,6 +207,9 @@ def cmd_watch(args) -> int:
         try:
             while not ended:
                 time.sleep(0.2)
+                if absent and run_dir.is_dir():
+                    absent = False
+                    print(f"{run_dir} appeared: the page follows the run", flush=True)
         finally:
             server.close()         # open pages get the last state and a goodbye
     return 0
@@ -193,30 +220,6 @@ def _add_watch_options(s) -> None:
     s.add_argument("--watch-port", type=int, default=0, help="port of the page (default: any free one)")
     s.add_argument("--watch-host", default="127.0.0.1",
                    help="interface of the page (default 127.0.0.1; others only when given)")
-
-
-def _plan_toml(p: dict) -> dict:
-    """The stored plan back into the TOML layout (the stored grid is used verbatim)."""
-    keys = ("settle_cycles", "min_settle_s", "measure_cycles", "min_measure_s", "control_cycles", "force_tolerance",
-            "max_iterations", "harmonics", "ramp_s", "min_sample_rate_Hz", "max_extra_settle_blocks")
-    out = {"name": p["name"], "levels_N": list(p["levels_N"]), "infeasible": p.get("infeasible", "refuse"),
-           "adaptive_per_sweep": p.get("adaptive_per_sweep", 0),
-           "frequencies": {"list_Hz": list(p["freqs_Hz"]), "direction": p["direction"]},
-           "control": {k: p[k] for k in keys if k in p}}
-    if p.get("limits"):
-        out["limits"] = p["limits"]
-    return out
-
-
-def _rig_toml(r: dict) -> dict:
-    return {"name": r["name"], "notes": r["notes"], "simulated": r["simulated"],
-            "instruments": {"generator": r["generator_url"], "sensor": r["sensor_url"], "daq": r["daq_url"]},
-            "calibration": {k: r[k] for k in ("force_V_per_N", "accel_V_per_m_s2", "disp_V_per_m",
-                                              "amp_gain_N_per_V")},
-            "limits": r["limits"],
-            "expected": {"mass_kg": r["expected_mass_kg"], "x_s_m": r["expected_x_s_m"],
-                         "F_s_N": r["expected_F_s_N"], "n": r["expected_n"]},
-            **({"model": r["model"]} if r["model"] else {})}
 
 
 def cmd_run(args) -> int:
@@ -258,7 +261,7 @@ def cmd_identify(args) -> int:
     from procedures.online_id import MAX_HARMONICS
     from sim.identify import identify_results
 
-    from .config import DEFAULTS, load_rig, parse_rig
+    from .config import DEFAULTS, load_rig, parse_rig, rig_toml
     from .sources import load_source
     from .storage import RunStore
 
@@ -267,13 +270,13 @@ def cmd_identify(args) -> int:
         raise FileNotFoundError(2, "no such file or directory (expected a run directory or a UFF58 file)", str(source))
     src = load_source(source)
     if src.kind == "run":
-        rig = parse_rig({"rig": _rig_toml(src.metadata["rig"])}, f"{source}/run.json")
+        rig = parse_rig({"rig": rig_toml(src.metadata["rig"])}, f"{source}/run.json")
     else:
         rig = load_rig(Path(args.rig) if args.rig else DEFAULTS / "sim_rig.toml")
     for r in src.rejected:
         print(f"step {r.step} rejected: {r.reason}")
     if not src.steps:
-        raise ValueError(f"{source}: no steps with force, acceleration and displacement to identify from")
+        raise ConfigurationError(f"{source}: no steps with force, acceleration and displacement to identify from")
     guess = dict(F_s_N=rig.expected_F_s_N, x_s_m=rig.expected_x_s_m, n=rig.expected_n,
                  mass_kg=rig.expected_mass_kg)
     est = identify_results([s.harmonics for s in src.steps], guess, MAX_HARMONICS).estimate
@@ -304,22 +307,27 @@ def cmd_analyze(args) -> int:
 
 
 def cmd_check(args) -> int:
-    """Verify a run directory: every problem on one line, exit 1 if there is any."""
-    from .storage import RunStore
+    """Verify a run directory against its plan: every missing, damaged and orphan step on
+    one line, then the count; exit 1 if there is any problem."""
+    from .storage import RunDirError, RunStore
 
     store = RunStore(Path(args.run))
     if not store.path.is_dir():
         RunStore.open(store.path)             # raises the one-line usage error
-    problems = store.check()
-    n = len(store.step_files())
+    try:
+        acc = store.account()
+    except RunDirError:                       # run.json damaged: the files alone, no plan to count against
+        acc = None
+    problems = store.check() if acc is None else acc.missing + acc.damaged + acc.orphan
     for p in problems:
         print(f"{p.kind:>9}  {p}")
-    good = n - len({p.key for p in problems if p.key and p.kind != "unknown" and
-                    (store.steps_dir / f"{p.key}.json").exists()})
-    print(f"{store.path}: {n} step result files, {good} intact; "
-          f"{len(problems)} problem{'s' if len(problems) != 1 else ''}"
-          + (f" (bench resume {store.path} measures damaged steps again, keeping their files in damaged/)"
-             if any(p.key and p.kind != "unknown" for p in problems) else ""))
+    if acc is None:
+        print(f"{store.path}: {len(store.step_files())} step result files; run.json unreadable, so the steps "
+              f"cannot be counted against the plan; {len(problems)} problem{'s' if len(problems) != 1 else ''}")
+        return ExitCode.FAILURE
+    print(f"{store.path}: {acc.summary()}"
+          + (f" (bench resume {store.path} measures missing and damaged steps again, keeping damaged "
+             "files in damaged/)" if acc.missing or acc.damaged else ""))
     return ExitCode.FAILURE if problems else ExitCode.OK
 
 
@@ -339,64 +347,100 @@ def cmd_twins(args) -> int:
     from .config import DEFAULTS, load_rig
     rig = load_rig(Path(args.rig) if args.rig else DEFAULTS / "sim_rig.toml")
     if not rig.simulated:
-        raise ValueError(f"{args.rig}: not a simulated rig (simulated = true is needed)")
+        raise ConfigurationError(f"{args.rig}: not a simulated rig (simulated = true is needed)")
     run_standalone(SimulatedRig(RigModel.from_dict(rig.model)), args.host, serial_ports=args.serial)
     return 0
 
 
+DESCRIPTION = """\
+Stepped-sine friction tests on the linear-guideway shaker rig, or on its simulated twin:
+plan and run a test, watch it live, stop and resume it, then report, export and analyse
+the measurements.  Start with `bench demo` (the default plan on the simulated rig), then
+`bench dry-run --plan P --rig R` and `bench run --plan P --rig R --out DIR` with your own
+plan and rig files (annotated examples in bench/defaults/).  Force levels 0.1-100 N,
+frequencies 20-1000 Hz.  `bench COMMAND --help` explains each command."""
+
+EPILOG = """\
+exit codes: 0 done; 1 failure (an instrument error, a failed run, `bench check` found
+problems); 2 usage or configuration error (the message names the file, key and allowed
+values); 3 stopped by a limit (refused before the output went on, or aborted); 130
+interrupted (Ctrl-C, SIGTERM).  The output is switched off on every exit.
+-v, --debug and -vv may come before or after the command."""
+
+
+class _Formatter(argparse.RawDescriptionHelpFormatter):
+    """Every option's default shown after its help, unless it has none to show."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        default = action.default
+        if ("%(default)" in text or "default" in text or any(default is x for x in (None, False, argparse.SUPPRESS))
+                or not action.option_strings or action.option_strings[0] in ("-v", "-h")):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
 class _Parser(argparse.ArgumentParser):
-    """Usage errors in one line, naming the command, the problem and where to look."""
+    """Usage errors in one line, naming the command, the problem and where to look; every
+    (sub)command's help shows the defaults."""
+
+    def __init__(self, *a, **k):
+        k.setdefault("formatter_class", _Formatter)
+        super().__init__(*a, **k)
 
     def error(self, message):
         self.exit(ExitCode.USAGE, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="bench", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
-    p.add_argument("--debug", action="store_true", help="show the traceback of an error")
+    p = _Parser(prog="bench", description=DESCRIPTION, epilog=EPILOG)
+    _add_common(p, argparse.SUPPRESS)
+    p.set_defaults(verbose=0, debug=False)
+    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("paper", help="redraw the seed paper's numerical figures (PNG + CSV)")
-    s.add_argument("--out", default="out/paper")
-    s.add_argument("--quick", action="store_true", help="coarse grids (seconds)")
+    s.add_argument("--out", default="out/paper", help="directory for the figures, their CSV and a README")
+    s.add_argument("--quick", action="store_true", help="coarse grids (seconds instead of minutes)")
     s.set_defaults(func=cmd_paper)
 
     s = sub.add_parser("demo", help="the main job: the default plan on the simulated rig, with its report")
-    s.add_argument("--out", default="out/demo")
+    s.add_argument("--out", default="out/demo", help="run directory (emptied first: the demo starts afresh)")
     _add_watch_options(s)
     s.set_defaults(func=cmd_demo)
 
     for name, func, hlp in (("run", cmd_run, "run a stepped-sine plan on a rig"),
                             ("dry-run", cmd_dry_run, "check a plan against the rig's limits; print the envelope")):
         s = sub.add_parser(name, help=hlp)
-        s.add_argument("--plan", help="plan TOML (default: the demo plan)")
-        s.add_argument("--rig", help="rig TOML (default: the simulated rig)")
+        s.add_argument("--plan", help="plan TOML: force levels (0.1-100 N), frequencies (20-1000 Hz), control "
+                                      "(default: the demo plan, bench/defaults/demo_plan.toml)")
+        s.add_argument("--rig", help="rig TOML: instrument URLs, calibration, limits "
+                                     "(default: the simulated rig, bench/defaults/sim_rig.toml)")
         if name == "run":
-            s.add_argument("--out", required=True, help="new run directory")
-            s.add_argument("--seed", type=int, help="noise seed of a simulated rig")
-            s.add_argument("--no-report", action="store_true")
+            s.add_argument("--out", required=True, help="new run directory (bench resume continues it)")
+            s.add_argument("--seed", type=int, help="noise seed of a simulated rig (default: the rig file's)")
+            s.add_argument("--no-report", action="store_true", help="do not write the report at the end")
             _add_watch_options(s)
         s.set_defaults(func=func)
 
     s = sub.add_parser("resume", help="continue an interrupted run without repeating completed steps")
-    s.add_argument("run")
-    s.add_argument("--no-report", action="store_true")
+    s.add_argument("run", help="run directory of an interrupted, aborted or failed run")
+    s.add_argument("--no-report", action="store_true", help="do not write the report at the end")
     _add_watch_options(s)
     s.set_defaults(func=cmd_resume)
 
     s = sub.add_parser("watch", help="serve a live page of a run directory (running, resumed or finished)")
-    s.add_argument("run")
+    s.add_argument("run", help="run directory (it may not exist yet: the page waits for it)")
     s.add_argument("--port", type=int, default=0, help="port (default: any free one)")
     s.add_argument("--host", default="127.0.0.1", help="interface (default 127.0.0.1; others only when given)")
     s.set_defaults(func=cmd_watch)
 
     s = sub.add_parser("report", help="(re)write the report of a run directory")
-    s.add_argument("run")
+    s.add_argument("run", help="run directory (the report goes to RUN/report/)")
     s.set_defaults(func=cmd_report)
 
     s = sub.add_parser("export", help="write a run's steps as CSV and UFF 58 (FRFs and time records)")
-    s.add_argument("run")
+    s.add_argument("run", help="run directory")
     s.add_argument("--out", help="output directory (default: <run>/export)")
     s.add_argument("--no-time", action="store_true", help="skip the time records (time.uff)")
     s.set_defaults(func=cmd_export)
@@ -420,7 +464,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("twins", help="serve the simulated rig's instruments on loopback; print their URLs")
     s.add_argument("--rig", help="simulated rig TOML (default: bench/defaults/sim_rig.toml)")
-    s.add_argument("--host", default="127.0.0.1")
+    s.add_argument("--host", default="127.0.0.1", help="interface the twins listen on")
     s.add_argument("--serial", action="store_true", help="also serve SCPI and Modbus RTU on pty pairs")
     s.set_defaults(func=cmd_twins)
 
@@ -428,51 +472,63 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_warmup)
 
     s = sub.add_parser("frf", help="compliance G(beta) of the model at one force level (CSV to stdout)")
-    s.add_argument("--gamma0", type=float, default=0.6)
-    s.add_argument("--n", type=float, default=1.5)
-    s.add_argument("--beta-min", type=float, default=0.2)
-    s.add_argument("--beta-max", type=float, default=2.0)
-    s.add_argument("--points", type=int, default=200)
-    s.add_argument("--engine", choices=("shooting", "rk4"), default="shooting")
+    s.add_argument("--gamma0", type=float, default=0.6, help="force ratio P0/F_s")
+    s.add_argument("--n", type=float, default=1.5, help="shape factor n of the virgin curve")
+    s.add_argument("--beta-min", type=float, default=0.2, help="lowest frequency ratio beta")
+    s.add_argument("--beta-max", type=float, default=2.0, help="highest frequency ratio beta")
+    s.add_argument("--points", type=int, default=200, help="frequency ratios, linearly spaced")
+    s.add_argument("--engine", choices=("shooting", "rk4"), default="shooting",
+                   help="steady state by half-period shooting (fast) or by RK4 time stepping")
     s.set_defaults(func=cmd_frf)
 
     s = sub.add_parser("check", help="verify a run directory: list missing, truncated, damaged and unknown steps")
-    s.add_argument("run")
+    s.add_argument("run", help="run directory")
     s.set_defaults(func=cmd_check)
 
     from .studies.cli import add_parsers as add_study_parsers
     add_study_parsers(sub, Progress)
-    return _with_debug(p)
+    return _with_common(p)
 
 
-def _with_debug(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    """``--debug`` after any subcommand too (every subcommand, whoever added it)."""
+def _add_common(p: argparse.ArgumentParser, default) -> None:
+    p.add_argument("-v", "--verbose", action="count", default=default,
+                   help="more detail on the terminal: -v the bench's INFO lines, -vv its DEBUG lines "
+                        "(other libraries speak only for warnings)")
+    p.add_argument("--debug", action="store_true", default=default, help="show the traceback of an error")
+
+
+def _with_common(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """``-v`` and ``--debug`` after any subcommand too (every level of every subcommand,
+    whoever added it): ``bench run -v`` is ``bench -v run``."""
     for action in p._actions:
         if isinstance(action, argparse._SubParsersAction):
             for s in action.choices.values():
                 if "--debug" not in s._option_string_actions:
-                    s.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
-                                   help="show the traceback of an error")
+                    _add_common(s, argparse.SUPPRESS)
+                _with_common(s)
     return p
 
 
-def _is(e: BaseException, module: str, name: str) -> bool:
-    """isinstance without importing: a module that raised ``e`` is loaded already."""
-    cls = getattr(sys.modules.get(module), name, None)
-    return cls is not None and isinstance(e, cls)
+# OSErrors about a path the user named (a missing file, a directory where a file goes):
+# usage errors.  Any other OSError is a runtime failure (a full disk, a lost network).
+_PATH_ERRORS = (FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError, PermissionError)
 
 
 def _exit_code(e: BaseException) -> ExitCode:
+    """The documented exit code of an exception, by its place in the error tree
+    (sim/errors.py, decision record 0027)."""
     if isinstance(e, KeyboardInterrupt):
         return ExitCode.INTERRUPTED
-    if _is(e, "procedures.safety", "LimitExceeded") or _is(e, "bench.session", "EnvelopeError"):
+    if isinstance(e, (LimitError, EnvelopeError)):
         return ExitCode.LIMIT
-    if _is(e, "drivers._errors", "InstrumentError"):
-        return ExitCode.FAILURE
-    if isinstance(e, (ValueError, FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError,
-                      PermissionError, UnicodeDecodeError)):
+    if isinstance(e, (ConfigurationError, RunDirectoryError, _PATH_ERRORS)):
         return ExitCode.USAGE
-    return ExitCode.FAILURE
+    return ExitCode.FAILURE           # InstrumentError, another BenchError, a failure, a bug
+
+
+def _internal(e: BaseException) -> bool:
+    """A bug (or a library's error nobody translated), not an error raised on purpose."""
+    return not isinstance(e, (BenchError, KeyboardInterrupt, OSError))
 
 
 def _one_line(e: BaseException) -> str:
@@ -483,9 +539,12 @@ def _one_line(e: BaseException) -> str:
         return f"{where}: {e.strerror}" if where else e.strerror
     text = str(e).strip().splitlines()
     first = text[0] if text else ""
+    named = f"{type(e).__name__}: {first}" if first else type(e).__name__
+    if _internal(e):
+        return f"internal error ({named})"
     if _exit_code(e) in (ExitCode.USAGE, ExitCode.LIMIT) and first:
         return first
-    return f"{type(e).__name__}: {first}" if first else type(e).__name__
+    return named
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -493,18 +552,22 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as e:               # usage error or --help: argparse has printed it
         return int(e.code or 0)
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    handler = setup_logging(args.verbose)
     try:
         return int(args.func(args))
     except (Exception, KeyboardInterrupt) as e:   # one line, a documented code; --debug: traceback
         code = _exit_code(e)
+        end_line()
         if args.debug:
             log.exception("bench %s failed", args.command)
-        print(f"bench {args.command}: {'error: ' if code != ExitCode.INTERRUPTED else ''}{_one_line(e)}"
-              + ("" if args.debug or code == ExitCode.INTERRUPTED else " (--debug shows the traceback)"),
+        hint = ("" if args.debug or code == ExitCode.INTERRUPTED else
+                ", rerun with --debug for the traceback" if _internal(e) else " (--debug shows the traceback)")
+        print(f"bench {args.command}: {'error: ' if code != ExitCode.INTERRUPTED else ''}{_one_line(e)}{hint}",
               file=sys.stderr)
         return code
+    finally:
+        end_line()
+        logging.getLogger().removeHandler(handler)
 
 
 if __name__ == "__main__":

@@ -6,6 +6,7 @@ annotated examples (the demo's plan and the simulated rig).
 
 from __future__ import annotations
 
+import difflib
 import logging
 import math
 import tomllib
@@ -13,25 +14,66 @@ from pathlib import Path
 
 import numpy as np
 
-from procedures.plan import Limits, Plan, Rig, StepSpec
+from procedures.plan import Limits, Plan, Rig
+from sim.errors import ConfigurationError
 
 log = logging.getLogger(__name__)
 
-MAX_FREQ_HZ = 1000.0
+# The bench's working range (README, bench/defaults/demo_plan.toml, `bench run --help`):
+# force levels 0.1-100 N (force amplitude, half peak-to-peak), frequencies 20-1000 Hz.
+MIN_LEVEL_N, MAX_LEVEL_N = 0.1, 100.0
+MIN_FREQ_HZ, MAX_FREQ_HZ = 20.0, 1000.0
+FORCE_RANGE = f" (the bench's force range, {MIN_LEVEL_N:g}-{MAX_LEVEL_N:g} N)"
+FREQ_RANGE = f" (the bench's frequency range, {MIN_FREQ_HZ:g}-{MAX_FREQ_HZ:g} Hz)"
 DEFAULTS = Path(__file__).with_name("defaults")
 
+LIMIT_KEYS = ("drive_V", "force_N", "disp_m", "accel_m_s2")
+# Every key each table may hold (a table's path -> its keys); an unknown key is named, with
+# the close valid one, before any value is read (a misspelled required key is reported as
+# the misspelling, not as the key it was meant to be).  [rig.model]: MODEL_SCHEMA below.
+KEYS = {
+    "plan": ("name", "levels_N", "frequencies", "control", "limits", "infeasible", "adaptive_per_sweep"),
+    "plan.frequencies": ("list_Hz", "start_Hz", "stop_Hz", "points", "spacing", "direction"),
+    "plan.control": ("settle_cycles", "min_settle_s", "measure_cycles", "min_measure_s", "control_cycles",
+                     "force_tolerance", "max_iterations", "harmonics", "ramp_s", "min_sample_rate_Hz",
+                     "max_extra_settle_blocks"),
+    "plan.limits": LIMIT_KEYS,
+    "rig": ("name", "notes", "simulated", "instruments", "calibration", "limits", "expected", "model"),
+    "rig.instruments": ("generator", "sensor", "daq"),
+    "rig.calibration": ("force_V_per_N", "accel_V_per_m_s2", "disp_V_per_m", "amp_gain_N_per_V"),
+    "rig.limits": LIMIT_KEYS,
+    "rig.expected": ("mass_kg", "x_s_m", "F_s_N", "n"),
+}
 
-class ConfigError(ValueError):
-    """A configuration value is missing, unknown or out of range."""
+
+ConfigError = ConfigurationError     # a configuration value is missing, unknown or out of range
 
 
 class _Section:
     """Typed access to one TOML table that remembers where it came from."""
 
-    def __init__(self, source: str, path: str, data: dict):
+    def __init__(self, source: str, path: str, data: dict, keys=None):
         if not isinstance(data, dict):
             raise ConfigError(f"{source}: [{path}] must be a table")
         self.source, self.path, self.data, self.used = source, path, data, set()
+        if keys is not None:
+            self.unknown(keys)
+
+    def unknown(self, keys) -> None:
+        """Name every key outside ``keys``, with the close valid one when there is one."""
+        problems = []
+        for key in [k for k in self.data if k not in keys]:
+            table = isinstance(self.data[key], dict)
+            near = difflib.get_close_matches(key, list(keys), n=1, cutoff=0.6)
+            full = lambda k: f"{self.path}.{k}" if self.path else k     # noqa: E731
+            if table:
+                hint = f"did you mean [{full(near[0])}]?" if near else f"allowed: {sorted(keys)}"
+                problems.append(f"[{full(key)}]: unknown table; {hint}")
+            else:
+                hint = f"did you mean {near[0]}?" if near else f"allowed: {sorted(keys)}"
+                problems.append(f"{'[' + self.path + '] ' if self.path else ''}{key}: unknown key; {hint}")
+        if problems:
+            raise ConfigError(f"{self.source}: " + "; ".join(problems))
 
     def where(self, key: str) -> str:
         return f"{self.source}: [{self.path}] {key}"
@@ -44,7 +86,7 @@ class _Section:
             return default
         return self.data[key]
 
-    def number(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, integer=False):
+    def number(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, integer=False, note=""):
         v = self._get(key, default)
         kind = "an integer" if integer else "a number"
         if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not float(v).is_integer()):
@@ -52,15 +94,15 @@ class _Section:
         ok = (v > lo if lo_open else v >= lo) and v <= hi and math.isfinite(v)
         if not ok:
             lo_s = f"> {lo:g}" if lo_open else f">= {lo:g}"
-            raise ConfigError(f"{self.where(key)}: must be {lo_s} and <= {hi:g}, got {v!r}")
+            raise ConfigError(f"{self.where(key)}: must be {lo_s} and <= {hi:g}{note}, got {v!r}")
         return int(v) if integer else float(v)
 
-    def numbers(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False):
+    def numbers(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, note=""):
         v = self._get(key, default)
         if not isinstance(v, list) or not v:
             raise ConfigError(f"{self.where(key)}: must be a non-empty list of numbers, got {v!r}")
         sub = _Section(self.source, self.path, {f"{key}[{i}]": x for i, x in enumerate(v)})
-        return [sub.number(f"{key}[{i}]", lo=lo, hi=hi, lo_open=lo_open) for i in range(len(v))]
+        return [sub.number(f"{key}[{i}]", lo=lo, hi=hi, lo_open=lo_open, note=note) for i in range(len(v))]
 
     def choice(self, key, default, allowed):
         v = self._get(key, default)
@@ -80,9 +122,10 @@ class _Section:
             raise ConfigError(f"{self.where(key)}: must be true or false, got {v!r}")
         return v
 
-    def table(self, key) -> "_Section":
+    def table(self, key) -> _Section:
         self.used.add(key)
-        return _Section(self.source, f"{self.path}.{key}" if self.path else key, self.data.get(key, {}))
+        path = f"{self.path}.{key}" if self.path else key
+        return _Section(self.source, path, self.data.get(key, {}), KEYS.get(path))
 
     def done(self) -> None:
         unknown = sorted(set(self.data) - self.used)
@@ -105,11 +148,20 @@ def _load(path: Path) -> dict:
         raise ConfigError(f"{path}: not valid TOML: {e}") from None
 
 
-def _limits(sec: _Section) -> Limits:
-    lim = Limits(drive_V=sec.number("drive_V", _REQUIRED, 0, 10, lo_open=True),
-                 force_N=sec.number("force_N", _REQUIRED, 0, 1000, lo_open=True),
-                 disp_m=sec.number("disp_m", _REQUIRED, 0, 0.01, lo_open=True),
-                 accel_m_s2=sec.number("accel_m_s2", _REQUIRED, 0, 1e4, lo_open=True))
+def read_toml(path: Path) -> dict:
+    """A TOML file's tables; a missing or malformed file is a ConfigError naming it."""
+    return _load(path)
+
+
+def _limits(sec: _Section, required: bool = True) -> Limits:
+    """The rig's limits (all four required) or a plan's tighter ones (each optional: one
+    left out is the rig's, procedures.safety.tightest)."""
+    need = _REQUIRED if required else None
+
+    def one(key, hi):
+        return sec.number(key, need, 0, hi, lo_open=True) if required or key in sec.data else None
+    lim = Limits(drive_V=one("drive_V", 10), force_N=one("force_N", 1000), disp_m=one("disp_m", 0.01),
+                 accel_m_s2=one("accel_m_s2", 1e4))
     sec.done()
     return lim
 
@@ -119,16 +171,16 @@ def load_plan(path: Path) -> Plan:
 
 
 def parse_plan(data: dict, source: str = "plan") -> Plan:
-    top = _Section(source, "", data)
+    top = _Section(source, "", data, ("plan",))
     p = top.table("plan")
     top.done()
-    levels = p.numbers("levels_N", _REQUIRED, 0.0, 1000.0, lo_open=True)
+    levels = p.numbers("levels_N", _REQUIRED, MIN_LEVEL_N, MAX_LEVEL_N, note=FORCE_RANGE)
     fr = p.table("frequencies")
     if "list_Hz" in fr.data:
-        freqs = sorted(fr.numbers("list_Hz", None, 0.0, MAX_FREQ_HZ, lo_open=True))
+        freqs = sorted(fr.numbers("list_Hz", None, MIN_FREQ_HZ, MAX_FREQ_HZ, note=FREQ_RANGE))
     else:
-        start = fr.number("start_Hz", _REQUIRED, 0.0, MAX_FREQ_HZ, lo_open=True)
-        stop = fr.number("stop_Hz", _REQUIRED, start, MAX_FREQ_HZ)
+        start = fr.number("start_Hz", _REQUIRED, MIN_FREQ_HZ, MAX_FREQ_HZ, note=FREQ_RANGE)
+        stop = fr.number("stop_Hz", _REQUIRED, start, MAX_FREQ_HZ, note=FREQ_RANGE)
         points = fr.number("points", _REQUIRED, 1, 10000, integer=True)
         spacing = fr.choice("spacing", "log", ("log", "linear"))
         grid = np.geomspace(start, stop, points) if spacing == "log" else np.linspace(start, stop, points)
@@ -153,7 +205,7 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
         ramp_s=c.number("ramp_s", 0.1, 0, 60),
         min_sample_rate_Hz=c.number("min_sample_rate_Hz", 25600.0, 1000, 204800),
         max_extra_settle_blocks=c.number("max_extra_settle_blocks", 3, 0, 100, integer=True),
-        limits=_limits(lim) if lim.data else None,
+        limits=_limits(lim, required=False) if lim.data else None,
         infeasible=p.choice("infeasible", "refuse", ("refuse", "skip")),
         adaptive_per_sweep=p.number("adaptive_per_sweep", 0, 0, 10000, integer=True))
     # every fitted harmonic must stay below Nyquist at the highest frequency (the DAQ samples
@@ -216,10 +268,7 @@ def _check_model(sec: _Section) -> None:
     """Each [rig.model] key against its unit and range, then the model's own rules."""
     from sim.rig import RigModel
 
-    unknown = sorted(set(sec.data) - set(MODEL_SCHEMA))
-    if unknown:
-        raise ConfigError(f"{sec.source}: [rig.model] unknown rig model keys {unknown}; "
-                          f"allowed: {sorted(MODEL_SCHEMA)}")
+    sec.unknown(MODEL_SCHEMA)
     for key in sec.data:
         unit, lo, hi, lo_open, integer = MODEL_SCHEMA[key]
         try:
@@ -237,7 +286,7 @@ def load_rig(path: Path) -> Rig:
 
 
 def parse_rig(data: dict, source: str = "rig") -> Rig:
-    top = _Section(source, "", data)
+    top = _Section(source, "", data, ("rig",))
     r = top.table("rig")
     top.done()
     simulated = r.flag("simulated", False)
@@ -269,3 +318,28 @@ def parse_rig(data: dict, source: str = "rig") -> Rig:
     exp.done()
     r.done()
     return rig
+
+
+def plan_toml(p: dict) -> dict:
+    """The stored plan back into the TOML layout (the stored grid is used verbatim)."""
+    keys = ("settle_cycles", "min_settle_s", "measure_cycles", "min_measure_s", "control_cycles", "force_tolerance",
+            "max_iterations", "harmonics", "ramp_s", "min_sample_rate_Hz", "max_extra_settle_blocks")
+    out = {"name": p["name"], "levels_N": list(p["levels_N"]), "infeasible": p.get("infeasible", "refuse"),
+           "adaptive_per_sweep": p.get("adaptive_per_sweep", 0),
+           "frequencies": {"list_Hz": list(p["freqs_Hz"]), "direction": p["direction"]},
+           "control": {k: p[k] for k in keys if k in p}}
+    if p.get("limits"):
+        out["limits"] = {k: v for k, v in p["limits"].items() if v is not None}   # None: the rig's
+    return out
+
+
+def rig_toml(r: dict) -> dict:
+    """The stored rig (run.json) back into the TOML layout."""
+    return {"name": r["name"], "notes": r["notes"], "simulated": r["simulated"],
+            "instruments": {"generator": r["generator_url"], "sensor": r["sensor_url"], "daq": r["daq_url"]},
+            "calibration": {k: r[k] for k in ("force_V_per_N", "accel_V_per_m_s2", "disp_V_per_m",
+                                              "amp_gain_N_per_V")},
+            "limits": r["limits"],
+            "expected": {"mass_kg": r["expected_mass_kg"], "x_s_m": r["expected_x_s_m"],
+                         "F_s_N": r["expected_F_s_N"], "n": r["expected_n"]},
+            **({"model": r["model"]} if r["model"] else {})}

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.errors import ConfigurationError
 from sim.records import estimate_frequency
 
 from .storage import RunStore
@@ -300,10 +301,10 @@ def import_uff58(path: Path) -> UffImport:
         uff = pyuff.UFF(str(path))
         types = list(uff.get_set_types())
     except Exception as e:  # noqa: BLE001 - pyuff raises bare Exception and others
-        raise ValueError(f"{path}: not a readable UFF file ({type(e).__name__}: {e})") from None
+        raise ConfigurationError(f"{path}: not a readable UFF file ({type(e).__name__}: {e})") from None
     idx = [i for i, t in enumerate(types) if int(t) == 58]
     if not idx:
-        raise ValueError(f"{path}: no dataset 58 in the file (types: {sorted(set(int(t) for t in types))})")
+        raise ConfigurationError(f"{path}: no dataset 58 in the file (types: {sorted(set(int(t) for t in types))})")
     sets = []
     for i in idx:                     # one at a time: a damaged record costs only itself
         try:
@@ -313,7 +314,7 @@ def import_uff58(path: Path) -> UffImport:
         except Exception as e:  # noqa: BLE001
             log.warning("%s: dataset #%d unreadable (%s: %s); skipped", path, i + 1, type(e).__name__, e)
     if not sets:
-        raise ValueError(f"{path}: none of the {len(idx)} dataset-58 records is readable")
+        raise ConfigurationError(f"{path}: none of the {len(idx)} dataset-58 records is readable")
     out = UffImport()
     frfs = [d for d in sets if int(d["func_type"]) == FUNC_FRF]
     times = [d for d in sets if int(d["func_type"]) == FUNC_TIME]

@@ -20,67 +20,82 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers import (CanFdDaq, Channel, ChannelSpec, InstrumentError, ModbusEddySensor,
-                     ScpiFunctionGenerator, open_can_bus, start_twins)
+from drivers import (
+    CanFdDaq,
+    Channel,
+    ChannelSpec,
+    InstrumentError,
+    ModbusEddySensor,
+    ScpiFunctionGenerator,
+    open_can_bus,
+    start_twins,
+)
 from procedures.online_id import OnlineIdentification, identifiability
-from procedures.safety import LimitExceeded, SupervisedDaq, SupervisedGenerator, Supervisor, tightest
-from procedures.stepped_sine import SteppedSine
+from procedures.plan import StepSpec
+from procedures.safety import LimitExceeded, SupervisedDaq, SupervisedGenerator, Supervisor, check_gap, tightest
+from procedures.stepped_sine import SteppedSine, StepResult
+from sim.errors import EnvelopeError
 
 from .config import Plan, Rig
 from .signals import SignalLatch, uninterruptible
-from .storage import RunStore
+from .storage import RunStatus, RunStore, planned_count
 from .watch import stop as stop_request
 
 log = logging.getLogger(__name__)
 
-FORCE_MARGIN = 1.25      # control overshoot allowance in the envelope check
+FORCE_MARGIN = 1.25      # control overshoot allowance: the envelope is checked at 1.25 x each level
 
 
 @dataclass(frozen=True)
 class EnvelopePoint:
     force_N: float
     freq_Hz: float
-    drive_V: float
-    disp_m: float
+    drive_V: float           # generator output amplitude (= Vpp/2) at the level, without the margin
+    disp_m: float            # bounds at FORCE_MARGIN x the level
     accel_m_s2: float
     problems: tuple[str, ...]
 
 
 def envelope(plan: Plan, rig: Rig) -> list[EnvelopePoint]:
-    """Expected peak drive, displacement and acceleration of every (level, frequency).
+    """Expected drive, peak displacement and acceleration of every (level, frequency).
 
-    Displacement: free mass P/(m w^2) plus a pre-rolling allowance of 3 x_s; acceleration
-    P/m (the free-mass bound, reached above the friction resonance)."""
+    Drive: the generator's amplitude (V, = Vpp/2: the unit of ``drive_V`` and of the
+    amplifier gain) at the level.  The limits are checked at FORCE_MARGIN x the level (the
+    force control may overshoot), and a problem says so.  Displacement: free mass
+    P/(m w^2) plus a pre-rolling allowance of 3 x_s; acceleration P/m (the free-mass bound,
+    reached above the friction resonance); both at the margin."""
     lim = tightest(rig.limits, plan.limits)
+    m = f"x {FORCE_MARGIN:g} margin"
     out = []
     for F in plan.levels_N:
         for f in plan.freqs_Hz:
             Fp = F * FORCE_MARGIN
             w = 2 * math.pi * f
-            drive = Fp / rig.amp_gain_N_per_V
+            drive = F / rig.amp_gain_N_per_V
             disp = Fp / (rig.expected_mass_kg * w * w) + 3 * rig.expected_x_s_m
             acc = Fp / rig.expected_mass_kg
             problems = tuple(p for p, bad in (
-                (f"drive {drive:.3g} V > {lim.drive_V:g} V", drive > lim.drive_V),
-                (f"force {Fp:.3g} N > {lim.force_N:g} N", Fp > lim.force_N),
-                (f"displacement {disp * 1e3:.3g} mm > {lim.disp_m * 1e3:g} mm", disp > lim.disp_m),
-                (f"acceleration {acc:.3g} m/s^2 > {lim.accel_m_s2:g} m/s^2", acc > lim.accel_m_s2)) if bad)
+                (f"drive {drive:.3g} V {m} = {drive * FORCE_MARGIN:.3g} V > drive_V {lim.drive_V:g} V",
+                 drive * FORCE_MARGIN > lim.drive_V),
+                (f"{F:g} N {m} = {Fp:.3g} N > force_N {lim.force_N:g} N", Fp > lim.force_N),
+                (f"displacement {disp * 1e3:.3g} mm at {F:g} N {m} > disp_m {lim.disp_m * 1e3:g} mm",
+                 disp > lim.disp_m),
+                (f"acceleration {acc:.3g} m/s^2 at {F:g} N {m} > accel_m_s2 {lim.accel_m_s2:g} m/s^2",
+                 acc > lim.accel_m_s2)) if bad)
             out.append(EnvelopePoint(F, f, drive, disp, acc, problems))
     return out
 
 
 def envelope_report(points: list[EnvelopePoint]) -> str:
-    lines = [f"{'level N':>8} {'drive V':>8} {'disp mm (max)':>14} {'accel m/s2':>10}  problems"]
+    lines = [f"{'level N':>8} {'drive V':>8} {'disp mm (max)':>14} {'accel m/s2':>10}  problems",
+             f"(drive: the generator's amplitude, V = Vpp/2, at the level; displacement, acceleration and every "
+             f"limit check: at {FORCE_MARGIN:g} x the level, the control's overshoot margin)"]
     for F in sorted({p.force_N for p in points}):
         ps = [p for p in points if p.force_N == F]
         bad = [f"{p.freq_Hz:g} Hz: {'; '.join(p.problems)}" for p in ps if p.problems]
         lines.append(f"{F:8.3g} {max(p.drive_V for p in ps):8.3g} {max(p.disp_m for p in ps) * 1e3:14.4g} "
                      f"{max(p.accel_m_s2 for p in ps):10.3g}  {bad[0] + (f' (+{len(bad) - 1} more)' if len(bad) > 1 else '') if bad else 'ok'}")
     return "\n".join(lines)
-
-
-class EnvelopeError(ValueError):
-    pass
 
 
 def check_envelope(plan: Plan, rig: Rig) -> Plan:
@@ -118,7 +133,7 @@ class Instruments:
     daq: CanFdDaq
     sensor: ModbusEddySensor
     identities: dict
-    sim_rig: object = None
+    sim_rig: object | None = None
 
 
 def switch_off(gen: ScpiFunctionGenerator, url: str) -> bool:
@@ -179,96 +194,63 @@ def open_instruments(rig: Rig, stack: ExitStack, *, sim_seed: int | None = None,
 
 
 def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=None,
-             sim_seed: int | None = None, identify: bool = True, warm_up: bool = True) -> RunStore:
+             sim_seed: int | None = None, identify: bool = True) -> RunStore:
     """Run (or resume) ``plan`` on ``rig`` into the run directory ``out``.
 
-    A simulated rig whose kernels are not compiled yet is warmed up first (``warm_up``),
-    with a one-line notice, so compiling never counts in the progress line's ETA."""
+    The plan is checked against the rig's limits before anything is opened; the run's
+    status and the output-off confirmation are recorded whatever happens."""
     plan = check_envelope(plan, rig)
-    if rig.simulated and warm_up:
-        from .warmup import kernels_warm, warm_up as compile_kernels
-        if not kernels_warm():
-            log.warning("compiling the simulation kernels (first run only; `make setup` does it ahead)")
-            log.info("kernels compiled in %.0f s", compile_kernels())
     warnings = identifiability(plan, rig)
     for w in warnings:
         log.warning("identifiability: %s", w)
-    limits = tightest(rig.limits, plan.limits)
+    store = _open_store(plan, rig, out, resume=resume, sim_seed=sim_seed, warnings=warnings)
+    log_handler = _log_to(store.path / "bench.log")
+    try:
+        _supervised(plan, rig, store, progress=progress, sim_seed=sim_seed, identify=identify)
+    finally:
+        if log_handler:
+            logging.getLogger().removeHandler(log_handler)
+            log_handler.close()
+    return store
+
+
+def _open_store(plan: Plan, rig: Rig, out: Path, *, resume: bool, sim_seed: int | None,
+                warnings: list[str]) -> RunStore:
+    """The run directory, new or resumed (damaged steps set aside to be measured again)."""
     if resume:
         store = RunStore.open(out)
         store.set_aside_damaged()        # damaged steps are measured again, their files kept
         store.event("resume", done=len(store.done_keys()))
-        store.update(status="running")
+        store.update(status=RunStatus.RUNNING)
     else:
         store = RunStore.create(out, {"plan": plan.to_dict(), "rig": rig.to_dict(), "versions": versions(),
                                       "sim_seed": sim_seed, "identifiability_warnings": warnings})
     stop_request.clear(store.path)      # a request left from an earlier session is not for this one
     store.update(process={"pid": os.getpid(), "host": socket.gethostname()})   # watch: is it still alive?
-    log_handler = _log_to(store.path / "bench.log")
-    status = "failed"
-    sup = None
+    return store
+
+
+def _supervised(plan: Plan, rig: Rig, store: RunStore, *, progress, sim_seed: int | None,
+                identify: bool) -> None:
+    """The safety path: open the instruments, measure, and on every way out ramp down,
+    switch the output off (confirmed), close everything and record how the run ended."""
+    status = RunStatus.FAILED
+    sup: Supervisor | None = None
     latch = SignalLatch()
     with ExitStack() as stack, latch.installed():
         try:
             ins = open_instruments(rig, stack, sim_seed=sim_seed,
                                    on_output_off=lambda ok: store.event("output_off", confirmed=ok))
             store.update(identities=ins.identities)
-            sup = Supervisor(limits, ins.generator)
-            gen = SupervisedGenerator(ins.generator, sup)
-            daq = stop_request.StopOnRequest(SupervisedDaq(ins.daq, sup), store.path, also=latch.check)
-
-            def sensor_check() -> dict:
-                reading = ins.sensor.read_gap()
-                if not reading.in_range:
-                    raise LimitExceeded(f"displacement sensor reports {reading.status!r} "
-                                        f"(gap {reading.gap_mm:.4f} mm): target out of range")
-                store.event("sensor", gap_mm=reading.gap_mm, status=int(reading.status),
-                            temperature_C=reading.temperature_C)
-                return reading.__dict__
-
-            # reference position with the output off
-            rest = ins.daq.acquire_periods(100.0, 10).disp_m
-            sup.x_ref_m = float(np.mean(rest))
-            proc = SteppedSine(plan, gen, daq, amp_gain_N_per_V=rig.amp_gain_N_per_V,
-                               sensor_check=sensor_check, drive_limit_V=limits.drive_V,
-                               on_skip=lambda step, why: store.event("step_skipped", key=step.key, reason=why))
-            proc.disp_noise_floor_m = float(np.std(rest))
-            if progress and hasattr(progress, "restart"):
-                progress.restart(len(store.done_keys()))     # the ETA counts steps from here
-            online = OnlineIdentification(store.path, rig, plan.harmonics) if identify else None
-            if online:
-                online.preload(store.results(), store.raw)
-
-            progress_note = [""]       # the latest estimates, shown on the status line
-
-            def record(step, res, raw):
-                store.write_step(step.key, res, raw)
-                if online:
-                    est = online.update(res, raw)
-                    if est:
-                        v = est["values"]
-                        progress_note[0] = (f"F_s {v['F_s_N']:.3g} N x_s {v['x_s_m'] * 1e6:.3g} um "
-                                            f"n {v['n']:.3g} m {v['mass_kg']:.3g} kg")
-
-            def show(done, total, note):
-                if progress:
-                    progress(done, total, f"{note} | {progress_note[0]}")
-
-            choose = None
-            if plan.adaptive_per_sweep:
-                from procedures.online_id import choose_frequencies
-                choose = lambda sweep: choose_frequencies(           # noqa: E731
-                    sweep, online.current() if online else None, plan.adaptive_per_sweep)
-            proc.run(store.done_keys(), record, show, choose=choose)
-            status = "completed"
-            if online:
-                store.update(identification=online.final())
+            sup = Supervisor(tightest(rig.limits, plan.limits), ins.generator)
+            _measure(plan, rig, store, ins, sup, latch, progress=progress, identify=identify)
+            status = RunStatus.COMPLETED
         except LimitExceeded as e:
-            status = "aborted"
+            status = RunStatus.ABORTED
             store.event("abort", reason=str(e))
             log.error("aborted: %s", e)
         except KeyboardInterrupt as e:
-            status = "interrupted"
+            status = RunStatus.INTERRUPTED
             store.event("interrupted", reason=str(e) or "Ctrl-C")
             if sup is not None:
                 with uninterruptible("ramping down"):
@@ -277,7 +259,7 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
             log.warning("interrupted; resume with: bench resume %s", store.path)
             raise
         except InstrumentError as e:
-            status = "instrument error"
+            status = RunStatus.INSTRUMENT_ERROR
             store.event("instrument_error", error=f"{type(e).__name__}: {e}")
             log.error("instrument error: %s: %s", type(e).__name__, e)
         except Exception as e:
@@ -287,11 +269,58 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
         finally:
             with uninterruptible("switching the output off"):
                 stack.close()    # output off, then close links and twins
-            store.finish(status, steps_done=len(store.done_keys()), steps_total=len(plan.schedule()))
-            if log_handler:
-                logging.getLogger().removeHandler(log_handler)
-                log_handler.close()
-    return store
+            store.finish(status, steps_done=len(store.done_keys()), steps_total=planned_count(plan))
+
+
+def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Supervisor, latch: SignalLatch,
+             *, progress, identify: bool) -> None:
+    """The stepped-sine test on supervised instruments, each step stored (and fed to the
+    online identification) as it completes."""
+    gen = SupervisedGenerator(ins.generator, sup)
+    daq = stop_request.StopOnRequest(SupervisedDaq(ins.daq, sup), store.path, also=latch.check)
+
+    def sensor_check() -> dict:
+        reading = check_gap(ins.sensor)
+        store.event("sensor", gap_mm=reading.gap_mm, status=int(reading.status),
+                    temperature_C=reading.temperature_C)
+        return reading.__dict__
+
+    # reference position with the output off
+    rest = ins.daq.acquire_periods(100.0, 10).disp_m
+    sup.x_ref_m = float(np.mean(rest))
+    proc = SteppedSine(plan, gen, daq, amp_gain_N_per_V=rig.amp_gain_N_per_V,
+                       sensor_check=sensor_check, marker=ins.generator, drive_limit_V=sup.limits.drive_V,
+                       on_skip=lambda step, why: store.event("step_skipped", key=step.key, reason=why))
+    proc.disp_noise_floor_m = float(np.std(rest))
+    if progress and hasattr(progress, "restart"):
+        progress.restart(len(store.done_keys()))     # the ETA counts steps from here
+    online = OnlineIdentification(store.path, rig, plan.harmonics) if identify else None
+    if online:
+        online.preload(store.results(), store.raw)
+
+    progress_note = [""]       # the latest estimates, shown on the status line
+
+    def record(step: StepSpec, res: StepResult, raw: dict) -> None:
+        store.write_step(step.key, res, raw)
+        if online:
+            est = online.update(res, raw)
+            if est:
+                v = est["values"]
+                progress_note[0] = (f"F_s {v['F_s_N']:.3g} N x_s {v['x_s_m'] * 1e6:.3g} um "
+                                    f"n {v['n']:.3g} m {v['mass_kg']:.3g} kg")
+
+    def show(done: int, total: int, note: str) -> None:
+        if progress:
+            progress(done, total, f"{note} | {progress_note[0]}")
+
+    choose = None
+    if plan.adaptive_per_sweep:
+        from procedures.online_id import choose_frequencies
+        choose = lambda sweep: choose_frequencies(           # noqa: E731
+            sweep, online.current() if online else None, plan.adaptive_per_sweep)
+    proc.run(store.done_keys(), record, show, choose=choose)
+    if online:
+        store.update(identification=online.final())
 
 
 def _log_to(path: Path) -> logging.Handler | None:

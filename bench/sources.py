@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.errors import ConfigurationError, RunDirectoryError
 from sim.identify import StepHarmonics
 from sim.records import analyse_records
 
@@ -82,7 +83,7 @@ def load_source(path: Path) -> Source:
     if path.is_dir():
         return _load_run(path)
     if not path.is_file():
-        raise ValueError(f"{path}: no such run directory or file")
+        raise ConfigurationError(f"{path}: no such run directory or file")
     return _load_uff(path)
 
 
@@ -111,7 +112,7 @@ def _load_run(path: Path) -> Source:
         src = Source(path=path, kind="run", metadata=store.metadata)
         results = store.results()
     except (OSError, ValueError) as e:         # json.JSONDecodeError is a ValueError
-        raise ValueError(f"{path}: cannot read the run's metadata or step results: {e}") from e
+        raise RunDirectoryError(f"{path}: cannot read the run's metadata or step results: {e}") from e
     src.rejected += [Rejected(p.key or p.path.name, f"damaged: {p}") for p in store.problems]
     for r in results:
         key = str(r.get("key", "?"))
@@ -153,7 +154,7 @@ def _read_uff(path: Path) -> list[dict]:
         uff = pyuff.UFF(str(path))
         types = [int(t) for t in uff.get_set_types()]
     except Exception as e:  # noqa: BLE001 - pyuff raises many kinds
-        raise ValueError(f"{path}: not a readable universal file ({type(e).__name__}: {e})") from e
+        raise ConfigurationError(f"{path}: not a readable universal file ({type(e).__name__}: {e})") from e
     out = []
     for i, t in enumerate(types):
         if t != 58:
@@ -161,12 +162,12 @@ def _read_uff(path: Path) -> list[dict]:
         try:
             ds = uff.read_sets(i)
         except Exception as e:  # noqa: BLE001
-            raise ValueError(f"{path}: record {i + 1} of the file (dataset 58) cannot be read: "
+            raise ConfigurationError(f"{path}: record {i + 1} of the file (dataset 58) cannot be read: "
                              f"{type(e).__name__}: {e}") from e
         ds["_record"] = i + 1
         out.append(ds)
     if not out:
-        raise ValueError(f"{path}: no dataset 58 in the file (dataset types: {sorted(set(types))})")
+        raise ConfigurationError(f"{path}: no dataset 58 in the file (dataset types: {sorted(set(types))})")
     return out
 
 

@@ -18,10 +18,15 @@ skip a damaged or half-missing step with a warning naming the file and why, and 
 :meth:`RunStore.check` lists every problem; :meth:`RunStore.set_aside_damaged` moves a
 damaged step's files to ``<run>/damaged/<time>/`` (never deleting) so that resume measures
 it again.  Steps written before checksums existed are read with the structural checks only.
+
+run.json and every step file carry a ``format_version`` (docs/run-format.md); files without
+one are version 1, and a version newer than this code reads is refused with a message
+naming the file, never taken for damage.
 """
 
 from __future__ import annotations
 
+import enum
 import hashlib
 import io
 import json
@@ -30,16 +35,35 @@ import os
 import tempfile
 import zipfile
 from dataclasses import dataclass, fields
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
+from sim.errors import RunDirectoryError
+from sim.step_result import STEP_FORMAT_VERSION, StepResult, check_step_version
+
 log = logging.getLogger(__name__)
 
 
+# run.json's ``format_version`` (docs/run-format.md; absent = 1, the layout before the
+# field existed).  Step files carry their own: sim.step_result.STEP_FORMAT_VERSION.
+RUN_FORMAT_VERSION = 1
+
+
+class RunStatus(enum.StrEnum):
+    """``status`` in run.json (stored as these strings)."""
+
+    RUNNING = "running"
+    COMPLETED = "completed"
+    ABORTED = "aborted"                    # stopped by a safety limit
+    INTERRUPTED = "interrupted"            # Ctrl-C, SIGTERM, a stop request
+    INSTRUMENT_ERROR = "instrument error"
+    FAILED = "failed"                      # any other error
+
+
 def now_iso() -> str:
-    return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
 
 
 def _fsync_dir(path: Path) -> None:
@@ -50,7 +74,7 @@ def _fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
-def _atomic_write(path: Path, write) -> None:
+def atomic_write(path: Path, write) -> None:
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as fh:
@@ -79,7 +103,7 @@ def _json_default(o):
 
 def write_json(path: Path, obj) -> None:
     data = json.dumps(obj, indent=1, default=_json_default).encode()
-    _atomic_write(path, lambda fh: fh.write(data))
+    atomic_write(path, lambda fh: fh.write(data))
 
 
 def _sha256(data: bytes) -> str:
@@ -92,14 +116,13 @@ def _canonical(obj) -> bytes:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=_json_default).encode()
 
 
-class RunDirError(ValueError):
-    """The directory is not a readable run directory (missing, or run.json damaged)."""
+RunDirError = RunDirectoryError    # not a readable run directory (missing, or run.json damaged)
 
 
-class DamagedStep(ValueError):
+class DamagedStep(RunDirectoryError):
     """A completed step's files are missing, truncated or fail their checksum."""
 
-    def __init__(self, problem: "StepProblem"):
+    def __init__(self, problem: StepProblem):
         super().__init__(str(problem))
         self.problem = problem
 
@@ -112,6 +135,7 @@ class StepProblem:
     path: Path        # the file concerned
     kind: str         # one of PROBLEM_KINDS
     reason: str       # plain language
+    count: int = 1    # steps concerned (more than one: an adaptive sweep's shortfall)
 
     def __str__(self) -> str:
         return f"{self.path}: {self.reason}"
@@ -129,25 +153,29 @@ class RunStore:
 
     # ------------------------------------------------------------------ life cycle
     @classmethod
-    def create(cls, path: Path, metadata: dict) -> "RunStore":
+    def create(cls, path: Path, metadata: dict) -> RunStore:
         path = Path(path)
         if path.exists() and any(path.iterdir()):
             raise FileExistsError(f"run directory {path} exists and is not empty; "
                                   f"use 'bench resume {path}' or choose another --out")
         (path / "steps").mkdir(parents=True, exist_ok=True)
         store = cls(path)
-        write_json(path / "run.json", dict(metadata, status="running", started=now_iso()))
+        write_json(path / "run.json", dict(metadata, format_version=RUN_FORMAT_VERSION, status=RunStatus.RUNNING,
+                                           started=now_iso()))
         store.event("start")
         return store
 
     @classmethod
-    def open(cls, path: Path) -> "RunStore":
+    def open(cls, path: Path) -> RunStore:
         store = cls(path)
         if not store.path.exists():
             raise RunDirError(f"{path}: no such directory (expected a run directory made by 'bench run')")
         if not (store.path / "run.json").is_file():
             raise RunDirError(f"{path}: not a run directory (no run.json; expected a directory made by 'bench run')")
-        store.metadata   # noqa: B018 - a damaged run.json is named now, not deep inside a reader
+        version = store.metadata.get("format_version", 1)   # a damaged run.json is named now, not deep inside a reader
+        if not isinstance(version, int) or isinstance(version, bool) or version > RUN_FORMAT_VERSION:
+            raise RunDirError(f"{store.path / 'run.json'}: run format version {version!r}, written by a newer "
+                              f"guideway-bench (this one reads versions up to {RUN_FORMAT_VERSION}); update to read it")
         return store
 
     @property
@@ -168,7 +196,7 @@ class RunStore:
     def update(self, **fields) -> None:
         write_json(self.path / "run.json", dict(self.metadata, **fields))
 
-    def finish(self, status: str, **fields) -> None:
+    def finish(self, status: RunStatus, **fields) -> None:
         self.update(status=status, ended=now_iso(), **fields)
         self.event("end", status=status)
 
@@ -198,13 +226,14 @@ class RunStore:
         return out
 
     # ------------------------------------------------------------------ steps: writing
-    def write_step(self, key: str, result: dict, raw: dict[str, np.ndarray]) -> None:
+    def write_step(self, key: str, result: StepResult, raw: dict[str, np.ndarray]) -> None:
         buf = io.BytesIO()
         np.savez(buf, **raw)
         npz = buf.getvalue()
-        _atomic_write(self.steps_dir / f"{key}.npz", lambda fh: fh.write(npz))
+        atomic_write(self.steps_dir / f"{key}.npz", lambda fh: fh.write(npz))
         plain = json.loads(json.dumps(result, default=_json_default))    # what a reader will see
         plain.pop("integrity", None)
+        plain["format_version"] = STEP_FORMAT_VERSION
         plain["integrity"] = {"json_sha256": _sha256(_canonical(plain)), "npz_sha256": _sha256(npz),
                               "npz_bytes": len(npz)}
         write_json(self.steps_dir / f"{key}.json", plain)
@@ -216,7 +245,7 @@ class RunStore:
         """The steps' JSON files present (intact or not), in key order."""
         return sorted(self.steps_dir.glob("*.json")) if self.steps_dir.is_dir() else []
 
-    def verify_step(self, key: str) -> dict:
+    def verify_step(self, key: str) -> StepResult:
         """The step's result after checking both its files (JSON content, the .npz's size
         and checksum); raises :class:`DamagedStep` naming the file and why."""
         jp, zp = self.steps_dir / f"{key}.json", self.steps_dir / f"{key}.npz"
@@ -234,7 +263,7 @@ class RunStore:
         """Keys of the completed steps whose files are intact (a damaged step is not done)."""
         return {r["key"] for r in self.results(warn=False)}
 
-    def results(self, *, warn: bool = True) -> list[dict]:
+    def results(self, *, warn: bool = True) -> list[StepResult]:
         """Completed steps' results, in schedule order; a damaged or half-missing step is
         skipped with a warning naming the file and why (and listed in ``self.problems``)."""
         out, self.problems = [], []
@@ -307,6 +336,51 @@ class RunStore:
             problems.append(StepProblem("", p, "unknown", "not a step file"))
         return problems
 
+    def account(self) -> Accounting:
+        """The run's steps counted against its stored plan: intact, missing (no files, or
+        only one of the pair), damaged and orphan files, each named (see :class:`Accounting`)."""
+        meta = self.metadata
+        plan = stored_plan(meta)
+        problems = self.check()
+        orphan = [p for p in problems if p.kind == "unknown" or not p.key]
+        bad = {p.key: p for p in problems if p.key and p.kind != "unknown"}
+        have_json = {p.stem for p in self.step_files()}
+        have_npz = {p.stem for p in self.steps_dir.glob("*.npz")} if self.steps_dir.is_dir() else set()
+        if plan is None:
+            intact = sorted(have_json - set(bad))
+            return Accounting(None, intact, [], [p for p in bad.values()], orphan)
+        sweeps = _sweeps(plan)
+        k = plan.adaptive_per_sweep
+        intact, missing, damaged, n_planned = [], [], [], 0
+        for (li, direction), keys in sweeps.items():
+            n_sweep = min(len(keys), k) if k else len(keys)
+            n_planned += n_sweep
+            present = 0
+            for key in keys:
+                jp, zp = self.steps_dir / f"{key}.json", self.steps_dir / f"{key}.npz"
+                if key not in have_json and key not in have_npz:
+                    if not k:
+                        missing.append(StepProblem(key, jp, "missing", "missing: neither .json nor .npz"))
+                    continue
+                present += 1
+                if key not in have_json:
+                    missing.append(StepProblem(key, jp, "missing", "missing: no .json (only the .npz)"))
+                elif bad.get(key) and bad[key].kind == "missing":
+                    missing.append(StepProblem(key, zp, "missing", "missing: no .npz (only the .json)"))
+                elif key in bad:
+                    damaged.append(bad[key])
+                else:
+                    intact.append(key)
+            if k and present < n_sweep:
+                label = f"L{li:02d}-{direction}"
+                missing.append(StepProblem(label, self.steps_dir, "missing",
+                                           f"missing: {n_sweep - present} of the {n_sweep} steps this sweep "
+                                           f"measures (adaptive plan: chosen online, so not named by key)",
+                                           count=n_sweep - present))
+        order = {key: i for i, key in enumerate(s.key for s in plan.schedule())}
+        missing.sort(key=lambda p: order.get(p.key, -1))
+        return Accounting(n_planned, intact, missing, damaged, orphan)
+
     def set_aside_damaged(self) -> list[StepProblem]:
         """Move the files of every damaged step to ``<run>/damaged/<time>/`` (so that resume
         measures those steps again) and record it; returns the problems found."""
@@ -331,7 +405,7 @@ def _json_reason(e: json.JSONDecodeError) -> str:
     return f"{cut}not valid JSON ({e.msg} at line {e.lineno} column {e.colno}, file of {len(e.doc)} characters)"
 
 
-def _read_step_json(path: Path, key: str) -> tuple[dict, dict | None]:
+def _read_step_json(path: Path, key: str) -> tuple[StepResult, dict | None]:
     def bad(kind, reason):
         return DamagedStep(StepProblem(key, path, kind, reason))
     try:
@@ -360,6 +434,7 @@ def _read_step_json(path: Path, key: str) -> tuple[dict, dict | None]:
             raise bad("checksum", "checksum mismatch: the content differs from what was written")
     if obj.get("key") != key:
         raise bad("corrupt", f"the result inside is for step {obj.get('key')!r}, not {key!r}")
+    check_step_version(obj, str(path))       # a newer format is refused, not taken for damage
     return obj, integrity
 
 
@@ -382,8 +457,8 @@ def _check_npz(path: Path, key: str, integrity: dict | None) -> None:
         raise bad("checksum", "checksum mismatch: the raw block differs from what was written")
 
 
-def planned_keys(meta: dict | None) -> set[str] | None:
-    """Keys of every step of the run's stored plan (None if the plan cannot be rebuilt)."""
+def stored_plan(meta: dict | None):
+    """The run's stored plan as a :class:`procedures.plan.Plan` (None if it cannot be rebuilt)."""
     from procedures.plan import Plan
 
     p = (meta or {}).get("plan")
@@ -393,7 +468,85 @@ def planned_keys(meta: dict | None) -> set[str] | None:
         kw = {f.name: p[f.name] for f in fields(Plan) if f.name in p}
         kw.update(levels_N=tuple(p["levels_N"]), freqs_Hz=tuple(p["freqs_Hz"]),
                   skip=tuple(tuple(s) for s in p.get("skip") or ()))
-        return {s.key for s in Plan(**kw).schedule()}
+        plan = Plan(**kw)
+        plan.schedule()
+        return plan
     except Exception as e:  # noqa: BLE001 - a damaged plan entry: then keys cannot be judged
         log.warning("run.json: the stored plan cannot be rebuilt (%s); step keys not checked", e)
         return None
+
+
+def planned_keys(meta: dict | None) -> set[str] | None:
+    """Keys of every step of the run's stored plan (None if the plan cannot be rebuilt)."""
+    plan = stored_plan(meta)
+    return None if plan is None else {s.key for s in plan.schedule()}
+
+
+# ---------------------------------------------------------------------------- accounting
+
+
+def _keys_text(keys: list[str], limit: int = 8) -> str:
+    return ", ".join(keys[:limit]) + (f" and {len(keys) - limit} more" if len(keys) > limit else "")
+
+
+@dataclass
+class Accounting:
+    """A run's steps counted against its plan (:meth:`RunStore.account`).
+
+    ``missing``: planned steps without a complete file pair (nothing, or only one of the
+    two files); in an adaptive plan, the steps a sweep still lacks of the number it
+    measures (their keys are chosen online, so the sweep is named).  ``damaged``: planned
+    steps whose files are both there but fail a check.  ``orphan``: files no planned step
+    owns.  ``planned`` is None when run.json holds no plan this version can rebuild."""
+
+    planned: int | None
+    intact: list[str]
+    missing: list[StepProblem]
+    damaged: list[StepProblem]
+    orphan: list[StepProblem]
+
+    @property
+    def complete(self) -> bool:
+        """Every planned step is there and intact."""
+        return self.planned is not None and not self.missing and not self.damaged
+
+    @property
+    def missing_count(self) -> int:
+        return sum(p.count for p in self.missing)
+
+    def resume_text(self) -> str:
+        """'measures again 3 of 30 planned steps; missing: K1, K2; damaged: K3 (truncated)'."""
+        n = self.missing_count + len(self.damaged)
+        parts = [f"measures again {n} of {'?' if self.planned is None else self.planned} planned "
+                 f"step{'s' * (self.planned != 1)}"]
+        if self.missing:
+            parts.append("missing: " + _keys_text([_missing_label(p) for p in self.missing], 12))
+        if self.damaged:
+            parts.append("damaged: " + _keys_text([f"{p.key} ({p.kind})" for p in self.damaged], 12))
+        return "; ".join(parts)
+
+    def summary(self) -> str:
+        """'28 intact / 30 planned; missing: K1; damaged: K2 (truncated); orphan: none'."""
+        missing = [_missing_label(p) for p in self.missing]
+        return (f"{len(self.intact)} intact / {'?' if self.planned is None else self.planned} planned; "
+                f"missing: {_keys_text(missing) or 'none'}; "
+                f"damaged: {_keys_text([f'{p.key} ({p.kind})' for p in self.damaged]) or 'none'}; "
+                f"orphan: {_keys_text([p.path.name for p in self.orphan]) or 'none'}")
+
+
+def _missing_label(p: StepProblem) -> str:
+    """A step's key, or an adaptive sweep with the number of steps it lacks: 'L01-up (2)'."""
+    return p.key if p.path.suffix in (".json", ".npz") else f"{p.key} ({p.count})"
+
+
+def _sweeps(plan) -> dict[tuple[int, str], list[str]]:
+    out: dict[tuple[int, str], list[str]] = {}
+    for s in plan.schedule():
+        out.setdefault((s.level_index, s.direction), []).append(s.key)
+    return out
+
+
+def planned_count(plan) -> int:
+    """Steps the plan measures: its schedule, or in adaptive mode the chosen number per sweep."""
+    k = plan.adaptive_per_sweep
+    return sum(min(len(keys), k) if k else len(keys) for keys in _sweeps(plan).values())

@@ -45,6 +45,7 @@ def warm_up() -> float:
 
     from .config import DEFAULTS, load_rig, parse_plan
     from .session import run_plan
+    from .storage import RunStatus
 
     t0 = time.perf_counter()
     newest = _newest_source()
@@ -57,8 +58,8 @@ def warm_up() -> float:
         rig.run(256, 25600.0)
     with tempfile.TemporaryDirectory(prefix="bench-warmup-") as tmp:
         store = run_plan(parse_plan(_PLAN, "warm-up plan"), load_rig(DEFAULTS / "sim_rig.toml"),
-                         Path(tmp) / "run", identify=True, warm_up=False)
-        if store.metadata["status"] != "completed":
+                         Path(tmp) / "run", identify=True)
+        if store.metadata["status"] != RunStatus.COMPLETED:
             raise RuntimeError(f"warm-up run ended {store.metadata['status']!r}")
     try:
         STAMP.parent.mkdir(exist_ok=True)

@@ -167,7 +167,7 @@ def main(argv=None) -> int:
     seeds = range(args.first, args.first + args.cases)
     t0 = time.perf_counter()
     if args.workers > 1 or args.scheduler:
-        from bench.studies import map_cases     # the study engine: local cores or a dask cluster
+        from bench.studies import map_cases  # the study engine: local cores or a dask cluster
         def done(i, total, label):
             print(f"{label}: {i}/{total} cases done, {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
         rows = [_progress(r) for r in map_cases(run_case, list(seeds), scheduler=args.scheduler,

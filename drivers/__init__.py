@@ -4,7 +4,8 @@ Public surface (everything else is private implementation):
 
 - protocols: FunctionGenerator, Daq, DisplacementSensor; records Identity, ChannelSpec,
   Channel, DaqBlock, GapReading, SensorStatus, TargetMaterial
-- drivers: ScpiFunctionGenerator (SCPI over serial/TCP), CanFdDaq (CAN FD, python-can),
+- drivers: ScpiFunctionGenerator (SCPI over serial/TCP or a VISA resource; is_visa_resource
+  tells which strings go to pyvisa, VisaTransport), CanFdDaq (CAN FD, python-can),
   ModbusEddySensor (Modbus TCP/RTU), open_can_bus, plan_block
 - twins: start_twins, run_standalone, Twins
 - errors: InstrumentError and its subclasses
@@ -16,12 +17,32 @@ from ._can_transport import CanTcpBridge, TcpCanBus, open_can_bus
 from ._daq import CanFdDaq, plan_block
 from ._daq_codec import dbc_path
 from ._eddy_sensor import ModbusEddySensor
-from ._errors import (BlockIntegrityError, ConnectionLost, FrameError, InstrumentError,
-                      InstrumentTimeout, ModbusError, ProtocolError, SafetyInterlock, ScpiError)
+from ._errors import (
+    BlockIntegrityError,
+    ConnectionLost,
+    FrameError,
+    InstrumentError,
+    InstrumentTimeout,
+    ModbusError,
+    ProtocolError,
+    SafetyInterlock,
+    ScpiError,
+)
 from ._function_generator import ScpiFunctionGenerator
-from ._interfaces import (Channel, ChannelSpec, Daq, DaqBlock, DisplacementSensor,
-                          FunctionGenerator, GapReading, Identity, SensorStatus, TargetMaterial)
+from ._interfaces import (
+    Channel,
+    ChannelSpec,
+    Daq,
+    DaqBlock,
+    DisplacementSensor,
+    FunctionGenerator,
+    GapReading,
+    Identity,
+    SensorStatus,
+    TargetMaterial,
+)
 from ._twins import Twins, run_standalone, start_twins
+from ._visa_transport import VisaTransport, is_visa_resource
 
 log = logging.getLogger(__name__)
 
@@ -31,5 +52,5 @@ __all__ = [
     "FunctionGenerator", "GapReading", "Identity", "InstrumentError", "InstrumentTimeout",
     "ModbusEddySensor", "ModbusError", "ProtocolError", "SafetyInterlock", "ScpiError",
     "ScpiFunctionGenerator", "SensorStatus", "TargetMaterial", "TcpCanBus", "Twins",
-    "dbc_path", "open_can_bus", "plan_block", "run_standalone", "start_twins",
+    "VisaTransport", "dbc_path", "is_visa_resource", "open_can_bus", "plan_block", "run_standalone", "start_twins",
 ]

@@ -21,6 +21,8 @@ from typing import Any
 
 import can
 
+from sim.errors import ConfigurationError
+
 log = logging.getLogger(__name__)
 
 _HEAD = struct.Struct("<IBB")
@@ -183,6 +185,6 @@ def open_can_bus(url: str) -> can.BusABC:
         return TcpCanBus(host, int(port))
     interface, sep, channel = url.partition(":")
     if not sep:
-        raise ValueError(f"CAN bus URL {url!r}: expected virtual:<ch>, tcp://host:port or "
+        raise ConfigurationError(f"CAN bus URL {url!r}: expected virtual:<ch>, tcp://host:port or "
                          f"<interface>:<channel>")
     return can.Bus(interface=interface, channel=channel, fd=True)

@@ -186,10 +186,10 @@ class CanFdDaq:
             deadline = time.monotonic() + timeout_s
         else:
             deadline = self._block_deadline()
-        header = None
+        header: codec.BlockHeader | None = None
         problems: list[str] = []
         for attempt in range(self.max_resends + 1):
-            if attempt:
+            if attempt and header is not None:      # (a failed attempt always has its header)
                 log.warning("DAQ block %d: %s; RESEND (%d/%d)", header.block_id,
                             problems[-1], attempt, self.max_resends)
                 self._drain()
@@ -200,14 +200,14 @@ class CanFdDaq:
                 self._check_end(header, end)
                 payload = codec.assemble_payload(header, frames)
             except FrameError as exc:
-                if getattr(exc, "header", None) is not None:
+                if isinstance(exc.header, codec.BlockHeader):
                     header = exc.header
                 if header is None:
                     raise
                 problems.append(str(exc))
                 continue
             return self._to_block(header, payload, resends=attempt)
-        raise BlockIntegrityError(f"DAQ block {header.block_id} still inconsistent after "
+        raise BlockIntegrityError(f"DAQ block {header.block_id if header else '?'} still inconsistent after "
                                   f"{self.max_resends} RESEND(s): " + " | ".join(problems))
 
     def _collect(self, deadline: float
@@ -221,10 +221,9 @@ class CanFdDaq:
             except InstrumentTimeout:
                 if header is None:
                     raise
-                exc = FrameError(f"block {header.block_id}: end-of-block frame lost "
-                                 f"({len(frames)} of {header.n_frames} data frames received)")
-                exc.header = header  # type: ignore[attr-defined]
-                raise exc from None
+                raise FrameError(f"block {header.block_id}: end-of-block frame lost "
+                                 f"({len(frames)} of {header.n_frames} data frames received)",
+                                 header) from None
             fid = msg.arbitration_id
             if fid == codec.ID_BLOCK_HEADER:
                 try:
@@ -233,10 +232,8 @@ class CanFdDaq:
                     raise FrameError(f"unreadable block header ({len(msg.data)} bytes): "
                                      f"{exc}") from exc
                 if header is not None:
-                    exc = FrameError(f"block {header.block_id}: new header before the end "
-                                     f"of block")
-                    exc.header = new_header  # type: ignore[attr-defined]
-                    raise exc
+                    raise FrameError(f"block {header.block_id}: new header before the end "
+                                     f"of block", new_header)
                 header = new_header
             elif fid == codec.ID_BLOCK_DATA:
                 if header is not None:
@@ -247,9 +244,8 @@ class CanFdDaq:
                 try:
                     end = codec.decode(codec.ID_BLOCK_END, bytes(msg.data))
                 except Exception as exc:  # noqa: BLE001
-                    err = FrameError(f"block {header.block_id}: unreadable end frame: {exc}")
-                    err.header = header  # type: ignore[attr-defined]
-                    raise err from exc
+                    raise FrameError(f"block {header.block_id}: unreadable end frame: {exc}",
+                                     header) from exc
                 return header, frames, end
             elif fid == codec.ID_STATUS:
                 status = self._decode_status(msg)
@@ -261,10 +257,8 @@ class CanFdDaq:
     def _check_end(header: codec.BlockHeader, end: dict) -> None:
         if (int(end["BlockId"]), int(end["NFrames"]), int(end["PayloadCrc32"])) != \
                 (header.block_id, header.n_frames, header.payload_crc32):
-            exc = FrameError(f"block {header.block_id}: end-of-block {dict(end)} does not "
-                             f"match the header")
-            exc.header = header  # type: ignore[attr-defined]
-            raise exc
+            raise FrameError(f"block {header.block_id}: end-of-block {dict(end)} does not "
+                             f"match the header", header)
 
     def _to_block(self, header: codec.BlockHeader, payload: bytes, resends: int) -> DaqBlock:
         counts = codec.unpack_samples(payload, header.n_samples)

@@ -81,7 +81,9 @@ def dbc_path() -> str:
 @functools.cache
 def database() -> cantools.database.can.Database:
     """The shipped DBC, loaded once."""
-    return cantools.database.load_file(dbc_path())
+    db = cantools.database.load_file(dbc_path())
+    assert isinstance(db, cantools.database.can.Database)     # a .dbc is a CAN database
+    return db
 
 
 def encode(frame_id: int, **signals: float) -> bytes:
@@ -89,8 +91,8 @@ def encode(frame_id: int, **signals: float) -> bytes:
 
 
 def decode(frame_id: int, data: bytes) -> dict:
-    return database().get_message_by_frame_id(frame_id).decode(bytes(data),
-                                                                decode_choices=False)
+    return dict(database().get_message_by_frame_id(frame_id).decode(bytes(data),
+                                                                     decode_choices=False))
 
 
 def n_data_frames(n_samples: int, n_channels: int = N_CHANNELS) -> int:
@@ -160,7 +162,7 @@ class BlockHeader:
     full_scale_mV: int
 
     @classmethod
-    def from_frame(cls, data: bytes) -> "BlockHeader":
+    def from_frame(cls, data: bytes) -> BlockHeader:
         s = decode(ID_BLOCK_HEADER, data)
         return cls(int(s["BlockId"]), int(s["NSamples"]), int(s["ChannelMask"]),
                    int(s["BitsPerSample"]), int(s["NFrames"]), int(s["PayloadCrc32"]),

@@ -18,6 +18,8 @@ from pymodbus import FramerType
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 
+from sim.errors import ConfigurationError
+
 from . import _eddy_registers as regmap
 from ._eddy_registers import Reg
 from ._errors import ConnectionLost, InstrumentTimeout, ModbusError, ProtocolError
@@ -32,13 +34,13 @@ def _parse_url(url: str) -> tuple[str, dict[str, Any], int]:
     unit = int(query.get("unit", 1))
     if parts.scheme == "modbus-tcp":
         if parts.hostname is None or parts.port is None:
-            raise ValueError(f"{url!r}: expected modbus-tcp://host:port")
+            raise ConfigurationError(f"{url!r}: expected modbus-tcp://host:port")
         return "tcp", {"host": parts.hostname, "port": parts.port}, unit
     if parts.scheme == "modbus-rtu":
         if not parts.path:
-            raise ValueError(f"{url!r}: expected modbus-rtu:///dev/<port>")
+            raise ConfigurationError(f"{url!r}: expected modbus-rtu:///dev/<port>")
         return "rtu", {"port": parts.path, "baudrate": int(query.get("baud", 115200))}, unit
-    raise ValueError(f"{url!r}: scheme must be modbus-tcp or modbus-rtu")
+    raise ConfigurationError(f"{url!r}: scheme must be modbus-tcp or modbus-rtu")
 
 
 class ModbusEddySensor:
@@ -47,6 +49,7 @@ class ModbusEddySensor:
     def __init__(self, url: str, *, timeout_s: float = 1.0, retries: int = 1) -> None:
         self.url = url
         kind, params, self.unit_id = _parse_url(url)
+        self._client: ModbusTcpClient | ModbusSerialClient
         if kind == "tcp":
             self._client = ModbusTcpClient(params["host"], port=params["port"],
                                            timeout=timeout_s, retries=retries)
@@ -170,7 +173,7 @@ class ModbusEddySensor:
     def close(self) -> None:
         self._client.close()
 
-    def __enter__(self) -> "ModbusEddySensor":
+    def __enter__(self) -> ModbusEddySensor:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -1,6 +1,6 @@
 """Typed exceptions raised by the instrument drivers.
 
-Every driver error derives from :class:`InstrumentError`, so a procedure can catch one
+Every driver error derives from :class:`InstrumentError` (a :class:`sim.errors.BenchError`), so a procedure can catch one
 type to run its safe-stop path, and a finer type when it wants to react differently
 (retry on :class:`InstrumentTimeout`, stop on :class:`ScpiError`).
 """
@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import logging
 
+from sim.errors import InstrumentError  # the root of the driver errors, in the project's tree
+
 log = logging.getLogger(__name__)
 
-
-class InstrumentError(Exception):
-    """Base class of every error reported by a driver in this package."""
+__all__ = ["BlockIntegrityError", "ConnectionLost", "FrameError", "InstrumentError", "InstrumentTimeout",
+           "ModbusError", "ProtocolError", "SafetyInterlock", "ScpiError"]
 
 
 class ConnectionLost(InstrumentError):
@@ -57,7 +58,13 @@ class ModbusError(InstrumentError):
 
 
 class FrameError(InstrumentError):
-    """A CAN frame of a data block was lost, duplicated, corrupt or of the wrong size."""
+    """A CAN frame of a data block was lost, duplicated, corrupt or of the wrong size.
+
+    ``header`` is the block's header when it was received (a RESEND can then name it)."""
+
+    def __init__(self, message: str, header: object | None = None) -> None:
+        super().__init__(message)
+        self.header = header
 
 
 class BlockIntegrityError(FrameError):

@@ -1,7 +1,9 @@
 """Driver for a Keysight 33500-style function generator (SCPI over serial or TCP).
 
 One driver serves every transport pyserial's ``serial_for_url`` opens: ``/dev/ttyUSB0``,
-``socket://host:5025`` (raw SCPI socket), ``loop://``. Every setting is confirmed: the
+``socket://host:5025`` (raw SCPI socket), ``loop://``; and VISA resource strings
+(``TCPIP0::host::inst0::INSTR``, ``USB0::...::INSTR``, ``...::SOCKET``) through pyvisa-py
+behind the same byte-stream surface (:mod:`drivers._visa_transport`). Every setting is confirmed: the
 driver reads the value back and drains ``SYST:ERR?``; an instrument error becomes a
 :class:`ScpiError` naming the command and the instrument's message.
 
@@ -27,13 +29,17 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 import socket
+import time
 from types import TracebackType
+from typing import Any
 
 import serial
 
 from ._errors import ConnectionLost, InstrumentTimeout, ProtocolError, SafetyInterlock, ScpiError
 from ._interfaces import Identity
+from ._visa_transport import VisaTransport, is_visa_resource
 
 TWIN_MARK = "guideway-bench twin"     # in the *IDN? firmware field of the simulated generator
 
@@ -41,12 +47,14 @@ log = logging.getLogger(__name__)
 
 MAX_ERRORS_DRAINED = 32
 FREQ_MAX_HZ = 20e6
+RESYNC_QUIET_S = 0.1      # a link silent this long after an interrupted exchange is drained
+RESYNC_MAX_LINES = 64     # stale lines skipped before a marker, at most
 
 
 class ScpiFunctionGenerator:
     """A function generator on a SCPI link. Satisfies :class:`FunctionGenerator`.
 
-    :param url: anything ``serial.serial_for_url`` opens.
+    :param url: anything ``serial.serial_for_url`` opens, or a VISA resource string.
     :param timeout_s: bound on every reply; a silent instrument raises InstrumentTimeout.
     :param drive_limit_V: largest instantaneous output voltage magnitude the procedures may
         ask for (|offset| + Vpp/2). Requests above it raise ValueError before anything is
@@ -59,9 +67,14 @@ class ScpiFunctionGenerator:
         self.timeout_s = timeout_s
         self.drive_limit_V = drive_limit_V
         self._twin: bool | None = None
+        self._in_step = True
+        self._port: Any           # pyserial's port, or the VISA transport with the same surface
         try:
-            self._port = serial.serial_for_url(url, baudrate=baudrate, timeout=timeout_s,
-                                               write_timeout=timeout_s)
+            if is_visa_resource(url):     # USB-TMC, VXI-11, HiSLIP, VISA socket: pyvisa-py
+                self._port = VisaTransport(url, timeout=timeout_s)
+            else:
+                self._port = serial.serial_for_url(url, baudrate=baudrate, timeout=timeout_s,
+                                                   write_timeout=timeout_s)
         except (serial.SerialException, OSError, ValueError) as exc:
             raise ConnectionLost(f"cannot open function generator at {url!r}: {exc}") from exc
         sock = getattr(self._port, "_socket", None)
@@ -70,8 +83,13 @@ class ScpiFunctionGenerator:
         log.info("function generator opened at %s", url)
 
     # ----------------------------------------------------------------- transport
-    def write(self, command: str) -> None:
-        """Send one program message, LF-terminated, without checking the error queue."""
+    #
+    # The link is "in step" when every reply the instrument will send has been read.  An
+    # exchange cut short (Ctrl-C or SIGTERM inside a query, a timeout, a half-sent line)
+    # leaves it out of step: the next query would read the previous one's answer.  The next
+    # exchange then resynchronises first (:meth:`resync`), as a device clear does.
+
+    def _send(self, command: str) -> None:
         log.debug("-> %s", command)
         try:
             self._port.write(command.encode("ascii") + b"\n")
@@ -79,19 +97,80 @@ class ScpiFunctionGenerator:
         except (serial.SerialException, OSError) as exc:
             raise ConnectionLost(f"{command!r}: link to {self.url} failed: {exc}") from exc
 
-    def query(self, command: str) -> str:
-        """Send a query and return its response line (without the terminator)."""
-        self.write(command)
+    def _read_line(self, command: str) -> str:
         try:
             raw = self._port.read_until(b"\n")
         except (serial.SerialException, OSError) as exc:
             raise ConnectionLost(f"{command!r}: link to {self.url} failed: {exc}") from exc
         if not raw.endswith(b"\n"):
             raise InstrumentTimeout(f"{command!r}: no complete reply from {self.url} within "
-                                    f"{self.timeout_s:g} s (got {raw!r})")
+                                    f"{self._port.timeout:g} s (got {raw!r})")
         reply = raw.decode("ascii", errors="replace").strip()
         log.debug("<- %s", reply)
         return reply
+
+    @property
+    def in_step(self) -> bool:
+        """False after an exchange was cut short, until :meth:`resync` succeeds."""
+        return self._in_step
+
+    def write(self, command: str) -> None:
+        """Send one program message, LF-terminated, without checking the error queue."""
+        if not self._in_step:
+            self.resync()
+        self._in_step = False           # until the whole line is out
+        self._send(command)
+        self._in_step = True
+
+    def query(self, command: str) -> str:
+        """Send a query and return its response line (without the terminator)."""
+        if not self._in_step:
+            self.resync()
+        self._in_step = False           # until its whole reply is read
+        self._send(command)
+        reply = self._read_line(command)
+        self._in_step = True
+        return reply
+
+    def resync(self) -> None:
+        """Bring the reply stream back in step after an interrupted exchange.
+
+        As a device clear does: end a half-sent line, drain whatever input arrives until
+        the link is quiet for ``RESYNC_QUIET_S``, ``*CLS``, then ``*OPC?`` read until it
+        answers ``1`` and ``SYST:ERR?`` read until an error-queue entry.  The instrument
+        answers in order, so a stale reply that arrives after the drain comes before the
+        markers' replies; the second marker, whose answer looks like no other query's,
+        catches the case where the stale reply was itself a ``1``.  Raises
+        InstrumentTimeout (the link stays out of step) if the markers do not come back.
+        """
+        log.warning("resynchronising the link to %s after an interrupted exchange", self.url)
+        port = self._port
+        timeout = port.timeout
+        try:
+            port.reset_input_buffer()
+            port.timeout = RESYNC_QUIET_S
+            deadline = time.monotonic() + self.timeout_s
+            while port.read(4096) and time.monotonic() < deadline:
+                pass
+            port.timeout = self.timeout_s
+            self._send("")                  # ends a half-sent command line; empty lines are ignored
+            self._send("*CLS")
+            self._send("*OPC?")
+            self._skip_until("*OPC?", lambda r: r == "1")
+            self._send("SYST:ERR?")
+            self._skip_until("SYST:ERR?", lambda r: re.fullmatch(r'[+-]?\d+,.*', r) is not None)
+        finally:
+            port.timeout = timeout
+        self._in_step = True
+        log.info("link to %s back in step", self.url)
+
+    def _skip_until(self, command: str, is_answer) -> None:
+        for _ in range(RESYNC_MAX_LINES):
+            reply = self._read_line(command)
+            if is_answer(reply):
+                return
+            log.debug("resync: skipped stale reply %r", reply)
+        raise ProtocolError(f"{command!r}: no answer among {RESYNC_MAX_LINES} lines from {self.url}")
 
     def query_float(self, command: str) -> float:
         reply = self.query(command)
@@ -102,7 +181,7 @@ class ScpiFunctionGenerator:
 
     def read_errors(self) -> list[tuple[int, str]]:
         """Drain the instrument's error queue: [(code, message), ...], oldest first."""
-        errors = []
+        errors: list[tuple[int, str]] = []
         for _ in range(MAX_ERRORS_DRAINED):
             reply = self.query("SYST:ERR?")
             code_text, _, message = reply.partition(",")
@@ -242,9 +321,18 @@ class ScpiFunctionGenerator:
 
     # ----------------------------------------------------------------- teardown
     def safe_off(self) -> None:
-        """Output off, best effort: never raises, even on a dead link (logged instead)."""
+        """Output off, best effort: never raises, even on a dead link (logged instead).
+
+        After an interrupted exchange the link is resynchronised first; if that fails,
+        ``OUTP OFF`` is still sent, and the confirmation is what may fail."""
         try:
-            self.write("OUTP OFF")
+            if not self._in_step:
+                try:
+                    self.resync()
+                except Exception as exc:  # noqa: BLE001 - the off command must still go out
+                    log.error("safe_off: could not resynchronise %s (%s); sending OUTP OFF anyway",
+                              self.url, exc)
+            self._send("OUTP OFF" if self._in_step else "\nOUTP OFF")   # end a half-sent line
             if self.output_enabled():
                 log.error("safe_off: %s still reports the output on", self.url)
         except Exception as exc:  # noqa: BLE001 - this runs on every exit path
@@ -262,7 +350,7 @@ class ScpiFunctionGenerator:
         except Exception as exc:  # noqa: BLE001
             log.warning("closing %s: %s", self.url, exc)
 
-    def __enter__(self) -> "ScpiFunctionGenerator":
+    def __enter__(self) -> ScpiFunctionGenerator:
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,

@@ -14,6 +14,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from sim.errors import ConfigurationError
+
 log = logging.getLogger(__name__)
 
 
@@ -61,7 +63,7 @@ class ChannelSpec:
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.sensitivity_V_per_unit) or self.sensitivity_V_per_unit == 0.0:
-            raise ValueError(f"{self.channel.name}: sensitivity must be finite and non-zero, "
+            raise ConfigurationError(f"{self.channel.name}: sensitivity must be finite and non-zero, "
                              f"got {self.sensitivity_V_per_unit!r}")
 
 
@@ -95,7 +97,8 @@ class DaqBlock:
 
 @runtime_checkable
 class Daq(Protocol):
-    """Arm -> trigger -> read one block of an integer number of periods."""
+    """Arm -> trigger -> read one block (``acquire``), or one of an integer number of periods
+    at a sample rate of at least ``min_rate_Hz`` (``acquire_periods``)."""
 
     channels: tuple[ChannelSpec, ...]
 
@@ -105,7 +108,8 @@ class Daq(Protocol):
     def arm(self) -> None: ...
     def trigger(self) -> None: ...
     def read_block(self, timeout_s: float | None = None) -> DaqBlock: ...
-    def acquire_periods(self, freq_Hz: float, n_periods: int) -> DaqBlock: ...
+    def acquire(self) -> DaqBlock: ...
+    def acquire_periods(self, freq_Hz: float, n_periods: int, min_rate_Hz: float = 25_600.0) -> DaqBlock: ...
     def close(self) -> None: ...
 
 

@@ -55,7 +55,7 @@ class PtyPair:
                 self._proc.wait()
         shutil.rmtree(self._dir, ignore_errors=True)
 
-    def __enter__(self) -> "PtyPair":
+    def __enter__(self) -> PtyPair:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -23,7 +23,7 @@ class Mnemonic:
     optional: bool
 
     @classmethod
-    def parse(cls, text: str) -> "Mnemonic":
+    def parse(cls, text: str) -> Mnemonic:
         optional = text.startswith("?")
         word = text.lstrip("?")
         short = "".join(ch for ch in word if ch.isupper() or ch.isdigit())

@@ -18,11 +18,20 @@ import contextlib
 import logging
 import math
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
-from ._scpi_syntax import (HeaderPattern, ParameterError, ProgramUnit, format_number,
-                           parse_bool, parse_number, parse_unit, split_message)
+from ._scpi_syntax import (
+    HeaderPattern,
+    ParameterError,
+    ProgramUnit,
+    format_number,
+    parse_bool,
+    parse_number,
+    parse_unit,
+    split_message,
+)
 
 log = logging.getLogger(__name__)
 

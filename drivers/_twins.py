@@ -13,8 +13,9 @@ import itertools
 import logging
 import os
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 from ._can_transport import CanTcpBridge, open_can_bus
 from ._daq_twin import DaqTwin
@@ -62,7 +63,7 @@ class Twins:
                 log.warning("closing a twin failed: %s", exc)
         self._closers.clear()
 
-    def __enter__(self) -> "Twins":
+    def __enter__(self) -> Twins:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -17,6 +17,7 @@ import numpy as np
 
 from sim.identify import Identifier, StepHarmonics
 from sim.records import analyse_records
+from sim.step_result import StepResult
 
 from .plan import Plan, Rig
 
@@ -82,7 +83,7 @@ def choose_frequencies(sweep: list, values: dict | None, per_sweep: int) -> list
     return [s for i, s in enumerate(sweep) if i in pick]
 
 
-def step_harmonics(result: dict, raw: dict | None = None) -> StepHarmonics:
+def step_harmonics(result: StepResult, raw: dict | None = None) -> StepHarmonics:
     """A step for the identifier: from its raw block when there is one (every harmonic the
     block holds, noise from the scatter of its periods), else from the stored fits."""
     if raw is None:
@@ -105,7 +106,7 @@ class OnlineIdentification:
         """The latest estimate's values (None before the first fit)."""
         return self.ident.estimate.values if self.ident.estimate else None
 
-    def preload(self, results: list[dict], raw_of=None) -> None:
+    def preload(self, results: list[StepResult], raw_of=None) -> None:
         """Steps already measured (resume): fitted once before new steps arrive.
         ``raw_of(key)`` gives a step's raw block (for every harmonic it holds)."""
         for r in results:
@@ -113,7 +114,7 @@ class OnlineIdentification:
         if results:
             self.ident.fit(max_nfev=200)
 
-    def update(self, result: dict, raw: dict | None = None) -> dict | None:
+    def update(self, result: StepResult, raw: dict | None = None) -> dict | None:
         """Add a step (with its raw block when there is one) and refit."""
         t = time.perf_counter()
         try:

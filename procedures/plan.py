@@ -35,7 +35,7 @@ class Plan:
     ramp_s: float
     min_sample_rate_Hz: float
     max_extra_settle_blocks: int         # re-measure while a free vibration still decays
-    limits: Limits | None                # optional, tighter than the rig's
+    limits: Limits | None                # optional, tighter than the rig's (a field None: the rig's)
     infeasible: str = "refuse"           # steps the limits cannot hold: "refuse" the plan or "skip" them
     adaptive_per_sweep: int = 0          # > 0: measure only this many frequencies per sweep, chosen online
     skip: tuple[tuple[int, int], ...] = ()   # (level index, frequency index) left out
@@ -45,7 +45,7 @@ class Plan:
         down = ("down", tuple(reversed(self.freqs_Hz)))
         return {"up": [up], "down": [down], "both": [up, down]}[self.direction]
 
-    def schedule(self) -> list["StepSpec"]:
+    def schedule(self) -> list[StepSpec]:
         """Every step of the test in order; a step's key identifies it across resumes."""
         steps, index = [], 0
         skip = set(self.skip)

@@ -10,16 +10,22 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
 from drivers import plan_block
+from sim.step_result import ControlIteration, FitSummary, StepMeasurement, StepResult
 
 from .analysis import HarmonicFit, fit_harmonics
+from .instruments import Block, BlockSource, SineSource, StepMarker
 from .plan import Plan, StepSpec
 from .safety import LimitExceeded
+
+__all__ = ["MIN_VPP", "DriveState", "ForceUnreachable", "SteppedSine", "StepResult", "next_drive"]
+
+Record = Callable[[StepSpec, StepResult, dict[str, np.ndarray]], None]
 
 log = logging.getLogger(__name__)
 
@@ -63,8 +69,8 @@ class DriveState:
     next_quarter: int = 1             # changes alternate between phase pi/2 and 3 pi/2
 
 
-def _fit_summary(fit: HarmonicFit) -> dict:
-    return dict(amplitude=fit.amplitude.tolist(), phase_rad=fit.phase_rad.tolist(),
+def _fit_summary(fit: HarmonicFit) -> FitSummary:
+    return FitSummary(amplitude=fit.amplitude.tolist(), phase_rad=fit.phase_rad.tolist(),
                 offset=fit.offset, thd=fit.thd, noise_rms=fit.noise_rms, peak_to_peak=fit.peak_to_peak,
                 raw_peak_to_peak=fit.raw_peak_to_peak)
 
@@ -72,13 +78,14 @@ def _fit_summary(fit: HarmonicFit) -> dict:
 class SteppedSine:
     """Runs a :class:`~bench.config.Plan` on supervised instruments."""
 
-    def __init__(self, plan: Plan, generator, daq, *, amp_gain_N_per_V: float,
-                 sensor_check: Callable[[], dict] | None = None, drive_limit_V: float = math.inf,
-                 on_skip: Callable[[StepSpec, str], None] | None = None):
+    def __init__(self, plan: Plan, generator: SineSource, daq: BlockSource, *, amp_gain_N_per_V: float,
+                 sensor_check: Callable[[], object] | None = None, marker: StepMarker | None = None,
+                 drive_limit_V: float = math.inf, on_skip: Callable[[StepSpec, str], None] | None = None):
         self.plan = plan
         self.gen = generator
         self.daq = daq
         self.sensor_check = sensor_check          # gap in range? called before each sweep
+        self.marker = marker                      # told each step's key before its measured block
         self.disp_noise_floor_m = 0.0             # rms at rest; set by the session
         self.drive = DriveState(gain_N_per_Vpp=amp_gain_N_per_V / 2.0)
         # the largest drive the control may ask for: the peak limit, a hair inside it
@@ -100,12 +107,12 @@ class SteppedSine:
         return min(FIRST_DRIVE_MARGIN * step.force_N / gain, self.max_vpp)
 
     # ------------------------------------------------------------------ primitives
-    def _acquire(self, freq_Hz: float, periods: int):
+    def _acquire(self, freq_Hz: float, periods: int) -> Block:
         block = self.daq.acquire_periods(freq_Hz, max(1, periods), self.plan.min_sample_rate_Hz)
         self._track_phase(block, freq_Hz)
         return block
 
-    def _track_phase(self, block, freq_Hz: float) -> None:
+    def _track_phase(self, block: Block, freq_Hz: float) -> None:
         """Drive phase at the end of ``block``, from a fit of its force signal."""
         if not self.drive.on or block.n_samples < 8:
             return
@@ -181,15 +188,16 @@ class SteppedSine:
         force error, iterations, converged, reason); the reason is "" when converged, names
         the drive limit when the force is still short with the drive at the limit."""
         f, target = step.freq_Hz, step.force_N
-        err, it, prev = math.inf, 0, None
+        err, it = math.inf, 0
+        prev: tuple[float, float] | None = None
         self.history = []
         for it in range(1, self.plan.max_iterations + 1):
             self._wait(f, 0.0, min_periods=self.plan.control_cycles)   # let the change settle
             block = self._acquire(f, self.plan.control_cycles)
-            F1 = fit_harmonics(block.force_N, block.fs_Hz, f, 1).amplitude[0]
+            F1 = float(fit_harmonics(block.force_N, block.fs_Hz, f, 1).amplitude[0])
             vpp = self.drive.amplitude_Vpp
             err = F1 / target - 1.0
-            self.history.append((vpp, float(F1)))
+            self.history.append((vpp, F1))
             log.debug("step %s iteration %d: %.5g Vpp -> %.5g N (error %+.2f %%)", step.key, it, vpp, F1, 100 * err)
             if F1 > 0:
                 self.drive.gain_N_per_Vpp = self.gain_at[f] = F1 / vpp
@@ -204,15 +212,15 @@ class SteppedSine:
                                             f"limit {self.max_vpp / 2:.4g} V: {F1:.4g} N at the limit "
                                             f"({F1 / vpp:.4g} N/Vpp)")
                 nxt = self.max_vpp
-            prev = (vpp, float(F1))
+            prev = (vpp, F1)
             self._change(vpp=nxt)
         return err, it, False, f"not within {100 * self.plan.force_tolerance:g} % after {it} iterations"
 
-    def _fit_block(self, block, f):
+    def _fit_block(self, block: Block, f: float) -> dict[str, HarmonicFit]:
         return {name: fit_harmonics(x, block.fs_Hz, f, self.plan.harmonics)
                 for name, x in (("force", block.force_N), ("accel", block.accel_m_s2), ("disp", block.disp_m))}
 
-    def measure(self, step: StepSpec) -> tuple[dict, dict]:
+    def measure(self, step: StepSpec) -> tuple[StepMeasurement, dict[str, np.ndarray]]:
         """Settle, then measure; re-measure while a free vibration is still dying out.
 
         A weakly damped mode (small-amplitude pre-rolling, n > 1) can ring for hundreds of
@@ -223,9 +231,8 @@ class SteppedSine:
         f = step.freq_Hz
         periods = max(self.plan.measure_cycles, math.ceil(self.plan.min_measure_s * f))
         self._wait(f, self.plan.min_settle_s, min_periods=self.plan.settle_cycles)
-        mark = getattr(self.gen, "mark_step", None)
-        if mark:                      # a simulated rig reseeds its noise here (decision 0013)
-            mark(step.key)
+        if self.marker is not None:   # a simulated rig reseeds its noise here (decision 0013)
+            self.marker.mark_step(step.key)
         block = self._acquire(f, periods)
         fits = self._fit_block(block, f)
         extra = 0
@@ -242,9 +249,9 @@ class SteppedSine:
         A1 = fits["accel"].fundamental
         compliance = X1 / F1
         accelerance = A1 / F1
-        result = dict(
+        result = StepMeasurement(
             freq_Hz=f, force_N=abs(F1), drive_Vpp=self.drive.amplitude_Vpp,
-            compliance_m_per_N={"re": compliance.real, "im": compliance.imag},
+            compliance_m_per_N={"re": float(compliance.real), "im": float(compliance.imag)},
             compliance_abs_m_per_N=abs(compliance), compliance_phase_rad=float(np.angle(compliance)),
             accelerance_abs_kg_inv=abs(accelerance), accelerance_phase_rad=float(np.angle(accelerance)),
             # seed Eq. 9 in SI: half the peak-to-peak of the steady (fitted periodic)
@@ -259,7 +266,7 @@ class SteppedSine:
         return result, raw
 
     # ------------------------------------------------------------------ the test
-    def run(self, done: set[str], record: Callable[[StepSpec, dict, dict], None],
+    def run(self, done: set[str], record: Record,
             progress: Callable[[int, int, str], None] | None = None,
             choose: Callable[[list[StepSpec]], list[StepSpec]] | None = None) -> None:
         """Run the schedule, skipping ``done`` keys.  ``choose`` (adaptive mode) picks,
@@ -309,7 +316,7 @@ class SteppedSine:
         periods = max(self.plan.measure_cycles, math.ceil(self.plan.min_measure_s * step.freq_Hz))
         self._wait(step.freq_Hz, self.plan.min_settle_s, min_periods=self.plan.settle_cycles + periods)
 
-    def step(self, step: StepSpec, *, new_sweep: bool, record) -> dict | None:
+    def step(self, step: StepSpec, *, new_sweep: bool, record: Record) -> StepResult | None:
         """One step: drive, control the force, settle, measure, record.  A step whose force
         the drive limit cannot reach is not measured: the plan's ``infeasible`` says whether
         that stops the test (``refuse``: ramp down, output off, ForceUnreachable) or the step
@@ -337,11 +344,11 @@ class SteppedSine:
             log.warning("step %s: force %.3g N not reached within %.1f %% after %d iterations "
                         "(error %+.1f %%)", step.key, step.force_N, 100 * self.plan.force_tolerance,
                         iterations, 100 * err)
-        result, raw = self.measure(step)
-        result.update(key=step.key, index=step.index, level_index=step.level_index,
-                      freq_index=step.freq_index, direction=step.direction,
-                      target_force_N=step.force_N, control_iterations=iterations,
-                      force_converged=ok, force_error=result["force_N"] / step.force_N - 1.0,
-                      control_history=[dict(drive_Vpp=v, force_N=F) for v, F in self.history])
+        measured, raw = self.measure(step)
+        result = StepResult(**measured, key=step.key, index=step.index, level_index=step.level_index,
+                            freq_index=step.freq_index, direction=step.direction,
+                            target_force_N=step.force_N, control_iterations=iterations,
+                            force_converged=ok, force_error=measured["force_N"] / step.force_N - 1.0,
+                            control_history=[ControlIteration(drive_Vpp=v, force_N=F) for v, F in self.history])
         record(step, result, raw)
         return result

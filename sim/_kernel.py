@@ -72,7 +72,7 @@ def _rk4_at(u, v, t, h, k, su, sF, d, lam, kind, p, a_f, gamma, omega, phase, bi
 
 
 @njit(cache=True, nogil=True)
-def _velocity_root(v0, v1, m0, m1):
+def velocity_root(v0, v1, m0, m1):
     """Fraction theta in [0, 1] where the cubic Hermite v(theta) crosses zero.
 
     v0 and v1 have opposite signs (or v0 == 0); m0, m1 are the end slopes times h.
@@ -146,7 +146,7 @@ def rk4_run(u, v, t0, k, d, su, sF, lam, kind, p, a_f, gamma, omega, phase, bias
             # Motion reverses inside this step: split it at the zero of the velocity.
             if d * v > 0.0:
                 a_end = _accel(un, vn, gamma * sn + bias, k, su, sF, d, lam, kind, p, a_f, c1, k1)
-                theta = _velocity_root(v, vn, a0 * h, a_end * h)
+                theta = velocity_root(v, vn, a0 * h, a_end * h)
             else:
                 theta = 0.0
             h1 = theta * h

@@ -38,7 +38,7 @@ import math
 
 from numba import njit
 
-from ._kernel import _velocity_root
+from ._kernel import velocity_root
 from .masing import active_depth, branch_force, friction, push_reversal
 
 N_COEF = 18
@@ -161,7 +161,7 @@ def plant_run(u, v, th, w, q, t0, k, d, su, sF, lam, kind, p, gamma, omega, phas
             if d * v > 0.0:
                 Pe = gamma * math.sin(omega * (t + h) + phase) + bias
                 a_end, _, _, _, _ = _deriv(un, vn, tn, wn, qn, Pe, k, su, sF, d, lam, kind, p, coef)
-                theta = _velocity_root(v, vn, a0 * h, a_end * h)
+                theta = velocity_root(v, vn, a0 * h, a_end * h)
             else:
                 theta = 0.0
             h1 = theta * h

@@ -16,8 +16,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import _kernel
+from .errors import ConfigurationError
 from .masing import LAMBDA_MASING
-from .virgin import SakaiCurve, check_positive_finite
+from .virgin import SakaiCurve, VirginCurve, check_positive_finite
 
 log = logging.getLogger(__name__)
 
@@ -35,7 +36,7 @@ class FrictionState:
     su: np.ndarray = field(default_factory=lambda: np.empty(64))
     sF: np.ndarray = field(default_factory=lambda: np.empty(64))
 
-    def copy(self) -> "FrictionState":
+    def copy(self) -> FrictionState:
         return replace(self, su=self.su.copy(), sF=self.sF.copy())
 
 
@@ -77,14 +78,14 @@ class Integrator:
     n: float = 1.5
     lam: float = LAMBDA_MASING
     steps_per_period: int = 10_000
-    curve: object = None
+    curve: VirginCurve | None = None       # None: the Sakai curve of ``n``
 
     def __post_init__(self):
         if self.curve is None:
             object.__setattr__(self, "curve", SakaiCurve(self.n))
         check_positive_finite("similarity ratio lam", self.lam)
         if int(self.steps_per_period) < 100:
-            raise ValueError(f"steps_per_period must be >= 100, got {self.steps_per_period!r}")
+            raise ConfigurationError(f"steps_per_period must be >= 100, got {self.steps_per_period!r}")
 
     def run(self, state: FrictionState, gamma0: float, beta: float, periods: int,
             record_every: int = 0, record: np.ndarray | None = None):
@@ -92,10 +93,12 @@ class Integrator:
         N = int(self.steps_per_period)
         h = TWO_PI / N
         rec = record if record is not None else np.empty((0, 5))
+        curve = self.curve
+        assert curve is not None               # set in __post_init__
         (state.u, state.v, state.k, state.d, state.su, state.sF,
          umax, umin, depth, nrev) = _kernel.rk4_run(
             state.u, state.v, 0.0, state.k, state.d, state.su, state.sF,
-            self.lam, self.curve.kind, self.curve.params,
+            self.lam, curve.kind, curve.params,
             1.0 / (beta * beta), gamma0, 1.0, 0.0, 0.0, 0.0, 0.0,
             h, N * periods, max(record_every, 1), rec)
         return umax, umin, depth, nrev

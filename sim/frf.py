@@ -16,11 +16,12 @@ from __future__ import annotations
 import logging
 import os
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .dynamics import FrictionState, Integrator, SteadyState, steady_state
+from .errors import ConfigurationError
 
 log = logging.getLogger(__name__)
 
@@ -42,7 +43,7 @@ class FrequencyResponse:
     max_depth: int
 
     @classmethod
-    def from_points(cls, points: list[SteadyState], sweep: str, method: str) -> "FrequencyResponse":
+    def from_points(cls, points: list[SteadyState], sweep: str, method: str) -> FrequencyResponse:
         return cls(
             gamma0=points[0].gamma0, n=points[0].n,
             beta=np.array([p.beta for p in points]), G=np.array([p.G for p in points]),
@@ -73,12 +74,12 @@ def _workers(workers: int | None) -> int:
     return max(1, workers or os.cpu_count() or 1)
 
 
-def _grid(betas) -> np.ndarray:
+def beta_grid(betas) -> np.ndarray:
     b = np.asarray(betas, dtype=np.float64).ravel()
     if b.size == 0:
-        raise ValueError("beta grid is empty")
+        raise ConfigurationError("beta grid is empty")
     if not np.all(np.isfinite(b)) or np.any(b <= 0):
-        raise ValueError("beta grid must hold finite values > 0")
+        raise ConfigurationError("beta grid must hold finite values > 0")
     return b
 
 
@@ -92,8 +93,8 @@ def frf_rk4(betas, gamma0: float, n: float = 1.5, *, sweep: str = "independent",
     previous one's final state.  ``progress(done, total)`` is called after each point.
     """
     if sweep not in SWEEPS:
-        raise ValueError(f"sweep must be one of {SWEEPS}, got {sweep!r}")
-    b = _grid(betas)
+        raise ConfigurationError(f"sweep must be one of {SWEEPS}, got {sweep!r}")
+    b = beta_grid(betas)
     it = integrator or Integrator(n=n)
     total = b.size
     if sweep == "independent":
@@ -141,8 +142,9 @@ def sweep_up_down(betas, gamma0: float, n: float = 1.5, *, rtol_jump: float = 0.
 
 def _ascending(fr: FrequencyResponse) -> FrequencyResponse:
     idx = np.argsort(fr.beta)
-    fields = {k: (v[idx] if isinstance(v, np.ndarray) else v) for k, v in fr.__dict__.items()}
-    return FrequencyResponse(**fields)
+    return replace(fr, beta=fr.beta[idx], G=fr.G[idx], converged=fr.converged[idx],
+                   gross_rolling=fr.gross_rolling[idx], reversals_per_cycle=fr.reversals_per_cycle[idx],
+                   cycles=fr.cycles[idx])
 
 
 def find_peaks(fr: FrequencyResponse, min_prominence: float = 0.005) -> list[Peak]:

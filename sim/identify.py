@@ -41,7 +41,9 @@ import numpy as np
 from numba import njit
 from scipy.optimize import least_squares
 
+from .errors import ConfigurationError
 from .masing import LAMBDA_MASING, active_depth, branch_force, push_reversal
+from .step_result import StepResult
 from .virgin import CURVE_SAKAI
 
 log = logging.getLogger(__name__)
@@ -73,7 +75,7 @@ class StepHarmonics:
     sigma_disp: float = 0.0   # m
 
     @classmethod
-    def from_result(cls, r: dict) -> "StepHarmonics":
+    def from_result(cls, r: StepResult) -> StepHarmonics:
         def c(fit):
             return np.asarray(fit["amplitude"]) * np.exp(1j * np.asarray(fit["phase_rad"]))
         scale = math.sqrt(2.0 / max(r.get("n_samples", 1000), 1))
@@ -83,7 +85,7 @@ class StepHarmonics:
 
 
     @classmethod
-    def from_records(cls, rec) -> "StepHarmonics":
+    def from_records(cls, rec) -> StepHarmonics:
         """From a :class:`sim.records.PeriodicRecords` (every harmonic the records hold)."""
         c = rec.channels
         return cls(freq_Hz=rec.freq_Hz, force=c["force"].harmonics, accel=c["accel"].harmonics,
@@ -159,7 +161,7 @@ def displacement_harmonics(step: StepHarmonics) -> tuple[np.ndarray, np.ndarray,
     return X, wD, wD ** 2 * vD + (1 - wD) ** 2 * vA
 
 
-def _paths(X: np.ndarray, M: int) -> tuple[np.ndarray, np.ndarray]:
+def period_paths(X: np.ndarray, M: int) -> tuple[np.ndarray, np.ndarray]:
     """Periods of the displacement (rows of M samples) from rows of harmonics X, each
     centred between its extremes and rotated to start at its largest value; every turning
     point is lifted to the vertex of the parabola through it and its neighbours (the
@@ -181,16 +183,16 @@ def _paths(X: np.ndarray, M: int) -> tuple[np.ndarray, np.ndarray]:
     return x, starts
 
 
-def _path_friction(paths: np.ndarray, x_s: float, n: float, lam: float = LAMBDA_MASING) -> np.ndarray:
-    """Dimensionless Masing friction sampled along rows of ``paths`` (m, from :func:`_paths`)."""
+def path_friction(paths: np.ndarray, x_s: float, n: float, lam: float = LAMBDA_MASING) -> np.ndarray:
+    """Dimensionless Masing friction sampled along rows of ``paths`` (m, from :func:`period_paths`)."""
     u = paths / x_s
     out = np.empty_like(u)
     _loop_friction(u, u[:, 0].copy(), lam, np.array([n]), out)
     return out
 
 
-def _path_harmonics(samples: np.ndarray, starts: np.ndarray, K: int) -> np.ndarray:
-    """Harmonics 1..K of rows of samples taken along :func:`_paths`' rotated periods, in
+def path_harmonics(samples: np.ndarray, starts: np.ndarray, K: int) -> np.ndarray:
+    """Harmonics 1..K of rows of samples taken along :func:`period_paths`' rotated periods, in
     the period's own time."""
     M = samples.shape[1]
     k = np.arange(1, K + 1)
@@ -202,7 +204,7 @@ def _path_harmonics(samples: np.ndarray, starts: np.ndarray, K: int) -> np.ndarr
 def _friction_harmonics(paths: np.ndarray, starts: np.ndarray, x_s: float, n: float, lam: float,
                         K: int) -> np.ndarray:
     """Harmonics 1..K of the dimensionless Masing friction along rows of ``paths`` (m)."""
-    return _path_harmonics(_path_friction(paths, x_s, n, lam), starts, K)
+    return path_harmonics(path_friction(paths, x_s, n, lam), starts, K)
 
 
 def synthesize(C: np.ndarray, M: int) -> np.ndarray:
@@ -235,9 +237,9 @@ class _Prepared:
     vA: np.ndarray        # variance of the acceleration-derived displacement (per part)
     path: np.ndarray
     start: int
-    sig_re: np.ndarray | None = None
-    sig_im: np.ndarray | None = None
-    cov: np.ndarray | None = None   # with the kinematic residual (real, imaginary part; 2 x K)
+    sig_re: np.ndarray = field(default_factory=lambda: np.empty(0))   # empty until weighed
+    sig_im: np.ndarray = field(default_factory=lambda: np.empty(0))
+    cov: np.ndarray = field(default_factory=lambda: np.empty((2, 0)))   # with the kinematic residual (real, imaginary part; 2 x K)
     theta: np.ndarray | None = None
 
 
@@ -251,7 +253,7 @@ class Identifier:
         self.M = points_per_period
         self.steps: list[StepHarmonics] = []
         self._prep: list[_Prepared] = []
-        self._cache = None
+        self._cache: tuple[tuple[float, float], np.ndarray] | None = None
         self.theta = np.log([guess["F_s_N"], guess["x_s_m"], 1.0, guess["mass_kg"]])
         self.theta[2] = guess["n"]
         self.theta_prior = self.theta.copy()
@@ -259,11 +261,11 @@ class Identifier:
         self.history: list[dict] = []
 
     # ------------------------------------------------------------------ data
-    def add(self, step: StepHarmonics | dict) -> None:
+    def add(self, step: StepHarmonics | StepResult) -> None:
         if isinstance(step, dict):
             step = StepHarmonics.from_result(step)
         X, wD, vX = displacement_harmonics(step)
-        paths, starts = _paths(X, self.M)
+        paths, starts = period_paths(X, self.M)
         self.steps.append(step)
         with np.errstate(divide="ignore", invalid="ignore"):
             vA = np.where(wD < 1, (vX - wD ** 2 * float(step.sigma_disp) ** 2) / (1 - wD) ** 2, 0.0)
@@ -272,7 +274,7 @@ class Identifier:
     # ------------------------------------------------------------------ model
     def model_friction(self, F_s: float, x_s: float, n: float, X: np.ndarray, harmonics: int | None = None) -> np.ndarray:
         """Harmonics (N) of the Masing friction along the displacement harmonics X (m, steps x Kx)."""
-        paths, starts = _paths(X, self.M)
+        paths, starts = period_paths(X, self.M)
         return F_s * _friction_harmonics(paths, starts, x_s, n, self.lam, harmonics or np.atleast_2d(X).shape[1])
 
     def _weights(self, p: _Prepared, F_s: float, x_s: float, n: float, m: float, K: int) -> None:
@@ -310,7 +312,7 @@ class Identifier:
             deltas[2 * live.size + r][tail] = signs[r] * sdX[tail]
         if deltas:
             D = np.array(deltas)
-            F = F_s * _friction_harmonics(*_paths(np.concatenate([p.X + D, p.X - D]), self.M), x_s, n, self.lam, K)
+            F = F_s * _friction_harmonics(*period_paths(np.concatenate([p.X + D, p.X - D]), self.M), x_s, n, self.lam, K)
             resp = (F[:len(D)] - F[len(D):]) / 2                # response to one sd (per row)
             for i, j in enumerate(live):
                 for part, unit in ((0, 1.0), (1, 1j)):
@@ -401,7 +403,7 @@ class Identifier:
         ``reweight_budget`` caps how many stale weights one call refreshes (online use;
         new steps always get theirs); ``tol`` is least_squares' ftol and xtol."""
         if not self.steps:
-            raise ValueError("no steps to identify from")
+            raise ConfigurationError("no steps to identify from")
         # only harmonics every step measured (a missing one is not a zero)
         K = min([self.K] + [min(s.disp.size, s.force.size, s.accel.size) for s in self.steps])
         paths = np.array([p.path for p in self._prep])

@@ -34,7 +34,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from .virgin import SakaiCurve, virgin_g
+from .errors import ConfigurationError
+from .virgin import SakaiCurve, VirginCurve, virgin_g
 
 log = logging.getLogger(__name__)
 
@@ -124,7 +125,7 @@ class MasingFriction:
     Works dimensionless (u, F/F_s); :meth:`force_SI` converts with F_s and x_s.
     """
 
-    curve: object = field(default_factory=lambda: SakaiCurve(1.5))
+    curve: VirginCurve = field(default_factory=lambda: SakaiCurve(1.5))
     lam: float = LAMBDA_MASING
     k: int = 0
     d: float = 0.0
@@ -133,7 +134,7 @@ class MasingFriction:
     def __post_init__(self):
         lam = float(self.lam)
         if not np.isfinite(lam) or lam <= 0:
-            raise ValueError(f"similarity ratio lam must be finite and > 0, got {self.lam!r}")
+            raise ConfigurationError(f"similarity ratio lam must be finite and > 0, got {self.lam!r}")
         self.lam = lam
         self._su = np.empty(16)
         self._sF = np.empty(16)

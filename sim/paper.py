@@ -53,11 +53,11 @@ class Grids:
     fig13_zoom_points: int           # refinement between the coarse maximum's neighbours
     fig13_gamma0: tuple[float, ...]
     pitch_levels_N: tuple[float, ...] = (0.1, 3.0, 100.0)   # Figs. 15-17: force amplitudes
-    pitch_freqs_Hz: np.ndarray = None                       # coarse sweep (None: 24 points)
+    pitch_freqs_Hz: np.ndarray | None = None                # coarse sweep (None: 24 points)
     pitch_zoom_points: int = 7
 
     @classmethod
-    def for_run(cls, quick: bool) -> "Grids":
+    def for_run(cls, quick: bool) -> Grids:
         if quick:
             return cls(np.linspace(0.2, 2.0, 37), np.linspace(0.2, 3.0, 29), (0.4, 0.8),
                        np.geomspace(0.4, 5.0, 25), 7, (0.2, 0.6, 0.9),
@@ -238,6 +238,7 @@ def steady_cycles() -> dict[tuple[float, str], Cycle]:
             s = steady_state(GAMMA0_FIG6, beta, n, history_samples=HISTORY_SAMPLES)
             if not s.converged:
                 log.warning("cycle at %s (n=%g, beta=%g) is not steady", letter, n, beta)
+            assert s.history is not None          # asked for with history_samples
             cycles[n, letter] = Cycle(n, letter, s, cycle_features(s.history))
     return cycles
 
@@ -284,7 +285,9 @@ def _two_periods(c: Cycle):
     it = Integrator(n=c.n)
     every = max(1, it.steps_per_period // HISTORY_SAMPLES)
     rec = np.empty((2 * it.steps_per_period // every + 1, 5))
-    it.run(c.steady.state.copy(), GAMMA0_FIG6, c.steady.beta, 2, every, rec)
+    state = c.steady.state
+    assert state is not None                  # steady_state returns its final state
+    it.run(state.copy(), GAMMA0_FIG6, c.steady.beta, 2, every, rec)
     return rec
 
 
@@ -443,7 +446,7 @@ def pitch_resonances(model, level_N: float, freqs_Hz, zoom_points: int):
 
 def fig15_17_pitch_resonance(rep: Report, grids: Grids):
     from .rig import RigModel
-    model = RigModel(**PITCH_MODEL)
+    model = RigModel.from_dict(PITCH_MODEL)
     freqs = grids.pitch_freqs_Hz if grids.pitch_freqs_Hz is not None else np.geomspace(40.0, 300.0, 24)
     f_s = model.omega_s / (2 * math.pi)
     fig = Figure(figsize=(11, 4.5), layout="constrained")

@@ -42,6 +42,7 @@ import math
 import numpy as np
 
 from ._plant_kernel import N_COEF, S_BEMF, S_CA, S_KA, S_MA, S_ON, S_TAU, S_XS
+from .errors import ConfigurationError
 
 log = logging.getLogger(__name__)
 
@@ -57,20 +58,20 @@ def validate(model) -> None:
     for name in EFFECT_FIELDS:
         v = getattr(model, name)
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
-            raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+            raise ConfigurationError(f"{name} must be finite and >= 0, got {v!r}")
     if model.friction_alpha > 0 and model.friction_v_ref_m_per_s <= 0:
-        raise ValueError(f"friction_v_ref_m_per_s must be > 0 when friction_alpha > 0, "
+        raise ConfigurationError(f"friction_v_ref_m_per_s must be > 0 when friction_alpha > 0, "
                          f"got {model.friction_v_ref_m_per_s!r}")
     if pitch_on(model):
         if model.pitch_stiffness_N_m_per_rad <= 0:
-            raise ValueError(f"pitch_stiffness_N_m_per_rad must be > 0 when the pitch is on "
+            raise ConfigurationError(f"pitch_stiffness_N_m_per_rad must be > 0 when the pitch is on "
                              f"(pitch_inertia_kg_m2 > 0), got {model.pitch_stiffness_N_m_per_rad!r}")
         m_e2 = model.mass_kg * model.cg_height_m ** 2
         if model.pitch_inertia_kg_m2 <= m_e2:
-            raise ValueError(f"pitch_inertia_kg_m2 must be > mass_kg * cg_height_m^2 = {m_e2:g} "
+            raise ConfigurationError(f"pitch_inertia_kg_m2 must be > mass_kg * cg_height_m^2 = {m_e2:g} "
                              f"(positive-definite mass matrix), got {model.pitch_inertia_kg_m2!r}")
     if shaker_on(model) and model.shaker_resistance_ohm <= 0:
-        raise ValueError(f"shaker_resistance_ohm must be > 0 when the shaker model is on "
+        raise ConfigurationError(f"shaker_resistance_ohm must be > 0 when the shaker model is on "
                          f"(shaker_force_constant_N_per_A > 0), got {model.shaker_resistance_ohm!r}")
 
 
@@ -100,7 +101,7 @@ def coefficients(model) -> np.ndarray | None:
     """The kernel's coefficient array (layout in :mod:`sim._plant_kernel`), or None."""
     if not any_on(model):
         return None
-    F_s, x_s, m = model.F_s_N, model.x_s_m, model.mass_kg
+    F_s, x_s = model.F_s_N, model.x_s_m
     c = np.zeros(N_COEF)
     if pitch_on(model):
         inv = np.linalg.inv(mass_matrix(model))

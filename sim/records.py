@@ -213,7 +213,7 @@ def analyse_records(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | 
         n_half = int(round(half * ratio))
         a = _analyse_channel(v[:n_half], fs_Hz, f, half, spp, DRIFT_HARMONICS) if half >= 1 else None
         b = _analyse_channel(v[n_half:2 * n_half], fs_Hz, f, half, spp, DRIFT_HARMONICS) if half >= 1 else None
-        if a is None:
+        if a is None or b is None:
             continue
         # the noise of the whole record sets the scale (a half alone can hold too few periods)
         s_h = chans[k].noise_rms * math.sqrt(2.0 / n_half) * math.sqrt(2.0)

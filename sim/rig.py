@@ -48,6 +48,7 @@ import numpy as np
 
 from . import _kernel, _plant_kernel, plant_effects
 from .dynamics import FrictionState
+from .errors import ConfigurationError
 from .masing import LAMBDA_MASING
 from .virgin import SakaiCurve, check_positive_finite
 
@@ -107,16 +108,16 @@ class RigModel:
                      "spring_N_per_m", "disp_delay_s", "probe_standoff_m"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
-                raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+                raise ConfigurationError(f"{name} must be finite and >= 0, got {v!r}")
         SakaiCurve(self.n)  # validates n
         plant_effects.validate(self)
 
     @classmethod
-    def from_dict(cls, d: dict) -> "RigModel":
+    def from_dict(cls, d: dict) -> RigModel:
         known = {f.name for f in fields(cls)}
         unknown = set(d) - known
         if unknown:
-            raise ValueError(f"unknown rig model keys {sorted(unknown)}; allowed: {sorted(known)}")
+            raise ConfigurationError(f"unknown rig model keys {sorted(unknown)}; allowed: {sorted(known)}")
         return cls(**d)
 
     @property
@@ -156,7 +157,8 @@ class SimulatedRig:
         self.pitch_rate_rad_s = 0.0
         self.coil_force_N = 0.0         # Bl i (shaker model with an inductance only)
         self._coef = plant_effects.coefficients(self.model)
-        self._resolution_key, self._resolution = None, 1.0
+        self._resolution_key: float | None = None
+        self._resolution = 1.0
         self.gen = _Generator()
         self._t = 0.0
         self._phase = 0.0
@@ -175,11 +177,11 @@ class SimulatedRig:
                 self.gen.freq_Hz = check_positive_finite("freq_Hz", freq_Hz)
             if amplitude_Vpp is not None:
                 if not (math.isfinite(amplitude_Vpp) and amplitude_Vpp >= 0):
-                    raise ValueError(f"amplitude_Vpp must be finite and >= 0, got {amplitude_Vpp!r}")
+                    raise ConfigurationError(f"amplitude_Vpp must be finite and >= 0, got {amplitude_Vpp!r}")
                 self.gen.amplitude_Vpp = float(amplitude_Vpp)
             if offset_V is not None:
                 if not math.isfinite(offset_V):
-                    raise ValueError(f"offset_V must be finite, got {offset_V!r}")
+                    raise ConfigurationError(f"offset_V must be finite, got {offset_V!r}")
                 self.gen.offset_V = float(offset_V)
             if output_on is not None:
                 self.gen.output_on = bool(output_on)
@@ -210,7 +212,7 @@ class SimulatedRig:
         """Advance the plant by ``n_samples / fs_Hz`` seconds and sample the sensors."""
         n_samples = int(n_samples)
         if n_samples <= 0:
-            raise ValueError(f"n_samples must be > 0, got {n_samples}")
+            raise ConfigurationError(f"n_samples must be > 0, got {n_samples}")
         fs_Hz = check_positive_finite("fs_Hz", fs_Hz)
         with self.lock:
             return self._run(n_samples, fs_Hz)

@@ -24,7 +24,8 @@ import numpy as np
 from numba import njit
 
 from .dynamics import Integrator, SteadyState, steady_state
-from .frf import FrequencyResponse, _grid
+from .errors import ConfigurationError
+from .frf import FrequencyResponse, beta_grid
 from .virgin import virgin_g
 
 log = logging.getLogger(__name__)
@@ -120,6 +121,7 @@ def solve_half_period(beta: float, gamma0: float, curve, a0: float, tau0: float,
 def _seed_from_rk4(p: SteadyState) -> tuple[float, float]:
     """(a, tau_r) of a converged RK4 point: amplitude and phase of the upper reversal."""
     h = p.history
+    assert h is not None, "the RK4 point was run with a history"
     i = int(np.argmax(h.u))
     return 0.5 * (p.u_max - p.u_min), float(h.tau[i] % (2 * math.pi))
 
@@ -148,8 +150,8 @@ def frf_shooting(betas, gamma0: float, n: float = 1.5, *, integrator: Integrator
     array marking the points that fell back to the RK4 engine.
     """
     if direction not in ("up", "down"):
-        raise ValueError(f"direction must be 'up' or 'down', got {direction!r}")
-    b = np.sort(_grid(betas))
+        raise ConfigurationError(f"direction must be 'up' or 'down', got {direction!r}")
+    b = np.sort(beta_grid(betas))
     if direction == "down":
         b = b[::-1]
     it = integrator or Integrator(n=n)

@@ -90,7 +90,7 @@ def generate(model: RigModel, levels_N, freqs_Hz, *, settle: int = 25, measure: 
     """Up-sweeps through ``freqs_Hz`` at each of ``levels_N``; one :class:`SyntheticStep` per
     step."""
     rng = np.random.default_rng(seed)
-    out = []
+    out: list[SyntheticStep] = []
     for li, level in enumerate(levels_N):
         rig = SimulatedRig(replace(model, seed=model.seed + li))
         vpp = 2.0 * level / model.amp_gain_N_per_V

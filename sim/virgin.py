@@ -19,9 +19,12 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from numba import njit
+
+from .errors import ConfigurationError
 
 log = logging.getLogger(__name__)
 
@@ -31,9 +34,9 @@ def check_positive_finite(name: str, value: float) -> float:
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number > 0, got {value!r}") from None
+        raise ConfigurationError(f"{name} must be a number > 0, got {value!r}") from None
     if not math.isfinite(v) or v <= 0.0:
-        raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+        raise ConfigurationError(f"{name} must be finite and > 0, got {value!r}")
     return v
 
 
@@ -59,6 +62,15 @@ def virgin_g(kind, s, params):
     return math.nan
 
 
+class VirginCurve(Protocol):
+    """What the kernels take of a virgin curve: its ``kind`` (CURVE_*) and ``params``."""
+
+    @property
+    def kind(self) -> int: ...
+    @property
+    def params(self) -> np.ndarray: ...
+
+
 @dataclass(frozen=True)
 class SakaiCurve:
     """f1 = A x^n + B x on [0, x_s], f2 = F_s beyond; A, B from seed Eqs. 4-5.
@@ -72,7 +84,7 @@ class SakaiCurve:
     def __post_init__(self):
         n = check_positive_finite("shape factor n", self.n)
         if abs(n - 1.0) < 1e-9:
-            raise ValueError(
+            raise ConfigurationError(
                 f"shape factor n must be > 0 and != 1 (n = 1 is a linear spring with no "
                 f"hysteresis; seed Eqs. 4-5 are singular there), got {self.n!r}"
             )

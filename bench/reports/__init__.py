@@ -6,9 +6,9 @@ The data are prepared once (``_run.load_run`` reads a run directory into a typed
 Decision record 0016.
 """
 
+from ._figures import plot_identification
 from ._html import render_analysis_html, write_analysis_html
 from ._identification import ID_PARAMS, IdentificationData, identification_data
-from ._figures import plot_identification
 from ._markdown import write_report
 from ._run import RunData, load_run
 from ._steps import UNSETTLED_RESIDUAL, residual_ratio

@@ -16,6 +16,8 @@ import math
 from html import escape
 from pathlib import Path
 
+from sim.discrepancy.rounding import round_to_interval
+
 from . import _figures as figures
 from ._analysis import AnalysisData, Interval, analysis_data
 
@@ -76,9 +78,10 @@ def _figure(fig, alt: str, caption: str) -> str:
 
 
 def _param_row(key: str, p: Interval) -> list[str]:
+    """label, unit, value, low, high: each figure to the digit its interval supports."""
     label, unit, scale = PARAM_DISPLAY.get(key, (key, p.unit, 1.0))
-    return [escape(label), escape(unit or p.unit or "-"), _num(p.value * scale), _num(p.low * scale),
-            _num(p.high * scale)]
+    return [escape(label), escape(unit or p.unit or "-"), *round_to_interval(p.value * scale, p.low * scale,
+                                                                              p.high * scale)]
 
 
 def _verdict(a: AnalysisData) -> str:
@@ -102,7 +105,7 @@ def _causes(a: AnalysisData) -> str:
                    + "</p>")
     for i, c in enumerate(a.causes, 1):
         out.append(f"<h3>{i}. {escape(c.label)} <code>{escape(c.id)}</code></h3>")
-        rows = [[escape(k), escape(p.unit or "-"), _num(p.value), _num(p.low), _num(p.high)]
+        rows = [[escape(k), escape(p.unit or "-"), *round_to_interval(p.value, p.low, p.high)]
                 for k, p in c.parameters.items()]
         out.append(_table(["parameter", "unit", "value", "95 % low", "95 % high"], rows, {2, 3, 4})
                    if rows else "<p>No parameters given.</p>")

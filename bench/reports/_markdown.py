@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.discrepancy.rounding import round_to_interval
+
 from . import _figures as figures
 from ._analysis import analysis_data
 from ._identification import ID_PARAMS, IdentificationData, determined_from, finite, steps_of
@@ -117,8 +119,7 @@ def analysis_md(run: RunData) -> list[str]:
     if a.causes:
         md += _table(["cause", "parameters (95 %)", "held-out error before", "after", "delta BIC"],
                      [[f"{c.label} (`{c.id}`)",
-                       "; ".join(f"{k} = {_num(p.value)} {p.unit}".rstrip() + f" [{_num(p.low)}, {_num(p.high)}]"
-                                 for k, p in c.parameters.items()) or "-",
+                       "; ".join(_param_md(k, p) for k, p in c.parameters.items()) or "-",
                        _pct_abs(c.heldout_error_before), _pct_abs(c.heldout_error_after), _num(c.delta_bic)]
                       for c in a.causes])
     else:
@@ -129,6 +130,12 @@ def analysis_md(run: RunData) -> list[str]:
               f"- the analysis page `{ANALYSIS_HTML}` is missing: `bench analyze {run.path}` writes it")
     md += [f"- could not be read: {p}" for p in a.problems]
     return md + [""]
+
+
+def _param_md(key: str, p) -> str:
+    """'c = 41 N s/m [37, 45]': each figure to the digit its interval supports."""
+    v, lo, hi = round_to_interval(p.value, p.low, p.high)
+    return f"{key} = {v} {p.unit}".rstrip() + (f" [{lo}, {hi}]" if math.isfinite(p.low) and p.low != p.high else "")
 
 
 def _pct_abs(x: float) -> str:
@@ -183,12 +190,17 @@ def _header_md(run: RunData) -> list[str]:
     meta, plan, rig, levels_N = run.meta, run.plan, run.rig, run.levels_N
 
     md = [f"# Stepped-sine report: {plan.get('name', '?')}", ""]
+    md += accounting_md(run)
+    acc = run.accounting
+    recorded = f"{meta.get('steps_done', '?')}/{meta.get('steps_total', '?')}"
+    readable = (f"{len(acc.intact)} readable / {acc.planned} planned" if acc and acc.planned is not None
+                else f"{len(run.results)} readable / {meta.get('steps_total', '?')} planned")
     md += _table(["", ""], [
         ["run directory", f"`{run.path}`"],
         ["plan", plan.get("name", "?")],
         ["rig", f"{rig.get('name', '?')}{' (simulated)' if rig.get('simulated') else ''}"],
         ["status", f"**{meta.get('status', '?')}**"],
-        ["steps done / total", f"{meta.get('steps_done', len(run.results))} / {meta.get('steps_total', '?')}"],
+        ["steps", f"{readable} (the run recorded {recorded} done when it ended)"],
         ["started / ended (UTC)", f"{meta.get('started', '?')} / {meta.get('ended', '?')}"],
         ["levels (N)", ", ".join(f"{v:g}" for v in levels_N)],
         ["frequencies", f"{len(plan.get('freqs_Hz', []))} from {min(plan.get('freqs_Hz', [math.nan])):g} to "
@@ -210,6 +222,49 @@ def _header_md(run: RunData) -> list[str]:
     else:
         md.append("none (events.jsonl records only start, sensor checks, output off and end)")
     md.append("")
+    return md
+
+
+def accounting_md(run: RunData) -> list[str]:
+    """The report's first lines: steps used against the plan, what was skipped and why,
+    and one overall line (went well / needs attention, and why)."""
+    acc = run.accounting
+    if acc is None or acc.planned is None:
+        return [f"**{len(run.results)} used / ? planned**: run.json holds no plan this version can read, so the "
+                "steps cannot be counted against it.", "", "Overall: **needs attention**: no readable plan.", ""]
+    skipped = [f"{p.key} ({p.reason})" for p in acc.missing] + [f"{p.key} (damaged: {p.reason})" for p in acc.damaged]
+    extra = len(run.results) - len(acc.intact)
+    more = f"; and {len(skipped) - 12} more (`bench check` lists them all)" if len(skipped) > 12 else ""
+    md = [f"**{len(acc.intact)} used / {acc.planned} planned**; skipped: {'; '.join(skipped[:12]) or 'none'}{more}"
+          + (f"; also used: {extra} step{'s' * (extra != 1)} the plan does not know" if extra > 0 else ""), ""]
+    why = []
+    status = run.meta.get("status", "?")
+    if status != "completed":
+        why.append({"interrupted": "the run was interrupted (bench resume continues it)",
+                    "aborted": "the run was stopped by a limit",
+                    "running": "the run is still running, or ended without recording its end"}.get(
+                        status, f"the run ended with status '{status}'"))
+    if acc.missing:
+        why.append(f"{acc.missing_count} step{'s' * (acc.missing_count != 1)} missing")
+    if acc.damaged:
+        why.append(f"{len(acc.damaged)} step{'s' * (len(acc.damaged) != 1)} damaged")
+    trips = [e for e in run.events if e.get("event") == "abort"]
+    if trips:
+        why.append("limit trip: " + "; ".join(str(e.get("reason", "?")) for e in trips))
+    errors = [e for e in run.events if e.get("event") in ("instrument_error", "error")]
+    if errors:
+        why.append(f"{len(errors)} instrument or run error{'s' * (len(errors) != 1)} (see the events below)")
+    off = [r for r in run.results if not r.get("force_converged", True)]
+    if off:
+        why.append(f"force error out of tolerance at {len(off)} step{'s' * (len(off) != 1)}")
+    if acc.orphan:
+        why.append(f"{len(acc.orphan)} file{'s' * (len(acc.orphan) != 1)} in steps/ that no planned step owns "
+                   f"({', '.join(p.path.name for p in acc.orphan[:5])})")
+    if why:
+        md += [f"Overall: **needs attention**: {'; '.join(why)}.", ""]
+    else:
+        md += ["Overall: **went well**: every planned step measured and intact, the force within tolerance at "
+               "every step, no limit trip, error or interruption.", ""]
     return md
 
 

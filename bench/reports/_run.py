@@ -14,8 +14,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-
-from ..storage import RunStore
+from ..storage import Accounting, RunDirError, RunStore
 from ._identification import IdentificationData, identification_data
 from ._model import ModelComparison, model_comparison
 from ._steps import Series, legacy_pp, series_of
@@ -69,6 +68,7 @@ class RunData:
     resonances: list[Resonance]
     analysis: dict | None                     # analysis/analysis.json, when `bench analyze` wrote it
     analysis_error: str | None                # why analysis.json could not be read, if so
+    accounting: Accounting | None = None      # the steps counted against the plan (None: no plan stored)
 
     @property
     def plan(self) -> dict:
@@ -119,5 +119,9 @@ def load_run(run_dir: Path) -> RunData:
             log.warning("model comparison failed: %s", e)
             cmp_error = f"{type(e).__name__}: {e}"
     analysis, analysis_error = _analysis(store.path)
+    try:
+        accounting = store.account()
+    except RunDirError:
+        accounting = None
     return RunData(store.path, meta, results, events, list(levels_N), series, identification_data(store.path, meta),
-                   cmp, cmp_error, resonances(series, cmp) if results else [], analysis, analysis_error)
+                   cmp, cmp_error, resonances(series, cmp) if results else [], analysis, analysis_error, accounting)

@@ -20,10 +20,12 @@ import csv
 import importlib
 import logging
 import re
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import pyarrow.parquet as pq
+
+from sim.errors import ConfigurationError
 
 from .engine import Engine, Outcome, Study
 
@@ -39,7 +41,7 @@ def find_sources(paths: list[Path]) -> list[Path]:
     out: list[Path] = []
     for p in map(Path, paths):
         if not p.exists():
-            raise ValueError(f"{p}: no such file or directory")
+            raise ConfigurationError(f"{p}: no such file or directory")
         if p.is_file() or (p / "run.json").exists():
             out.append(p)
             continue
@@ -49,7 +51,7 @@ def find_sources(paths: list[Path]) -> list[Path]:
                 and not runs.intersection(q.parents)}
         found = sorted(runs | uffs)
         if not found:
-            raise ValueError(f"{p}: no run directories (run.json) or UFF58 files (.uff, .unv) in it")
+            raise ConfigurationError(f"{p}: no run directories (run.json) or UFF58 files (.uff, .unv) in it")
         out.extend(found)
     seen, unique = set(), []
     for s in out:
@@ -119,7 +121,7 @@ def identify_source(source: Path, out_dir: Path | None = None, rig: Path | None 
         guess = dict(F_s_N=rr.expected_F_s_N, x_s_m=rr.expected_x_s_m, n=rr.expected_n,
                      mass_kg=rr.expected_mass_kg)
     if not src.steps:
-        raise ValueError(f"{source}: no steps with force, acceleration and displacement to identify from")
+        raise ConfigurationError(f"{source}: no steps with force, acceleration and displacement to identify from")
     est = identify_results([s.harmonics for s in src.steps], guess, MAX_HARMONICS).estimate
     out = dict(schema="guideway-bench/identification/1", source=str(source), kind=src.kind,
                parameters={k: dict(value=est.values[k], low=est.low[k], high=est.high[k]) for k in est.values},

@@ -4,8 +4,9 @@ printing only; the work is in the sibling modules)."""
 from __future__ import annotations
 
 import logging
-import tomllib
 from pathlib import Path
+
+from sim.errors import ConfigurationError
 
 log = logging.getLogger(__name__)
 
@@ -13,13 +14,13 @@ log = logging.getLogger(__name__)
 def _floats(text: str) -> tuple[float, ...]:
     """"0.5,1.5" or "0.1:0.9:9" (start:stop:count, linear)."""
     import numpy as np
-    if text.count(":") == 2:
-        a, b, k = text.split(":")
-        return tuple(float(x) for x in np.round(np.linspace(float(a), float(b), int(k)), 12))
     try:
+        if text.count(":") == 2:
+            a, b, k = text.split(":")
+            return tuple(float(x) for x in np.round(np.linspace(float(a), float(b), int(k)), 12))
         return tuple(float(x) for x in text.split(",") if x.strip())
     except ValueError:
-        raise ValueError(f"expected numbers like '0.5,1.5' or 'start:stop:count', got {text!r}") from None
+        raise ConfigurationError(f"expected numbers like '0.5,1.5' or 'start:stop:count', got {text!r}") from None
 
 
 def _dask_info(record: logging.LogRecord) -> bool:
@@ -62,11 +63,14 @@ def cmd_study_map(args, progress) -> int:
 
 def cmd_study_mc(args, progress) -> int:
     _quiet_dask()
-    from bench.config import DEFAULTS
+    from bench.config import DEFAULTS, parse_plan, parse_rig, read_toml
 
     from .montecarlo import McSpec, identification_mc
-    plan = tomllib.loads(Path(args.plan or DEFAULTS / "demo_plan.toml").read_text())
-    rig = tomllib.loads(Path(args.rig or DEFAULTS / "sim_rig.toml").read_text())
+    plan_path, rig_path = Path(args.plan or DEFAULTS / "demo_plan.toml"), Path(args.rig or DEFAULTS / "sim_rig.toml")
+    plan, rig = read_toml(plan_path), read_toml(rig_path)
+    parse_plan(plan, str(plan_path))          # errors name the file (McSpec checks again, unnamed)
+    if not parse_rig(rig, str(rig_path)).simulated:
+        raise ValueError(f"{rig_path}: a Monte-Carlo study needs a simulated rig (simulated = true, [rig.model])")
     spec = McSpec(plan=plan, rig=rig, samples=args.samples, spread=args.spread, n_spread=args.n_spread,
                   noise_scale=args.noise_scale, seed=args.seed)
     out = identification_mc(spec, Path(args.out), scheduler=args.scheduler, workers=args.workers,
@@ -88,7 +92,7 @@ def is_batch(args) -> bool:
 def cmd_analyze_batch(args, progress) -> int:
     _quiet_dask()
     if not args.out:
-        raise ValueError("analysing several sources needs --out DIR (the summary table and one report per source)")
+        raise ConfigurationError("analysing several sources needs --out DIR (the summary table and one report per source)")
     from .batch import ANALYZE, IDENTIFY, analyze_batch
     out = analyze_batch([Path(s) for s in args.sources], Path(args.out), rig=Path(args.rig) if args.rig else None,
                         function=IDENTIFY if args.identify_only else ANALYZE, scheduler=args.scheduler,
@@ -105,17 +109,18 @@ def add_parsers(sub, progress) -> None:
     m = ss.add_parser("map", help="compliance map G(beta, gamma0) for one or more n (Parquet + map.png)")
     m.add_argument("--n", default="1.5", help="shape factors: '0.5,1.5' or 'start:stop:count'")
     m.add_argument("--gamma0", default="0.1:0.9:9", help="force ratios P0/F_s in (0, 1)")
-    m.add_argument("--beta-min", type=float, default=0.2)
-    m.add_argument("--beta-max", type=float, default=3.0)
+    m.add_argument("--beta-min", type=float, default=0.2, help="lowest frequency ratio beta")
+    m.add_argument("--beta-max", type=float, default=3.0, help="highest frequency ratio beta")
     m.add_argument("--beta-points", type=int, default=200, help="log-spaced frequency ratios per row")
-    m.add_argument("--engine", choices=("shooting", "rk4"), default="shooting")
+    m.add_argument("--engine", choices=("shooting", "rk4"), default="shooting",
+                   help="steady state by half-period shooting (fast) or by RK4 time stepping")
     m.add_argument("--out", required=True, help="study directory (run again to resume)")
     _engine_args(m)
     m.set_defaults(func=lambda a: cmd_study_map(a, progress))
     c = ss.add_parser("mc", help="Monte-Carlo study of identification for a plan (Parquet + errors.png)")
     c.add_argument("--plan", help="plan TOML (default: the demo plan)")
     c.add_argument("--rig", help="simulated rig TOML; [rig.expected] centres the random rigs")
-    c.add_argument("--samples", type=int, default=20)
+    c.add_argument("--samples", type=int, default=20, help="random rigs to run the plan on")
     c.add_argument("--spread", type=float, default=2.0, help="F_s, x_s, m within this factor of expected")
     c.add_argument("--n-spread", type=float, default=0.5, help="n within +- this of expected")
     c.add_argument("--noise-scale", type=float, default=1.0, help="multiplies the rig model's sensor noise")

@@ -34,16 +34,17 @@ import json
 import logging
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 from distributed import Client, LocalCluster, WorkerPlugin, as_completed
 
 from bench.signals import SignalLatch
-from bench.storage import _atomic_write, now_iso
+from bench.storage import atomic_write, now_iso
+from sim.errors import ConfigurationError
 
 log = logging.getLogger(__name__)
 
@@ -120,13 +121,13 @@ class Engine:
         self.cluster: LocalCluster | None = None
         self.client: Client | None = None
 
-    def __enter__(self) -> "Engine":
+    def __enter__(self) -> Engine:
         try:
             if self.scheduler:
                 try:
                     self.client = Client(self.scheduler, timeout=f"{self.connect_timeout_s}s")
                 except OSError as e:
-                    raise ValueError(f"cannot reach the dask scheduler at {self.scheduler}: {e}") from e
+                    raise ConfigurationError(f"cannot reach the dask scheduler at {self.scheduler}: {e}") from e
             else:
                 n = self.workers or os.cpu_count() or 1
                 self.cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
@@ -208,7 +209,7 @@ class Study:
         self.tasks = tasks
         self.keys = [task_key(t) for t in tasks]
         if len(set(self.keys)) != len(self.keys):
-            raise ValueError(f"{kind} study: two tasks have the same inputs")
+            raise ConfigurationError(f"{kind} study: two tasks have the same inputs")
         self.parts = self.dir / "parts"
         self.manifest = self.dir / "study.json"
 
@@ -218,7 +219,7 @@ class Study:
             old = json.loads(self.manifest.read_text())
             if old.get("kind") != self.kind or old.get("spec") != json.loads(json.dumps(self.spec)) \
                     or old.get("seed") != self.seed:
-                raise ValueError(
+                raise ConfigurationError(
                     f"{self.dir} holds a different study ({old.get('kind')}, seed {old.get('seed')}, "
                     f"spec {old.get('spec')}); use a new directory or the same inputs to resume it")
             return old
@@ -230,7 +231,7 @@ class Study:
         return {p.stem for p in self.parts.glob("*.parquet")}
 
     def _write_manifest(self, m: dict) -> None:
-        _atomic_write(self.manifest, lambda fh: fh.write(json.dumps(m, indent=1, default=float).encode()))
+        atomic_write(self.manifest, lambda fh: fh.write(json.dumps(m, indent=1, default=float).encode()))
 
     def run_on(self, fn: Callable, engine: Engine | None = None, scheduler: str | None = None,
                workers: int | None = None, *, progress=None) -> Outcome:
@@ -302,5 +303,5 @@ class Study:
         path = self.dir / "results.parquet"
         if tables:
             table = pa.concat_tables(tables, promote_options="default")
-            _atomic_write(path, lambda fh: pq.write_table(table, fh))
+            atomic_write(path, lambda fh: pq.write_table(table, fh))
         return path

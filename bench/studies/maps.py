@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim.errors import ConfigurationError
+
 from .engine import Engine, Outcome, Study
 
 log = logging.getLogger(__name__)
@@ -38,19 +40,19 @@ class MapSpec:
 
     def __post_init__(self):
         if not self.n or not self.gamma0:
-            raise ValueError("a map needs at least one n and one gamma0")
+            raise ConfigurationError("a map needs at least one n and one gamma0")
         for n in self.n:
             if not (n > 0 and abs(n - 1) > 1e-9):
-                raise ValueError(f"n must be > 0 and != 1, got {n!r}")
+                raise ConfigurationError(f"n must be > 0 and != 1, got {n!r}")
         for g in self.gamma0:
             if not (0 < g < 1):
-                raise ValueError(f"gamma0 must lie in (0, 1) (above 1 the carriage rolls away), got {g!r}")
+                raise ConfigurationError(f"gamma0 must lie in (0, 1) (above 1 the carriage rolls away), got {g!r}")
         if not (0 < self.beta_min < self.beta_max):
-            raise ValueError(f"need 0 < beta_min < beta_max, got {self.beta_min!r}, {self.beta_max!r}")
+            raise ConfigurationError(f"need 0 < beta_min < beta_max, got {self.beta_min!r}, {self.beta_max!r}")
         if self.beta_points < 3:
-            raise ValueError(f"beta_points must be >= 3, got {self.beta_points!r}")
+            raise ConfigurationError(f"beta_points must be >= 3, got {self.beta_points!r}")
         if self.engine not in ("shooting", "rk4"):
-            raise ValueError(f"engine must be 'shooting' or 'rk4', got {self.engine!r}")
+            raise ConfigurationError(f"engine must be 'shooting' or 'rk4', got {self.engine!r}")
 
     def betas(self) -> np.ndarray:
         return np.geomspace(self.beta_min, self.beta_max, self.beta_points)

@@ -21,6 +21,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from drivers import plan_block
+from sim.errors import ConfigurationError
 from sim.rig import SimulatedRig
 
 from .engine import Engine, Outcome, Study
@@ -40,9 +41,9 @@ class PlantGenerator:
         self.rig.set_generator(freq_Hz=freq_Hz)
         return float(freq_Hz)
 
-    def set_amplitude(self, vpp: float) -> float:
-        self.rig.set_generator(amplitude_Vpp=vpp)
-        return float(vpp)
+    def set_amplitude(self, amplitude_Vpp: float) -> float:
+        self.rig.set_generator(amplitude_Vpp=amplitude_Vpp)
+        return float(amplitude_Vpp)
 
     def set_output(self, on: bool) -> None:
         self.rig.set_generator(output_on=on)
@@ -71,9 +72,9 @@ class PlantDaq:
         self.rig = rig
         self.blocks = 0
 
-    def acquire_samples(self, rate_Hz: float, n: int) -> PlantBlock:
+    def acquire_samples(self, rate_Hz: float, n_samples: int) -> PlantBlock:
         m = self.rig.model
-        b = self.rig.run(n, rate_Hz)
+        b = self.rig.run(n_samples, rate_Hz)
         self.blocks += 1
         return PlantBlock(b.force_V / m.force_sens_V_per_N, b.accel_V / m.accel_sens_V_per_m_s2,
                           b.disp_V / m.disp_sens_V_per_m, rate_Hz, b.t0_s, self.blocks)
@@ -97,11 +98,11 @@ class McSpec:
 
     def __post_init__(self):
         if self.samples < 1:
-            raise ValueError(f"samples must be >= 1, got {self.samples!r}")
+            raise ConfigurationError(f"samples must be >= 1, got {self.samples!r}")
         if not self.spread >= 1:
-            raise ValueError(f"spread is a factor >= 1, got {self.spread!r}")
+            raise ConfigurationError(f"spread is a factor >= 1, got {self.spread!r}")
         if not (self.n_spread >= 0 and self.noise_scale >= 0):
-            raise ValueError("n_spread and noise_scale must be >= 0")
+            raise ConfigurationError("n_spread and noise_scale must be >= 0")
         _configs(self.plan, self.rig)          # validates both now, not on a worker
 
     def tasks(self) -> list[dict]:
@@ -118,7 +119,7 @@ def _configs(plan: dict, rig: dict):
     p = parse_plan(plan)
     r = parse_rig(rig)
     if not r.simulated:
-        raise ValueError("a Monte-Carlo study needs a simulated rig (simulated = true, [rig.model])")
+        raise ConfigurationError("a Monte-Carlo study needs a simulated rig (simulated = true, [rig.model])")
     return replace(p, infeasible="skip"), r
 
 
@@ -132,7 +133,7 @@ def draw_rig(expected: dict, spread: float, n_spread: float, rng: np.random.Gene
             break
         n = expected["n"] + rng.uniform(-n_spread, n_spread)
     else:
-        raise ValueError(f"expected n {expected['n']} +- {n_spread} leaves no n > 0.2 away from 1")
+        raise ConfigurationError(f"expected n {expected['n']} +- {n_spread} leaves no n > 0.2 away from 1")
     truth["n"] = n
     return truth
 

@@ -1,15 +1,18 @@
 """The watch page's HTTP server (standard library ``ThreadingHTTPServer``).
 
-    GET  /                  the page (bench/watch/page.html)
+    GET  /                  the page (bench/watch/page.html); needs no token
     GET  /plotly.min.js     plotly's own bundle from the installed Python package (no CDN)
-    GET  /api/state         the run as JSON (bench.watch.snapshot)
-    GET  /api/stream        the same as server-sent events, pushed whenever the directory changes
+    GET  /api/state         the run as JSON (bench.watch.snapshot); needs ?token=
+    GET  /api/stream        the same as server-sent events, pushed whenever the directory
+                            changes; needs ?token=
     POST /api/stop          ask the run to stop safely; needs the header X-Stop-Token
 
-Binds to 127.0.0.1 unless another host is given explicitly.  The stop token is random per
+Binds to 127.0.0.1 unless another host is given explicitly.  The token is random per
 server (``secrets.token_urlsafe``), printed with the URL (``?token=...``) and compared in
-constant time; reading needs no token.  Requests naming a foreign Host are refused while
-bound to loopback (a web page elsewhere cannot reach the server by DNS rebinding).
+constant time.  The page itself is answered without it, so opened from a link without the
+token (or an earlier server's) it can say what is needed, while the run's data are refused
+(403 with that message; decision record 0030).  Requests naming a foreign Host are refused
+while bound to loopback (a web page elsewhere cannot reach the server by DNS rebinding).
 """
 
 from __future__ import annotations
@@ -21,10 +24,12 @@ import math
 import secrets
 import threading
 import time
+import urllib.parse
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
+from ..storage import RunStatus
 from . import stop
 from .snapshot import RunReader
 
@@ -34,6 +39,10 @@ PAGE = Path(__file__).with_name("page.html")
 POLL_S = 0.25             # how often a stream looks at the directory
 HEARTBEAT_S = 10.0        # keep-alive comment on a quiet stream
 LOOPBACK_NAMES = {"127.0.0.1", "localhost", "::1", "[::1]"}
+NO_TOKEN = ("this link has no token: open the link with ?token=... that `bench watch` or "
+            "`bench run --watch` printed")
+WRONG_TOKEN = ("this link's token is not this server's (the page was restarted?): open the link "
+               "that `bench watch` or `bench run --watch` printed last")
 
 
 def _plotly_js() -> bytes:
@@ -90,7 +99,7 @@ class WatchServer(ThreadingHTTPServer):
             self._plotly = _plotly_js()
         return self._plotly
 
-    def start(self) -> "WatchServer":
+    def start(self) -> WatchServer:
         """Serve from a daemon thread (beside a run in this process)."""
         self._thread = threading.Thread(target=self.serve_forever, name="bench-watch", daemon=True)
         self._thread.start()
@@ -131,6 +140,14 @@ class _Handler(BaseHTTPRequestHandler):
     def _send_json(self, code: int, obj) -> None:
         self._send(code, _json(obj), "application/json")
 
+    def _token_problem(self, given: str) -> str | None:
+        """Why ``given`` does not open the run's data (None: it does)."""
+        if not given:
+            return NO_TOKEN
+        if not hmac.compare_digest(given.encode(), self.server.token.encode()):
+            return WRONG_TOKEN
+        return None
+
     def _host_ok(self) -> bool:
         if not self.server.loopback:
             return True
@@ -142,7 +159,11 @@ class _Handler(BaseHTTPRequestHandler):
     def do_GET(self):  # noqa: N802 - http.server's naming
         if not self._host_ok():
             return self._send_json(HTTPStatus.FORBIDDEN, {"error": "unexpected Host header"})
-        path = self.path.split("?", 1)[0]
+        path, _, query = self.path.partition("?")
+        if path.startswith("/api/"):
+            problem = self._token_problem(urllib.parse.parse_qs(query).get("token", [""])[0])
+            if problem:
+                return self._send_json(HTTPStatus.FORBIDDEN, {"error": problem})
         if path in ("/", "/index.html"):
             self._send(HTTPStatus.OK, PAGE.read_bytes(), "text/html; charset=utf-8")
         elif path == "/plotly.min.js":
@@ -169,7 +190,7 @@ class _Handler(BaseHTTPRequestHandler):
             return self._send_json(HTTPStatus.FORBIDDEN, {"error": "a valid stop token is needed "
                                                           "(the one printed with the page's URL)"})
         state = self.server.reader.snapshot()
-        if state.get("status") != "running" or state.get("process_gone"):
+        if state.get("status") != RunStatus.RUNNING or state.get("process_gone"):
             shown = "process gone" if state.get("process_gone") else state.get("status")
             return self._send_json(HTTPStatus.CONFLICT, {"error": f"the run is not running ({shown})"})
         try:

@@ -26,6 +26,7 @@ from pathlib import Path
 
 from procedures.plan import Limits, Plan
 
+from ..storage import RunStatus
 from .stop import STOP_FILE
 
 log = logging.getLogger(__name__)
@@ -114,7 +115,8 @@ def _step_summary(r: dict) -> dict:
                 direction=r.get("direction"), force_N=r.get("force_N"), force_error=r.get("force_error"),
                 control_iterations=r.get("control_iterations"), force_converged=r.get("force_converged"),
                 thd_force=r.get("force", {}).get("thd"), thd_accel=r.get("accel", {}).get("thd"),
-                thd_disp=r.get("disp", {}).get("thd"), drive_Vpp=r.get("drive_Vpp"))
+                thd_disp=r.get("disp", {}).get("thd"), drive_Vpp=r.get("drive_Vpp"),
+                drive_V=None if r.get("drive_Vpp") is None else r["drive_Vpp"] / 2)   # amplitude (0029)
 
 
 class RunReader:
@@ -185,7 +187,7 @@ class RunReader:
             if sig != self._cached_sig:
                 self._cached, self._cached_sig = self._snapshot(), sig
             state = dict(self._cached)
-        if state.get("status") == "running":     # a process can die without touching a file
+        if state.get("status") == RunStatus.RUNNING:     # a process can die without touching a file
             state["process_gone"] = self._process_gone()
         return state
 
@@ -210,12 +212,12 @@ class RunReader:
             "status": status,
             "levels_N": list(plan.levels_N) if plan else [],
             "started": meta.get("started"),
-            "ended": meta.get("ended") if status != "running" else None,
+            "ended": meta.get("ended") if status != RunStatus.RUNNING else None,
             "stop_pending": (self.path / STOP_FILE).exists(),
             "process_gone": False,       # filled in by snapshot()
             "progress": self._progress(plan, results, events, status),
             "last_step": _step_summary(results[-1]) if results else None,
-            "next_step": self._next(plan, results) if status == "running" else None,
+            "next_step": self._next(plan, results) if status == RunStatus.RUNNING else None,
             "compliance": self._compliance(plan, results),
             "identification": self._identification(ident, results, meta),
             "events": [e for e in events if e.get("event") not in QUIET_EVENTS],
@@ -235,7 +237,7 @@ class RunReader:
         elif since and t_start:
             per_step_s = since[0] - t_start
         if per_step_s is not None:
-            if total is not None and status == "running":
+            if total is not None and status == RunStatus.RUNNING:
                 eta_s = max(0.0, per_step_s * (total - done))
         return dict(done=done, total=total, fraction=(done / total if total else None),
                     started_s=t_start, per_step_s=per_step_s, eta_s=eta_s)

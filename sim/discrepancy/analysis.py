@@ -23,11 +23,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..identify import Identifier, displacement_harmonics, synthesize
+from ..errors import ConfigurationError
+from ..identify import Estimate, Identifier, displacement_harmonics, synthesize
 from .fit import Fit, Weights, fit, whitened
-from .gain import frf, heldout_error
+from .gain import frf
 from .models import BASE_PARAMS, EFFECTS, Data, Model
+from .rounding import interval_text
 from .select import Selection, select, settle_final
+from .terms import accelerance_pair, second_mode_phrase, speed_friction, speed_friction_phrase
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +58,7 @@ def data_from_steps(steps, harmonics: int = 9) -> Data:
     both motion channels with their inverse-variance weights (the friction along x,
     :func:`sim.identify.displacement_harmonics`)."""
     if not steps:
-        raise ValueError("no steps to analyse")
+        raise ConfigurationError("no steps to analyse")
     H = [s.harmonics for s in steps]
     K = min([harmonics] + [min(h.force.size, h.accel.size, h.disp.size) for h in H])
     Kf = max(K, max(min(h.force.size, h.accel.size, h.disp.size) for h in H))
@@ -89,7 +92,8 @@ def guess_from_data(d: Data) -> dict:
 
 def base_fit(steps, d: Data, guess: dict | None, harmonics: int) -> tuple[Fit, Weights]:
     starts = [guess] if guess else [dict(guess_from_data(d), n=n) for n in (0.5, 1.5, 2.5)]
-    best, best_ident = None, None
+    best: Estimate | None = None
+    best_ident: Identifier | None = None
     for g in starts:
         ident = Identifier(g, harmonics)
         for s in steps:
@@ -97,18 +101,11 @@ def base_fit(steps, d: Data, guess: dict | None, harmonics: int) -> tuple[Fit, W
         est = ident.fit(max_nfev=200)
         if best is None or est.cost < best.cost:
             best, best_ident = est, ident
+    assert best is not None and best_ident is not None      # at least one start
     v = best.values
     theta = np.array([math.log(v["F_s_N"]), math.log(v["x_s_m"]), v["n"], math.log(v["mass_kg"])])
     W = Weights.from_data(d, v["mass_kg"], friction_noise=best_ident.residual_noise(d.X.shape[1]))
     return fit(Model((), d.X.shape[1]), theta, d, W, max_nfev=200), W
-
-
-def interval_text(value: float, low: float, high: float, unit: str = "", signed: bool = False) -> str:
-    """'41 N s/m (95 %: 37 to 45 N s/m)' with just enough digits to tell the bounds apart."""
-    width = abs(high - low)
-    digits = 3 if width == 0 or value == 0 else max(2, min(8, int(math.ceil(math.log10(abs(value) / width))) + 2))
-    f = (lambda x: f"{x:+.{digits}g}") if signed else (lambda x: f"{x:.{digits}g}")
-    return f"{f(value)}{unit} (95 %: {f(low)} to {f(high)}{unit})"
 
 
 @dataclass
@@ -120,6 +117,7 @@ class Analysis:
     source: str = ""
     software_version: str = ""
     rejected: list = field(default_factory=list)
+    v_ref_m_per_s: float | None = None     # the rig file's friction_v_ref_m_per_s: alpha is stated there
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -164,9 +162,10 @@ class Analysis:
             put("k", iv["linear_spring.k"], "N/m")
             put("k_relative_to_F_s_over_x_s", iv["linear_spring.k"], "1", v["x_s_m"] / v["F_s_N"])
         elif effect == "velocity_dependent_friction":
-            v_ref = w_res * v["x_s_m"]
-            put("alpha", iv["velocity_dependent_friction.beta"], "1", v_ref)
-            out["v_ref"] = dict(value=v_ref, low=v_ref, high=v_ref, unit="m/s")
+            v_ref, source = ((self.v_ref_m_per_s, "rig") if self.v_ref_m_per_s
+                             else (w_res * v["x_s_m"], "friction resonance"))
+            out["alpha"] = speed_friction(iv["velocity_dependent_friction.beta"], v_ref)
+            out["v_ref"] = dict(value=v_ref, low=v_ref, high=v_ref, unit="m/s", source=source)
         elif effect == "sensor_delay":
             put("delay", iv["sensor_delay.delay"], "s")
             put("delay_relative_to_resonance_period", iv["sensor_delay.delay"], "1", w_res / (2 * math.pi))
@@ -177,6 +176,13 @@ class Analysis:
             put("damping_ratio", iv["second_mode.zeta"], "1")
             put("coupling", iv["second_mode.a"], "1", v["mass_kg"])     # m h^2 / J
             put("cg_over_drive_height", iv["second_mode.r"], "1")
+            f_p = v["second_mode.f_p"]
+            d = self.data
+            pair = accelerance_pair(d.omega / (2 * math.pi), np.abs(d.A[:, 0] / d.P[:, 0]), d.level,
+                                    (0.5 * f_p, 4.0 * f_p))
+            for name, e in zip(("anti_resonance_Hz", "resonance_Hz"), pair):
+                if e is not None:        # as the measured accelerance shows it, between grid points
+                    out[name] = dict(value=e.freq_Hz, low=e.low_Hz, high=e.high_Hz, unit="Hz")
         return out
 
     def _predicted_frf(self, f: Fit) -> tuple[np.ndarray, np.ndarray]:
@@ -263,8 +269,7 @@ class Analysis:
             return (f"a linear spring k = {iv('k', '.3g', unit=' N/m')}, "
                     f"{100 * p['k_relative_to_F_s_over_x_s']['value']:.1f} % of the friction stiffness F_s/x_s")
         if c.id == "velocity_dependent_friction":
-            return (f"friction rising with speed: {iv('alpha', '.1f', 100, ' %')} higher at "
-                    f"v_ref = {1e3 * p['v_ref']['value']:.3g} mm/s (only alpha/v_ref is identifiable)")
+            return speed_friction_phrase(p)
         if c.id == "sensor_delay":
             return (f"a displacement channel delay of {iv('delay', '.3g', 1e6, ' us')}, "
                     f"{100 * p['delay_relative_to_resonance_period']['value']:.1f} % of the resonance period")
@@ -272,8 +277,7 @@ class Analysis:
             return (f"a displacement scale inconsistent with the accelerometer by "
                     f"{iv('gain_error', '+.1f', 100, ' %')}")
         if c.id == "second_mode":
-            return (f"a second (pitching) mode at {iv('frequency', '.4g', unit=' Hz')}, damping ratio "
-                    f"{100 * p['damping_ratio']['value']:.1f} %, coupling m h^2/J = {p['coupling']['value']:.2g}")
+            return second_mode_phrase(p)
         return EFFECTS[c.id].label
 
     # ------------------------------------------------------------------ schema
@@ -347,17 +351,19 @@ class Analysis:
 
 
 def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, source: str = "",
-                  software_version: str = "", rejected: list | None = None) -> Analysis:
+                  software_version: str = "", rejected: list | None = None,
+                  v_ref_m_per_s: float | None = None) -> Analysis:
     """Fit the base model, try the catalog, name what survives both gates (see module doc).
 
     ``guess``: rough F_s_N, x_s_m, n, mass_kg (e.g. a rig file's expected values); None
-    estimates them from the data."""
+    estimates them from the data.  ``v_ref_m_per_s``: the speed at which to state a
+    velocity-dependent friction (the rig file's); None: the speed at the friction resonance."""
     steps = list(steps)
     d = data_from_steps(steps, harmonics)
     if np.unique(d.level).size < 2:
-        raise ValueError("need steps at two force levels at least (held-out checks leave one level out)")
+        raise ConfigurationError("need steps at two force levels at least (held-out checks leave one level out)")
     base, W = base_fit(steps, d, guess, harmonics)
     log.info("base fit: reduced chi2 %.2f", base.reduced_chi2)
     sel = settle_final(select(base, d, W), d)
     return Analysis(steps=steps, data=d, weights=W, selection=sel, source=source,
-                    software_version=software_version, rejected=list(rejected or []))
+                    software_version=software_version, rejected=list(rejected or []), v_ref_m_per_s=v_ref_m_per_s)

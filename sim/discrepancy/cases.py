@@ -22,6 +22,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..errors import ConfigurationError
 from ..identify import StepHarmonics
 from ..rig import RigModel, SimulatedRig
 from ..synthetic import draw_rig, grid
@@ -76,7 +77,7 @@ class Case:
         return tuple(e for e in self.effects if e in CATALOG)
 
 
-def truth_size(case: "Case", effect: str) -> tuple[str | None, float | None]:
+def truth_size(case: Case, effect: str) -> tuple[str | None, float | None]:
     """(parameter name in the analysis' cause parameters, its true value) for the effects
     whose reported size maps one to one onto the plant's settings; (None, None) otherwise."""
     fx = case.effects[effect]
@@ -96,7 +97,7 @@ def truth_size(case: "Case", effect: str) -> tuple[str | None, float | None]:
     return None, None
 
 
-def observable_rig(case: "Case") -> dict:
+def observable_rig(case: Case) -> dict:
     """The rig's F_s_N, x_s_m, n, mass_kg as measurements can show them.  The analysis takes
     the accelerometer as the reference of scale (a gain error is the displacement's scale
     relative to it), so an accelerometer gain error g_a shows as x_s (1 + g_a) and
@@ -143,7 +144,7 @@ def draw_effect(effect: str, rig: dict, rng: np.random.Generator, margin: tuple[
                     pitch_damping_N_m_s_per_rad=2 * zeta * J_eff * w_p, drive_height_m=h, cg_height_m=e)
     if effect == "cubic_spring":
         return dict(cubic_spring_N_per_m3=0.15 * s * F_s / (2 * x_s) ** 3)
-    raise ValueError(f"unknown effect {effect!r}; known: {CATALOG + OUTSIDE}")
+    raise ConfigurationError(f"unknown effect {effect!r}; known: {CATALOG + OUTSIDE}")
 
 
 def plan_grid(rig: dict, levels: int = 5, freqs: int = 18) -> tuple[np.ndarray, np.ndarray]:

@@ -58,7 +58,7 @@ class Weights:
 
     @classmethod
     def from_data(cls, d: Data, mass_kg: float, rel_floor: float = REL_FLOOR,
-                  friction_noise: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> "Weights":
+                  friction_noise: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> Weights:
         Om = d.Omega
         k = (np.abs(d.P[:, 0] - mass_kg * d.A[:, 0]) / np.maximum(np.abs(d.X[:, 0]), 1e-300))[:, None]
         sP = np.maximum(d.sP, rel_floor * np.abs(d.P[:, 0]))[:, None]
@@ -74,8 +74,8 @@ class Weights:
         return cls(np.sqrt(var_F), c, np.sqrt(np.maximum(var_K - c ** 2 / var_F, 1e-6 * var_K)))
 
     @classmethod
-    def propagated(cls, model: "Model", theta: np.ndarray, d: Data, tail_draws: int = TAIL_DRAWS,
-                   seed: int = 0) -> "Weights":
+    def propagated(cls, model: Model, theta: np.ndarray, d: Data, tail_draws: int = TAIL_DRAWS,
+                   seed: int = 0) -> Weights:
         """The noise of this model's own residuals: every channel's noise propagated through
         ``model.residuals`` at ``theta`` by central differences of one standard deviation
         (the friction is not differentiable at a reversal for n < 1; the noise's own scale is
@@ -111,14 +111,14 @@ class Weights:
 
         f0, k0 = model.residuals(theta, d)
 
-        def response(dP, dA, dX):
+        def response(dP, dA, dX) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
             (fp, kp), (fm, km) = (model.residuals(theta, moved(dP, dA, dX, s)) for s in (1.0, -1.0))
             return (fp - fm) / 2, (kp - km) / 2, (fp + fm) / 2 - f0, (kp + km) / 2 - k0
 
         acc = np.zeros((6,) + d.X.shape)      # var F re, im; var K re, im; cov re, im
         bias = np.zeros((2,) + d.X.shape, complex)
 
-        def add(gF, gK, bF, bK, w=1.0):
+        def add(gF, gK, bF, bK, w: float = 1.0) -> None:
             acc[:] += w * np.stack([gF.real ** 2, gF.imag ** 2, gK.real ** 2, gK.imag ** 2,
                                     gF.real * gK.real, gF.imag * gK.imag])
             bias[:] += w * np.stack([bF, bK])
@@ -145,7 +145,7 @@ class Weights:
         c = acc[4:]
         return cls(np.sqrt(var_F), c, np.sqrt(np.maximum(var_K - c ** 2 / var_F, 1e-6 * var_K)), *bias)
 
-    def subset(self, mask: np.ndarray) -> "Weights":
+    def subset(self, mask: np.ndarray) -> Weights:
         pick = lambda b: b[mask] if np.ndim(b) else b       # noqa: E731
         return Weights(self.s_F[:, mask], self.c[:, mask], self.s_Kc[:, mask], pick(self.bias_F), pick(self.bias_K))
 

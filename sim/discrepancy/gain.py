@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import ConfigurationError
 from .fit import Weights, fit
 from .models import Data, Model
 
@@ -35,7 +36,7 @@ def heldout_error(model: Model, theta: np.ndarray, d: Data, W: Weights, max_nfev
     """Leave-one-level-out prediction error (rms relative error, a fraction)."""
     levels = np.unique(d.level)
     if levels.size < 2:
-        raise ValueError("need at least two force levels to hold one out")
+        raise ConfigurationError("need at least two force levels to hold one out")
     errs = []
     for lv in levels:
         train = d.level != lv

@@ -43,7 +43,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..identify import POINTS_PER_PERIOD, _path_friction, _path_harmonics, _paths, synthesize
+from ..errors import ConfigurationError
+from ..identify import POINTS_PER_PERIOD, path_friction, path_harmonics, period_paths, synthesize
 
 BASE_PARAMS = ("F_s_N", "x_s_m", "n", "mass_kg")
 MOTION_EFFECTS = ("sensor_delay", "sensor_gain_error", "second_mode")   # they change the rebuilt x
@@ -97,12 +98,13 @@ class Data:
 
     def friction_channels(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(X, XA, wD, P) over every harmonic at hand (the probe alone when only it is)."""
-        if self.Xf is None:
+        if self.Xf is None or self.XAf is None or self.wDf is None or self.Pf is None:
             return self.X, np.zeros_like(self.X), np.ones(self.X.shape), self.P
         return self.Xf, self.XAf, self.wDf, self.Pf
 
-    def subset(self, mask: np.ndarray) -> "Data":
-        return Data(*(None if getattr(self, f) is None else getattr(self, f)[mask] for f in self.FIELDS))
+    def subset(self, mask: np.ndarray) -> Data:
+        return Data(*(None if getattr(self, f) is None else getattr(self, f)[mask]   # type: ignore[arg-type]
+                      for f in self.FIELDS))
 
 
 class Model:
@@ -114,7 +116,7 @@ class Model:
     def __init__(self, effects: tuple[str, ...] = (), harmonics: int = 9, points_per_period: int = POINTS_PER_PERIOD):
         unknown = [e for e in effects if e not in EFFECTS]
         if unknown:
-            raise ValueError(f"unknown effects {unknown}; catalog: {CATALOG}")
+            raise ConfigurationError(f"unknown effects {unknown}; catalog: {CATALOG}")
         self.effects = tuple(effects)
         self.M = points_per_period
         self.K = harmonics
@@ -140,7 +142,7 @@ class Model:
                 out[f"{e}.{name}"] = math.exp(v) if name == "f_p" else float(v)
         return out
 
-    def extend(self, theta: np.ndarray, effect: str, init: np.ndarray) -> tuple["Model", np.ndarray]:
+    def extend(self, theta: np.ndarray, effect: str, init: np.ndarray) -> tuple[Model, np.ndarray]:
         """This model with one more effect, and the parameter vector warm-started from ``theta``."""
         m = Model(self.effects + (effect,), self.K, self.M)
         return m, np.concatenate([theta, init])
@@ -211,12 +213,12 @@ class Model:
 
         def motion():
             x = self._displacement(v, d)
-            paths, starts = _paths(x, self.M)
+            paths, starts = period_paths(x, self.M)
             return x, paths, starts
         x, paths, starts = self._cached(d, mkey, motion)
         n = v["n"] if abs(v["n"] - 1.0) >= 1e-6 else 1.0 + 1e-6
         F = v["F_s_N"] * self._cached(d, mkey + (float(theta[1]), n),
-                                      lambda: _path_friction(paths, v["x_s_m"], n))
+                                      lambda: path_friction(paths, v["x_s_m"], n))
         beta = v.get("velocity_dependent_friction.beta", 0.0)
         if beta != 0.0:       # friction level rising with speed: F (1 + beta |v|)
             def speed():
@@ -225,7 +227,7 @@ class Model:
                 rows = np.arange(vel.shape[0])[:, None]
                 return np.abs(vel[rows, (starts[:, None] + np.arange(self.M)[None, :]) % self.M])
             F = F * (1.0 + beta * self._cached(d, mkey + ("v",), speed))
-        return _path_harmonics(F, starts, d.X.shape[1]), x
+        return path_harmonics(F, starts, d.X.shape[1]), x
 
     def terms(self, theta: np.ndarray, d: Data, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(G, A_pred) for force harmonics ``P`` (the measured ones, or a trial).

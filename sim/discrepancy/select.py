@@ -31,7 +31,8 @@ import numpy as np
 
 from .fit import Fit, Weights, fit, whitened
 from .gain import heldout_error
-from .models import CATALOG, Data, Model
+from .models import CATALOG, Data
+from .rounding import percent_text
 
 log = logging.getLogger(__name__)
 
@@ -76,7 +77,7 @@ def init_effect(effect: str, current: Fit, d: Data, W: Weights) -> np.ndarray:
     Om = d.Omega
     m = math.exp(current.theta[3])
     wgt = 1.0 / np.sqrt(0.5 * (W.s_Kc[0] ** 2 + W.s_Kc[1] ** 2))
-    best = (math.inf, None)
+    best: tuple[float, tuple[float, float, float, float] | None] = (math.inf, None)
     f_lo, f_hi = d.omega.min() / (2 * math.pi), 3 * Om.max() / (2 * math.pi)
     for f_p in np.geomspace(f_lo, f_hi, 90):
         w_p = 2 * math.pi * f_p
@@ -158,7 +159,7 @@ def select(base: Fit, d: Data, W: Weights, catalog: tuple[str, ...] = CATALOG, m
                 chosen = c
                 break
         log.info("round %d: %s", rnd, ", ".join(f"{c.id} dBIC {c.delta_bic:.0f} held-out "
-                                                 f"{100 * c.heldout_error:.2f} %" for c in cands))
+                                                 f"{percent_text(c.heldout_error)}" for c in cands))
         if chosen is None:
             break
         chosen.named = True

@@ -25,10 +25,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
-from procedures.analysis import fit_harmonics
 from scipy.optimize import least_squares
 
+from procedures.analysis import fit_harmonics
 from sim.identify import Identifier, StepHarmonics, analyse, synthesize
 from sim.rig import RigModel, SimulatedRig
 

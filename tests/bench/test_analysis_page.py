@@ -104,7 +104,14 @@ def test_page_leads_with_the_verdict_and_names_the_cause(page, analysis_example)
     assert headings[0] == "h1" and headings.count("h1") == 1
     assert ("Unexplained" in text) == analysis_example["unexplained"]
     c = analysis_example["causes"][0]["parameters"]["c"]
-    assert f"<td class=\"num\">{c['value']:.4g}</td><td class=\"num\">{c['low']:.4g}</td>" in text
+    # each figure to the digit its interval supports: the last digit shown is where the
+    # interval's half-width has its first or second significant digit, no further
+    row = re.search(r'<td>c</td><td>[^<]*</td>' + 3 * r'<td class="num">([^<]+)</td>', text)
+    value, low, high = row.groups()
+    step = 10.0 ** -(len(value.split(".")[1]) if "." in value else 0)
+    assert step <= (c["high"] - c["low"]) / 2 < 100 * step, (row.groups(), c)
+    for shown, exact in zip((value, low, high), (c["value"], c["low"], c["high"])):
+        assert abs(float(shown) - exact) <= step / 2 * (1 + 1e-9)
 
 
 def test_page_lists_every_candidate_and_rejected_step(page, analysis_example):

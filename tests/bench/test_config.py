@@ -101,19 +101,19 @@ def test_a_non_simulated_rig_parses(tmp_path):
 PLAN_ERRORS = {
     "unknown key in [plan]": (
         edit(PLAN, 'name = "config test"', 'name = "config test"\ncolour = "red"'),
-        ["[plan]", "unknown key(s) ['colour']", "allowed", "'levels_N'", "'frequencies'"]),
+        ["[plan] colour: unknown key", "allowed", "'levels_N'", "'frequencies'"]),
     "unknown key in [plan.control]": (
         edit(PLAN, "settle_cycles = 4", "setle_cycles = 4"),
-        ["[plan.control]", "'setle_cycles'", "allowed", "'settle_cycles'"]),
+        ["[plan.control] setle_cycles: unknown key; did you mean settle_cycles?"]),
     "unknown top-level table": (
         PLAN + "\n[plna]\nx = 1\n",
-        ["unknown key(s) ['plna']", "allowed: ['plan']"]),
+        ["[plna]: unknown table; did you mean [plan]?"]),
     "force level above 1000 N": (
         edit(PLAN, "levels_N = [1.0, 3.0]", "levels_N = [1.0, 2000.0]"),
-        ["[plan] levels_N[1]", "must be > 0 and <= 1000", "got 2000"]),
+        ["[plan] levels_N[1]", "must be >= 0.1 and <= 100", "got 2000"]),
     "force level zero": (
         edit(PLAN, "levels_N = [1.0, 3.0]", "levels_N = [0.0]"),
-        ["[plan] levels_N[0]", "must be > 0", "got 0"]),
+        ["[plan] levels_N[0]", "must be >= 0.1", "got 0"]),
     "force level not a number": (
         edit(PLAN, "levels_N = [1.0, 3.0]", 'levels_N = ["big"]'),
         ["[plan] levels_N[0]", "must be a number", "'big'"]),
@@ -154,9 +154,25 @@ PLAN_ERRORS = {
     "harmonics above Nyquist at the highest frequency": (
         edit(edit(PLAN, "settle_cycles = 4", "harmonics = 20"), "160.0]", "800.0]"),
         ["[plan.control] harmonics", "must be <= 15", "Nyquist at 800 Hz", "got 20"]),
-    "incomplete plan limits": (
-        PLAN + "\n[plan.limits]\ndrive_V = 1.0\n",
-        ["[plan.limits] force_N", "missing (required)"]),
+    "misspelled plan limit": (
+        PLAN + "\n[plan.limits]\nforse_N = 60.0\n",
+        ["[plan.limits] forse_N: unknown key; did you mean force_N?"]),
+    "misspelled required key": (
+        edit(PLAN, "levels_N = [1.0, 3.0]", "level_N = [1.0, 3.0]"),
+        ["[plan] level_N: unknown key; did you mean levels_N?"]),
+    "misspelled table": (
+        edit(PLAN, "[plan.frequencies]", "[plan.frequency]"),
+        ["[plan.frequency]: unknown table; did you mean [plan.frequencies]?"]),
+    "level below the bench's force range": (
+        edit(PLAN, "levels_N = [1.0, 3.0]", "levels_N = [0.05, 1.0]"),
+        ["[plan] levels_N[0]", "must be >= 0.1 and <= 100 (the bench's force range, 0.1-100 N)", "got 0.05"]),
+    "frequency below the bench's range": (
+        edit(PLAN, "list_Hz = [40.0, 80.0, 160.0]", "list_Hz = [10.0, 80.0]"),
+        ["[plan.frequencies] list_Hz[0]", "must be >= 20 and <= 1000 (the bench's frequency range, 20-1000 Hz)",
+         "got 10"]),
+    "grid start below the bench's range": (
+        edit(PLAN, "list_Hz = [40.0, 80.0, 160.0]", "start_Hz = 5.0\nstop_Hz = 100.0\npoints = 5"),
+        ["[plan.frequencies] start_Hz", "(the bench's frequency range, 20-1000 Hz)", "got 5"]),
     "infeasible policy": (
         edit(PLAN, 'name = "config test"', 'name = "config test"\ninfeasible = "ignore"'),
         ["[plan] infeasible", "['refuse', 'skip']", "'ignore'"]),
@@ -196,7 +212,10 @@ RIG_ERRORS = {
         ["[rig.instruments] generator", "missing (required)"]),
     "unknown instrument": (
         edit(RIG, '[rig.instruments]\n', '[rig.instruments]\nscope = "socket://192.0.2.13:5025"\n'),
-        ["[rig.instruments]", "unknown key(s) ['scope']", "'daq'", "'generator'", "'sensor'"]),
+        ["[rig.instruments] scope: unknown key", "'daq'", "'generator'", "'sensor'"]),
+    "misspelled rig limit": (
+        edit(RIG, "force_N = 130.0", "forse_N = 130.0"),
+        ["[rig.limits] forse_N: unknown key; did you mean force_N?"]),
     "displacement limit beyond the probe": (
         edit(RIG, "disp_m = 0.9e-3", "disp_m = 0.05"),
         ["[rig.limits] disp_m", "must be > 0 and <= 0.01", "got 0.05"]),
@@ -208,7 +227,7 @@ RIG_ERRORS = {
         ["[rig] simulated", "must be true or false", "'no'"]),
     "unknown model parameter on a simulated rig": (
         edit(RIG, "simulated = false", "simulated = true") + "\n[rig.model]\nF_s = 10.0\n",
-        ["[rig.model]", "unknown rig model keys ['F_s']", "allowed", "'F_s_N'"]),
+        ["[rig.model] F_s: unknown key; did you mean F_s_N?"]),
 }
 
 
@@ -273,8 +292,8 @@ def test_schedule_runs_each_level_in_turn_through_its_sweeps(direction, sweeps):
 
 
 def test_step_keys_are_unique_readable_and_sort_in_schedule_order():
-    steps = plan_with("both", levels=[0.5] * 1 + [1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0, 256.0, 512.0],
-                      freqs=[10.0 * k for k in range(1, 31)]).schedule()
+    steps = plan_with("both", levels=[0.1, 0.2, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 100.0],
+                      freqs=[20.0 * k for k in range(1, 31)]).schedule()
     keys = [s.key for s in steps]
     assert len(set(keys)) == len(keys) == 11 * 30 * 2
     # the run directory lists steps by file name: that order must be the schedule's
@@ -292,3 +311,36 @@ def test_a_log_grid_hits_its_end_points():
     lin = parse_plan({"plan": {"levels_N": [1.0], "frequencies": {
         "start_Hz": 100.0, "stop_Hz": 200.0, "points": 5, "spacing": "linear"}}})
     assert lin.freqs_Hz == (100.0, 125.0, 150.0, 175.0, 200.0)
+
+
+# --------------------------------------------------------------------------- tighter plan limits
+
+def test_one_tighter_plan_limit_on_its_own_works_and_the_rest_are_the_rigs(tmp_path, capsys):
+    from bench.cli import _plan_toml
+    from procedures.safety import tightest
+
+    text = edit(PLAN, "levels_N = [1.0, 3.0]", "levels_N = [1.0, 100.0]") + "\n[plan.limits]\nforce_N = 60\n"
+    plan = load_plan(write(tmp_path, "p.toml", text))
+    rig = load_rig(DEFAULTS / "sim_rig.toml")
+    lim = tightest(rig.limits, plan.limits)
+    assert (lim.drive_V, lim.force_N, lim.disp_m, lim.accel_m_s2) == (rig.limits.drive_V, 60.0, rig.limits.disp_m,
+                                                                      rig.limits.accel_m_s2)
+    assert parse_plan({"plan": _plan_toml(plan.to_dict())}) == plan       # as a resume reads run.json
+    # the rig (130 N) holds a 100 N level; the plan's own 60 N does not: refused before anything moves
+    assert main(["dry-run", "--plan", str(tmp_path / "p.toml")]) == 3
+    assert "REFUSED" in capsys.readouterr().out
+    ok = load_plan(write(tmp_path, "q.toml", edit(text, "force_N = 60", "force_N = 200")))
+    assert tightest(rig.limits, ok.limits).force_N == rig.limits.force_N
+
+
+def test_bench_study_mc_names_the_file_of_a_bad_plan_or_rig(tmp_path, capsys):
+    bad = write(tmp_path, "mc_plan.toml", edit(PLAN, "levels_N = [1.0, 3.0]", "level_N = [1.0, 3.0]"))
+    assert main(["study", "mc", "--plan", str(bad), "--out", str(tmp_path / "mc")]) == 2
+    assert f"{bad}: [plan] level_N: unknown key; did you mean levels_N?" in capsys.readouterr().err
+    broken = write(tmp_path, "mc_rig.toml", "[rig\n")
+    assert main(["study", "mc", "--rig", str(broken), "--out", str(tmp_path / "mc")]) == 2
+    assert f"{broken}: not valid TOML" in capsys.readouterr().err
+    real = write(tmp_path, "real_rig.toml", RIG)
+    assert main(["study", "mc", "--rig", str(real), "--out", str(tmp_path / "mc")]) == 2
+    assert f"{real}: a Monte-Carlo study needs a simulated rig" in capsys.readouterr().err
+    assert not (tmp_path / "mc").exists()

@@ -75,7 +75,7 @@ def test_an_intact_run_has_no_problems_and_every_step_carries_checksums(small_ru
         assert len(integrity["json_sha256"]) == 64 and len(integrity["npz_sha256"]) == 64
         assert integrity["npz_bytes"] == p.with_suffix(".npz").stat().st_size
     assert main(["check", str(small_run.path)]) == ExitCode.OK
-    assert "20 intact; 0 problems" in capsys.readouterr().out
+    assert "20 intact / 20 planned; missing: none; damaged: none; orphan: none" in capsys.readouterr().out
 
 
 def test_check_lists_every_problem_and_fails(damaged, capsys):

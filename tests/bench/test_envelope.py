@@ -61,7 +61,7 @@ def test_dry_run_refuses_a_level_beyond_the_drive_limit(tmp_path, capsys):
     refused = [line for line in out.splitlines() if line.startswith("REFUSED")]
     assert len(refused) == 1
     assert "2 of 4 steps" in refused[0]
-    assert "30 N at 40 Hz" in refused[0] and "drive" in refused[0] and "> 1 V" in refused[0]
+    assert "30 N at 40 Hz: drive 1.5 V x 1.25 margin = 1.88 V > drive_V 1 V" in refused[0]
     # the per-level table says the small level is fine
     level_1 = next(line for line in out.splitlines() if line.split()[:1] == ["1"])
     assert level_1.endswith("ok")
@@ -73,7 +73,7 @@ def test_dry_run_refuses_a_level_beyond_the_displacement_limit_at_low_frequency(
     out = capsys.readouterr().out
     refused = next(line for line in out.splitlines() if line.startswith("REFUSED"))
     assert "1 of 4 steps" in refused                  # 30 N at 80 Hz is fine
-    assert "30 N at 20 Hz" in refused and "displacement" in refused and "> 0.15 mm" in refused
+    assert "30 N at 20 Hz: displacement" in refused and "at 30 N x 1.25 margin > disp_m 0.15 mm" in refused
 
 
 def test_run_plan_refuses_before_any_twin_starts(tmp_path, mocker):
@@ -99,7 +99,7 @@ def test_run_plan_refuses_without_touching_a_real_rigs_generator(tmp_path):
                             "disp_V_per_m": 8000.0, "amp_gain_N_per_V": 20.0},
             "limits": dict(RIG_LIMITS, drive_V=1.0)}})
         plan = parse_plan({"plan": {"levels_N": [1.0, 30.0], "frequencies": {"list_Hz": [40.0]}}})
-        with pytest.raises(EnvelopeError, match=r"30 N at 40 Hz: drive [0-9.]+ V > 1 V"):
+        with pytest.raises(EnvelopeError, match=r"30 N at 40 Hz: drive 1.5 V x 1.25 margin = 1.88 V > drive_V 1 V"):
             run_plan(plan, rig, tmp_path / "run", identify=False)
         assert repr(twins.generator.state) == state_before
         assert not twins.generator.state.output_on
@@ -116,3 +116,27 @@ def test_a_plan_that_asks_to_skip_infeasible_steps_runs_the_rest(tmp_path, capsy
     steps = plan.schedule()
     assert [(s.force_N, s.freq_Hz) for s in steps] == [(1.0, 20.0), (1.0, 80.0), (30.0, 80.0)]
     assert steps[-1].key == "00003-L01-F001-up"      # keys keep their place in the full schedule
+
+
+def test_the_refusal_names_the_force_margin_and_the_limit_key(tmp_path, capsys):
+    """Issue 19: 120 N against force_N = 130 N was refused as "force 150 N > 130 N", the
+    1.25 control-overshoot margin applied but never named (levels now end at 100 N)."""
+    plan = plan_toml(tmp_path, levels=[100.0], freqs=[200.0], force_N=120.0)
+    assert main(["dry-run", "--plan", plan]) == 3
+    refused = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("REFUSED"))
+    assert "100 N x 1.25 margin = 125 N > force_N 120 N" in refused
+    assert "drive" not in refused                      # 100 N x 1.25 / 20 N/V = 6.25 V < drive_V 7 V
+
+
+def test_the_drive_column_is_the_generator_amplitude_at_the_level(tmp_path, capsys):
+    """One voltage convention (decision record 0029): a sine's amplitude (= Vpp/2), the
+    unit of drive_V and of the amplifier gain.  50 N through 20 N/V is 2.5 V, whatever the
+    margin of the limit check (which the refusal names instead)."""
+    plan = plan_toml(tmp_path, levels=[1.0, 50.0], freqs=[200.0], drive_V=3.0)
+    assert main(["dry-run", "--plan", plan]) == 3
+    out = capsys.readouterr().out
+    row = next(line for line in out.splitlines() if line.split()[:1] == ["50"])
+    assert row.split()[1] == "2.5"
+    assert "the generator's amplitude, V = Vpp/2, at the level" in out
+    refused = next(line for line in out.splitlines() if line.startswith("REFUSED"))
+    assert "drive 2.5 V x 1.25 margin = 3.12 V > drive_V 3 V" in refused

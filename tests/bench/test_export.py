@@ -11,6 +11,7 @@ import pyuff
 from bench.cli import main
 from bench.export import CSV_COLUMNS, export_run, import_uff58
 
+
 @pytest.fixture(scope="module")
 def run(small_run):
     return small_run

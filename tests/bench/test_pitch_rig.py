@@ -62,3 +62,42 @@ def test_the_probe_does_not_see_the_pitch_but_the_accelerometer_does(pitch_run):
              / ((2 * math.pi * r["freq_Hz"]) ** 2 * r["compliance_abs_m_per_N"]) for r in results}
     assert ratio[100.0] == pytest.approx(1.0, abs=0.25)
     assert min(ratio.values()) < 0.3 and max(ratio.values()) > 3.0
+
+
+def test_the_analysis_finds_the_pair_the_2dof_theory_puts_in_the_measured_accelerance(pitch_run):
+    """Issue 19: the analysis said "second (pitching) mode at 159.15 Hz", sqrt(k_th/J), a
+    model-internal number; the technician sees the dip and the peak of the accelerance."""
+    from sim.discrepancy.terms import accelerance_pair, second_mode_phrase
+    model, results = pitch_run
+    f = np.array([r["freq_Hz"] for r in results])
+    acc = np.array([r["accelerance_abs_kg_inv"] for r in results])
+    K_s = model.F_s_N / model.x_s_m
+    lo, hi = two_dof(model, K_s), two_dof(model, model.n / (model.n - 1) * K_s)
+    anti, res = accelerance_pair(f, acc, np.zeros(f.size), (80.0, 640.0))
+    assert 0.95 * lo[0] <= anti.freq_Hz <= 1.05 * hi[0]
+    assert 0.95 * lo[1] <= res.freq_Hz <= 1.05 * hi[1]
+    f_p = math.sqrt(model.pitch_stiffness_N_m_per_rad / model.pitch_inertia_kg_m2) / (2 * math.pi)
+    assert f_p < 0.95 * lo[0]                       # sqrt(k_th/J) is neither of them
+    for e in (anti, res):
+        assert e.low_Hz < e.freq_Hz < e.high_Hz and e.levels == 1
+    p = {"frequency": dict(value=f_p, low=f_p - 0.3, high=f_p + 0.3), "damping_ratio": dict(value=0.02, low=0.015,
+         high=0.025), "coupling": dict(value=1.33, low=1.2, high=1.5),
+         "anti_resonance_Hz": dict(value=anti.freq_Hz, low=anti.low_Hz, high=anti.high_Hz),
+         "resonance_Hz": dict(value=res.freq_Hz, low=res.low_Hz, high=res.high_Hz)}
+    text = second_mode_phrase(p)
+    assert f"an anti-resonance at {anti.text()} and a resonance at {res.text()}" in text, text
+    assert f"(grid points {anti.low_Hz:.3g} to {anti.high_Hz:.3g} Hz)" in text
+    assert text.index("anti-resonance") < text.index("sqrt(k_th/J)/2 pi = 159.2 Hz (95 %: 158.9 to 159.5 Hz)")
+
+
+def test_speed_dependent_friction_is_stated_at_the_rig_files_v_ref():
+    """Only alpha/v_ref is identifiable: at the rig file's 5 mm/s the pitch rig's
+    alpha = 0.5 must read as 50 %, whatever speed the fit used inside."""
+    from sim.discrepancy.terms import speed_friction, speed_friction_phrase
+    beta = (0.5 / 5e-3, 0.46 / 5e-3, 0.54 / 5e-3)          # alpha/v_ref in s/m, with its interval
+    at_rig = dict(alpha=speed_friction(beta, 5e-3), v_ref=dict(value=5e-3, source="rig"))
+    assert "50 % (95 %: 46 to 54 %) higher at v_ref = 5 mm/s (the rig file's friction_v_ref_m_per_s" \
+        in speed_friction_phrase(at_rig)
+    chosen = dict(alpha=speed_friction(beta, 2e-3), v_ref=dict(value=2e-3, source="friction resonance"))
+    text = speed_friction_phrase(chosen)
+    assert "20.0 % (95 %: 18.4 to 21.6 %) higher at v_ref = 2 mm/s (chosen here" in text, text

@@ -4,13 +4,21 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import shutil
 
 import numpy as np
 import pytest
 
-from bench.reports import (ID_PARAMS, UNSETTLED_RESIDUAL, identification_data, plot_identification, residual_ratio,
-                           write_analysis_html, write_report)
+from bench.reports import (
+    ID_PARAMS,
+    UNSETTLED_RESIDUAL,
+    identification_data,
+    plot_identification,
+    residual_ratio,
+    write_analysis_html,
+    write_report,
+)
 from bench.storage import RunStore
 from sim.rig import RigModel
 from sim.shooting import frf_shooting
@@ -60,11 +68,17 @@ def test_report_names_plan_rig_status_and_each_level(report, run_dir):
     text = report.read_text()
     meta = RunStore.open(run_dir).metadata
     assert "small test plan" in text and meta["rig"]["name"] in text
-    assert "**completed**" in text and "20 / 20" in text
+    assert "**completed**" in text and "20 readable / 20 planned" in text
     for part in ("TWIN000001", "numpy", "none (events.jsonl"):
         assert part in text
     for level in (1.0, 5.0):
         assert any(line.startswith(f"| {level:g} | ") for line in text.splitlines()), level
+
+
+def test_report_opens_with_the_steps_used_against_the_plan_and_an_overall_line(report):
+    head = report.read_text().split("## Instruments")[0]
+    assert "**20 used / 20 planned**; skipped: none" in head
+    assert "Overall: **went well**" in head and "needs attention" not in head
 
 
 def test_harmonic_resonance_falls_as_force_rises(report):
@@ -284,7 +298,8 @@ def test_partial_run_reports_its_interruption(run_dir, tmp_path):
     store.event("interrupted", reason="Ctrl-C")
     store.update(status="interrupted", steps_done=7)
     text = write_report(run).read_text()
-    assert "**interrupted**" in text and "7 / 20" in text
+    assert "**interrupted**" in text and "**7 used / 20 planned**" in text
+    assert "Overall: **needs attention**: the run was interrupted" in text
     assert "| interrupted | reason=Ctrl-C |" in text
     assert (run / "report" / "compliance.png").is_file()
 
@@ -316,7 +331,12 @@ def test_report_includes_the_analysis_when_bench_analyze_wrote_it(run_dir, tmp_p
     (cause,) = analysis_example["causes"]
     row = _rows(section, [f"{cause['label']} (`{cause['id']}`)"])[f"{cause['label']} (`{cause['id']}`)"]
     c = cause["parameters"]["c"]
-    assert row[1] == f"c = {c['value']:.4g} N s/m [{c['low']:.4g}, {c['high']:.4g}]"
+    # each figure to the digit its interval supports (the interval's first or second significant digit)
+    value, low, high = re.fullmatch(r"c = (\S+) N s/m \[(\S+), (\S+)\]", row[1]).groups()
+    step = 10.0 ** -(len(value.split(".")[1]) if "." in value else 0)
+    assert step <= (c["high"] - c["low"]) / 2 < 100 * step, (row[1], c)
+    for shown, exact in zip((value, low, high), (c["value"], c["low"], c["high"])):
+        assert abs(float(shown) - exact) <= step / 2 * (1 + 1e-9)
     assert float(row[2].split()[0]) == pytest.approx(100 * cause["gain"]["heldout_error_before"], rel=1e-2)
     assert float(row[3].split()[0]) == pytest.approx(100 * cause["gain"]["heldout_error_after"], rel=1e-2)
     link = "../analysis/analysis.html"

@@ -23,8 +23,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.cli import _plan_toml, _rig_toml
-from bench.config import DEFAULTS, load_plan, load_rig, parse_plan, parse_rig
+from bench.config import DEFAULTS, load_plan, load_rig, parse_plan, parse_rig, plan_toml, rig_toml
 from bench.session import run_plan
 from bench.storage import RunStore
 
@@ -222,6 +221,6 @@ def test_resumed_steps_agree_with_the_uninterrupted_run(crash_run):
 def test_resume_rebuilds_the_plan_and_rig_from_run_json(crash_run):
     meta = crash_run["final"]["meta"]
     plan = load_plan(crash_run["log"].parent / "plan.toml")
-    assert parse_plan({"plan": _plan_toml(meta["plan"])}) == plan
-    assert parse_rig({"rig": _rig_toml(meta["rig"])}) == load_rig(DEFAULTS / "sim_rig.toml")
+    assert parse_plan({"plan": plan_toml(meta["plan"])}) == plan
+    assert parse_rig({"rig": rig_toml(meta["rig"])}) == load_rig(DEFAULTS / "sim_rig.toml")
     assert meta["sim_seed"] == SEED

@@ -16,10 +16,9 @@ import socket
 import subprocess
 import sys
 import textwrap
-import time
-from datetime import datetime
 import urllib.error
 import urllib.request
+from datetime import datetime
 from pathlib import Path
 
 import pytest
@@ -52,9 +51,18 @@ def post_stop(server: WatchServer, token: str | None, host: str | None = None) -
         return e.code, json.loads(e.read())
 
 
-def get_json(server: WatchServer, path: str) -> dict:
-    with urllib.request.urlopen(server.url.split("?")[0] + path, timeout=5) as r:
-        return json.loads(r.read())
+def get_json(server: WatchServer, path: str, token: str | None = "") -> dict | tuple[int, dict]:
+    """The JSON at ``path`` with the server's token; with ``token`` given (None: none at
+    all), the HTTP status and the body."""
+    query = f"?token={server.token if token == '' else token}" if token is not None else ""
+    try:
+        with urllib.request.urlopen(server.url.split("?")[0] + path + query, timeout=5) as r:
+            body = json.loads(r.read())
+            return body if token == "" else (r.status, body)
+    except urllib.error.HTTPError as e:
+        if token == "":
+            raise
+        return e.code, json.loads(e.read())
 
 
 def listening_addresses(port: int) -> set[str]:
@@ -123,6 +131,9 @@ def test_the_state_counts_what_the_run_directory_holds(small_run):
     c = next(c for c in series if one["key"] in c["key"])
     assert c["abs_m_per_N"][c["key"].index(one["key"])] == pytest.approx(one["compliance_abs_m_per_N"])
     assert len(state["identification"]["history"]) == len(steps)
+    # one voltage convention (decision record 0029): the drive is the generator's amplitude, Vpp/2
+    last = json.loads(steps[-1].read_text())
+    assert state["last_step"]["drive_V"] == pytest.approx(last["drive_Vpp"] / 2)
     assert b"plotly" in js[:2000] and len(js) > 1_000_000        # the package's own bundle
 
 
@@ -219,6 +230,18 @@ def test_a_stop_request_left_from_an_earlier_session_does_not_stop_a_resume(tmp_
 # --------------------------------------------------------------------------- end to end in Chromium
 
 
+def test_the_runs_data_need_the_token_and_the_refusal_says_which_link_to_open(small_run):
+    with serve(small_run.path) as server:
+        with urllib.request.urlopen(server.url.split("?")[0], timeout=5) as r:
+            assert r.status == 200 and b"<html" in r.read()            # the page itself: no token needed
+        for path in ("api/state", "api/stream"):
+            code, body = get_json(server, path, token=None)
+            assert code == 403 and "has no token" in body["error"] and "bench watch" in body["error"]
+            code, body = get_json(server, path, token="not-" + server.token)
+            assert code == 403 and "not this server's" in body["error"]
+        assert get_json(server, "api/state", token=server.token)[0] == 200
+
+
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (make setup)")
 def test_the_stop_button_works_only_with_the_token_and_while_the_run_runs(tmp_path, small_run):
     run = tmp_path / "run"
@@ -226,11 +249,18 @@ def test_the_stop_button_works_only_with_the_token_and_while_the_run_runs(tmp_pa
     meta = dict(small_run.metadata, status="running", process={"pid": os.getpid(), "host": socket.gethostname()})
     (run / "run.json").write_text(json.dumps(meta))
     enabled = "document.getElementById('status').textContent !== 'connecting' && !document.getElementById('stop').disabled"
+    access = "!document.getElementById('access').hidden && document.getElementById('access').textContent"
     with serve(run) as server, Browser() as browser:
-        browser.goto(server.url.split("?")[0])                     # no token: read-only
-        browser.wait_for("document.getElementById('status').textContent === 'running'", 30, "the page")
+        browser.goto(server.url.split("?")[0])                     # no token: says which link to open
+        shown = browser.wait_for(access, 30, "the page to say the token is needed")
+        assert "has no token" in shown and "?token=" in shown and "bench watch" in shown
+        assert browser.js("document.getElementById('status').textContent") == "token needed"
         assert browser.js(enabled) is False
+        assert browser.js("document.getElementById('current').textContent") == ""   # no run data shown
+        browser.goto(server.url.replace("?token=", "?token=old"))  # an earlier server's link
+        assert "not this server's" in browser.wait_for(access, 30, "the page to refuse a wrong token")
         browser.goto(server.url)
+        browser.wait_for("document.getElementById('access').hidden", 30, "no refusal with the token")
         browser.wait_for(enabled, 30, "the stop button enabled with the token")
         (run / "run.json").write_text(json.dumps(dict(meta, status="completed")))   # the run ends
         browser.wait_for("document.getElementById('status').textContent === 'completed'", 30, "the end")
@@ -278,6 +308,8 @@ def test_the_page_shows_a_running_test_and_its_stop_button_stops_it_safely(tmp_p
                     assert later >= first + 2
                     assert browser.js("document.getElementById('compliance').data.length") >= 2   # |x/P| and phase
                     assert browser.js("document.getElementById('status').textContent") == "running"
+                    current = browser.js("document.getElementById('current').textContent")
+                    assert re.search(r"drive[0-9.]+ V amplitude", current) and "Vpp" not in current, current
                     browser.wait_for("!document.getElementById('stop').disabled", 10, "the stop button")
                     browser.click("#stop")
                     rc = proc.wait(timeout=60)
@@ -313,8 +345,7 @@ def test_the_page_shows_a_running_test_and_its_stop_button_stops_it_safely(tmp_p
 
 @pytest.mark.timeout(120)
 def test_bench_watch_follows_a_run_in_another_process_through_a_stop_and_a_resume(tmp_path):
-    out = tmp_path / "run"
-    out.mkdir()
+    out = tmp_path / "run"               # not there yet: bench watch waits for the run to create it
     with open(tmp_path / "watch.out", "wb") as log:
         proc = subprocess.Popen([sys.executable, "-m", "bench.cli", "watch", str(out)], cwd=REPO,
                                 stdout=log, stderr=subprocess.STDOUT)
@@ -328,9 +359,10 @@ def test_bench_watch_follows_a_run_in_another_process_through_a_stop_and_a_resum
         assert listening_addresses(int(base.rsplit(":", 1)[1].strip("/"))) == {LOOPBACK_HEX}
 
         def state():
-            with urllib.request.urlopen(base + "api/state", timeout=5) as r:
+            with urllib.request.urlopen(base + f"api/state?token={token}", timeout=5) as r:
                 return json.loads(r.read())
         assert state()["status"] == "waiting"
+        assert f"waiting for {out} to appear ... (Ctrl-C stops)" in (tmp_path / "watch.out").read_text()
 
         seen = []
 
@@ -355,6 +387,7 @@ def test_bench_watch_follows_a_run_in_another_process_through_a_stop_and_a_resum
         assert [e["event"] for e in s["events"]].count("resume") == 1
         assert sum(len(c["freq_Hz"]) for c in s["compliance"]) == 4
         assert proc.poll() is None             # the page outlives the runs it shows
+        assert f"{out} appeared" in (tmp_path / "watch.out").read_text()
     finally:
         proc.send_signal(signal.SIGINT)
         proc.wait(timeout=30)                  # generous: CI machines are shared

@@ -11,8 +11,15 @@ import can
 import numpy as np
 import pytest
 
-from drivers import (BlockIntegrityError, CanFdDaq, InstrumentError, InstrumentTimeout,
-                     ScpiFunctionGenerator, open_can_bus, plan_block)
+from drivers import (
+    BlockIntegrityError,
+    CanFdDaq,
+    InstrumentError,
+    InstrumentTimeout,
+    ScpiFunctionGenerator,
+    open_can_bus,
+    plan_block,
+)
 from drivers import _daq_codec as codec
 from sim.rig import RigModel
 from tests.drivers.plant import channel_specs, fundamental

@@ -9,8 +9,7 @@ import time
 
 import pytest
 
-from drivers import (ConnectionLost, InstrumentTimeout, ModbusEddySensor, ModbusError,
-                     SensorStatus, TargetMaterial)
+from drivers import ConnectionLost, InstrumentTimeout, ModbusEddySensor, ModbusError, SensorStatus, TargetMaterial
 from drivers._eddy_registers import Reg
 from drivers._eddy_twin import EddySensorModel, EddySensorRtuTwin
 from tests.drivers.expected_protocol import ModbusTcpScript

@@ -6,8 +6,7 @@ import time
 
 import pytest
 
-from drivers import (ConnectionLost, InstrumentTimeout, SafetyInterlock, ScpiError,
-                     ScpiFunctionGenerator)
+from drivers import ConnectionLost, InstrumentTimeout, SafetyInterlock, ScpiError, ScpiFunctionGenerator
 from drivers._scpi_twin_server import ScpiSerialServer
 from tests.drivers.expected_protocol import expected_scpi_protocol
 
@@ -190,3 +189,97 @@ def test_safe_off_on_a_dead_link_does_not_raise_and_logs(generator, scpi_server,
     scpi_server.close()
     generator.safe_off()
     assert "safe_off" in caplog.text
+
+
+# --------------------------------------------------------------------- interrupted exchanges
+# A Ctrl-C (or SIGTERM) inside a query leaves its reply unread; without a resynchronisation
+# every later query reads the previous one's answer and the output-off is unconfirmed.
+# These tests interrupt inside the exchange on purpose (pytest-mock injects the
+# KeyboardInterrupt at the transport), against the real twin.
+
+def interrupt_once(mocker, port, name, before=None):
+    """``port.name`` raises KeyboardInterrupt on its next call (after ``before(*args)``)."""
+    original = getattr(port, name)
+    calls = []
+
+    def side_effect(*args, **kwargs):
+        if not calls:
+            calls.append(args)
+            if before:
+                before(*args)
+            raise KeyboardInterrupt
+        return original(*args, **kwargs)
+
+    return mocker.patch.object(port, name, side_effect=side_effect)
+
+
+def driving(generator):
+    generator.configure_sine()
+    generator.set_frequency(80.0)
+    generator.set_amplitude(1.2)
+    generator.set_output(True)
+
+
+def test_ctrl_c_before_a_reply_is_read_then_safe_off_is_confirmed(generator, rig, mocker, caplog):
+    driving(generator)
+    interrupt_once(mocker, generator._port, "read_until")
+    with pytest.raises(KeyboardInterrupt):
+        generator.query("OUTP?")            # its "1" stays in the link, unread
+    assert not generator.in_step
+    generator.safe_off()
+    assert rig.output_on is False
+    assert "safe_off" not in caplog.text    # confirmed, no error logged
+    assert generator.output_enabled() is False
+    assert generator.query_float("FREQ?") == 80.0   # every later reply is its own
+
+
+def test_ctrl_c_with_half_a_reply_read_then_the_ramp_down_works(generator, rig, mocker):
+    driving(generator)
+    interrupt_once(mocker, generator._port, "read_until",
+                   before=lambda *a: generator._port.read(3))   # '+1.' consumed, rest pending
+    with pytest.raises(KeyboardInterrupt):
+        generator.query("VOLT?")
+    assert generator.set_amplitude(0.6) == 0.6                 # confirmed read-back, in step
+    assert rig.amplitude_Vpp == pytest.approx(0.6)
+    generator.safe_off()
+    assert rig.output_on is False and generator.output_enabled() is False
+
+
+def test_ctrl_c_inside_a_half_sent_command_does_not_glue_onto_the_next(generator, rig, mocker):
+    driving(generator)
+    port = generator._port
+    interrupt_once(mocker, port, "write", before=lambda data: port._socket.sendall(data[:4]))  # "FREQ"
+    with pytest.raises(KeyboardInterrupt):
+        generator.set_frequency(90.0)
+    assert generator.set_frequency(100.0) == 100.0
+    assert rig.freq_Hz == 100.0
+    assert generator.read_errors() == []    # the fragment's error was cleared by *CLS
+
+
+def test_a_stale_one_that_arrives_after_the_drain_is_still_skipped(generator, rig, mocker, monkeypatch):
+    """The worst stale reply is OUTP?'s '1': read in place of the marker it would leave the
+    marker's own '1' pending, and the next OUTP? would read 'on'.  With the drain disabled
+    the second marker (SYST:ERR?) must still bring the link back in step."""
+    driving(generator)
+    interrupt_once(mocker, generator._port, "read_until")
+    with pytest.raises(KeyboardInterrupt):
+        generator.query("OUTP?")
+    monkeypatch.setattr(generator._port, "reset_input_buffer", lambda: None)
+    time.sleep(0.05)                         # the stale "1" is in the socket, undrained
+    read = generator._port.read            # the drain reads in 4096-byte chunks: it sees nothing
+    mocker.patch.object(generator._port, "read", side_effect=lambda n=1: b"" if n == 4096 else read(n))
+    generator.safe_off()
+    assert rig.output_on is False
+    assert generator.output_enabled() is False
+    assert generator.query("*OPC?") == "1" and generator.query_float("FREQ?") == 80.0
+
+
+def test_a_failed_resync_still_sends_output_off(generator, rig, mocker, caplog):
+    driving(generator)
+    interrupt_once(mocker, generator._port, "read_until")
+    with pytest.raises(KeyboardInterrupt):
+        generator.query("OUTP?")
+    mocker.patch.object(type(generator), "resync", side_effect=InstrumentTimeout("no marker"))
+    generator.safe_off()
+    assert rig.output_on is False            # OUTP OFF went out although the link is out of step
+    assert "sending OUTP OFF anyway" in caplog.text

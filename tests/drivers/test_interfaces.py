@@ -2,9 +2,19 @@
 
 import pytest
 
-from drivers import (CanFdDaq, Channel, ChannelSpec, Daq, DisplacementSensor, FunctionGenerator,
-                     GapReading, ModbusEddySensor, ScpiFunctionGenerator, SensorStatus,
-                     open_can_bus)
+from drivers import (
+    CanFdDaq,
+    Channel,
+    ChannelSpec,
+    Daq,
+    DisplacementSensor,
+    FunctionGenerator,
+    GapReading,
+    ModbusEddySensor,
+    ScpiFunctionGenerator,
+    SensorStatus,
+    open_can_bus,
+)
 from sim.rig import RigModel
 from tests.drivers.plant import channel_specs
 

@@ -5,8 +5,7 @@ import threading
 
 import pytest
 
-from drivers import (CanFdDaq, ModbusEddySensor, ScpiFunctionGenerator, open_can_bus,
-                     run_standalone, start_twins)
+from drivers import CanFdDaq, ModbusEddySensor, ScpiFunctionGenerator, open_can_bus, run_standalone, start_twins
 from tests.drivers.plant import fundamental
 
 pytestmark = pytest.mark.timeout(60)

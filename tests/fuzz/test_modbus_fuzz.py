@@ -45,7 +45,7 @@ def _exchange(twin, frame: bytes, expect_reply: bool) -> bytes | None:
         s.sendall(frame)
         try:
             return s.recv(1024)
-        except socket.timeout:
+        except TimeoutError:
             if expect_reply:
                 raise AssertionError(f"no reply to {frame.hex()} within {TIME_BOUND_S} s") from None
             return None

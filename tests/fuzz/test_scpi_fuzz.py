@@ -70,7 +70,7 @@ def _answers_idn(sock: socket.socket) -> bool:
     while time.monotonic() < deadline:
         try:
             chunk = sock.recv(65536)
-        except socket.timeout:
+        except TimeoutError:
             return False
         if not chunk:
             return False

@@ -18,7 +18,7 @@ import pytest
 from bench.config import DEFAULTS, parse_plan, parse_rig
 from bench.studies.montecarlo import PlantDaq, PlantGenerator
 from procedures.plan import Limits
-from procedures.safety import LimitExceeded, SupervisedDaq, SupervisedGenerator, Supervisor
+from procedures.safety import SupervisedDaq, SupervisedGenerator, Supervisor
 from procedures.stepped_sine import ForceUnreachable, SteppedSine, next_drive
 from sim.rig import RigModel, SimulatedRig
 

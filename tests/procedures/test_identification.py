@@ -105,6 +105,7 @@ def test_adaptive_mode_measures_fewer_steps_and_still_pins_the_parameters(tmp_pa
     results = store.results()
     assert store.metadata["status"] == "completed"
     assert len(results) == 6 * len(plan.levels_N)                 # 42 of 168
+    assert store.metadata["steps_total"] == 42 and store.account().complete    # counted as planned
     final = store.metadata["identification"]["values"]
     for k, v in truth.items():
         assert final[k] == pytest.approx(v, rel=0.01)

@@ -112,19 +112,19 @@ def _reparametrised(F_s, x_s, n, k):
 def test_a_spring_in_pre_rolling_is_exactly_a_masing_curve_with_other_parameters(n):
     # f1 = A x^n + B x: a spring k in parallel makes B + k, and the Masing rule holds for the
     # sum branch by branch, so along any path that stays below x_s the two loops coincide
-    from sim.identify import _path_friction
+    from sim.identify import path_friction
     F_s, x_s, k = 10.0, 20e-6, 0.1 * 10.0 / 20e-6
     t = np.linspace(0, 2 * np.pi, 512, endpoint=False)
     path = 0.7 * x_s * (np.cos(t) + 0.2 * np.cos(3 * t + 0.4)) / 1.2
     path = path[np.argmax(path):].tolist() + path[:np.argmax(path)].tolist()
     path = np.array([path])
     F_s2, x_s2 = _reparametrised(F_s, x_s, n, k)
-    with_spring = F_s * _path_friction(path, x_s, n) + k * path
-    masing = F_s2 * _path_friction(path, x_s2, n)
+    with_spring = F_s * path_friction(path, x_s, n) + k * path
+    masing = F_s2 * path_friction(path, x_s2, n)
     assert np.max(np.abs(with_spring - masing)) < 1e-9 * F_s
     beyond = path * 2.2                                   # into rolling: they part
-    assert np.max(np.abs(F_s * _path_friction(beyond, x_s, n) + k * beyond
-                         - F_s2 * _path_friction(beyond, x_s2, n))) > 0.01 * F_s
+    assert np.max(np.abs(F_s * path_friction(beyond, x_s, n) + k * beyond
+                         - F_s2 * path_friction(beyond, x_s2, n))) > 0.01 * F_s
 
 
 @pytest.mark.slow
