@@ -94,15 +94,15 @@ def test_converges_in_a_few_iterations_when_the_gain_estimate_is_40_percent_off(
 
 
 def test_converges_at_force_drop_out():
-    """At 0.03 N the friction's stiffness (3 F_s/x_s for n = 1.5) makes the carriage a
-    lightly damped 87 Hz oscillator; near its resonance the shaker delivers little more than
-    half its force per volt.  From the rig's estimate the control still converges within the plan's
+    """At 0.1 N the friction's stiffness (3 F_s/x_s for n = 1.5, softened a little by the
+    amplitude) makes the carriage a lightly damped ~81 Hz oscillator; at its resonance the
+    shaker delivers 40 % less force per volt than the rig file says.  From the rig's estimate the control still converges within the plan's
     tolerance and iterations."""
-    results, _, _, _, plan = run([0.03], [83.8])
+    results, _, _, _, plan = run([0.1], [80.8])
     (r,) = results
     gain = r["force_N"] / (r["drive_Vpp"] / 2)
-    assert gain < 0.6 * RIG.amp_gain_N_per_V                        # really at the drop-out
-    assert r["force_converged"] and r["control_iterations"] <= plan.max_iterations
+    assert gain < 0.7 * RIG.amp_gain_N_per_V                        # really at the drop-out
+    assert r["force_converged"] and 2 <= r["control_iterations"] <= plan.max_iterations
     assert abs(r["force_error"]) <= plan.force_tolerance
 
 
