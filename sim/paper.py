@@ -449,8 +449,8 @@ def fig15_17_pitch_resonance(rep: Report, grids: Grids):
     model = RigModel.from_dict(PITCH_MODEL)
     freqs = grids.pitch_freqs_Hz if grids.pitch_freqs_Hz is not None else np.geomspace(40.0, 300.0, 24)
     f_s = model.omega_s / (2 * math.pi)
-    fig = Figure(figsize=(11, 4.5), layout="constrained")
-    ax_G, ax_f = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
+    fig = Figure(figsize=(14, 4.5), layout="constrained")
+    ax_G, ax_feed, ax_pitch = (fig.add_subplot(1, 3, i) for i in (1, 2, 3))
     rows, curves = [], []
     for level in grids.pitch_levels_N:
         feed, pitch, G = pitch_resonances(model, level, freqs, grids.pitch_zoom_points)
@@ -463,22 +463,34 @@ def fig15_17_pitch_resonance(rep: Report, grids: Grids):
                 rep.key("fig15_17_pitch_resonance.png", "Figs. 15-17", model.n, level / model.F_s_N, item,
                         f_r / f_s, G_r * model.F_s_N / model.x_s_m)
     levels = np.array([r[0] for r in rows])
-    ax_f.semilogx(levels, [r[1] for r in rows], "o-", label="feed mode")
-    ax_f.semilogx(levels, [r[2] for r in rows], "s-", label="pitching mode")
-    from .plant_effects import highest_linear_frequency_Hz
+    ax_feed.semilogx(levels, [r[1] for r in rows], "o-", color="tab:blue", label="feed mode (RK4 plant)")
+    ax_pitch.semilogx(levels, [r[2] for r in rows], "s-", color="tab:orange", label="pitching mode (RK4 plant)")
+    from .plant_effects import mass_matrix
     k0 = SakaiCurve(model.n).stiffness0 * model.F_s_N / model.x_s_m
-    for k, text, ls in ((0.0, "linear, no friction stiffness", "--"), (k0, "linear, initial friction stiffness", ":")):
-        ax_f.axhline(highest_linear_frequency_Hz(model, k), color="grey", ls=ls, lw=0.9, label=f"pitch, {text}")
+    for k, text, ls in ((0.0, "no friction stiffness", "--"), (k0, "initial friction stiffness", ":")):
+        w2 = np.sort(np.linalg.eigvals(np.linalg.solve(mass_matrix(model),
+                                                       np.diag([k, model.pitch_stiffness_N_m_per_rad]))).real)
+        f_lin = np.sqrt(np.maximum(w2, 0.0)) / (2 * math.pi)
+        if k > 0:
+            ax_feed.axhline(f_lin[0], color="grey", ls=ls, lw=0.9, label=f"linear 2-DOF, {text}")
+        ax_pitch.axhline(f_lin[1], color="grey", ls=ls, lw=0.9, label=f"linear 2-DOF, {text}")
     ax_G.set_xlabel("frequency [Hz]")
     ax_G.set_ylabel("feed compliance |X/P| [m/N]")
     ax_G.set_title("Seed Fig. 15: FRF of the pitching rig per force")
     ax_G.grid(alpha=0.3, which="both")
     ax_G.legend(fontsize=8, title="force amplitude", title_fontsize=8)
-    ax_f.set_xlabel("force amplitude [N]")
-    ax_f.set_ylabel("resonance frequency [Hz]")
-    ax_f.set_title("Seed Figs. 16-17: resonances fall as the force rises")
-    ax_f.grid(alpha=0.3, which="both")
-    ax_f.legend(fontsize=8)
+    for ax, name in ((ax_feed, "feed"), (ax_pitch, "pitching")):
+        ax.set_xlabel("force amplitude [N]")
+        ax.set_ylabel(f"{name} mode resonance frequency [Hz]")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    ax_feed.set_xlim(ax_pitch.get_xlim())
+    gone = [r[0] for r in rows if not math.isfinite(r[1])]
+    if gone:
+        ax_feed.text(0.97, 0.5, "no feed peak at\n" + ", ".join(f"{g:g} N" for g in gone), ha="right",
+                     transform=ax_feed.transAxes, fontsize=8, color="grey")
+    ax_feed.set_title("Seed Fig. 16: feed mode falls, then is gone")
+    ax_pitch.set_title("Seed Fig. 17: pitching mode falls with force")
     rep.table("fig15_17_pitch_resonance", ["force [N]", "freq [Hz]", "compliance [m/N]"], curves)
     # NaN: the mode shows no peak at that force (the feed mode above F_s, as in the seed)
     rep.table("fig15_17_pitch_resonance_peaks", ["force [N]", "feed_resonance [Hz]", "pitch_resonance [Hz]"], rows)
