@@ -94,6 +94,16 @@ class SteppedSine:
         self.gain_at: dict[float, float] = {}     # frequency -> latest measured force per Vpp
         self.history: list[tuple[float, float]] = []   # (Vpp, force) of the last control
 
+    def preload(self, results: list) -> None:
+        """A resumed run knows the force per volt its stored steps measured (the last control
+        iteration of each, in schedule order), so its first drives are those of an
+        uninterrupted run."""
+        for r in sorted(results, key=lambda r: r["index"]):
+            history = r.get("control_history")
+            if history and history[-1]["force_N"] > 0 and history[-1]["drive_Vpp"] > 0:
+                gain = history[-1]["force_N"] / history[-1]["drive_Vpp"]
+                self.drive.gain_N_per_Vpp = self.gain_at[r["freq_Hz"]] = gain
+
     def _first_vpp(self, step: StepSpec, new_sweep: bool = False) -> float:
         """First drive of a step, within the drive limit: inside a sweep, from the force per
         volt of the step before (same level, the next frequency); a new sweep (a new level)
