@@ -259,6 +259,14 @@ MODEL_SCHEMA = {
     "line_amplitude": ("unit of line_channel: m, N or m/s^2", 0, 1e4, False, False),
     "quadratic_damping_N_s2_per_m2": ("N s^2/m^2", 0, 1e9, False, False),
     "friction_asymmetry": ("1", -0.5, 0.5, True, False),     # |a| < 0.5 (the model's own rule)
+    # electrodynamic shaker (decision 0025): on when the force constant Bl > 0; then
+    # amp_gain_N_per_V is the blocked force per generator volt at DC
+    "shaker_force_constant_N_per_A": ("N/A", 0, 1e3, False, False),
+    "shaker_resistance_ohm": ("ohm", 0, 1e3, False, False),
+    "shaker_inductance_H": ("H", 0, 1, False, False),
+    "shaker_armature_mass_kg": ("kg", 0, 100, False, False),
+    "shaker_suspension_N_per_m": ("N/m", 0, 1e8, False, False),
+    "shaker_damping_N_s_per_m": ("N s/m", 0, 1e5, False, False),
     "steps_per_period": ("steps", 20, 1e5, False, True),
     "seed": ("", 0, 2**63 - 1, False, True),
 }

@@ -289,7 +289,9 @@ def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Super
     rest = ins.daq.acquire_periods(100.0, 10).disp_m
     sup.x_ref_m = float(np.mean(rest))
     proc = SteppedSine(plan, gen, daq, amp_gain_N_per_V=rig.amp_gain_N_per_V,
-                       sensor_check=sensor_check, marker=ins.generator)
+                       sensor_check=sensor_check, marker=ins.generator, drive_limit_V=sup.limits.drive_V,
+                       on_skip=lambda step, why: store.event("step_skipped", key=step.key, reason=why))
+    proc.preload(store.results())             # a resumed run: the force per volt measured so far
     proc.disp_noise_floor_m = float(np.std(rest))
     if progress and hasattr(progress, "restart"):
         progress.restart(len(store.done_keys()))     # the ETA counts steps from here

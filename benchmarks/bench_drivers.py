@@ -139,10 +139,17 @@ ALL_EFFECTS = dict(friction_alpha=0.5, friction_v_ref_m_per_s=5e-3, pitch_inerti
                    viscous_N_s_per_m=20.0, spring_N_per_m=1e5)
 
 
+# the electrodynamic shaker of bench/defaults/sim_rig.toml (decision 0025)
+SHAKER = dict(shaker_force_constant_N_per_A=15.0, shaker_resistance_ohm=1.5, shaker_inductance_H=0.2e-3,
+              shaker_armature_mass_kg=0.3, shaker_suspension_N_per_m=2e4, shaker_damping_N_s_per_m=20.0)
+
+
 def bench_rig_effects(repeats: int = 5, freq_Hz: float = 1000.0) -> None:
-    """Rig generation per simulated second at 1 kHz: plain plant vs every effect on."""
+    """Rig generation per simulated second at 1 kHz: plain plant vs the shaker model vs
+    every effect on."""
     walls = {}
-    for name, model in (("plain", _MODEL), ("all effects", RigModel(**ALL_EFFECTS))):
+    for name, model in (("plain", _MODEL), ("shaker", RigModel(**SHAKER)),
+                        ("all effects", RigModel(**ALL_EFFECTS, **SHAKER))):
         rig = SimulatedRig(model)
         rig.set_generator(freq_Hz=freq_Hz, amplitude_Vpp=DRIVE_VPP, output_on=True)
         rig.run(16, FS_HZ)            # compile (or load the cache) outside the timing
@@ -153,7 +160,8 @@ def bench_rig_effects(repeats: int = 5, freq_Hz: float = 1000.0) -> None:
             times.append(time.perf_counter() - t0)
         walls[name] = statistics.median(times)
     print(f"rig generation per simulated second at {freq_Hz:g} Hz, 25.6 kS/s: plain "
-          f"{walls['plain'] * 1e3:.0f} ms, pitching mode + every effect on "
+          f"{walls['plain'] * 1e3:.0f} ms, shaker model {walls['shaker'] * 1e3:.0f} ms "
+          f"({walls['shaker'] / walls['plain']:.2f}x), pitching mode + every effect + shaker on "
           f"{walls['all effects'] * 1e3:.0f} ms ({walls['all effects'] / walls['plain']:.2f}x the plain "
           f"plant; target <= 1 s)")
 
@@ -166,6 +174,7 @@ def main() -> None:
     bench_block_over_virtual_bus()
     bench_rig()
     bench_rig_effects()
+    bench_rig_effects(freq_Hz=100.0)
 
 
 if __name__ == "__main__":

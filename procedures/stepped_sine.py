@@ -16,19 +16,47 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers import plan_block
-from sim.step_result import FitSummary, StepMeasurement, StepResult
+from sim.step_result import ControlIteration, FitSummary, StepMeasurement, StepResult
 
 from .analysis import HarmonicFit, fit_harmonics
 from .instruments import Block, BlockSource, SineSource, StepMarker
 from .plan import Plan, StepSpec
+from .safety import LimitExceeded
 
-__all__ = ["MIN_VPP", "DriveState", "SteppedSine", "StepResult"]
+__all__ = ["MIN_VPP", "DriveState", "ForceUnreachable", "SteppedSine", "StepResult", "next_drive"]
 
 Record = Callable[[StepSpec, StepResult, dict[str, np.ndarray]], None]
 
 log = logging.getLogger(__name__)
 
 MIN_VPP = 2e-3       # the generator's smallest amplitude into a high-impedance load
+MAX_FACTOR = 10.0    # one control update changes the drive by at most this factor
+FIRST_DRIVE_MARGIN = 0.9   # a sweep starts 10 % below the force its gain estimate predicts
+
+
+class ForceUnreachable(LimitExceeded):
+    """A step's force cannot be reached within the drive limit (plan: infeasible = "refuse");
+    the output has been ramped down and switched off."""
+
+
+def next_drive(vpp: float, force: float, target: float, prev: tuple[float, float] | None) -> float:
+    """The next drive amplitude (Vpp) of the force control (decision 0025).
+
+    Secant in log-log: force ~ drive^s, s from this and the previous iteration (exact for a
+    linear rig, s = 1: the measured force per volt scales the drive; a resonance that moves
+    with the amplitude makes s < 1 at a force drop-out).  Without a previous iteration, with
+    drives within 5 % of each other (what the settling left in the force dominates) or a
+    force that did not grow with the drive, s = 1; otherwise s is kept within 0.25-2.  The
+    update is bounded to a factor MAX_FACTOR either way."""
+    s = 1.0
+    if prev is not None:
+        v0, f0 = prev
+        if abs(math.log(vpp / v0)) > 0.05 and f0 > 0:
+            slope = math.log(force / f0) / math.log(vpp / v0)
+            if slope > 0:
+                s = min(max(slope, 0.25), 2.0)
+    nxt = vpp * (target / force) ** (1.0 / s)
+    return min(max(nxt, vpp / MAX_FACTOR), vpp * MAX_FACTOR)
 
 
 @dataclass
@@ -51,7 +79,8 @@ class SteppedSine:
     """Runs a :class:`~bench.config.Plan` on supervised instruments."""
 
     def __init__(self, plan: Plan, generator: SineSource, daq: BlockSource, *, amp_gain_N_per_V: float,
-                 sensor_check: Callable[[], object] | None = None, marker: StepMarker | None = None):
+                 sensor_check: Callable[[], object] | None = None, marker: StepMarker | None = None,
+                 drive_limit_V: float = math.inf, on_skip: Callable[[StepSpec, str], None] | None = None):
         self.plan = plan
         self.gen = generator
         self.daq = daq
@@ -59,6 +88,33 @@ class SteppedSine:
         self.marker = marker                      # told each step's key before its measured block
         self.disp_noise_floor_m = 0.0             # rms at rest; set by the session
         self.drive = DriveState(gain_N_per_Vpp=amp_gain_N_per_V / 2.0)
+        # the largest drive the control may ask for: the peak limit, a hair inside it
+        self.max_vpp = 2.0 * drive_limit_V * (1.0 - 1e-6)
+        self.on_skip = on_skip                    # a step skipped (force unreachable) and why
+        self.gain_at: dict[float, float] = {}     # frequency -> latest measured force per Vpp
+        self.history: list[tuple[float, float]] = []   # (Vpp, force) of the last control
+
+    def preload(self, results: list) -> None:
+        """A resumed run knows the force per volt its stored steps measured (the last control
+        iteration of each, in schedule order), so its first drives are those of an
+        uninterrupted run."""
+        for r in sorted(results, key=lambda r: r["index"]):
+            history = r.get("control_history")
+            if history and history[-1]["force_N"] > 0 and history[-1]["drive_Vpp"] > 0:
+                gain = history[-1]["force_N"] / history[-1]["drive_Vpp"]
+                self.drive.gain_N_per_Vpp = self.gain_at[r["freq_Hz"]] = gain
+
+    def _first_vpp(self, step: StepSpec, new_sweep: bool = False) -> float:
+        """First drive of a step, within the drive limit: inside a sweep, from the force per
+        volt of the step before (same level, the next frequency); a new sweep (a new level)
+        from the force per volt measured at its first frequency before (an earlier level),
+        FIRST_DRIVE_MARGIN below it: the force per volt depends on the level (the rig's
+        resonance moves), and a ramp to a force above the target, plus the start's
+        transient, could reach the force limit."""
+        if not new_sweep:
+            return min(step.force_N / self.drive.gain_N_per_Vpp, self.max_vpp)
+        gain = self.gain_at.get(step.freq_Hz, self.drive.gain_N_per_Vpp)
+        return min(FIRST_DRIVE_MARGIN * step.force_N / gain, self.max_vpp)
 
     # ------------------------------------------------------------------ primitives
     def _acquire(self, freq_Hz: float, periods: int) -> Block:
@@ -135,25 +191,40 @@ class SteppedSine:
             self.drive.on = False
 
     # ------------------------------------------------------------------ one step
-    def control_force(self, step: StepSpec) -> tuple[float, int, bool]:
+    def control_force(self, step: StepSpec) -> tuple[float, int, bool, str]:
         """Iterate the drive until the force fundamental is within tolerance.
 
-        Returns (relative force error, iterations, converged)."""
+        Each iteration's (Vpp, force) is kept in ``history`` and logged.  Returns (relative
+        force error, iterations, converged, reason); the reason is "" when converged, names
+        the drive limit when the force is still short with the drive at the limit."""
         f, target = step.freq_Hz, step.force_N
         err, it = math.inf, 0
+        prev: tuple[float, float] | None = None
+        self.history = []
         for it in range(1, self.plan.max_iterations + 1):
             self._wait(f, 0.0, min_periods=self.plan.control_cycles)   # let the change settle
             block = self._acquire(f, self.plan.control_cycles)
-            F1 = fit_harmonics(block.force_N, block.fs_Hz, f, 1).amplitude[0]
+            F1 = float(fit_harmonics(block.force_N, block.fs_Hz, f, 1).amplitude[0])
+            vpp = self.drive.amplitude_Vpp
             err = F1 / target - 1.0
+            self.history.append((vpp, F1))
+            log.debug("step %s iteration %d: %.5g Vpp -> %.5g N (error %+.2f %%)", step.key, it, vpp, F1, 100 * err)
             if F1 > 0:
-                self.drive.gain_N_per_Vpp = F1 / self.drive.amplitude_Vpp
+                self.drive.gain_N_per_Vpp = self.gain_at[f] = F1 / vpp
             if abs(err) <= self.plan.force_tolerance:
-                return err, it, True
+                return err, it, True, ""
             if F1 <= 0 or not math.isfinite(F1):
-                break
-            self._change(vpp=self.drive.amplitude_Vpp * target / F1)
-        return err, it, False
+                return err, it, False, f"no force measured at {vpp:.4g} Vpp"
+            nxt = next_drive(vpp, F1, target, prev)
+            if nxt > self.max_vpp:
+                if vpp >= self.max_vpp * (1 - 1e-6):
+                    return err, it, False, (f"force {target:g} N unreachable at {f:g} Hz within the drive "
+                                            f"limit {self.max_vpp / 2:.4g} V: {F1:.4g} N at the limit "
+                                            f"({F1 / vpp:.4g} N/Vpp)")
+                nxt = self.max_vpp
+            prev = (vpp, F1)
+            self._change(vpp=nxt)
+        return err, it, False, f"not within {100 * self.plan.force_tolerance:g} % after {it} iterations"
 
     def _fit_block(self, block: Block, f: float) -> dict[str, HarmonicFit]:
         return {name: fit_harmonics(x, block.fs_Hz, f, self.plan.harmonics)
@@ -237,7 +308,8 @@ class SteppedSine:
                 finished += 1
                 if progress:
                     progress(finished, total, f"{step.force_N:g} N {step.freq_Hz:7.1f} Hz {step.direction:4s} "
-                             f"err {100 * res['force_error']:+.1f}% THD(x) {res['disp']['thd']:.2f}")
+                             + (f"err {100 * res['force_error']:+.1f}% THD(x) {res['disp']['thd']:.2f}"
+                                if res else "skipped: force unreachable"))
                 prev = step
         self.stop()
 
@@ -249,14 +321,17 @@ class SteppedSine:
             self.stop()
         if self.sensor_check:
             self.sensor_check()
-        self.ramp(step.force_N / self.drive.gain_N_per_Vpp, step.freq_Hz)
+        self.ramp(self._first_vpp(step, new_sweep=True), step.freq_Hz)
         self.control_force(step)
         periods = max(self.plan.measure_cycles, math.ceil(self.plan.min_measure_s * step.freq_Hz))
         self._wait(step.freq_Hz, self.plan.min_settle_s, min_periods=self.plan.settle_cycles + periods)
 
-    def step(self, step: StepSpec, *, new_sweep: bool, record: Record) -> StepResult:
-        """One step: drive, control the force, settle, measure, record."""
-        first_vpp = step.force_N / self.drive.gain_N_per_Vpp
+    def step(self, step: StepSpec, *, new_sweep: bool, record: Record) -> StepResult | None:
+        """One step: drive, control the force, settle, measure, record.  A step whose force
+        the drive limit cannot reach is not measured: the plan's ``infeasible`` says whether
+        that stops the test (``refuse``: ramp down, output off, ForceUnreachable) or the step
+        is skipped (``skip``: ``on_skip`` is told why; returns None)."""
+        first_vpp = self._first_vpp(step, new_sweep)
         if new_sweep:
             if self.drive.on:
                 self.stop()
@@ -265,7 +340,16 @@ class SteppedSine:
             self.ramp(first_vpp, step.freq_Hz)
         else:
             self._change(freq_Hz=step.freq_Hz, vpp=first_vpp)
-        err, iterations, ok = self.control_force(step)
+        err, iterations, ok, reason = self.control_force(step)
+        if not ok and "unreachable" in reason:
+            log.warning("step %s: %s", step.key, reason)
+            if self.plan.infeasible == "refuse":
+                self.stop()
+                raise ForceUnreachable(f"step {step.key}: {reason} (plan: infeasible = \"refuse\"; "
+                                       f"\"skip\" goes on without it)")
+            if self.on_skip:
+                self.on_skip(step, reason)
+            return None
         if not ok:
             log.warning("step %s: force %.3g N not reached within %.1f %% after %d iterations "
                         "(error %+.1f %%)", step.key, step.force_N, 100 * self.plan.force_tolerance,
@@ -274,6 +358,7 @@ class SteppedSine:
         result = StepResult(**measured, key=step.key, index=step.index, level_index=step.level_index,
                             freq_index=step.freq_index, direction=step.direction,
                             target_force_N=step.force_N, control_iterations=iterations,
-                            force_converged=ok, force_error=measured["force_N"] / step.force_N - 1.0)
+                            force_converged=ok, force_error=measured["force_N"] / step.force_N - 1.0,
+                            control_history=[ControlIteration(drive_Vpp=v, force_N=F) for v, F in self.history])
         record(step, result, raw)
         return result

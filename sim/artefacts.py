@@ -363,8 +363,11 @@ def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Lin
                  model=scale * (p[nd] * s + p[nd + 1] * c))
 
 
+NO_FREQUENCIES = np.zeros(0)     # no aliased harmonics (read only)
+
+
 def _line_search(q: np.ndarray, fs: float, f: float, skip: list[float],
-                 aliases: np.ndarray = np.zeros(0)) -> list[tuple[float, float]]:
+                 aliases: np.ndarray = NO_FREQUENCIES) -> list[tuple[float, float]]:
     """Candidate (frequency, peak power / noise floor) of the residual, strongest first,
     away from the drive harmonics, their ``aliases`` and the frequencies in ``skip``."""
     n = q.size
@@ -391,7 +394,7 @@ def _line_search(q: np.ndarray, fs: float, f: float, skip: list[float],
 
 
 def _find_lines(q: np.ndarray, fs: float, f: float,
-                aliases: np.ndarray = np.zeros(0)) -> tuple[list[_Line], list[_Line]]:
+                aliases: np.ndarray = NO_FREQUENCIES) -> tuple[list[_Line], list[_Line]]:
     """Steady lines and decaying components of the residual ``q``, strongest first."""
     n = q.size
     guard = HARMONIC_GUARD * fs / n

@@ -1,4 +1,6 @@
-"""Reproduce the seed's numerical figures (Sakai 2020, Figs. 3-4 and 6-13) from the model.
+"""Reproduce the seed's numerical figures (Sakai 2020, Figs. 3-4 and 6-13) from the model,
+and the trend of its section 4 (Figs. 15-17: the feed and pitching modes' resonances fall
+as the force rises) from the simulated rig's pitching model.
 
 ``reproduce(out_dir)`` writes one PNG and one CSV per figure plus an index (README.md for
 people, summary.csv for programs) naming the seed figure each file corresponds to and the
@@ -50,17 +52,22 @@ class Grids:
     fig13_betas: np.ndarray          # coarse search for the harmonic peak
     fig13_zoom_points: int           # refinement between the coarse maximum's neighbours
     fig13_gamma0: tuple[float, ...]
+    pitch_levels_N: tuple[float, ...] = (0.1, 3.0, 100.0)   # Figs. 15-17: force amplitudes
+    pitch_freqs_Hz: np.ndarray | None = None                # coarse sweep (None: 24 points)
+    pitch_zoom_points: int = 7
 
     @classmethod
     def for_run(cls, quick: bool) -> Grids:
         if quick:
             return cls(np.linspace(0.2, 2.0, 37), np.linspace(0.2, 3.0, 29), (0.4, 0.8),
-                       np.geomspace(0.4, 5.0, 25), 7, (0.2, 0.6, 0.9))
+                       np.geomspace(0.4, 5.0, 25), 7, (0.2, 0.6, 0.9),
+                       (0.1, 3.0, 100.0), np.geomspace(40.0, 300.0, 24), 7)
         # The harmonic peak moves up as gamma0 falls (n = 0.5, gamma0 = 0.2: beta ~ 2.5;
         # gamma0 = 0.1: beta ~ 3.7), hence the ranges of Figs. 12 and 13.
         return cls(np.linspace(0.2, 2.0, 200), np.linspace(0.2, 3.0, 200), (0.2, 0.4, 0.6, 0.8, 0.9),
                    np.geomspace(0.4, 5.0, 120), 21,
-                   (0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.95))
+                   (0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.95),
+                   (0.1, 0.3, 1.0, 2.0, 3.0, 5.0, 10.0, 30.0, 100.0), np.geomspace(30.0, 300.0, 48), 9)
 
 
 @dataclass(frozen=True)
@@ -377,6 +384,121 @@ def fig13_resonance_vs_force(rep: Report, grids: Grids):
     rep.figure(fig, "fig13_resonance_vs_force", "Fig. 13", "harmonic resonance beta_h and G_h versus gamma0")
 
 
+# --- Seed Figs. 15-17: feed and pitching modes' resonances against force --------------------
+
+# The pitching rig of bench/defaults/sim_rig_pitch.toml ([rig.model]): carriage and column
+# 10 kg, J 0.3 kg m^2 about the guideway, k_th 3e5 N m/rad, h 0.2 m, e 0.1 m; ideal force
+# (the seed's FRFs are per measured force) and no sensor noise.
+PITCH_MODEL = dict(F_s_N=10.0, x_s_m=10e-6, n=1.5, mass_kg=10.0, friction_alpha=0.5,
+                   friction_v_ref_m_per_s=5e-3, pitch_inertia_kg_m2=0.3,
+                   pitch_stiffness_N_m_per_rad=3e5, pitch_damping_N_m_s_per_rad=10.0,
+                   drive_height_m=0.2, cg_height_m=0.1,
+                   force_noise_N=0.0, accel_noise_m_s2=0.0, disp_noise_m=0.0)
+PITCH_SETTLE_PERIODS, PITCH_MEASURE_PERIODS, PITCH_SAMPLES_PER_PERIOD = 30, 10, 64
+
+
+def pitch_compliance(model, level_N: float, freqs_Hz) -> np.ndarray:
+    """|X1 / P| (m/N) of the feed displacement along a stepped sweep at force ``level_N``
+    on the RK4 plant (:class:`sim.rig.SimulatedRig`), the state carried from step to step."""
+    from .rig import SimulatedRig
+    rig = SimulatedRig(model)
+    out = []
+    for i, f in enumerate(freqs_Hz):
+        rig.set_generator(freq_Hz=f, amplitude_Vpp=2 * level_N / model.amp_gain_N_per_V, output_on=True)
+        fs = PITCH_SAMPLES_PER_PERIOD * f
+        rig.run(PITCH_SAMPLES_PER_PERIOD * PITCH_SETTLE_PERIODS * (3 if i == 0 else 1), fs)
+        n = PITCH_SAMPLES_PER_PERIOD * PITCH_MEASURE_PERIODS
+        x = rig.run(n, fs).disp_V / model.disp_sens_V_per_m
+        out.append(2 * abs(np.exp(-2j * np.pi * np.arange(n) / PITCH_SAMPLES_PER_PERIOD) @ x) / n / level_N)
+    return np.array(out)
+
+
+def _local_maxima(y: np.ndarray) -> list[int]:
+    return [i for i in range(1, y.size - 1) if y[i] > y[i - 1] and y[i] >= y[i + 1]]
+
+
+def pitch_resonances(model, level_N: float, freqs_Hz, zoom_points: int):
+    """(feed, pitch) resonance frequencies (Hz; NaN when not observed), the coarse sweep.
+
+    Peaks of the feed compliance: the pitch mode's is the largest at or above 0.8 x the
+    pitch frequency of the free (frictionless) carriage, the feed mode's the largest
+    below it.  Each is refined on a sweep of ``zoom_points`` between its neighbours."""
+    from .plant_effects import highest_linear_frequency_Hz
+    freqs_Hz = np.asarray(freqs_Hz, dtype=float)
+    G = pitch_compliance(model, level_N, freqs_Hz)
+    split = 0.8 * highest_linear_frequency_Hz(model, 0.0)
+    found = []
+    for band in (freqs_Hz < split, freqs_Hz >= split):
+        peaks = [i for i in _local_maxima(G) if band[i]]
+        if not peaks:
+            found.append(math.nan)
+            continue
+        i = max(peaks, key=lambda j: G[j])
+        fine = np.linspace(freqs_Hz[i - 1], freqs_Hz[i + 1], zoom_points)
+        Gf = pitch_compliance(model, level_N, fine)
+        j = int(np.argmax(Gf))
+        if 0 < j < fine.size - 1:        # parabola through the fine maximum and its neighbours
+            a, b, c = np.log(Gf[j - 1:j + 2])
+            j = j + 0.5 * (a - c) / (a - 2 * b + c)
+        found.append(float(np.interp(j, np.arange(fine.size), fine)))
+    return found[0], found[1], G
+
+
+def fig15_17_pitch_resonance(rep: Report, grids: Grids):
+    from .rig import RigModel
+    model = RigModel.from_dict(PITCH_MODEL)
+    freqs = grids.pitch_freqs_Hz if grids.pitch_freqs_Hz is not None else np.geomspace(40.0, 300.0, 24)
+    f_s = model.omega_s / (2 * math.pi)
+    fig = Figure(figsize=(14, 4.5), layout="constrained")
+    ax_G, ax_feed, ax_pitch = (fig.add_subplot(1, 3, i) for i in (1, 2, 3))
+    rows, curves = [], []
+    for level in grids.pitch_levels_N:
+        feed, pitch, G = pitch_resonances(model, level, freqs, grids.pitch_zoom_points)
+        rows.append((level, feed, pitch))
+        curves += [(level, f, g) for f, g in zip(freqs, G)]
+        ax_G.loglog(freqs, G, label=f"{level:g} N")
+        for item, f_r in (("feed mode resonance", feed), ("pitching mode resonance", pitch)):
+            if math.isfinite(f_r):
+                G_r = float(np.interp(f_r, freqs, G))
+                rep.key("fig15_17_pitch_resonance.png", "Figs. 15-17", model.n, level / model.F_s_N, item,
+                        f_r / f_s, G_r * model.F_s_N / model.x_s_m)
+    levels = np.array([r[0] for r in rows])
+    ax_feed.semilogx(levels, [r[1] for r in rows], "o-", color="tab:blue", label="feed mode (RK4 plant)")
+    ax_pitch.semilogx(levels, [r[2] for r in rows], "s-", color="tab:orange", label="pitching mode (RK4 plant)")
+    from .plant_effects import mass_matrix
+    k0 = SakaiCurve(model.n).stiffness0 * model.F_s_N / model.x_s_m
+    for k, text, ls in ((0.0, "no friction stiffness", "--"), (k0, "initial friction stiffness", ":")):
+        w2 = np.sort(np.linalg.eigvals(np.linalg.solve(mass_matrix(model),
+                                                       np.diag([k, model.pitch_stiffness_N_m_per_rad]))).real)
+        f_lin = np.sqrt(np.maximum(w2, 0.0)) / (2 * math.pi)
+        if k > 0:
+            ax_feed.axhline(f_lin[0], color="grey", ls=ls, lw=0.9, label=f"linear 2-DOF, {text}")
+        ax_pitch.axhline(f_lin[1], color="grey", ls=ls, lw=0.9, label=f"linear 2-DOF, {text}")
+    ax_G.set_xlabel("frequency [Hz]")
+    ax_G.set_ylabel("feed compliance |X/P| [m/N]")
+    ax_G.set_title("Seed Fig. 15: FRF of the pitching rig per force")
+    ax_G.grid(alpha=0.3, which="both")
+    ax_G.legend(fontsize=8, title="force amplitude", title_fontsize=8)
+    for ax, name in ((ax_feed, "feed"), (ax_pitch, "pitching")):
+        ax.set_xlabel("force amplitude [N]")
+        ax.set_ylabel(f"{name} mode resonance frequency [Hz]")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    ax_feed.set_xlim(ax_pitch.get_xlim())
+    gone = [r[0] for r in rows if not math.isfinite(r[1])]
+    if gone:
+        ax_feed.text(0.97, 0.5, "no feed peak at\n" + ", ".join(f"{g:g} N" for g in gone), ha="right",
+                     transform=ax_feed.transAxes, fontsize=8, color="grey")
+    ax_feed.set_title("Seed Fig. 16: feed mode falls, then is gone")
+    ax_pitch.set_title("Seed Fig. 17: pitching mode falls with force")
+    rep.table("fig15_17_pitch_resonance", ["force [N]", "freq [Hz]", "compliance [m/N]"], curves)
+    # NaN: the mode shows no peak at that force (the feed mode above F_s, as in the seed)
+    rep.table("fig15_17_pitch_resonance_peaks", ["force [N]", "feed_resonance [Hz]", "pitch_resonance [Hz]"], rows)
+    rep.figure(fig, "fig15_17_pitch_resonance", "Figs. 15-17",
+               "feed and pitching modes' resonance frequencies against force (pitching rig, RK4 plant)")
+    return rows
+
+
 # --- Index ------------------------------------------------------------------------------------
 
 def write_index(rep: Report, checks: dict[float, str], quick: bool, seconds: float):
@@ -392,7 +514,9 @@ def write_index(rep: Report, checks: dict[float, str], quick: bool, seconds: flo
         f"Written by `sim.paper.reproduce` ({'quick, coarse grids' if quick else 'full grids'}; "
         f"{seconds:.1f} s). All quantities dimensionless: u = x/x_s, F/F_s, beta = omega/omega_s, "
         "G = u_0/gamma0. FRFs by half-period shooting (RK4 where it falls back); cycles by RK4 "
-        "with 10000 steps per period, as the seed. Each PNG has a CSV of the same name.",
+        "with 10000 steps per period, as the seed. Figs. 15-17 are in Hz and N, from stepped sweeps "
+        "of the simulated pitching rig (RK4 plant; beta = f/f_s and G = compliance F_s/x_s in the "
+        "key numbers). Each PNG has a CSV of the same name.",
         "",
         "| file | seed figure | content |",
         "|---|---|---|",
@@ -439,6 +563,7 @@ def reproduce(out_dir: Path, *, quick: bool = False, progress=None) -> list[Path
         ("fig11_time_history_B", lambda: fig10_11_time_history(rep, cycles, "B")),
         ("fig12_frf_levels", lambda: fig12_frf_levels(rep, grids)),
         ("fig13_resonance_vs_force", lambda: fig13_resonance_vs_force(rep, grids)),
+        ("fig15_17_pitch_resonance", lambda: fig15_17_pitch_resonance(rep, grids)),
     ]
     for done, (label, step) in enumerate(steps, start=1):
         t = time.perf_counter()

@@ -3,6 +3,12 @@
     generator voltage -> amplifier + shaker (gain, force limit) -> force P(t) at the
     impedance head -> carriage mass with Masing friction -> sensors -> DAQ inputs (V)
 
+The amplifier and shaker are an exact gain ``amp_gain_N_per_V`` (an ideal force source)
+unless the shaker model is on (``shaker_force_constant_N_per_A`` > 0, decision 0025): then
+a voltage amplifier drives an electrodynamic shaker (coil R, L, back-EMF Bl x_d';
+armature mass, suspension) coupled to the carriage, and the impedance head measures the
+force actually delivered, which drops out at the structure's resonance.
+
     m x'' = -F_Masing(x) - c x' - k x + P(t)
 
 With the optional effects of :mod:`sim.plant_effects` on (velocity-dependent friction, a
@@ -94,6 +100,13 @@ class RigModel:
     line_amplitude: float = 0.0             # SI unit of that channel (m, N, m/s^2)
     quadratic_damping_N_s2_per_m2: float = 0.0  # c2 x'|x'| (oil, air)
     friction_asymmetry: float = 0.0         # a: friction saturates at +F_s(1+a), -F_s(1-a); |a| < 0.5
+    # electrodynamic shaker (decision 0025); off (ideal force source) while Bl = 0
+    shaker_force_constant_N_per_A: float = 0.0   # Bl
+    shaker_resistance_ohm: float = 0.0           # R (coil + amplifier output), > 0 when on
+    shaker_inductance_H: float = 0.0             # L, electrical pole at R / (2 pi L)
+    shaker_armature_mass_kg: float = 0.0         # m_a, moves with the drive point
+    shaker_suspension_N_per_m: float = 0.0       # k_a, armature suspension to ground
+    shaker_damping_N_s_per_m: float = 0.0        # c_a
     steps_per_period: int = 400             # RK4 resolution of the drive period (minimum)
     seed: int = 0
 
@@ -163,6 +176,7 @@ class SimulatedRig:
         self.state = FrictionState()
         self.pitch_rad = 0.0            # pitch angle and rate (2-DOF plant only)
         self.pitch_rate_rad_s = 0.0
+        self.coil_force_N = 0.0         # Bl i (shaker model with an inductance only)
         self._coef = plant_effects.coefficients(self.model)
         self._resolution_key: float | None = None
         self._resolution = 1.0
@@ -202,7 +216,8 @@ class SimulatedRig:
         log.debug("plant noise reseeded for step %s", key)
 
     def drive_force(self) -> tuple[float, float]:
-        """(amplitude, static part) of the shaker force in N for the present settings."""
+        """(amplitude, static part) of the shaker force in N for the present settings (the
+        blocked force, before the shaker model, when that is on)."""
         m, g = self.model, self.gen
         if not g.output_on:
             return 0.0, 0.0
@@ -256,6 +271,8 @@ class SimulatedRig:
         f_nat = plant_effects.highest_linear_frequency_Hz(m, k0 * m.F_s_N / m.x_s_m + m.spring_N_per_m)
         f_res = max(self.gen.freq_Hz, f_nat)
         sub = max(1, math.ceil(m.steps_per_period * self._resolution_factor(P_amp) * f_res / fs))
+        if plant_effects.shaker_on(m) and m.shaker_inductance_H > 0:   # RK4 step <= L/R / 2
+            sub = max(sub, math.ceil(2.0 * m.shaker_resistance_ohm / (m.shaker_inductance_H * fs)))
         h = 1.0 / (fs * sub)
         if self._coef is None:
             rec = np.empty((n, 5))
@@ -266,14 +283,19 @@ class SimulatedRig:
                 h, n * sub, sub, rec)
             accel = rec[:, 3] * m.x_s_m
         else:
-            rec = np.empty((n, 6))
-            (st.u, st.v, self.pitch_rad, self.pitch_rate_rad_s, st.k, st.d, st.su, st.sF) = _plant_kernel.plant_run(
-                st.u, st.v, self.pitch_rad, self.pitch_rate_rad_s, 0.0, st.k, st.d, st.su, st.sF,
+            rec = np.empty((n, 7))
+            (st.u, st.v, self.pitch_rad, self.pitch_rate_rad_s, q, st.k, st.d, st.su, st.sF) = _plant_kernel.plant_run(
+                st.u, st.v, self.pitch_rad, self.pitch_rate_rad_s, self.coil_force_N / m.F_s_N, 0.0,
+                st.k, st.d, st.su, st.sF,
                 LAMBDA_MASING, self.curve.kind, self.curve.params, P_amp / m.F_s_N, omega, self._phase,
                 P_dc / m.F_s_N, self._coef, h, n * sub, sub, rec)
+            self.coil_force_N = q * m.F_s_N
             accel = rec[:, 3] * m.x_s_m + m.drive_height_m * rec[:, 4]
-        t_rel = np.arange(n) / fs
-        force = P_amp * np.sin(omega * t_rel + self._phase) + P_dc
+        if plant_effects.shaker_on(m):
+            force = rec[:, 6] * m.F_s_N
+        else:
+            t_rel = np.arange(n) / fs
+            force = P_amp * np.sin(omega * t_rel + self._phase) + P_dc
         disp = rec[:, 1] * m.x_s_m
         if m.disp_delay_s > 0:
             disp = self._delayed(disp, fs)

@@ -66,6 +66,11 @@ class StepMeasurement(TypedDict):
     settle_extra_blocks: int
 
 
+class ControlIteration(TypedDict):
+    drive_Vpp: float                    # generator amplitude of the iteration
+    force_N: float                      # force fundamental it gave
+
+
 class StepResult(StepMeasurement):
     """A step's result as stored: the measurement, where it sits in the plan, and how the
     force control went."""
@@ -79,6 +84,7 @@ class StepResult(StepMeasurement):
     control_iterations: int
     force_converged: bool
     force_error: float                  # force_N / target_force_N - 1
+    control_history: NotRequired[list[ControlIteration]]   # each force-control iteration (decision 0025)
     format_version: NotRequired[int]    # written by the run store; absent = 1
 
 

@@ -61,6 +61,7 @@ def _model_effects(model) -> list[str]:
              "friction_alpha": "speed-dependent friction", "pitch_inertia_kg_m2": "pitching mode",
              "cubic_spring_N_per_m3": "cubic spring", "quadratic_damping_N_s2_per_m2": "quadratic damping",
              "friction_asymmetry": "asymmetric friction",
+             "shaker_force_constant_N_per_A": "electrodynamic shaker (the force has harmonics)",
              "line_amplitude": f"interference line on the {model.line_channel or '?'} sensor at "
                                f"{model.line_freq_Hz:g} Hz"}
     return [f"{label} ({k} = {getattr(model, k):g})" for k, label in names.items() if getattr(model, k, 0)]

@@ -366,7 +366,10 @@ def test_every_plant_effect_the_engine_leaves_out_is_named_in_the_model_notes():
         "friction_alpha": dict(friction_v_ref_m_per_s=0.01),
         "pitch_inertia_kg_m2": dict(pitch_stiffness_N_m_per_rad=1e4, pitch_damping_N_m_s_per_rad=1.0,
                                     drive_height_m=0.05, cg_height_m=0.03),
-        "line_amplitude": dict(line_channel="disp", line_freq_Hz=50.0)}
+        "line_amplitude": dict(line_channel="disp", line_freq_Hz=50.0),
+        "shaker_force_constant_N_per_A": dict(shaker_resistance_ohm=1.5, shaker_inductance_H=2e-4,
+                                              shaker_armature_mass_kg=0.3, shaker_suspension_N_per_m=2e4,
+                                              shaker_damping_N_s_per_m=20.0)}
     sub_parameters = {k for c in companions.values() for k in c}
     effects = [f.name for f in fields(RigModel) if f.default == 0.0 and f.name not in sub_parameters
                and f.name != "seed"]

@@ -58,9 +58,14 @@ PLAN = textwrap.dedent("""\
 # and a force controlled from another starting amplitude.  Observed over this kill pattern:
 # force 0.03 %, |C| 0.08 %, phase 2e-4 rad at worst (before: 0.2 % and 9e-3 rad, from the
 # noise stream); the tolerances leave a factor of about 3-5 on that.
+# With the shaker model on in the default rig (decision 0025) the delivered force depends on
+# the plant's state: the armature's suspension holds the carriage's static offset, which a
+# fresh plant starts without.  The resumed run starts each step from the force per volt the
+# stored steps measured (SteppedSine.preload), as the uninterrupted run does; what is left
+# is up to 3.5e-3 rad in phase (force 0.03 %, |C| 0.05 %), hence 5e-3 rad.
 FORCE_TOL = 0.001
 COMPLIANCE_TOL = 0.0025
-PHASE_TOL_RAD = 0.001
+PHASE_TOL_RAD = 0.005
 
 
 def bench(*args: str, log: Path) -> subprocess.Popen:

@@ -47,3 +47,18 @@ def test_a_bad_model_value_names_the_key_and_what_is_allowed(tmp_path, line, fra
         load_rig(rig_with(tmp_path, line))
     for fragment in fragments:
         assert fragment in str(err.value)
+
+
+def test_the_shaker_keys_are_checked_and_old_rig_files_keep_an_ideal_force_source(tmp_path):
+    from sim import plant_effects
+    assert plant_effects.shaker_on(RigModel.from_dict(load_rig(DEFAULTS / "sim_rig.toml").model))
+    path = tmp_path / "my_rig.toml"
+    path.write_text(BASE.replace("shaker_resistance_ohm = 1.5", "shaker_resistance_ohm = 0.0"))
+    with pytest.raises(ConfigError, match=r"\[rig.model\] shaker_resistance_ohm must be > 0 when the shaker model is on"):
+        load_rig(path)
+    path.write_text(BASE.replace("shaker_inductance_H = 0.2e-3", "shaker_inductance_H = 2.0"))
+    with pytest.raises(ConfigError, match=r"\[rig.model\] shaker_inductance_H: must be >= 0 and <= 1.*unit: H"):
+        load_rig(path)
+    old = "\n".join(line for line in BASE.splitlines() if not line.startswith("shaker_"))
+    path.write_text(old)
+    assert not plant_effects.shaker_on(RigModel.from_dict(load_rig(path).model))

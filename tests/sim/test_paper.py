@@ -28,6 +28,7 @@ EXPECTED = {
     "fig12_frf_levels": ["n [-]", "gamma0 [-]", "beta [-]", "G [-]", "rk4_fallback [0/1]"],
     "fig13_resonance_vs_force": ["n [-]", "gamma0 [-]", "beta_h [-]", "G_h [-]",
                                  "peak_at_grid_edge [0/1]"],
+    "fig15_17_pitch_resonance": ["force [N]", "freq [Hz]", "compliance [m/N]"],
 }
 
 
@@ -85,7 +86,7 @@ def test_index_names_every_figure_and_its_seed_figure(run):
     for stem in EXPECTED:
         assert f"{stem}.png" in readme
     for seed_fig in ("Fig. 3", "Fig. 4", "Fig. 6", "Fig. 7", "Fig. 8", "Fig. 9", "Fig. 10", "Fig. 11",
-                     "Fig. 12", "Fig. 13"):
+                     "Fig. 12", "Fig. 13", "Figs. 15-17"):
         assert seed_fig in readme
     with (out / "summary.csv").open() as fh:
         rows = list(csv.DictReader(fh))
@@ -102,3 +103,35 @@ def test_progress_reports_each_figure_in_order(run):
     assert [c[0] for c in calls] == list(range(1, len(calls) + 1))
     assert all(total == len(calls) for _, total, _ in calls)
     assert len(calls) >= 10
+
+
+def _modes_Hz(k_feed, m, J, e, k_th):
+    """Undamped natural frequencies of the 2-DOF carriage (feed x, pitch th; mass matrix
+    [[m, m e], [m e, J]], stiffness diag(k_feed, k_th)): roots of
+    (m J - m^2 e^2) w^4 - (k_feed J + k_th m) w^2 + k_feed k_th = 0."""
+    a, b, c = m * J - (m * e) ** 2, -(k_feed * J + k_th * m), k_feed * k_th
+    disc = math.sqrt(b * b - 4 * a * c)
+    return [math.sqrt(max(w2, 0.0)) / (2 * math.pi) for w2 in ((-b - disc) / (2 * a), (-b + disc) / (2 * a))]
+
+
+def test_pitch_resonance_falls_with_force_between_the_linear_limits(run):
+    """Seed Figs. 15-17: both resonances fall as the force rises, the feed mode's vanishes at
+    large force.  Independent limits: at large force the friction saturates (the carriage
+    rolls), so the pitch mode is that of the linear 2-DOF carriage without friction stiffness;
+    at small force the friction's initial stiffness n/(n-1) F_s/x_s (Sakai's virgin curve,
+    n = 1.5) adds, and neither mode can exceed the linear modes with it."""
+    from sim.paper import PITCH_MODEL as P
+    out, _, _ = run
+    rows = np.loadtxt(out / "fig15_17_pitch_resonance_peaks.csv", delimiter=",", skiprows=1, ndmin=2)
+    force, feed, pitch = rows[np.argsort(rows[:, 0])].T
+    assert force[0] <= 0.1 and force[-1] >= 100.0
+    assert np.all(np.diff(pitch) < 0)                         # the seed's trend, pitching mode
+    assert feed[0] > feed[1] and math.isnan(feed[-1])         # feed mode falls, then is gone
+    geometry = dict(m=P["mass_kg"], J=P["pitch_inertia_kg_m2"], e=P["cg_height_m"], k_th=P["pitch_stiffness_N_m_per_rad"])
+    k0 = P["n"] / (P["n"] - 1) * P["F_s_N"] / P["x_s_m"]
+    _, pitch_free = _modes_Hz(0.0, **geometry)
+    feed_stuck, pitch_stuck = _modes_Hz(k0, **geometry)
+    assert pitch[-1] == pytest.approx(pitch_free, rel=0.015)                       # 100 N: saturated
+    assert pitch_free * 1.03 < pitch_stuck                                           # the limits differ
+    assert pitch[0] == pytest.approx(pitch_stuck, rel=0.01)                          # 0.1 N: added spring
+    assert 0.85 * feed_stuck < feed[0] <= feed_stuck * 1.005

@@ -296,5 +296,5 @@ def test_asymmetric_friction_saturates_at_the_two_levels_the_definition_gives():
     assert np.median(F[far & (v > 0)]) == pytest.approx(F_s * (1 + a), rel=0.03)
     assert np.median(F[far & (v < 0)]) == pytest.approx(-F_s * (1 - a), rel=0.03)
     sym = RigModel(**dict(model.__dict__, friction_asymmetry=0.0))
-    assert plant_effects.coefficients(sym) is None or plant_effects.coefficients(sym)[12] == 0.0
-    assert plant_effects.coefficients(model)[12] == a
+    assert plant_effects.coefficients(sym) is None or plant_effects.coefficients(sym)[plant_effects.ASYM] == 0.0
+    assert plant_effects.coefficients(model)[plant_effects.ASYM] == a
