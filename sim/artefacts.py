@@ -188,7 +188,7 @@ def find_clipping(ch: str, x: np.ndarray, fs: float) -> list[Artefact]:
     """Samples piled up at the record's largest or smallest value (a flat top): at least 5,
     in flat runs, and 5 times more than at the next value inwards (a quantised record
     that is not clipped has about as many there)."""
-    out = []
+    out: list[Artefact] = []
     span = float(x.max() - x.min())
     if not span > 0:
         return out
@@ -411,7 +411,7 @@ def _find_lines(q: np.ndarray, fs: float, f: float,
         decaying = _fit_sinusoid(q - found, fs, steady.freq_Hz, with_decay=True)
         is_transient = (decaying is not None and decaying.decay > DECAY_Z * decaying.decay_se
                         and math.exp(-decaying.decay * n / fs) < DECAY_FRACTION)
-        ln = decaying if is_transient else steady
+        ln = decaying if is_transient and decaying is not None else steady
         k = round(ln.freq_Hz / f)
         if k >= 1 and abs(ln.freq_Hz - k * f) <= guard:       # moved onto a drive harmonic: not separable
             break
@@ -435,14 +435,14 @@ def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
         noise = _robust_noise(r)
         aliases = _aliases(C, noise * math.sqrt(2.0 / n), f, fs)
         lines, transients = _find_lines(r, fs, f, aliases)
-        found = sum((ln.model for ln in lines + transients), zero)
-        trend, change, z = _trend(r - found, noise)
+        removed_part = sum((ln.model for ln in lines + transients), zero)
+        trend, change, z = _trend(r - removed_part, noise)
         if not z > TREND_Z:
             trend, change, z = zero, 0.0, 0.0
         elif lines or transients:     # what the trend's low-frequency leakage made look like a line goes
             lines, transients = _find_lines(r - trend, fs, f, aliases)
-            found = sum((ln.model for ln in lines + transients), zero)
-            trend, change, z = _trend(r - found, noise)
+            removed_part = sum((ln.model for ln in lines + transients), zero)
+            trend, change, z = _trend(r - removed_part, noise)
             if not z > TREND_Z:
                 trend, change, z = zero, 0.0, 0.0
         new = trend + sum((ln.model for ln in lines + transients), zero)
@@ -460,7 +460,7 @@ def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
     for ln in lines:
         arts.append(Artefact("line_interference", ch, ln.amp, "removed", freq_Hz=ln.freq_Hz,
                              evidence=f"{ln.amp / se:.0f} standard errors, {ln.freq_Hz / f:.3f} x the drive frequency"))
-    found = [(ln.amp, ln.decay, ln.freq_Hz, f"a decaying sinusoid fitted, decay rate {ln.decay:.3g} +- "
+    found: list[tuple] = [(ln.amp, ln.decay, ln.freq_Hz, f"a decaying sinusoid fitted, decay rate {ln.decay:.3g} +- "
               f"{ln.decay_se:.2g} /s", True) for ln in transients]
     if not found:
         # the periodic part of the second half (the most settled), extrapolated to the whole

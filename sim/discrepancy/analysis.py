@@ -70,7 +70,7 @@ def data_from_steps(steps, harmonics: int = 9) -> Data:
         j = min(X.size, h.force.size)
         Xf[i, :j], wDf[i, :j], Pf[i, :j] = h.disp[:j], wD[:j], h.force[:j]
         XAf[i, :j] = -h.accel[:j] / (k[:j] * 2 * math.pi * h.freq_Hz) ** 2
-    means = np.array([float(np.mean(s.disp_m)) if np.size(getattr(s, "disp_m", None)) > 1 else math.nan
+    means = np.array([float(np.mean(s.disp_m)) if np.size(getattr(s, "disp_m", ())) > 1 else math.nan
                       for s in steps])
     x0 = np.nan_to_num(means - np.nanmedian(means)) if np.isfinite(means).any() else np.zeros(len(steps))
     return Data(omega=np.array([2 * math.pi * h.freq_Hz for h in H]), x0=x0,
@@ -191,8 +191,8 @@ class Analysis:
             t = iv["similarity_ratio.d"]
             put("lambda", (2 + t[0], 2 + t[1], 2 + t[2]), "1")
         elif EFFECTS[effect].kind == "discovered":
-            e = EFFECTS[effect]
-            for name, unit in zip(e.names, e.units):
+            term = EFFECTS[effect]
+            for name, unit in zip(term.names, term.units):
                 put(name, iv[f"{effect}.{name}"], unit)
         if EFFECTS[effect].force is not None:
             peak = self.term_peak_N(effect, f)
@@ -203,7 +203,9 @@ class Analysis:
         """Largest force the term adds over any measured period (N), at its fitted size."""
         ctx = f.model.context(f.theta, self.data)
         sl = f.model.slices[effect]
-        G = EFFECTS[effect].force(ctx, f.theta[sl] * f.model.scales[effect])
+        force = EFFECTS[effect].force
+        assert force is not None, effect
+        G = force(ctx, f.theta[sl] * f.model.scales[effect])
         return float(np.abs(synthesize(G, 256)).max())
 
     def _predicted_frf(self, f: Fit) -> tuple[np.ndarray, np.ndarray]:

@@ -236,8 +236,9 @@ class Model:
         G, ctx = self._friction(theta, v, d)
         x = ctx.X
         for e in self.effects:
-            if EFFECTS[e].force is not None:
-                G = G + EFFECTS[e].force(ctx, theta[self.slices[e]] * self.scales[e])
+            force = EFFECTS[e].force
+            if force is not None:
+                G = G + force(ctx, theta[self.slices[e]] * self.scales[e])
         A_pred = -Om ** 2 * self._sensor(v, d.X, Om)
         if "second_mode" in self.effects:
             D, a, r, m = self._pitch(v, Om)

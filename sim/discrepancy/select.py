@@ -211,6 +211,7 @@ def screen(current: Fit, d: Data, W: Weights, terms: tuple[str, ...]) -> list[tu
     out = []
     for t in terms:
         e = EFFECTS[t]
+        assert e.force is not None, t
         dG = e.force(ctx, np.array([e.step])) / e.step
         wF, wK = W.whiten(-dG, np.zeros_like(dG), bias=False)
         b = np.concatenate([wF.real.ravel(), wF.imag.ravel(), wK.real.ravel(), wK.imag.ravel()])
@@ -226,6 +227,7 @@ def term_scale(current: Fit, d: Data, term: str) -> float:
     e = EFFECTS[term]
     if e.step != 1.0:
         return 1.0
+    assert e.force is not None, e.id
     dG = e.force(current.model.context(current.theta, d), np.ones(1))
     size = float(np.sqrt(np.mean(np.abs(dG[:, 0]) ** 2)))
     ref = float(np.sqrt(np.mean(np.abs(d.P[:, 0]) ** 2)))
