@@ -64,13 +64,14 @@ def cmd_study_map(args, progress) -> int:
 def cmd_study_mc(args, progress) -> int:
     _quiet_dask()
     from bench.config import DEFAULTS, parse_plan, parse_rig, read_toml
+    from sim.errors import ConfigurationError
 
     from .montecarlo import McSpec, identification_mc
     plan_path, rig_path = Path(args.plan or DEFAULTS / "demo_plan.toml"), Path(args.rig or DEFAULTS / "sim_rig.toml")
     plan, rig = read_toml(plan_path), read_toml(rig_path)
     parse_plan(plan, str(plan_path))          # errors name the file (McSpec checks again, unnamed)
     if not parse_rig(rig, str(rig_path)).simulated:
-        raise ValueError(f"{rig_path}: a Monte-Carlo study needs a simulated rig (simulated = true, [rig.model])")
+        raise ConfigurationError(f"{rig_path}: a Monte-Carlo study needs a simulated rig (simulated = true, [rig.model])")
     spec = McSpec(plan=plan, rig=rig, samples=args.samples, spread=args.spread, n_spread=args.n_spread,
                   noise_scale=args.noise_scale, seed=args.seed)
     out = identification_mc(spec, Path(args.out), scheduler=args.scheduler, workers=args.workers,

@@ -316,7 +316,7 @@ def test_a_log_grid_hits_its_end_points():
 # --------------------------------------------------------------------------- tighter plan limits
 
 def test_one_tighter_plan_limit_on_its_own_works_and_the_rest_are_the_rigs(tmp_path, capsys):
-    from bench.cli import _plan_toml
+    from bench.config import plan_toml as _plan_toml
     from procedures.safety import tightest
 
     text = edit(PLAN, "levels_N = [1.0, 3.0]", "levels_N = [1.0, 100.0]") + "\n[plan.limits]\nforce_N = 60\n"
