@@ -7,6 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim.artefacts import NOISY_RESIDUAL as UNSETTLED_RESIDUAL  # noqa: F401 - re-exported: flagged above (residual / fundamental)
+
 
 @dataclass
 class Series:
