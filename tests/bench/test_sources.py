@@ -169,7 +169,9 @@ def test_a_run_directory_gives_every_step_and_rejects_a_damaged_block(small_run,
         assert s.key == r["key"] and s.freq_Hz == r["freq_Hz"] and s.level_N == r["target_force_N"]
         assert s.direction == r["direction"]
         X1 = r["disp"]["amplitude"][0]
-        assert abs(s.harmonics.disp[0]) == pytest.approx(X1, rel=1e-12)   # the same fit of the same block
+        # the source fits the block again after the step-quality check (sim.artefacts: trend and
+        # line removal, its own noise estimate), not the stored fit: equal to its noise, not to 1e-12
+        assert abs(s.harmonics.disp[0]) == pytest.approx(X1, rel=5e-3)
     run = tmp_path / "run"
     shutil.copytree(small_run.path, run)
     victim = results[3]["key"]
