@@ -130,7 +130,7 @@ def run_case(seed: int) -> dict:
     others = [f"{a.kind}@{a.channel}" for a in q.artefacts
               if not (a.kind == want and a.channel == truth.get("channel"))
               and not (kind == "transient" and a.kind == "unsettled_transient")]
-    return dict(seed=seed, kind=kind, detected=hit, false_alarms=others, status=q.status, seconds=dt,
+    return dict(seed=seed, kind=kind, detected=bool(hit), false_alarms=others, status=q.status, seconds=dt,
                 periods=int(len(sig["force"]) * f / fs))
 
 

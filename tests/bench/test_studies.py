@@ -333,9 +333,6 @@ def test_a_scheduler_that_does_not_answer_is_a_clear_error(tmp_path):
             pass
 
 
-@pytest.mark.xfail(strict=True, reason="known since the merge of 2026-11-24: with the default rig's "
-                   "electrodynamic shaker (armature suspension mode near 7 Hz) the artefact check names the "
-                   "carriage's slowly decaying motion a line_interference; the check must learn that mode")
 @pytest.mark.timeout(600)
 def test_batch_analysis_with_analyze_source_on_the_cluster(cluster, sources, tmp_path):
     out = analyze_batch(sources, tmp_path / "batch", scheduler=cluster.address)
