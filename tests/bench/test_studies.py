@@ -22,7 +22,11 @@ from bench.studies.batch import IDENTIFY, analyze_batch
 from bench.studies.maps import map_row
 
 DASK = Path(sys.executable).with_name("dask")
-ENV = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
+ROOT = Path(__file__).resolve().parents[2]
+# the workers import the tree under test, not whatever checkout the venv's editable install
+# points at (a `dask worker` script's sys.path starts at the venv's bin/, not at its cwd)
+ENV = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
+           PYTHONPATH=os.pathsep.join([str(ROOT)] + [p for p in [os.environ.get("PYTHONPATH", "")] if p]))
 SMALL_MAP = MapSpec(n=(1.5,), gamma0=(0.3, 0.6), beta_min=0.6, beta_max=1.6, beta_points=14)
 
 
