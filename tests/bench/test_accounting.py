@@ -231,3 +231,27 @@ def test_resume_leaves_skipped_steps_alone_unless_asked(skip_run, tmp_path, caps
     assert len(acc.intact) == 4 and not acc.skipped and acc.complete
     res = next(r for r in RunStore.open(run).results() if r["key"] == UNREACHABLE)
     assert res["target_force_N"] == 25.0 and res["force_converged"]
+
+
+def test_a_step_the_quality_check_rejects_is_not_counted_as_used(small_run, tmp_path, capsys):
+    """A step whose files are intact but whose records the step-quality check rejects (here the
+    accelerometer clipped at 80 % of its peak, rewritten through the store so the files stay
+    consistent) is not used by the analysis: the report's count and overall line say so,
+    while `bench check`, which is about files, stays green."""
+    import numpy as np
+
+    from bench.reports import write_report
+    run = tmp_path / "run"
+    shutil.copytree(small_run.path, run, ignore=shutil.ignore_patterns("report", "export", "analysis"))
+    store = RunStore.open(run)
+    key = _keys(run)[2]
+    res = next(r for r in store.results() if r["key"] == key)
+    raw = store.raw(key)
+    raw["accel_m_s2"] = np.minimum(raw["accel_m_s2"], 0.8 * raw["accel_m_s2"].max())
+    store.write_step(key, res, raw)
+    head = write_report(run).read_text().split("## Instruments")[0]
+    assert "**19 used / 20 planned**" in head
+    assert f"{key} (rejected by the step-quality check: clipping on the accelerometer (accel)" in head
+    assert "Overall: **needs attention**: 1 step rejected by the step-quality check" in head
+    assert main(["check", str(run)]) == ExitCode.OK
+    assert "20 intact / 20 planned" in capsys.readouterr().out
