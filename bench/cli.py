@@ -106,7 +106,7 @@ def _run(args, resume: bool) -> int:
         meta, acc = store.metadata, store.account()
         retry = bool(getattr(args, "retry_skipped", False)) and bool(acc.skipped)
         if acc.complete and not retry and meta.get("status") == RunStatus.COMPLETED:
-            print(f"resume: nothing to do: the run completed and its steps are all there "
+            print("resume: nothing to do: the run completed and its steps are all there "
                   + ("or were skipped at run time as the plan allows (--retry-skipped measures them again) "
                      if acc.skipped else "") + f"({acc.summary()})")
             return ExitCode.OK
