@@ -111,7 +111,8 @@ def _run(args, resume: bool) -> int:
                      if acc.skipped else "") + f"({acc.summary()})")
             return ExitCode.OK
         print(f"resume: {acc.resume_text(retry)}" if acc.missing or acc.damaged or retry else
-              f"resume: every planned step is there; finishing the run (it ended '{meta.get('status', '?')}')",
+              f"resume: every planned step is there{' or was skipped at run time' if acc.skipped else ''}; "
+              f"finishing the run (it ended '{meta.get('status', '?')}')",
               flush=True)
         plan = parse_plan({"plan": plan_toml(meta["plan"])}, f"{args.run}/run.json")
         rig = parse_rig({"rig": rig_toml(meta["rig"])}, f"{args.run}/run.json")

@@ -24,7 +24,11 @@ Nyquist, :mod:`sim.records`):
   noise floor by a factor that gives a false alarm probability of 1e-4 per record and
   channel; its frequency, amplitude and phase are fitted by least squares (with a decay
   rate, to tell a line from a transient), and a steady line is **removed** from the record:
-  the step stays usable (flagged).  Up to ``MAX_LINES`` per channel.
+  the step stays usable (flagged).  Up to ``MAX_LINES`` per channel.  A "line" the probe
+  and the accelerometer see as one motion (both components above ``MOTION_Z`` standard
+  errors, the accelerometer's -(2 pi f)^2 times the probe's in amplitude and phase) is a
+  free vibration too slow to decay within the record, named an unsettled transient; so is
+  a line on another channel at its frequency (decision record 0033).
 - **unsettled transient**: a spectral peak whose fitted decay rate is positive by more
   than 6 standard errors and which loses more than 20 % of its amplitude over the record
   is a transient with its own frequency: it is **removed** like a line.  A transient the
