@@ -104,12 +104,15 @@ def _run(args, resume: bool) -> int:
         from .config import parse_plan, parse_rig, plan_toml, rig_toml
         store = RunStore.open(Path(args.run))
         meta, acc = store.metadata, store.account()
-        if acc.complete and meta.get("status") == RunStatus.COMPLETED:
-            print(f"resume: nothing to do: the run completed and its steps are all there "
-                  f"({acc.summary()})")
+        retry = bool(getattr(args, "retry_skipped", False)) and bool(acc.skipped)
+        if acc.complete and not retry and meta.get("status") == RunStatus.COMPLETED:
+            print("resume: nothing to do: the run completed and its steps are all there "
+                  + ("or were skipped at run time as the plan allows (--retry-skipped measures them again) "
+                     if acc.skipped else "") + f"({acc.summary()})")
             return ExitCode.OK
-        print(f"resume: {acc.resume_text()}" if acc.missing or acc.damaged else
-              f"resume: every planned step is there; finishing the run (it ended '{meta.get('status', '?')}')",
+        print(f"resume: {acc.resume_text(retry)}" if acc.missing or acc.damaged or retry else
+              f"resume: every planned step is there{' or was skipped at run time' if acc.skipped else ''}; "
+              f"finishing the run (it ended '{meta.get('status', '?')}')",
               flush=True)
         plan = parse_plan({"plan": plan_toml(meta["plan"])}, f"{args.run}/run.json")
         rig = parse_rig({"rig": rig_toml(meta["rig"])}, f"{args.run}/run.json")
@@ -121,7 +124,8 @@ def _run(args, resume: bool) -> int:
         _warm_up()
     watch = _start_watch(out, args)
     try:
-        store = run_plan(plan, rig, out, resume=resume, progress=Progress("stepped sine"), sim_seed=seed)
+        store = run_plan(plan, rig, out, resume=resume, progress=Progress("stepped sine"), sim_seed=seed,
+                         retry_skipped=bool(getattr(args, "retry_skipped", False)))
     finally:
         if watch:
             watch.close()
@@ -308,7 +312,9 @@ def cmd_analyze(args) -> int:
 
 def cmd_check(args) -> int:
     """Verify a run directory against its plan: every missing, damaged and orphan step on
-    one line, then the count; exit 1 if there is any problem."""
+    one line, then the count; exit 1 if there is any problem.  A step skipped at run time
+    (force unreachable) as the plan allows (``infeasible = "skip"``) is listed and counted,
+    not a problem (exit 0 when it is the only gap) unless ``--strict`` (decision 0033)."""
     from .storage import RunDirError, RunStore
 
     store = RunStore(Path(args.run))
@@ -319,6 +325,9 @@ def cmd_check(args) -> int:
     except RunDirError:                       # run.json damaged: the files alone, no plan to count against
         acc = None
     problems = store.check() if acc is None else acc.missing + acc.damaged + acc.orphan
+    skipped = [] if acc is None else acc.skipped
+    for p in skipped:
+        print(f"{p.kind:>9}  {p.key}: {p.reason}")
     for p in problems:
         print(f"{p.kind:>9}  {p}")
     if acc is None:
@@ -328,7 +337,12 @@ def cmd_check(args) -> int:
     print(f"{store.path}: {acc.summary()}"
           + (f" (bench resume {store.path} measures missing and damaged steps again, keeping damaged "
              "files in damaged/)" if acc.missing or acc.damaged else ""))
-    return ExitCode.FAILURE if problems else ExitCode.OK
+    if skipped:
+        n = len(skipped)
+        print(f"{n} step{'s' * (n != 1)} skipped at run time as the plan allows (infeasible = \"skip\"): "
+              + ("counted as problems (--strict)" if args.strict else
+                 "not a problem (--strict counts them); bench resume --retry-skipped measures them again"))
+    return ExitCode.FAILURE if problems or (skipped and args.strict) else ExitCode.OK
 
 
 def cmd_warmup(args) -> int:
@@ -476,6 +490,9 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("resume", help="continue an interrupted run without repeating completed steps")
     s.add_argument("run", help="run directory of an interrupted, aborted or failed run")
     s.add_argument("--no-report", action="store_true", help="do not write the report at the end")
+    s.add_argument("--retry-skipped", action="store_true",
+                   help="also measure again the steps skipped at run time because their force was unreachable "
+                        "(e.g. after raising drive_V in run.json's rig); by default they stay skipped")
     _add_watch_options(s)
     s.set_defaults(func=cmd_resume)
 
@@ -533,6 +550,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("check", help="verify a run directory: list missing, truncated, damaged and unknown steps")
     s.add_argument("run", help="run directory")
+    s.add_argument("--strict", action="store_true",
+                   help="also fail (exit 1) on steps skipped at run time (force unreachable), which the plan's "
+                        "infeasible = \"skip\" otherwise allows")
     s.set_defaults(func=cmd_check)
 
     _add_twin_parsers(sub)

@@ -194,11 +194,13 @@ def open_instruments(rig: Rig, stack: ExitStack, *, sim_seed: int | None = None,
 
 
 def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=None,
-             sim_seed: int | None = None, identify: bool = True) -> RunStore:
+             sim_seed: int | None = None, identify: bool = True, retry_skipped: bool = False) -> RunStore:
     """Run (or resume) ``plan`` on ``rig`` into the run directory ``out``.
 
     The plan is checked against the rig's limits before anything is opened; the run's
-    status and the output-off confirmation are recorded whatever happens."""
+    status and the output-off confirmation are recorded whatever happens.  A resume does
+    not measure again the steps skipped at run time (force unreachable, ``infeasible =
+    "skip"``) unless ``retry_skipped`` (after raising a limit, say)."""
     plan = check_envelope(plan, rig)
     warnings = identifiability(plan, rig)
     for w in warnings:
@@ -206,7 +208,8 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
     store = _open_store(plan, rig, out, resume=resume, sim_seed=sim_seed, warnings=warnings)
     log_handler = _log_to(store.path / "bench.log")
     try:
-        _supervised(plan, rig, store, progress=progress, sim_seed=sim_seed, identify=identify)
+        _supervised(plan, rig, store, progress=progress, sim_seed=sim_seed, identify=identify,
+                    retry_skipped=retry_skipped)
     finally:
         if log_handler:
             logging.getLogger().removeHandler(log_handler)
@@ -231,7 +234,7 @@ def _open_store(plan: Plan, rig: Rig, out: Path, *, resume: bool, sim_seed: int 
 
 
 def _supervised(plan: Plan, rig: Rig, store: RunStore, *, progress, sim_seed: int | None,
-                identify: bool) -> None:
+                identify: bool, retry_skipped: bool = False) -> None:
     """The safety path: open the instruments, measure, and on every way out ramp down,
     switch the output off (confirmed), close everything and record how the run ended."""
     status = RunStatus.FAILED
@@ -243,7 +246,8 @@ def _supervised(plan: Plan, rig: Rig, store: RunStore, *, progress, sim_seed: in
                                    on_output_off=lambda ok: store.event("output_off", confirmed=ok))
             store.update(identities=ins.identities)
             sup = Supervisor(tightest(rig.limits, plan.limits), ins.generator)
-            _measure(plan, rig, store, ins, sup, latch, progress=progress, identify=identify)
+            _measure(plan, rig, store, ins, sup, latch, progress=progress, identify=identify,
+                     retry_skipped=retry_skipped)
             status = RunStatus.COMPLETED
         except LimitExceeded as e:
             status = RunStatus.ABORTED
@@ -273,9 +277,10 @@ def _supervised(plan: Plan, rig: Rig, store: RunStore, *, progress, sim_seed: in
 
 
 def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Supervisor, latch: SignalLatch,
-             *, progress, identify: bool) -> None:
+             *, progress, identify: bool, retry_skipped: bool = False) -> None:
     """The stepped-sine test on supervised instruments, each step stored (and fed to the
     online identification) as it completes."""
+    skipped = set() if retry_skipped or plan.infeasible != "skip" else set(store.skipped_at_run_time())
     gen = SupervisedGenerator(ins.generator, sup)
     daq = stop_request.StopOnRequest(SupervisedDaq(ins.daq, sup), store.path, also=latch.check)
 
@@ -319,7 +324,7 @@ def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Super
         from procedures.online_id import choose_frequencies
         choose = lambda sweep: choose_frequencies(           # noqa: E731
             sweep, online.current() if online else None, plan.adaptive_per_sweep)
-    proc.run(store.done_keys(), record, show, choose=choose)
+    proc.run(store.done_keys() | skipped, record, show, choose=choose)
     if online:
         store.update(identification=online.final())
 

@@ -43,7 +43,7 @@ import stat
 import tempfile
 import threading
 import zipfile
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -203,7 +203,7 @@ class StepProblem:
         return f"{self.path}: {self.reason}"
 
 
-PROBLEM_KINDS = ("missing", "truncated", "corrupt", "checksum", "unknown")
+PROBLEM_KINDS = ("missing", "truncated", "corrupt", "checksum", "unknown", "skipped")
 
 
 # what a run writes inside its directory: none of them may be a symbolic link
@@ -413,6 +413,17 @@ class RunStore:
             problems.append(StepProblem("", p, "unknown", "not a step file"))
         return problems
 
+    def skipped_at_run_time(self) -> dict[str, str]:
+        """Steps the run skipped because their force was unreachable (``step_skipped``
+        events, written only when the plan says ``infeasible = "skip"``): key -> reason, the
+        latest reason when a step was retried and skipped again.  A step retried later and
+        measured has files and is counted as such by :meth:`account`."""
+        out: dict[str, str] = {}
+        for e in self.events():
+            if e.get("event") == "step_skipped" and isinstance(e.get("key"), str):
+                out[e["key"]] = str(e.get("reason") or "no reason recorded")
+        return out
+
     def account(self) -> Accounting:
         """The run's steps counted against its stored plan: intact, missing (no files, or
         only one of the pair), damaged and orphan files, each named (see :class:`Accounting`)."""
@@ -428,7 +439,10 @@ class RunStore:
             return Accounting(None, intact, [], [p for p in bad.values()], orphan)
         sweeps = _sweeps(plan)
         k = plan.adaptive_per_sweep
-        intact, missing, damaged, n_planned = [], [], [], 0
+        # a run-time skip counts only where the plan allows it (the procedure writes the event
+        # only then; a plan edited to "refuse" afterwards makes those steps missing again)
+        allowed = self.skipped_at_run_time() if plan.infeasible == "skip" else {}
+        intact, missing, damaged, skipped, n_planned = [], [], [], [], 0
         for (li, direction), keys in sweeps.items():
             n_sweep = min(len(keys), k) if k else len(keys)
             n_planned += n_sweep
@@ -436,7 +450,10 @@ class RunStore:
             for key in keys:
                 jp, zp = self.steps_dir / f"{key}.json", self.steps_dir / f"{key}.npz"
                 if key not in have_json and key not in have_npz:
-                    if not k:
+                    if key in allowed:
+                        present += 1
+                        skipped.append(StepProblem(key, jp, "skipped", f"skipped at run time: {allowed[key]}"))
+                    elif not k:
                         missing.append(StepProblem(key, jp, "missing", "missing: neither .json nor .npz"))
                     continue
                 present += 1
@@ -456,7 +473,7 @@ class RunStore:
                                            count=n_sweep - present))
         order = {key: i for i, key in enumerate(s.key for s in plan.schedule())}
         missing.sort(key=lambda p: order.get(p.key, -1))
-        return Accounting(n_planned, intact, missing, damaged, orphan)
+        return Accounting(n_planned, intact, missing, damaged, orphan, skipped)
 
     def set_aside_damaged(self) -> list[StepProblem]:
         """Move the files of every damaged step to ``<run>/damaged/<time>/`` (so that resume
@@ -574,38 +591,51 @@ class Accounting:
     two files); in an adaptive plan, the steps a sweep still lacks of the number it
     measures (their keys are chosen online, so the sweep is named).  ``damaged``: planned
     steps whose files are both there but fail a check.  ``orphan``: files no planned step
-    owns.  ``planned`` is None when run.json holds no plan this version can rebuild."""
+    owns.  ``skipped``: planned steps without files that the run skipped because their
+    force was unreachable within the drive limit, as the plan allows (``infeasible =
+    "skip"``; a ``step_skipped`` event names the reason): accounted for, neither missing
+    nor damaged (decision record 0033).  ``planned`` is None when run.json holds no plan
+    this version can rebuild."""
 
     planned: int | None
     intact: list[str]
     missing: list[StepProblem]
     damaged: list[StepProblem]
     orphan: list[StepProblem]
+    skipped: list[StepProblem] = field(default_factory=list)
 
     @property
     def complete(self) -> bool:
-        """Every planned step is there and intact."""
+        """Every planned step is there and intact, or was skipped at run time as the plan
+        allows (nothing a resume would measure unless asked to retry the skipped ones)."""
         return self.planned is not None and not self.missing and not self.damaged
 
     @property
     def missing_count(self) -> int:
         return sum(p.count for p in self.missing)
 
-    def resume_text(self) -> str:
-        """'measures again 3 of 30 planned steps; missing: K1, K2; damaged: K3 (truncated)'."""
-        n = self.missing_count + len(self.damaged)
+    def resume_text(self, retry_skipped: bool = False) -> str:
+        """'measures again 3 of 30 planned steps; missing: K1, K2; damaged: K3 (truncated);
+        skipped at run time, not retried (--retry-skipped retries them): K4'."""
+        n = self.missing_count + len(self.damaged) + (len(self.skipped) if retry_skipped else 0)
         parts = [f"measures again {n} of {'?' if self.planned is None else self.planned} planned "
                  f"step{'s' * (self.planned != 1)}"]
         if self.missing:
             parts.append("missing: " + _keys_text([_missing_label(p) for p in self.missing], 12))
         if self.damaged:
             parts.append("damaged: " + _keys_text([f"{p.key} ({p.kind})" for p in self.damaged], 12))
+        if self.skipped:
+            parts.append(("skipped at run time, retried: " if retry_skipped else
+                          "skipped at run time, not retried (--retry-skipped retries them): ")
+                         + _keys_text([p.key for p in self.skipped], 12))
         return "; ".join(parts)
 
     def summary(self) -> str:
-        """'28 intact / 30 planned; missing: K1; damaged: K2 (truncated); orphan: none'."""
+        """'28 intact / 30 planned; skipped at run time: K4; missing: K1; damaged: K2
+        (truncated); orphan: none' (the skipped part only when there is one)."""
         missing = [_missing_label(p) for p in self.missing]
-        return (f"{len(self.intact)} intact / {'?' if self.planned is None else self.planned} planned; "
+        skipped = f"skipped at run time: {_keys_text([p.key for p in self.skipped])}; " if self.skipped else ""
+        return (f"{len(self.intact)} intact / {'?' if self.planned is None else self.planned} planned; {skipped}"
                 f"missing: {_keys_text(missing) or 'none'}; "
                 f"damaged: {_keys_text([f'{p.key} ({p.kind})' for p in self.damaged]) or 'none'}; "
                 f"orphan: {_keys_text([p.path.name for p in self.orphan]) or 'none'}")

@@ -48,10 +48,10 @@ EXPECT = {"line": "line_interference", "transient": "unsettled_transient", "clip
           "dropout": "dropout", "drift": "offset_drift"}
 
 
-def make_step(seed: int):
-    """(records, fs, f, kind, truth) of one generated case."""
+def make_step(seed: int, kind: str | None = None):
+    """(records, fs, f, kind, truth) of one generated case (``kind`` by the seed unless given)."""
     rng = np.random.default_rng(seed)
-    kind = KINDS[seed % len(KINDS)]
+    kind = kind or KINDS[seed % len(KINDS)]
     f = float(np.exp(rng.uniform(np.log(15), np.log(300))))
     fs = f * int(rng.integers(64, 400)) if rng.uniform() < 0.5 else float(rng.uniform(8000, 30000))
     periods = int(rng.integers(8, 31))
@@ -89,6 +89,20 @@ def make_step(seed: int):
         sig["disp"] = sig["disp"] + tr
         sig["accel"] = sig["accel"] - (2 * np.pi * ft) ** 2 * tr
         truth = dict(channel="disp", decay_per_s=sigma)
+    elif kind == "mode":
+        # a free vibration too slow to decay measurably: time constant 1-10 records, the
+        # probe 5-50 x its noise, the accelerometer its exact second derivative
+        sigma = 1 / (T * rng.uniform(1, 10))
+        res = fs / n
+        while True:
+            ft = f * rng.uniform(0.2, 3.0)
+            if abs(ft - round(ft / f) * f) > 2.5 * res and ft > 4 * res and ft < 0.4 * fs:
+                break
+        w, amp, ph = 2 * np.pi * ft, NOISE["disp"] * rng.uniform(5, 50), rng.uniform(0, 2 * np.pi)
+        e = amp * np.exp(-sigma * t)
+        sig["disp"] = sig["disp"] + e * np.sin(w * t + ph)
+        sig["accel"] = sig["accel"] + e * ((sigma ** 2 - w ** 2) * np.sin(w * t + ph) - 2 * sigma * w * np.cos(w * t + ph))
+        truth = dict(channel="disp", freq_Hz=ft, size=amp)
     elif kind == "clipping":
         ch = str(rng.choice(CHANNELS))
         top = rng.uniform(0.8, 0.95) * sig[ch].max()
@@ -130,7 +144,7 @@ def run_case(seed: int) -> dict:
     others = [f"{a.kind}@{a.channel}" for a in q.artefacts
               if not (a.kind == want and a.channel == truth.get("channel"))
               and not (kind == "transient" and a.kind == "unsettled_transient")]
-    return dict(seed=seed, kind=kind, detected=hit, false_alarms=others, status=q.status, seconds=dt,
+    return dict(seed=seed, kind=kind, detected=bool(hit), false_alarms=others, status=q.status, seconds=dt,
                 periods=int(len(sig["force"]) * f / fs))
 
 
@@ -139,7 +153,11 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", type=int, default=60)
     ap.add_argument("--first", type=int, default=0)
     ap.add_argument("--json", type=Path)
+    ap.add_argument("--modes", type=int, default=0,
+                    help="instead: this many slowly decaying modes (decision 0033), named a line or a vibration")
     args = ap.parse_args(argv)
+    if args.modes:
+        return modes(args.first, args.modes)
     rows = [run_case(s) for s in range(args.first, args.first + args.cases)]
     print(f"{'kind':<10} {'cases':>5} {'detected':>9} {'with false alarms':>18}")
     for kind in KINDS:
@@ -157,6 +175,27 @@ def main(argv=None) -> int:
     print(f"time per step: median {np.median(sec):.3f} s, max {max(sec):.3f} s")
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+def modes(first: int, count: int) -> int:
+    """Slowly decaying modes on probe and accelerometer (x'' = a): how many are named an
+    interference line (the defect of decision 0033), how many a free vibration or transient."""
+    line = vib = silent = 0
+    worst = []
+    for seed in range(first, first + count):
+        sig, fs, f, _, truth = make_step(seed, "mode")
+        q = assess_step(sig["force"], sig["accel"], sig["disp"], fs, f).quality
+        near = [a for a in q.artefacts if abs(a.freq_Hz - truth["freq_Hz"]) < 3 * fs / len(sig["disp"])]
+        if any(a.kind == "line_interference" for a in near):
+            line += 1
+            worst.append(seed)
+        elif near:
+            vib += 1
+        else:
+            silent += 1
+    print(f"slow modes: {count} cases; named a vibration or transient: {vib}; an interference line: {line}; "
+          f"not reported: {silent}" + (f"; line seeds: {worst[:10]}" if worst else ""))
     return 0
 
 

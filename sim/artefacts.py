@@ -24,7 +24,11 @@ Nyquist, :mod:`sim.records`):
   noise floor by a factor that gives a false alarm probability of 1e-4 per record and
   channel; its frequency, amplitude and phase are fitted by least squares (with a decay
   rate, to tell a line from a transient), and a steady line is **removed** from the record:
-  the step stays usable (flagged).  Up to ``MAX_LINES`` per channel.
+  the step stays usable (flagged).  Up to ``MAX_LINES`` per channel.  A "line" the probe
+  and the accelerometer see as one motion (both components above ``MOTION_Z`` standard
+  errors, the accelerometer's -(2 pi f)^2 times the probe's in amplitude and phase) is a
+  free vibration too slow to decay within the record, named an unsettled transient; so is
+  a line on another channel at its frequency (decision record 0033).
 - **unsettled transient**: a spectral peak whose fitted decay rate is positive by more
   than 6 standard errors and which loses more than 20 % of its amplitude over the record
   is a transient with its own frequency: it is **removed** like a line.  A transient the
@@ -553,6 +557,45 @@ def settle_cycles(A0: float, sigma: float, noise: float, n: int, fs: float, f: f
     return int(math.ceil(f * math.log(A0 / tol) / sigma))
 
 
+MOTION_Z = 4.0                # a free vibration: each motion channel's component above its noise, standard errors
+MOTION_TOL = 0.3              # ... and the accelerometer's within 30 % (+ 3 standard errors) of -(2 pi f)^2 x
+
+
+def _motion_evidence(sig: dict, cleaned: dict, noise: dict, fs: float, f: float, fl: float) -> str:
+    """Evidence that a component at ``fl`` Hz is motion of the structure, seen by the probe
+    and the accelerometer as one: both show it above MOTION_Z standard errors and the
+    accelerometer's complex amplitude is -(2 pi fl)^2 times the probe's within MOTION_TOL
+    (and 3 combined standard errors).  A line on one sensor (mains on a cable), or on both
+    in phase (crosstalk), fails.  '' when the records do not show that."""
+    n = sig["disp"].size
+    t = np.arange(n) / fs
+    w = 2 * np.pi * fl
+    M = np.column_stack([np.sin(w * t), np.cos(w * t), np.ones(n), t - t.mean()])
+    amp, se = {}, {}
+    for ch in ("disp", "accel"):
+        r = sig[ch] - _periodic_part(cleaned[ch], fs, f)     # the removed components + noise
+        c, *_ = np.linalg.lstsq(M, r, rcond=None)
+        amp[ch], se[ch] = complex(c[0], c[1]), noise[ch] * math.sqrt(2.0 / n)
+        if not abs(amp[ch]) > MOTION_Z * se[ch]:
+            return ""
+    pred = -w * w * amp["disp"]
+    tol = MOTION_TOL * abs(pred) + 3 * math.hypot(se["accel"], w * w * se["disp"])
+    if not abs(amp["accel"] - pred) <= tol:
+        return ""
+    ratio = amp["accel"] / pred
+    line = max(("disp", "accel"), key=lambda ch: abs(amp[ch]) / se[ch])
+    decay = _fit_sinusoid(sig[line] - _periodic_part(cleaned[line], fs, f), fs, fl, with_decay=True)
+    rate = ""
+    if decay is not None and decay.decay_se > 0:
+        rate = (f"; decay rate {decay.decay:.2g} +- {decay.decay_se:.2g} /s"
+                + (", not significant" if not decay.decay > DECAY_Z * decay.decay_se else "")
+                + f" in a {1e3 * n / fs:.3g} ms record")
+    return (f"a free vibration of the carriage, not interference: the accelerometer's {si(abs(amp['accel']), 'm/s^2')} "
+            f"at {fl:.4g} Hz is -(2 pi f)^2 times the probe's {si(abs(amp['disp']), 'm')} (ratio {abs(ratio):.2f}, "
+            f"phase {math.degrees(math.atan2(ratio.imag, ratio.real)):+.0f} deg; "
+            f"{abs(amp['accel']) / se['accel']:.0f} and {abs(amp['disp']) / se['disp']:.0f} standard errors){rate}")
+
+
 def assess_step(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None = None) -> Assessment:
     """Artefacts, cleaning and the usable/flagged/rejected decision for one step (module doc).
     Records that cannot be analysed at all (lengths, NaN, too short) raise ValueError."""
@@ -583,28 +626,29 @@ def assess_step(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None
                 need = max(need, cyc)
             tr_arts.append(Artefact("unsettled_transient", ch, A0, "removed" if removed else "kept",
                                     freq_Hz=ftr, decay_per_s=sigma, settle_cycles=cyc, evidence=ev))
-    # a "line" at the frequency of a transient on another channel is that transient (a free
-    # vibration of the carriage shows on several sensors; it decays below significance on some)
+    # a "line" the probe and the accelerometer both see as one motion (a = x'', the accelerometer's
+    # component at the line's frequency equals -(2 pi f)^2 times the probe's, in amplitude and
+    # phase) is a free vibration of the structure too slow to decay measurably within the
+    # record, not interference; a line at the frequency of a transient or of such a vibration
+    # on another channel is that vibration (the force sensor sees the shaker's reaction to it)
     guard = HARMONIC_GUARD * fs_Hz / n
     for i, a in enumerate(q.artefacts):
-        tr = [t for t in tr_arts if a.kind == "line_interference" and abs(t.freq_Hz - a.freq_Hz) <= guard]
+        if a.kind == "line_interference" and a.channel in ("disp", "accel") and not any(
+                t.channel != a.channel and abs(t.freq_Hz - a.freq_Hz) <= guard for t in tr_arts):
+            ev = _motion_evidence(sig, cleaned, noise, fs_Hz, f, a.freq_Hz)
+            if ev:
+                q.artefacts[i] = replace(a, kind="unsettled_transient", settle_cycles=0, evidence=ev)
+    for i, a in enumerate(q.artefacts):
+        if a.kind != "line_interference":
+            continue
+        tr = [t for t in tr_arts + [b for b in q.artefacts if b.kind == "unsettled_transient"]
+              if t.channel != a.channel and abs(t.freq_Hz - a.freq_Hz) <= guard]
         if tr:
-            cyc = settle_cycles(a.size, tr[0].decay_per_s, noise[a.channel], n, fs_Hz, f)
-            q.artefacts[i] = replace(a, kind="unsettled_transient", decay_per_s=tr[0].decay_per_s, settle_cycles=cyc,
-                                     evidence=f"at the frequency of the transient on the {LABEL[tr[0].channel]}")
-    # a "line" seen by the probe and the accelerometer alike (a = -(2 pi f)^2 x) is motion of
-    # the carriage, a free vibration too slow to decay measurably within the record, not interference
-    motion = set()
-    for i, x in enumerate(q.artefacts):
-        for j, acc in enumerate(q.artefacts):
-            if (x.kind == acc.kind == "line_interference" and x.channel == "disp" and acc.channel == "accel"
-                    and abs(x.freq_Hz - acc.freq_Hz) <= guard
-                    and 0.7 < acc.size / ((2 * math.pi * x.freq_Hz) ** 2 * x.size) < 1.4):
-                motion |= {i, j}
-    for i in motion:
-        q.artefacts[i] = replace(q.artefacts[i], kind="unsettled_transient", settle_cycles=0, evidence=(
-            "seen by the probe and the accelerometer alike, a = -(2 pi f)^2 x: a free vibration of the "
-            "carriage, not interference"))
+            decay = tr[0].decay_per_s
+            cyc = settle_cycles(a.size, decay, noise[a.channel], n, fs_Hz, f) if decay > 0 else 0
+            what = "transient" if decay > 0 else "free vibration"
+            q.artefacts[i] = replace(a, kind="unsettled_transient", decay_per_s=decay, settle_cycles=cyc,
+                                     evidence=f"at the frequency of the {what} on the {LABEL[tr[0].channel]}")
     if need > 0 and periods - need >= max(MIN_PERIODS, periods // 4):
         start = int(math.ceil(need * fs_Hz / f - 1e-9))
         for ch in CHANNELS:           # clean the kept part again: the fit is no longer biased by the transient

@@ -227,15 +227,22 @@ def _header_md(run: RunData) -> list[str]:
 
 def accounting_md(run: RunData) -> list[str]:
     """The report's first lines: steps used against the plan, what was skipped and why,
-    and one overall line (went well / needs attention, and why)."""
+    and one overall line (went well / needs attention, and why).  Used = intact and not
+    rejected by the step-quality check (the one check ``bench analyze`` applies); steps
+    skipped at run time as the plan allows are named, and are no reason for attention."""
     acc = run.accounting
     if acc is None or acc.planned is None:
         return [f"**{len(run.results)} used / ? planned**: run.json holds no plan this version can read, so the "
                 "steps cannot be counted against it.", "", "Overall: **needs attention**: no readable plan.", ""]
-    skipped = [f"{p.key} ({p.reason})" for p in acc.missing] + [f"{p.key} (damaged: {p.reason})" for p in acc.damaged]
+    intact = set(acc.intact)
+    rejected = {k: why for k, status, why in run.attention if status == "rejected" and k in intact}
+    used = [k for k in acc.intact if k not in rejected]
+    skipped = ([f"{p.key} ({p.reason})" for p in acc.skipped]
+               + [f"{k} (rejected by the step-quality check: {why})" for k, why in rejected.items()]
+               + [f"{p.key} ({p.reason})" for p in acc.missing] + [f"{p.key} (damaged: {p.reason})" for p in acc.damaged])
     extra = len(run.results) - len(acc.intact)
     more = f"; and {len(skipped) - 12} more (`bench check` lists them all)" if len(skipped) > 12 else ""
-    md = [f"**{len(acc.intact)} used / {acc.planned} planned**; skipped: {'; '.join(skipped[:12]) or 'none'}{more}"
+    md = [f"**{len(used)} used / {acc.planned} planned**; skipped: {'; '.join(skipped[:12]) or 'none'}{more}"
           + (f"; also used: {extra} step{'s' * (extra != 1)} the plan does not know" if extra > 0 else ""), ""]
     why = []
     status = run.meta.get("status", "?")
@@ -248,6 +255,11 @@ def accounting_md(run: RunData) -> list[str]:
         why.append(f"{acc.missing_count} step{'s' * (acc.missing_count != 1)} missing")
     if acc.damaged:
         why.append(f"{len(acc.damaged)} step{'s' * (len(acc.damaged) != 1)} damaged")
+    if rejected:
+        why.append(f"{len(rejected)} step{'s' * (len(rejected) != 1)} rejected by the step-quality check "
+                   "(see Steps needing attention)")
+    if run.attention_error:
+        why.append(f"the step quality could not be computed ({run.attention_error})")
     trips = [e for e in run.events if e.get("event") == "abort"]
     if trips:
         why.append("limit trip: " + "; ".join(str(e.get("reason", "?")) for e in trips))
@@ -263,8 +275,11 @@ def accounting_md(run: RunData) -> list[str]:
     if why:
         md += [f"Overall: **needs attention**: {'; '.join(why)}.", ""]
     else:
-        md += ["Overall: **went well**: every planned step measured and intact, the force within tolerance at "
-               "every step, no limit trip, error or interruption.", ""]
+        n = len(acc.skipped)
+        but = (f" but {n} skipped at run time as the plan allows (infeasible = \"skip\": force unreachable "
+               "within the drive limit)" if n else "")
+        md += [f"Overall: **went well**: every planned step measured, intact and usable{but}, the force within "
+               "tolerance at every step, no limit trip, error or interruption.", ""]
     return md
 
 

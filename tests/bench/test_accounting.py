@@ -130,3 +130,128 @@ def test_an_adaptive_plan_is_counted_per_sweep(small_run, tmp_path, capsys):
                 (run / "steps" / f"{key}{ext}").unlink()
     assert main(["check", str(run)]) == ExitCode.FAILURE
     assert "11 intact / 12 planned; missing: L00-up (1); damaged: none" in capsys.readouterr().out
+
+
+SKIP_PLAN = """
+[plan]
+name = "run-time skip"
+levels_N = [5.0, 25.0]
+infeasible = "skip"
+[plan.frequencies]
+list_Hz = [300.0, 1000.0]
+direction = "up"
+[plan.limits]
+drive_V = 1.6
+"""
+UNREACHABLE = "00003-L01-F001-up"
+
+
+@pytest.fixture(scope="module")
+def skip_run(tmp_path_factory):
+    """A real run on the simulated rig with a step skipped at run time: 25 N at 1000 Hz.  The
+    rig file's estimate (20 N/V) says 1.25 V, 1.56 V with the 1.25 margin, within the plan's
+    drive limit of 1.6 V, so the dry run lets it through; the shaker really gives about 15 N/V
+    at 1 kHz (the coil's pole, decision 0025), 24 N at the limit."""
+    from bench.config import DEFAULTS, load_plan, load_rig
+    from bench.session import run_plan
+    tmp = tmp_path_factory.mktemp("skip_run")
+    (tmp / "plan.toml").write_text(SKIP_PLAN)
+    store = run_plan(load_plan(tmp / "plan.toml"), load_rig(DEFAULTS / "sim_rig.toml"), tmp / "run")
+    assert store.metadata["status"] == "completed" and store.metadata["steps_done"] == 3
+    return store.path
+
+
+def _copy(run, tmp_path):
+    shutil.copytree(run, tmp_path / "run", ignore=shutil.ignore_patterns("report"))
+    return tmp_path / "run"
+
+
+def test_a_step_skipped_at_run_time_is_counted_and_named_not_missing(skip_run, capsys):
+    events = [e for e in RunStore.open(skip_run).events() if e["event"] == "step_skipped"]
+    assert [e["key"] for e in events] == [UNREACHABLE]                # the run really skipped it, no files
+    assert not (skip_run / "steps" / f"{UNREACHABLE}.json").exists()
+    acc = RunStore.open(skip_run).account()
+    assert acc.planned == 4 and len(acc.intact) == 3 and not acc.missing and not acc.damaged
+    ((sk,),) = [acc.skipped]
+    assert sk.key == UNREACHABLE and sk.reason.startswith("skipped at run time: force 25 N unreachable at 1000 Hz")
+    assert main(["check", str(skip_run)]) == ExitCode.OK               # the plan allowed it: CI passes
+    out = capsys.readouterr().out
+    assert f"skipped  {UNREACHABLE}: skipped at run time: force 25 N unreachable" in out
+    assert "3 intact / 4 planned; skipped at run time: 00003-L01-F001-up; missing: none" in out
+    assert main(["check", "--strict", str(skip_run)]) == ExitCode.FAILURE
+    capsys.readouterr()
+
+
+def test_a_run_time_skip_the_plan_does_not_allow_is_missing(skip_run, tmp_path):
+    """The same events under a plan that says "refuse" (run.json edited): the step is missing."""
+    import json
+    run = _copy(skip_run, tmp_path)
+    meta = json.loads((run / "run.json").read_text())
+    meta["plan"]["infeasible"] = "refuse"
+    (run / "run.json").write_text(json.dumps(meta))
+    acc = RunStore.open(run).account()
+    assert [p.key for p in acc.missing] == [UNREACHABLE] and not acc.skipped
+    assert main(["check", str(run)]) == ExitCode.FAILURE
+
+
+def test_the_report_names_the_skipped_step_and_the_run_went_well(skip_run, tmp_path):
+    from bench.reports import write_report
+    run = _copy(skip_run, tmp_path)
+    head = write_report(run).read_text().split("## Instruments")[0]
+    assert "**3 used / 4 planned**; skipped: 00003-L01-F001-up (skipped at run time: force 25 N unreachable" in head
+    assert "Overall: **went well**" in head and "1 skipped at run time as the plan allows" in head
+    assert "missing" not in head
+
+
+def test_resume_leaves_skipped_steps_alone_unless_asked(skip_run, tmp_path, capsys, mocker):
+    run = _copy(skip_run, tmp_path)
+    opened = mocker.patch("bench.session.open_instruments", side_effect=AssertionError("instruments opened"))
+    assert main(["resume", str(run), "--no-report"]) == ExitCode.OK              # nothing to do
+    assert "nothing to do" in capsys.readouterr().out and not opened.called
+    mocker.stopall()
+    # a step lost since: resume measures it, and only it
+    lost = "00001-L00-F001-up"
+    for ext in (".json", ".npz"):
+        (run / "steps" / f"{lost}{ext}").unlink()
+    assert main(["resume", str(run), "--no-report"]) == ExitCode.OK
+    out = capsys.readouterr().out
+    assert f"measures again 1 of 4 planned steps; missing: {lost}; skipped at run time, not retried" in out
+    skips = [e for e in RunStore.open(run).events() if e["event"] == "step_skipped"]
+    assert len(skips) == 1                                          # not tried again
+    assert (run / "steps" / f"{lost}.json").exists()
+    # the limit raised (run.json's plan), then retried on request: measured, and no longer skipped
+    import json
+    meta = json.loads((run / "run.json").read_text())
+    meta["plan"]["limits"]["drive_V"] = 3.0
+    (run / "run.json").write_text(json.dumps(meta))
+    assert main(["resume", str(run), "--no-report", "--retry-skipped"]) == ExitCode.OK
+    assert "measures again 1 of 4 planned steps; skipped at run time, retried: 00003-L01-F001-up" in \
+        capsys.readouterr().out
+    acc = RunStore.open(run).account()
+    assert len(acc.intact) == 4 and not acc.skipped and acc.complete
+    res = next(r for r in RunStore.open(run).results() if r["key"] == UNREACHABLE)
+    assert res["target_force_N"] == 25.0 and res["force_converged"]
+
+
+def test_a_step_the_quality_check_rejects_is_not_counted_as_used(small_run, tmp_path, capsys):
+    """A step whose files are intact but whose records the step-quality check rejects (here the
+    accelerometer clipped at 80 % of its peak, rewritten through the store so the files stay
+    consistent) is not used by the analysis: the report's count and overall line say so,
+    while `bench check`, which is about files, stays green."""
+    import numpy as np
+
+    from bench.reports import write_report
+    run = tmp_path / "run"
+    shutil.copytree(small_run.path, run, ignore=shutil.ignore_patterns("report", "export", "analysis"))
+    store = RunStore.open(run)
+    key = _keys(run)[2]
+    res = next(r for r in store.results() if r["key"] == key)
+    raw = store.raw(key)
+    raw["accel_m_s2"] = np.minimum(raw["accel_m_s2"], 0.8 * raw["accel_m_s2"].max())
+    store.write_step(key, res, raw)
+    head = write_report(run).read_text().split("## Instruments")[0]
+    assert "**19 used / 20 planned**" in head
+    assert f"{key} (rejected by the step-quality check: clipping on the accelerometer (accel)" in head
+    assert "Overall: **needs attention**: 1 step rejected by the step-quality check" in head
+    assert main(["check", str(run)]) == ExitCode.OK
+    assert "20 intact / 20 planned" in capsys.readouterr().out
