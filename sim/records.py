@@ -162,8 +162,13 @@ def _lsq_harmonics(x: np.ndarray, fs: float, f: float, K: int):
     return b_sin + 1j * a_cos[1:], float(a_cos[0]), rms
 
 
-def _analyse_channel(x: np.ndarray, fs: float, f: float, periods: int, spp: int | None,
-                     max_harmonics: int) -> ChannelHarmonics:
+def analyse_channel(x: np.ndarray, fs: float, f: float, periods: int, spp: int | None,
+                    max_harmonics: int) -> ChannelHarmonics:
+    """Harmonics 1..``max_harmonics`` of drive frequency ``f`` in one channel's record ``x``
+    (``periods`` whole periods; ``spp`` samples per period when the sample rate is a multiple
+    of the drive, else None): the period-averaged waveform's harmonics, the offset, the per-sample
+    noise (scatter about the mean period, or the least-squares residual) and one harmonic's
+    standard error."""
     if spp is not None:
         blocks = x[:periods * spp].reshape(periods, spp)
         mean = blocks.mean(axis=0)
@@ -215,14 +220,14 @@ def analyse_records(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | 
     ratio = fs_Hz / f
     periods = int(math.floor(n / ratio + 1e-9))
     spp = int(round(ratio)) if abs(ratio - round(ratio)) * periods < 0.02 else None
-    chans = {k: _analyse_channel(v, fs_Hz, f, periods, spp, max_harmonics) for k, v in sig.items()}
+    chans = {k: analyse_channel(v, fs_Hz, f, periods, spp, max_harmonics) for k, v in sig.items()}
     # periodicity: the two halves of the window against each other
     half = periods // 2
     drift, detail = 0.0, ""
     for k, v in sig.items():
         n_half = int(round(half * ratio))
-        a = _analyse_channel(v[:n_half], fs_Hz, f, half, spp, DRIFT_HARMONICS) if half >= 1 else None
-        b = _analyse_channel(v[n_half:2 * n_half], fs_Hz, f, half, spp, DRIFT_HARMONICS) if half >= 1 else None
+        a = analyse_channel(v[:n_half], fs_Hz, f, half, spp, DRIFT_HARMONICS) if half >= 1 else None
+        b = analyse_channel(v[n_half:2 * n_half], fs_Hz, f, half, spp, DRIFT_HARMONICS) if half >= 1 else None
         if a is None or b is None:
             continue
         # the noise of the whole record sets the scale (a half alone can hold too few periods)
