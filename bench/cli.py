@@ -122,6 +122,7 @@ def _run(args, resume: bool) -> int:
         out, seed = Path(args.out), args.seed
     if rig.simulated:
         _warm_up()
+    before = _event_count(out)
     watch = _start_watch(out, args)
     try:
         store = run_plan(plan, rig, out, resume=resume, progress=Progress("stepped sine"), sim_seed=seed,
@@ -130,7 +131,7 @@ def _run(args, resume: bool) -> int:
         if watch:
             watch.close()
         end_line()                 # an interrupted run's progress line ends where it stood
-        _say_output_state(out)
+        _say_output_state(out, before)
     meta = store.metadata
     print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/")
     if meta["status"] == RunStatus.COMPLETED and not getattr(args, "no_report", False):
@@ -148,19 +149,30 @@ def _warm_up() -> None:
         log.info("kernels compiled in %.0f s", warm_up())
 
 
-def _say_output_state(out: Path) -> None:
-    """On every ending (done, Ctrl-C, limit, error) say how this session left the output:
-    the last ``output_off`` event after its ``start``/``resume``."""
+def _event_count(out: Path) -> int:
+    """Number of events a run directory holds now (0 when there is none yet)."""
     from .storage import RunStore
     try:
-        events = RunStore.open(out).events()
-    except Exception:  # noqa: BLE001 - no run directory yet: nothing was switched on
-        return
-    starts = [i for i, e in enumerate(events) if e.get("event") in ("start", "resume")]
-    offs = [e for e in events[starts[-1] if starts else 0:] if e.get("event") == "output_off"]
+        return len(RunStore.open(out).events())
+    except Exception:  # noqa: BLE001 - no run directory yet
+        return 0
+
+
+def _say_output_state(out: Path, since: int = 0) -> None:
+    """On every ending (done, Ctrl-C, limit, error) say how this session left the output:
+    the last ``output_off`` event among those written after the first ``since`` (the events
+    of earlier sessions of a resumed run say nothing about this one).  No such event: this
+    session never opened the generator far enough to switch the output on."""
+    from .storage import RunStore
+    try:
+        events = RunStore.open(out).events()[since:]
+    except Exception:  # noqa: BLE001 - no run directory: nothing was opened
+        events = []
+    offs = [e for e in events if e.get("event") == "output_off"]
     if not offs:
-        return
-    if offs[-1].get("confirmed"):
+        print("output not switched on by this session (stopped before the generator was set up)",
+              file=sys.stderr, flush=True)
+    elif offs[-1].get("confirmed"):
         print("output off, confirmed by the generator", file=sys.stderr, flush=True)
     else:
         print("WARNING: output off NOT confirmed by the generator: switch the amplifier off by hand "

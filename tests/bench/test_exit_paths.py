@@ -427,3 +427,23 @@ def _rig_dict(rig) -> dict:
 def _calibration(rig) -> dict:
     return {"force_V_per_N": rig.force_V_per_N, "accel_V_per_m_s2": rig.accel_V_per_m_s2,
             "disp_V_per_m": rig.disp_V_per_m, "amp_gain_N_per_V": rig.amp_gain_N_per_V}
+
+
+# --------------------------------------------------------------------------- what the terminal says
+
+def test_a_resumed_session_stopped_before_the_generator_does_not_claim_an_earlier_sessions_output_off(
+        small_run, tmp_path, mocker, capsys):
+    # the run directory holds the first session's "output_off confirmed"; the resumed session is
+    # interrupted before it opens the generator: the terminal must not repeat the old confirmation
+    import shutil
+
+    from bench.cli import main
+    run = tmp_path / "run"
+    shutil.copytree(small_run.path, run)
+    assert any(e.get("event") == "output_off" and e.get("confirmed") for e in RunStore.open(run).events())
+    next(iter(sorted((run / "steps").glob("*.json")))).unlink()        # one step to measure again
+    mocker.patch("bench.session.open_instruments", side_effect=KeyboardInterrupt)
+    assert main(["resume", str(run), "--no-report"]) == 130
+    err = capsys.readouterr().err
+    assert "output not switched on by this session" in err
+    assert "confirmed by the generator" not in err
