@@ -95,7 +95,7 @@ CAUSE_KEYS = {
     # forms beyond the catalog (discovered terms and artefacts)
     "cubic_stiffness": lambda p, ctx: {"cubic_spring_N_per_m3": _value(p, "k3")},
     "quadratic_damping": lambda p, ctx: {"quadratic_damping_N_s2_per_m2": _value(p, "c2")},
-    "asymmetric_friction": lambda p, ctx: {"friction_asymmetry": _value(p, "asymmetry")},
+    "asymmetric_friction": lambda p, ctx: {"friction_asymmetry": _value(p, "a")},     # the analysis' name
     "line_interference": lambda p, ctx: {"line_channel": str(p["channel"]["value"]),
                                          "line_freq_Hz": _value(p, "frequency"),
                                          "line_amplitude": _value(p, "amplitude")},
@@ -230,6 +230,8 @@ def shaker_model(freqs_Hz, ratio_N_per_V, Zs) -> ShakerFit:
         t = float(stats.t.ppf(0.975, max(dof, 1)))
         half = t * np.sqrt(np.maximum(np.diag(cov), 0.0))  # of ln(theta): about the relative half-width
         rel = np.where(np.isfinite(half), half, np.inf)
+        u, lo_u, hi_u = np.log(th[free]), np.log(scale[free] * 1e-6), np.log(np.array(SHAKER_UPPER)[free])
+        rel[(u - lo_u < 1e-6) | (hi_u - u < 1e-6)] = np.inf     # pinned at a bound: its interval means nothing
         if dof >= 2 and rel.max() <= 1.0:
             break
         # fix an undetermined one, in the order of SHAKER_FIX_ORDER (the damping's share first)
@@ -255,7 +257,9 @@ def shaker_model(freqs_Hz, ratio_N_per_V, Zs) -> ShakerFit:
     for i, name in enumerate(SHAKER_PARAMS):
         if free[i]:
             params[name] = dict(value=float(th[i]), low=float(th[i] * math.exp(-hw[i])),
-                                high=float(th[i] * math.exp(hw[i])), fitted=True)
+                                high=float(min(th[i] * math.exp(hw[i]), SHAKER_UPPER[i])), fitted=True)
+            if fixed_why:        # an interval given the fixed ones: it does not hold their uncertainty
+                params[name]["given"] = [SHAKER_PARAMS[j] for j in sorted(fixed_why)]
         else:
             params[name] = dict(value=float(th[i]), low=float(th[i]), high=float(th[i]), fitted=False,
                                 reason=fixed_why[i])

@@ -230,7 +230,7 @@ def test_forms_beyond_the_catalog_have_their_keys_or_are_listed():
     ctx = dict(mass_kg=10.0, drive_height_m=None)
     expected = {"cubic_stiffness": ({"k3": p(1e13)}, {"cubic_spring_N_per_m3"}),
                 "quadratic_damping": ({"c2": p(3.0)}, {"quadratic_damping_N_s2_per_m2"}),
-                "asymmetric_friction": ({"asymmetry": p(0.1)}, {"friction_asymmetry"}),
+                "asymmetric_friction": ({"a": p(0.1)}, {"friction_asymmetry"}),
                 "line_interference": ({"channel": dict(value="disp"), "frequency": p(50.0), "amplitude": p(1e-8)},
                                       {"line_channel", "line_freq_Hz", "line_amplitude"})}
     base = dict(F_s_N=10.0, x_s_m=10e-6, n=1.5, mass_kg=10.0)
