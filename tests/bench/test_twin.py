@@ -69,8 +69,8 @@ def test_the_twin_of_a_run_reproduces_its_compliance_and_a_plain_masing_twin_doe
         assert f"# source sha256: {pitch['digest']}" in text and str(pitch["src"]) in text
     assert source_sha256(pitch["src"]) == pitch["digest"]          # the source was not modified
     # the rig's causes are named and put in the plant; its calibration and limits are kept
-    # (artefacts the analysis names are applied too: the carriage's decaying motion on the shaker's
-    # suspension is named an interference line now and then, sim/artefacts.py's known false alarm)
+    # (artefacts the analysis names are applied too; they are the measurement's, not the rig's
+    # causes: before decision 0033 the carriage's free vibration was named an interference line)
     assert set(t["applied"]) - set(ARTEFACTS) == {"second_mode", "velocity_dependent_friction"}, t
     assert rig.limits == load_rig(DEFAULTS / "sim_rig_pitch.toml").limits
     assert rig.model["friction_alpha"] / rig.model["friction_v_ref_m_per_s"] == pytest.approx(0.5 / 5e-3, rel=0.05)
