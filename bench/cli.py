@@ -391,6 +391,8 @@ def cmd_twin(args) -> int:
     for cid, keys in twin.applied.items():
         print(f"cause {cid} -> " + ", ".join(f"{k} = {x:.4g}" if isinstance(x, float) else f"{k} = {x}"
                                              for k, x in keys.items()))
+    if twin.shaker.get("note"):
+        print(twin.shaker["note"])
     for item in twin.not_in_plant:
         print(f"not in the plant: {item['cause']}: {item['reason']}")
     print(f"wrote {paths['rig']}, {paths['plan']} and {paths['twin']}")

@@ -58,7 +58,6 @@ PITCH_DRIVE_HEIGHT_M = 0.1     # h of a foreign rig's pitching mode (only h^2/J,
 FOREIGN_MIN_AMP_GAIN = 20.0    # N/V, the simulated rig's amplifier, raised if the largest level needs more than 5 V
 FOREIGN_SIGNAL_V = 5.0         # a foreign file's largest reading is put at this voltage (the DAQ clips at 10 V)
 FREQ_MERGE = 1e-3              # a file's step frequencies within 0.1 % are one plan frequency
-RATIO_SPREAD = 0.05            # drive-to-force ratio varying more than this over frequency: a shaker response
 
 
 def _value(params: dict, name: str, scale: float = 1.0) -> float:
@@ -96,30 +95,195 @@ CAUSE_KEYS = {
     # forms beyond the catalog (discovered terms and artefacts)
     "cubic_stiffness": lambda p, ctx: {"cubic_spring_N_per_m3": _value(p, "k3")},
     "quadratic_damping": lambda p, ctx: {"quadratic_damping_N_s2_per_m2": _value(p, "c2")},
-    "asymmetric_friction": lambda p, ctx: {"friction_asymmetry": _value(p, "asymmetry")},
+    "asymmetric_friction": lambda p, ctx: {"friction_asymmetry": _value(p, "a")},     # the analysis' name
     "line_interference": lambda p, ctx: {"line_channel": str(p["channel"]["value"]),
                                          "line_freq_Hz": _value(p, "frequency"),
                                          "line_amplitude": _value(p, "amplitude")},
 }
 
 
-def shaker_model(freqs_Hz: np.ndarray, ratio_N_per_V: np.ndarray) -> tuple[dict, str]:
-    """Hook: [rig.model] keys of a frequency-dependent shaker fitted to the source's
-    measured force per drive volt, and a note.  This plant's amplifier has one gain
-    (``amp_gain_N_per_V``, set to the median ratio by the caller), so no keys yet; the
-    note lists a spread the plant cannot reproduce.  Decision record 0025 (the shaker
-    model: Bl, R, L, armature mass, suspension, damping) gives the linear force per volt
-    P/V = amp_gain R/(R + j w L) Z_s/(Z_s + Z_a + Bl^2/(R + j w L)) to fit here; the
-    ratios are kept in twin.json (``drive_ratio``) for that."""
-    if ratio_N_per_V.size == 0:
-        return {}, ""
-    lo, hi = float(ratio_N_per_V.min()), float(ratio_N_per_V.max())
-    med = float(np.median(ratio_N_per_V))
-    if hi - lo <= RATIO_SPREAD * med:
-        return {}, ""
-    return {}, (f"drive-voltage-to-force ratio varies from {lo:.4g} to {hi:.4g} N/V over "
-                f"{freqs_Hz.min():g}-{freqs_Hz.max():g} Hz; this plant's amplifier has one gain "
-                f"(amp_gain_N_per_V = median {med:.4g} N/V); hook: bench.twin.shaker_model")
+# ---------------------------------------------------------------------------- the shaker
+# The plant (sim/_plant_kernel.py) and every measured quantity depend on the shaker's six
+# keys and the amplifier gain only through A = amp_gain_N_per_V (blocked force per volt at
+# DC), tau = L/R, c_e = Bl^2/R (back-EMF damping), m_a, k_a, c_a: the coil's state is
+# q = Bl i / F_s with tau q' = A V/F_s - q - c_e x_d'/F_s.  R is therefore fixed at the
+# documented default and Bl = sqrt(c_e R), L = tau R.  The damping is fitted as its total
+# c_t = c_a + c_e and the back-EMF's share s = c_e / c_t: the two differ only through the
+# coil's pole (c_e / (1 + j w tau)), so well below it only c_t acts, and fixing the share
+# then leaves c_t, and the force per volt, unbiased.  Decision record 0032.
+SHAKER_PARAMS = ("amp_gain_N_per_V", "L_over_R_s", "damping_total_N_s_per_m", "shaker_armature_mass_kg",
+                 "shaker_suspension_N_per_m", "back_emf_share")
+SHAKER_UPPER = (1e4, 1.0, 2e5, 100.0, 1e8, 1.0)
+SHAKER_MIN_STEPS = 8           # fewer steps with a drive ratio: the ideal amplifier at the median ratio
+SHAKER_P_VALUE = 0.01          # the shaker model must beat one constant gain at this level (F-test)
+SHAKER_FIX_ORDER = (5, 4, 3, 1, 2, 0)    # s, k_a, m_a, tau, c_t, A: which undetermined one to fix first
+SHAKER_STARTS = 12             # least-squares starts: the defaults, then each free parameter x 0.1-10 at random
+
+
+def shaker_defaults() -> dict:
+    """The documented defaults (bench/defaults/sim_rig.toml): R, and the value of a shaker
+    parameter the steps cannot determine."""
+    import tomllib
+    m = tomllib.loads((DEFAULTS / "sim_rig.toml").read_text())["rig"]["model"]
+    R = float(m["shaker_resistance_ohm"])
+    ce, ca = float(m["shaker_force_constant_N_per_A"]) ** 2 / R, float(m["shaker_damping_N_s_per_m"])
+    return dict(R=R, values=(float(m["amp_gain_N_per_V"]), float(m["shaker_inductance_H"]) / R, ce + ca,
+                             float(m["shaker_armature_mass_kg"]), float(m["shaker_suspension_N_per_m"]), ce / (ce + ca)))
+
+
+def shaker_ratio(theta, freqs_Hz, Zs) -> np.ndarray:
+    """|P/V| of decision 0025's formula with theta = (A, tau, c_t, m_a, k_a, s):
+    c_e = s c_t, c_a = (1 - s) c_t."""
+    A, tau, ct, ma, ka, share = theta
+    ce, ca = share * ct, (1 - share) * ct
+    w = 2 * np.pi * np.asarray(freqs_Hz, float)
+    pole = 1 + 1j * w * tau
+    return A / np.abs(pole) * np.abs(Zs) / np.abs(Zs + 1j * w * ma + ca + ka / (1j * w) + ce / pole)
+
+
+@dataclass
+class ShakerFit:
+    keys: dict                    # [rig.model] keys to write ({} for the ideal amplifier)
+    parameters: dict              # SHAKER_PARAMS name -> {value, low, high, fitted}
+    steps: int
+    rms_residual: float           # rms of ln(model/measured) over the steps
+    ideal_rms_residual: float     # the same for one constant gain (the median ratio)
+    p_value: float                # of the F-test shaker model vs one constant gain
+    not_fitted: list[dict] = field(default_factory=list)    # {cause, reason}
+    note: str = ""
+
+    def as_dict(self) -> dict:
+        return dict(model="shaker" if self.keys else "ideal amplifier", parameters=self.parameters,
+                    steps=self.steps, rms_residual=self.rms_residual, ideal_rms_residual=self.ideal_rms_residual,
+                    p_value=self.p_value, keys=self.keys, note=self.note)
+
+
+def _fit_free(freqs, ratio, Zs, free, theta0, scale):
+    """Least squares of ln(model/measured) over the free parameters, in ln(parameter)
+    (positive, spanning decades), from several starts (the problem is not convex: a start
+    without damping can settle where the back-EMF is 0).  Returns (theta, result)."""
+    from scipy.optimize import least_squares
+    idx = np.flatnonzero(free)
+    lo = np.log(scale[idx] * 1e-6)
+    hi = np.log(np.array(SHAKER_UPPER)[idx])
+
+    def resid(u):
+        th = theta0.copy()
+        th[idx] = np.exp(u)
+        return np.log(shaker_ratio(th, freqs, Zs) / ratio)
+
+    rng = np.random.default_rng(0)                  # deterministic starts
+    starts = [np.log(theta0[idx])] + [np.log(theta0[idx]) + rng.uniform(-2.3, 2.3, idx.size) * (idx != 0)
+                                      for _ in range(SHAKER_STARTS - 1)]
+    best = None
+    for u0 in starts:
+        r = least_squares(resid, np.clip(u0, lo + 1e-9, hi - 1e-9), bounds=(lo, hi), xtol=1e-12, ftol=1e-12,
+                          gtol=1e-12)
+        if best is None or r.cost < best.cost:
+            best = r
+    th = theta0.copy()
+    th[idx] = np.exp(best.x)
+    return th, best
+
+
+def shaker_model(freqs_Hz, ratio_N_per_V, Zs) -> ShakerFit:
+    """Fit the electrodynamic shaker of decision 0025 to a run's measured force per drive
+    volt (|P1|/|V| per step: the generator's phase is not recorded) given each step's
+    measured drive-point impedance ``Zs`` = j w P1 / A1 (N s/m, complex).
+
+    Identifiable: A, tau = L/R, c_e = Bl^2/R, m_a, k_a, c_a (module comment), fitted in
+    ln(parameter) with 95 % intervals from the Jacobian and the residuals' scatter (Student
+    t); a parameter whose interval spans more than a factor e either way (the steps do not
+    determine it) is fixed at its default and the rest fitted again (the damping's share s
+    first, then k_a, m_a, tau: SHAKER_FIX_ORDER).  The shaker model
+    is kept only when it beats one constant gain (F-test at SHAKER_P_VALUE); otherwise, and
+    with fewer than SHAKER_MIN_STEPS steps, the ideal amplifier at the median ratio."""
+    from scipy import stats
+    freqs = np.asarray(freqs_Hz, float)
+    ratio = np.asarray(ratio_N_per_V, float)
+    Zs = np.asarray(Zs, complex)
+    n = ratio.size
+    med = float(np.median(ratio)) if n else math.nan
+    ideal_rms = float(np.sqrt(np.mean(np.log(ratio / np.exp(np.mean(np.log(ratio)))) ** 2))) if n else math.nan
+    ideal = ShakerFit(keys={}, parameters={}, steps=n, rms_residual=ideal_rms, ideal_rms_residual=ideal_rms,
+                      p_value=1.0)
+    if n < SHAKER_MIN_STEPS:
+        ideal.note = (f"{n} steps with a drive ratio (fewer than {SHAKER_MIN_STEPS}): no shaker fitted, "
+                      f"the ideal amplifier at the median {med:.4g} N/V") if n else ""
+        return ideal
+    d = shaker_defaults()
+    scale = np.array(d["values"])
+    theta0 = scale.copy()
+    theta0[0] = med
+    free = np.ones(6, bool)
+    fixed_why: dict[int, str] = {}
+    while True:
+        th, res = _fit_free(freqs, ratio, Zs, free, theta0, scale)
+        k = int(free.sum())
+        dof = n - k
+        rss = float(res.fun @ res.fun)
+        J = res.jac                                         # d resid / d ln(theta)
+        s2 = rss / max(dof, 1)
+        _, sv, Vt = np.linalg.svd(J, full_matrices=False)   # a direction J cannot see has a huge variance
+        sv = np.maximum(sv, 1e-12 * max(float(sv.max()), 1e-300))
+        cov = s2 * (Vt.T / sv ** 2) @ Vt
+        t = float(stats.t.ppf(0.975, max(dof, 1)))
+        half = t * np.sqrt(np.maximum(np.diag(cov), 0.0))  # of ln(theta): about the relative half-width
+        rel = np.where(np.isfinite(half), half, np.inf)
+        u, lo_u, hi_u = np.log(th[free]), np.log(scale[free] * 1e-6), np.log(np.array(SHAKER_UPPER)[free])
+        rel[(u - lo_u < 1e-6) | (hi_u - u < 1e-6)] = np.inf     # pinned at a bound: its interval means nothing
+        if dof >= 2 and rel.max() <= 1.0:
+            break
+        # fix an undetermined one, in the order of SHAKER_FIX_ORDER (the damping's share first)
+        idx = list(np.flatnonzero(free))
+        undetermined = [j for j in idx if rel[idx.index(j)] > 1.0] if dof >= 2 else idx
+        i = next(j for j in SHAKER_FIX_ORDER if j in undetermined)
+        worst = idx.index(i)
+        if i == 0:                                          # A itself undetermined: nothing to fit
+            ideal.note = "the drive ratios do not determine the blocked force per volt: the ideal amplifier"
+            return ideal
+        fixed_why[i] = (f"the steps do not determine it (fitted {th[i]:.3g}, 95 % interval a factor "
+                        f"{math.exp(min(half[worst], 700.0)):.3g} either way)"
+                        if dof >= 2 else f"too few steps ({n}) for {k} parameters")
+        free[i] = False
+        theta0[i] = scale[i]
+    rms = math.sqrt(rss / n)
+    # F-test: the shaker's k parameters against one constant gain
+    rss0 = ideal_rms ** 2 * n
+    F = ((rss0 - rss) / (k - 1)) / (rss / dof) if k > 1 and rss > 0 else (math.inf if rss0 > rss else 0.0)
+    p = float(stats.f.sf(F, k - 1, dof)) if k > 1 and math.isfinite(F) else (0.0 if F == math.inf else 1.0)
+    params = {}
+    hw = dict(zip(np.flatnonzero(free), half))
+    for i, name in enumerate(SHAKER_PARAMS):
+        if free[i]:
+            params[name] = dict(value=float(th[i]), low=float(th[i] * math.exp(-hw[i])),
+                                high=float(min(th[i] * math.exp(hw[i]), SHAKER_UPPER[i])), fitted=True)
+            if fixed_why:        # an interval given the fixed ones: it does not hold their uncertainty
+                params[name]["given"] = [SHAKER_PARAMS[j] for j in sorted(fixed_why)]
+        else:
+            params[name] = dict(value=float(th[i]), low=float(th[i]), high=float(th[i]), fitted=False,
+                                reason=fixed_why[i])
+    if p > SHAKER_P_VALUE:
+        ideal.parameters, ideal.p_value = params, p
+        ideal.note = (f"one constant gain explains the drive ratios (rms {100 * ideal_rms:.3g} %; the shaker model "
+                      f"{100 * rms:.3g} %, F-test p = {p:.2g}): the ideal amplifier at the median {med:.4g} N/V")
+        return ideal
+    A, tau, ct, ma, ka, share = (float(v) for v in th)
+    ce, ca = share * ct, (1 - share) * ct
+    R = d["R"]
+    keys = dict(amp_gain_N_per_V=A, shaker_force_constant_N_per_A=math.sqrt(ce * R), shaker_resistance_ohm=R,
+                shaker_inductance_H=tau * R, shaker_armature_mass_kg=ma, shaker_suspension_N_per_m=ka,
+                shaker_damping_N_s_per_m=ca)
+    not_fitted = [dict(cause="shaker_response", reason=(
+        f"shaker_force_constant_N_per_A and shaker_resistance_ohm separately: only Bl^2/R and L/R act on the "
+        f"plant and the measurement; R fixed at the default {R:g} ohm, Bl = sqrt((Bl^2/R) R), L = (L/R) R"))]
+    for i in sorted(fixed_why):
+        not_fitted.append(dict(cause="shaker_response", reason=f"{SHAKER_PARAMS[i]}: {fixed_why[i]}; "
+                                                              f"fixed at the default {scale[i]:.4g}"))
+    return ShakerFit(keys=keys, parameters=params, steps=n, rms_residual=rms, ideal_rms_residual=ideal_rms,
+                     p_value=p, not_fitted=not_fitted,
+                     note=(f"shaker fitted to {n} steps' drive ratios ({float(ratio.min()):.4g}-{float(ratio.max()):.4g} "
+                           f"N/V): rms {100 * rms:.3g} % (one constant gain: {100 * ideal_rms:.3g} %)"))
 
 
 def check_model(model: dict) -> None:
@@ -143,14 +307,23 @@ def apply_causes(model: dict, causes: list[dict], ctx: dict) -> tuple[dict, dict
         if cid not in CAUSE_KEYS:
             missed.append(dict(cause=cid, reason="no plant or sensor form for this cause (bench.twin.CAUSE_KEYS)"))
             continue
+        params = dict(c.get("parameters", {}))
+        if "channel" in c and "channel" not in params:     # an artefact's channel is the cause's, not a parameter
+            params["channel"] = dict(value=c["channel"])
         try:
-            keys = CAUSE_KEYS[cid](c.get("parameters", {}), ctx)
+            keys = CAUSE_KEYS[cid](params, ctx)
         except KeyError as e:
             missed.append(dict(cause=cid, reason=f"the analysis gives no parameter {e} for it"))
             continue
         absent = sorted(set(keys) - known)
         if absent:
             missed.append(dict(cause=cid, reason=f"this version's plant has no {', '.join(absent)} "
+                                                 f"(keys {', '.join(f'{k} = {v}' for k, v in keys.items())})"))
+            continue
+        taken = {k: owner for owner, ks in applied.items() for k in ks if k in keys}
+        if taken:
+            missed.append(dict(cause=cid, reason=f"the plant holds one {', '.join(sorted(taken))}, already "
+                                                 f"taken by {', '.join(sorted(set(taken.values())))} "
                                                  f"(keys {', '.join(f'{k} = {v}' for k, v in keys.items())})"))
             continue
         trial = dict(model, **keys)
@@ -174,12 +347,13 @@ class Twin:
     applied: dict                # cause id -> {key: value} written to [rig.model]
     not_in_plant: list[dict] = field(default_factory=list)    # {cause, reason}
     notes: list[str] = field(default_factory=list)            # defaults used, and why
-    drive_ratio: list[dict] = field(default_factory=list)     # {freq_Hz, N_per_V} per step of a run
+    drive_ratio: list[dict] = field(default_factory=list)     # {freq_Hz, N_per_V, Z_s_N_s_per_m} per step of a run
+    shaker: dict = field(default_factory=dict)                # ShakerFit.as_dict() of a run, {} for a file
 
     def to_dict(self) -> dict:
         return dict(schema=SCHEMA, provenance=self.provenance, parameters=self.parameters, causes=self.causes,
                     applied=self.applied, not_in_plant=self.not_in_plant, notes=self.notes,
-                    drive_ratio=self.drive_ratio, rig=self.rig, plan=self.plan)
+                    drive_ratio=self.drive_ratio, shaker=self.shaker, rig=self.rig, plan=self.plan)
 
 
 # ---------------------------------------------------------------------------- provenance
@@ -215,18 +389,25 @@ def channel_noise(src: Source) -> dict:
     return out
 
 
-def drive_ratio(src: Source) -> tuple[np.ndarray, np.ndarray]:
-    """(frequencies, measured force amplitude per drive volt amplitude) of a run's steps."""
+def drive_ratio(src: Source) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(frequencies, |P1| / |V| (N/V), drive-point impedance j w P1 / A1 (N s/m)) of a run's
+    usable steps: the force fundamental of the measured block per generator amplitude
+    (drive_Vpp / 2) of that block, and the impedance from the same block's force and
+    acceleration (the impedance head's accelerometer sits at the drive point).  A file has
+    no drive voltage: empty arrays."""
     if src.kind != "run":
-        return np.zeros(0), np.zeros(0)
+        return np.zeros(0), np.zeros(0), np.zeros(0, complex)
     from .storage import RunStore
-    f, r = [], []
-    for res in RunStore.open(src.path).results(warn=False):
-        vpp, force = res.get("drive_Vpp"), res.get("force_N")
-        if vpp and force and vpp > 0:
-            f.append(float(res["freq_Hz"]))
-            r.append(float(force) / (0.5 * float(vpp)))
-    return np.array(f), np.array(r)
+    vpp = {str(r.get("key")): r.get("drive_Vpp") for r in RunStore.open(src.path).results(warn=False)}
+    f, r, z = [], [], []
+    for s in src.steps:
+        v = vpp.get(s.key)
+        P1, A1 = complex(s.harmonics.force[0]), complex(s.harmonics.accel[0])
+        if v and v > 0 and abs(P1) > 0 and abs(A1) > 0:
+            f.append(float(s.freq_Hz))
+            r.append(abs(P1) / (0.5 * float(v)))
+            z.append(2j * math.pi * s.freq_Hz * P1 / A1)
+    return np.array(f), np.array(r), np.array(z, complex)
 
 
 def _sig(x: float, digits: int = 6) -> float:
@@ -355,11 +536,16 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source
     model = dict(F_s_N=params["F_s_N"]["value"], x_s_m=params["x_s_m"]["value"], n=params["n"]["value"],
                  mass_kg=params["m_kg"]["value"], force_sens_V_per_N=cal["force_V_per_N"],
                  accel_sens_V_per_m_s2=cal["accel_V_per_m_s2"], disp_sens_V_per_m=cal["disp_V_per_m"], **noise)
-    f_r, ratio = drive_ratio(src)
+    f_r, ratio, Zs = drive_ratio(src)
+    shaker = shaker_model(f_r, ratio, Zs)
     model["amp_gain_N_per_V"] = float(np.median(ratio)) if ratio.size else cal["amp_gain_N_per_V"]
-    shaker_keys, shaker_note = shaker_model(f_r, ratio)
-    model.update(shaker_keys)
-    not_in_plant = [dict(cause="shaker_response", reason=shaker_note)] if shaker_note else []
+    model.update(shaker.keys)
+    not_in_plant = list(shaker.not_fitted)
+    if shaker.note:
+        notes.append(shaker.note)
+    if not ratio.size:
+        notes.append(f"no drive voltage in the source (a file): amp_gain_N_per_V is the calibration's single gain "
+                     f"{cal['amp_gain_N_per_V']:g} N/V, an ideal amplifier (no shaker fitted)")
     if "amp_force_limit_N" in src_model:
         model["amp_force_limit_N"] = src_model["amp_force_limit_N"]
     model["amp_force_limit_N"] = max(model.get("amp_force_limit_N", RigModel.amp_force_limit_N),
@@ -394,7 +580,9 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source
     twin = Twin(rig={"rig": rig}, plan={"plan": plan}, provenance=prov,
                 parameters={k: dict(v) for k, v in params.items()}, causes=[c["id"] for c in causes],
                 applied=applied, not_in_plant=not_in_plant, notes=notes,
-                drive_ratio=[dict(freq_Hz=float(f), N_per_V=float(r)) for f, r in zip(f_r, ratio)])
+                drive_ratio=[dict(freq_Hz=float(f), N_per_V=float(r), Z_s_N_s_per_m=[float(z.real), float(z.imag)])
+                             for f, r, z in zip(f_r, ratio, Zs)],
+                shaker=shaker.as_dict() if ratio.size else {})
     # both files must load as the commands will load them
     parse_rig(twin.rig, "twin rig.toml")
     parse_plan(twin.plan, "twin plan.toml")
@@ -451,6 +639,9 @@ def _rig_comments(twin: Twin) -> str:
     for cid, keys in twin.applied.items():
         lines.append(f"# cause {cid} -> " + ", ".join(f"{k} = {val:.5g}" if isinstance(val, float) else f"{k} = {val}"
                                                        for k, val in keys.items()))
+    for name, q in twin.shaker.get("parameters", {}).items() if twin.shaker.get("keys") else ():
+        lines.append(f"# shaker {name} {q['value']:.5g} " + (f"[{q['low']:.5g}, {q['high']:.5g}] (95 %)" if q["fitted"]
+                                                             else "(fixed at the default)"))
     for item in twin.not_in_plant:
         lines.append(f"# NOT IN THE PLANT: {item['cause']}: {item['reason']}")
     for n in twin.notes:

@@ -291,10 +291,10 @@ class SimulatedRig:
                 P_dc / m.F_s_N, self._coef, h, n * sub, sub, rec)
             self.coil_force_N = q * m.F_s_N
             accel = rec[:, 3] * m.x_s_m + m.drive_height_m * rec[:, 4]
+        t_rel = np.arange(n) / fs          # the drive's time base and the interference line's
         if plant_effects.shaker_on(m):
             force = rec[:, 6] * m.F_s_N
         else:
-            t_rel = np.arange(n) / fs
             force = P_amp * np.sin(omega * t_rel + self._phase) + P_dc
         disp = rec[:, 1] * m.x_s_m
         if m.disp_delay_s > 0:
