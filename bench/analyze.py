@@ -11,13 +11,13 @@ estimated from the data) and writes ``analysis.json`` (schema in docs/analysis.m
 from __future__ import annotations
 
 import logging
-from importlib import metadata
 from pathlib import Path
 
 from sim.artefacts import artefact_causes
 from sim.discrepancy import analyze_steps
 from sim.errors import ConfigurationError
 
+from . import __version__
 from .reports import write_analysis_html
 from .sources import load_source
 from .storage import write_json
@@ -46,13 +46,6 @@ def _guess(source: Path, rig: Path | None) -> tuple[dict | None, float | None]:
             float(v_ref) if v_ref else None)
 
 
-def _version() -> str:
-    try:
-        return metadata.version("guideway-bench")
-    except metadata.PackageNotFoundError:
-        return "unknown"
-
-
 def analyze_source(source: Path, out_dir: Path | None = None, rig: Path | None = None, *, src=None) -> dict:
     """Analyse SOURCE, write ``analysis.json`` (and ``analysis.html``) to ``out_dir``; return the dict.
     ``src``: SOURCE already read by :func:`bench.sources.load_source` (not read again)."""
@@ -69,7 +62,7 @@ def analyze_source(source: Path, out_dir: Path | None = None, rig: Path | None =
     artefacts = artefact_causes(src.quality(), total=len(src.steps) + len(src.rejected))
     for c in artefacts:
         log.info("artefact: %s", c["sentence"])
-    analysis = analyze_steps(steps, guess, source=str(source), software_version=_version(), rejected=rejected,
+    analysis = analyze_steps(steps, guess, source=str(source), software_version=__version__, rejected=rejected,
                              v_ref_m_per_s=v_ref, artefacts=artefacts)
     result = analysis.to_dict()
     out = Path(out_dir) if out_dir else default_out_dir(source)

@@ -35,7 +35,8 @@ from sim.discrepancy.analysis import level_groups
 from sim.errors import ConfigurationError
 from sim.rig import RigModel
 
-from .analyze import _version, analyze_source
+from . import __version__
+from .analyze import analyze_source
 from .config import (
     DEFAULTS,
     MAX_FREQ_HZ,
@@ -575,7 +576,7 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source
 
     prov = dict(source=str(source), source_kind=src.kind, source_sha256=source_sha256(source),
                 analysis_source=analysis.get("source", ""),
-                analysis_software_version=analysis.get("software_version", ""), software_version=_version(),
+                analysis_software_version=analysis.get("software_version", ""), software_version=__version__,
                 steps_used=len(src.steps), steps_rejected=len(src.rejected), plain=plain)
     twin = Twin(rig={"rig": rig}, plan={"plan": plan}, provenance=prov,
                 parameters={k: dict(v) for k, v in params.items()}, causes=[c["id"] for c in causes],
