@@ -19,7 +19,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from ._figures import level_colours
-from ._html import CSS, _figure, _num, _table
+from ._html import CSS, figure, num, table
 
 log = logging.getLogger(__name__)
 
@@ -120,8 +120,8 @@ def _verdict(result: dict) -> str:
         x = o[q]
         parts.append(f"<p>{q.capitalize()}: rms difference {_p(x['rms_rel_diff'])} over {x['judged']} judged steps "
                      f"({_p(x['rms_rel_diff_all'])} over all matched steps; magnitude "
-                     f"{_num(x['rms_mag_diff_pct'], '.3g')} %, phase {_num(x['rms_phase_diff_deg'], '.3g')} deg), "
-                     f"{_num(x['rms_noise_units'], '.3g')} times the measurement noise; largest judged "
+                     f"{num(x['rms_mag_diff_pct'], '.3g')} %, phase {num(x['rms_phase_diff_deg'], '.3g')} deg), "
+                     f"{num(x['rms_noise_units'], '.3g')} times the measurement noise; largest judged "
                      f"{_p(x['max_rel_diff'])}.</p>")
     parts.append("<p>A step is judged when the noise of the two measurements alone would give a difference of at "
                  "most half the tolerance; the others are shown but not gated.</p>")
@@ -137,7 +137,7 @@ def _sources(result: dict) -> str:
         rows.append([role, f"<code>{escape(s['path'])}</code>", escape(s["kind"]), str(s["steps"]),
                      str(len(s["rejected"])), f"<code>{escape(s['sha256'][:16])}</code>..."])
     return ('<section aria-labelledby="src-h"><h2 id="src-h">Sources</h2>'
-            + _table(["role", "path", "kind", "steps", "rejected", "sha256"], rows, {3, 4})
+            + table(["role", "path", "kind", "steps", "rejected", "sha256"], rows, {3, 4})
             + f"<p>Steps match when their force levels differ by at most {100 * result['matching']['level_rel']:g} %, "
               f"their frequencies by at most {100 * result['matching']['freq_rel']:g} % and their sweep directions "
               f"agree (when both are known).</p></section>")
@@ -147,16 +147,16 @@ def _steps_table(result: dict) -> str:
     rows = []
     for s in sorted(result["steps"], key=lambda s: (s["level_N"], s["direction"], s["freq_Hz"])):
         c, a = s["compliance"], s["accelerance"]
-        rows.append([escape(s["reference_key"]), escape(s["other_key"]), _num(s["level_N"], ".4g"),
-                     _num(s["freq_Hz"], ".5g"), escape(s["direction"] or "-"),
-                     _num(100 * c["rel_diff"], ".3g"), _num(c["mag_diff_pct"], "+.3g"), _num(c["phase_diff_deg"], "+.3g"),
-                     _num(c["noise_units"] if c["noise_units"] is not None else math.nan, ".3g"),
+        rows.append([escape(s["reference_key"]), escape(s["other_key"]), num(s["level_N"], ".4g"),
+                     num(s["freq_Hz"], ".5g"), escape(s["direction"] or "-"),
+                     num(100 * c["rel_diff"], ".3g"), num(c["mag_diff_pct"], "+.3g"), num(c["phase_diff_deg"], "+.3g"),
+                     num(c["noise_units"] if c["noise_units"] is not None else math.nan, ".3g"),
                      "yes" if c["judged"] else "no (noisy)",
-                     _num(100 * a["rel_diff"], ".3g"), _num(a["mag_diff_pct"], "+.3g"), _num(a["phase_diff_deg"], "+.3g")])
+                     num(100 * a["rel_diff"], ".3g"), num(a["mag_diff_pct"], "+.3g"), num(a["phase_diff_deg"], "+.3g")])
     head = ["reference step", "other step", "level (N)", "frequency (Hz)", "sweep", "compliance diff (%)",
             "magnitude (%)", "phase (deg)", "x noise", "judged", "accelerance diff (%)", "magnitude (%)", "phase (deg)"]
     out = ['<section aria-labelledby="steps-h"><h2 id="steps-h">Matched steps</h2>',
-           _table(head, rows, set(range(2, 13)) - {4, 9},
+           table(head, rows, set(range(2, 13)) - {4, 9},
                   "Per matched step: relative complex difference, magnitude difference, phase difference "
                   "(other minus reference) and, for the compliance, the difference in units of its noise and whether "
                   "the step is precise enough to be judged at the tolerance.")]
@@ -173,12 +173,12 @@ def render_compare_html(result: dict) -> str:
     meta = f"reference: {result['reference']['path']}; other: {result['other']['path']}"
     figs = ['<section aria-labelledby="figs-h"><h2 id="figs-h">Figures</h2>']
     for q in QUANTITIES:
-        figs.append(_figure(plot_frf(result, q),
+        figs.append(figure(plot_frf(result, q),
                             f"{q.capitalize()} magnitude and phase against frequency for each force level: reference "
                             f"as open circles, other as lines.",
                             f"First-harmonic {q}: the reference (open circles) and the other source (lines), one colour "
                             f"per force level; dashed: down sweeps."))
-    figs.append(_figure(plot_difference(result),
+    figs.append(figure(plot_difference(result),
                         "Relative difference of compliance and accelerance per matched step against frequency, "
                         "with the tolerance line.",
                         "Relative complex difference |H_other - H_ref| / |H_ref| per matched step: compliance (filled), "

@@ -60,7 +60,7 @@ summary { cursor: pointer; font-weight: bold; font-size: 1.1rem; }
 """
 
 
-def _num(v: float, fmt: str = ".4g") -> str:
+def num(v: float, fmt: str = ".4g") -> str:
     return "n/a" if not math.isfinite(v) else format(v, fmt)
 
 
@@ -68,7 +68,7 @@ def _pct(v: float) -> str:
     return "n/a" if not math.isfinite(v) else f"{100 * v:.3g} %"
 
 
-def _table(head: list[str], rows: list[list[str]], numeric: set[int] = frozenset(), caption: str = "") -> str:
+def table(head: list[str], rows: list[list[str]], numeric: set[int] = frozenset(), caption: str = "") -> str:
     cap = f"<caption>{escape(caption)}</caption>" if caption else ""
     th = "".join(f'<th scope="col">{escape(h)}</th>' for h in head)
     body = "".join("<tr>" + "".join(f'<td class="num">{c}</td>' if i in numeric else f"<td>{c}</td>"
@@ -76,7 +76,7 @@ def _table(head: list[str], rows: list[list[str]], numeric: set[int] = frozenset
     return f"<table>{cap}<thead><tr>{th}</tr></thead><tbody>{body}</tbody></table>"
 
 
-def _figure(fig, alt: str, caption: str) -> str:
+def figure(fig, alt: str, caption: str) -> str:
     data = base64.b64encode(figures.png_bytes(fig)).decode("ascii")
     return (f'<figure><img src="data:image/png;base64,{data}" alt="{escape(alt, quote=True)}">'
             f"<figcaption>{escape(caption)}</figcaption></figure>")
@@ -117,11 +117,11 @@ def _causes(a: AnalysisData) -> str:
     for i, c in enumerate(a.causes, 1):
         size = "<br>".join(_size(k, p) for k, p in c.parameters.items()) or "-"
         gain = (f"{_pct(c.heldout_error_before)} &rarr; {_pct(c.heldout_error_after)}"
-                + f"<br>&Delta;BIC = {_num(c.delta_bic, '.3g')}")
+                + f"<br>&Delta;BIC = {num(c.delta_bic, '.3g')}")
         rows.append([str(i), escape(KIND_TEXT.get(c.kind, c.kind)),
                      f"{escape(c.label)}<br><code>{escape(c.id)}</code>", escape(c.formula or "-"), size, gain,
                      escape(c.sentence or "")])
-    out.append(_table(["#", "kind", "cause", "formula", "size (SI units, 95 % interval)",
+    out.append(table(["#", "kind", "cause", "formula", "size (SI units, 95 % interval)",
                        "held-out error before \u2192 after", "in words"], rows,
                       caption="Every cause named, in the order the selection took them; the held-out error is "
                               "the prediction error on force levels left out of the fit."))
@@ -139,7 +139,7 @@ def _overview(a: AnalysisData) -> str:
     if not a.steps:
         return ""
     final = "the extended model (solid)" if a.causes else "no cause named: the base model is the final model"
-    return _figure(figures.plot_analysis_overview(a.steps),
+    return figure(figures.plot_analysis_overview(a.steps),
                    f"Compliance magnitude against frequency for every force level on one axis ({len(a.steps)} "
                    f"steps): measured circles, base Masing model dashed, extended model solid.",
                    f"Measured compliance (circles) against the base Masing model (dashed) and {final}, colour "
@@ -152,7 +152,7 @@ def _restoring(a: AnalysisData) -> str:
     if rf is None or rf.x_m.size == 0:
         out.append("<p>No restoring-force samples in the analysis.</p>")
     else:
-        out.append(_figure(figures.plot_restoring_force(rf),
+        out.append(figure(figures.plot_restoring_force(rf),
                            "Force the base model leaves out (N) against displacement and against velocity, "
                            "points coloured by force level.",
                            "What the base model leaves out, P - m a - F_Masing(x), against displacement (left) "
@@ -167,17 +167,17 @@ def _parameters(a: AnalysisData) -> str:
     head = ["parameter", "unit", "value", "95 % low", "95 % high"]
     same = not a.causes and a.parameters == a.base_parameters
     if a.parameters and not same:
-        out.append(_table(head, [_param_row(k, p) for k, p in a.parameters.items()], {2, 3, 4},
+        out.append(table(head, [_param_row(k, p) for k, p in a.parameters.items()], {2, 3, 4},
                           "final model" + ("" if a.causes else " (the base model: no cause named)")))
     if a.base_parameters:
-        out.append(_table(head, [_param_row(k, p) for k, p in a.base_parameters.items()], {2, 3, 4},
+        out.append(table(head, [_param_row(k, p) for k, p in a.base_parameters.items()], {2, 3, 4},
                           "base model (Masing friction and mass only)"
                           + (", which is the final model: no cause named" if same else "")))
     if not (a.parameters or a.base_parameters):
         out.append("<p>No parameters in the analysis.</p>")
-    fit = [f"base model {_num(a.base_reduced_chi2, '.4g')}"]
+    fit = [f"base model {num(a.base_reduced_chi2, '.4g')}"]
     if math.isfinite(a.final_reduced_chi2) and a.causes:
-        fit.append(f"final model {_num(a.final_reduced_chi2, '.4g')}")
+        fit.append(f"final model {num(a.final_reduced_chi2, '.4g')}")
     out.append(f"<p>Reduced chi-square: {', '.join(fit)} (about 1 when the residual is the measurement noise)."
                + (f" Held-out error of the base model: {_pct(a.base_heldout_error)}."
                   if math.isfinite(a.base_heldout_error) else "") + "</p>")
@@ -195,16 +195,16 @@ def _diagnostics(diag: dict) -> str:
         if isinstance(v, dict):
             sub = {kk: vv for kk, vv in v.items() if not isinstance(vv, dict)}
             rows = [[escape(str(kk).replace("_", " ")), _cell(vv)] for kk, vv in sub.items()]
-            parts.append(_table(["quantity", "values"], rows, caption=name))
+            parts.append(table(["quantity", "values"], rows, caption=name))
         elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
             head = list(dict.fromkeys(kk for x in v for kk in x))
-            parts.append(_table(head, [[_cell(x.get(h)) for h in head] for x in v], caption=name))
+            parts.append(table(head, [[_cell(x.get(h)) for h in head] for x in v], caption=name))
         elif isinstance(v, list) and v and all(isinstance(x, str) for x in v):
             parts.append(f"<p>{name}:</p><ul>" + "".join(f"<li>{escape(x)}</li>" for x in v) + "</ul>")
         else:
             scalars.append([name, _cell(v)])
     if scalars:
-        parts.insert(0, _table(["quantity", "value"], scalars, caption="diagnostics of the fit"))
+        parts.insert(0, table(["quantity", "value"], scalars, caption="diagnostics of the fit"))
     return "".join(parts)
 
 
@@ -212,7 +212,7 @@ def _cell(v) -> str:
     if isinstance(v, bool) or v is None:
         return escape(str(v))
     if isinstance(v, (int, float)):
-        return _num(float(v))
+        return num(float(v))
     if isinstance(v, (list, tuple)):
         return escape(", ".join(_cell(x) if not isinstance(x, (list, tuple)) else
                                 "[" + ", ".join(_cell(y) for y in x) + "]" for x in v)) if v else "none"
@@ -228,10 +228,10 @@ def _nested(v) -> str:
         if not v:
             return "none"
         if all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
-            return escape(", ".join(_num(float(x)) for x in v))
+            return escape(", ".join(num(float(x)) for x in v))
         return "<ul>" + "".join(f"<li>{_nested(x)}</li>" for x in v) + "</ul>"
     if isinstance(v, float):
-        return _num(v)
+        return num(v)
     return escape(str(v))
 
 
@@ -247,14 +247,14 @@ def _figures(a: AnalysisData) -> str:
         for q, what in (("compliance", "displacement over force, x/P"), ("accelerance", "acceleration over "
                                                                                          "force, a/P")):
             out.append(f"<h3>{q.capitalize()}</h3>")
-            out.append(_figure(figures.plot_analysis_frf(a.steps, q),
+            out.append(figure(figures.plot_analysis_frf(a.steps, q),
                                f"{q.capitalize()} ({what}) magnitude and phase against frequency for each force "
                                f"level ({span}): measured points, base model dashed, final model solid.",
                                f"First-harmonic {q} ({what}), one row per force level: measured (circles), "
                                f"simulated with the base Masing model (dashed); {final}."))
     if a.loops:
         out.append("<h3>Hysteresis loops</h3>")
-        out.append(_figure(figures.plot_analysis_loops(a.loops),
+        out.append(figure(figures.plot_analysis_loops(a.loops),
                            f"Friction force against displacement over one period at {len(a.loops)} chosen steps "
                            f"({', '.join(lp.key for lp in a.loops)}): measured, base model and final model.",
                            "Friction force P - m a against displacement over one period: measured (black), base "
@@ -263,7 +263,7 @@ def _figures(a: AnalysisData) -> str:
         out.append("<p>No hysteresis loops in the analysis.</p>")
     if a.steps:
         out.append("<h3>Residuals of the base model</h3>")
-        out.append(_figure(figures.plot_analysis_residuals(a.steps),
+        out.append(figure(figures.plot_analysis_residuals(a.steps),
                            "Relative error of the base model's compliance and accelerance against frequency and "
                            "against force level, and the base model's residual per harmonic.",
                            "Where the base model misses: relative error of the first harmonic against frequency "
@@ -281,11 +281,11 @@ def _candidates(a: AnalysisData) -> str:
         ordered = sorted(a.candidates, key=lambda c: (c.round if c.round is not None else 0, not c.named,
                                                       _sort_key(c.delta_bic)))
         rows = [([str(c.round) if c.round is not None else "-"] if rounds else [])
-                + [f"<code>{escape(c.id)}</code>", _num(c.delta_bic),
+                + [f"<code>{escape(c.id)}</code>", num(c.delta_bic),
                    _pct(c.heldout_error) if math.isfinite(c.heldout_error) else "not computed",
                    "<strong>yes</strong>" if c.named else "no"] for c in ordered]
         head = (["round"] if rounds else []) + ["candidate", "\u0394BIC", "held-out error", "named"]
-        out.append(_table(head, rows, {int(rounds) + 1, int(rounds) + 2},
+        out.append(table(head, rows, {int(rounds) + 1, int(rounds) + 2},
                           "Every candidate extension fitted"
                           + (", round by round of the forward selection (each round against the model so far)"
                              if rounds else "") + "; \u0394BIC against the model without it (negative favours "
@@ -303,10 +303,10 @@ def _steps(a: AnalysisData) -> str:
            f"<p>{len(a.steps_used)} steps used, {len(a.steps_rejected)} rejected"
            + (f"; {len(a.steps_flagged)} of the used steps flagged" if a.steps_flagged else "") + ".</p>"]
     if a.steps_rejected:
-        out.append(_table(["step", "reason"], [[escape(s), escape(r)] for s, r in a.steps_rejected],
+        out.append(table(["step", "reason"], [[escape(s), escape(r)] for s, r in a.steps_rejected],
                           caption="steps rejected, with the reason"))
     if a.steps_flagged:
-        out.append(_table(["step", "why"], [[escape(s), escape(r)] for s, r in a.steps_flagged],
+        out.append(table(["step", "why"], [[escape(s), escape(r)] for s, r in a.steps_flagged],
                           caption="steps used but flagged (artefacts removed, or noisy), with the reason"))
     return "".join(out) + "</section>"
 
