@@ -52,7 +52,8 @@ class MasingCarriage:
 def simulate_level(n: float, gamma0: float, betas, periods_settle: int, periods_measure: int,
                    samples_per_unit_time: float, rtol: float = 1e-10, cubic: float = 0.0, quadratic: float = 0.0,
                    asymmetry: float = 0.0, viscous: float = 0.0, spring: float = 0.0, speed: float = 0.0,
-                   delay: float = 0.0, pitch: tuple[float, float, float, float] | None = None):
+                   delay: float = 0.0, pitch: tuple[float, float, float, float] | None = None,
+                   settle_first: int | None = None):
     """Up-sweep through frequency ratios ``betas`` at force gamma0 (dimensionless).
     Yields per step (t', u, a, force) sampled over the measured periods at a fixed rate:
     u the displacement probe, a the accelerometer (both dimensionless).
@@ -69,7 +70,9 @@ def simulate_level(n: float, gamma0: float, betas, periods_settle: int, periods_
 
           u'' + r phi'' = P - F_total,   a r u'' + phi'' = a P - kappa phi - zeta phi',
 
-      and the accelerometer (at the drive height) reads u'' + phi''."""
+      and the accelerometer (at the drive height) reads u'' + phi''.
+
+    ``settle_first``: settle periods of the first step (from rest; default ``periods_settle``)."""
     car = MasingCarriage(n)
 
     def total(u, v):
@@ -99,10 +102,11 @@ def simulate_level(n: float, gamma0: float, betas, periods_settle: int, periods_
 
     t = 0.0
     phase = 0.0
-    for beta in betas:
+    for i_step, beta in enumerate(betas):
         T = 2 * math.pi / beta
         t_start = t
         ph0 = phase
+        settle = periods_settle if i_step or settle_first is None else settle_first
 
         def rhs(tt, yy):
             P = gamma0 * math.sin(beta * (tt - t_start) + ph0)
@@ -121,8 +125,8 @@ def simulate_level(n: float, gamma0: float, betas, periods_settle: int, periods_
         ev_close.terminal = True
         ev_close.direction = 1
 
-        t_end = t_start + (periods_settle + periods_measure) * T
-        t_meas = t_start + periods_settle * T
+        t_end = t_start + (settle + periods_measure) * T
+        t_meas = t_start + settle * T
         dt = 1.0 / samples_per_unit_time
         grid = t_meas + dt * np.arange(int(periods_measure * T / dt))
         # what each sample time needs: the drive-side records at grid, the probe at grid - delay
@@ -176,7 +180,7 @@ def generate_uff(path, F_s_N, x_s_m, n, mass_kg, levels_N, freqs_Hz, *, fs_Hz=No
                  noise=(0.003, 0.005, 0.002), seed=0, cubic_N_per_m3=0.0, quadratic_N_s2_per_m2=0.0,
                  asymmetry=0.0, viscous_N_s_per_m=0.0, spring_N_per_m=0.0, friction_alpha=0.0,
                  friction_v_ref_m_per_s=1.0, disp_delay_s=0.0, disp_gain_error=0.0, pitch=None,
-                 line_Hz=0.0, line_m=0.0, rtol=1e-10):
+                 line_Hz=0.0, line_m=0.0, rtol=1e-10, settle_first=None):
     """Simulate the up-sweeps and write them to ``path`` as UFF58 (no tags). Returns the
     number of steps written.  Effects in SI (0 = off): forms k3 x^3, c2 v|v|, friction
     asymmetry a; catalog c v, k x, friction F (1 + alpha |v| / v_ref), the probe delayed by
@@ -184,7 +188,8 @@ def generate_uff(path, F_s_N, x_s_m, n, mass_kg, levels_N, freqs_Hz, *, fs_Hz=No
     h, e) (kg m^2, N m/rad, N m s/rad, m, m; equations in :func:`simulate_level`).
     Artefacts: a line of ``line_m`` (amplitude) at ``line_Hz`` on the probe, on the
     simulation's own clock (not locked to the drive); a short ``settle`` leaves the
-    transient of each frequency change in the record."""
+    transient of each frequency change in the record (``settle_first``: of the first step of
+    each level, which starts from rest)."""
     import pyuff
 
     rng = np.random.default_rng(seed)
@@ -205,7 +210,7 @@ def generate_uff(path, F_s_N, x_s_m, n, mass_kg, levels_N, freqs_Hz, *, fs_Hz=No
     for level in levels_N:
         betas = [2 * math.pi * f / w_s for f in sorted(freqs_Hz)]
         for t_dim, u, acc, P in simulate_level(n, level / F_s_N, betas, settle, measure, fs / w_s, rtol=rtol,
-                                               **effects):
+                                               settle_first=settle_first, **effects):
             case += 1
             force = P * F_s_N
             accel = acc * F_s_N / mass_kg
