@@ -210,6 +210,9 @@ def run_independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str
     guess = {k: v * rng.uniform(0.7, 1.3) for k, v in rig.items()}
     t0 = time.perf_counter()
     src = load_source(path)
+    if not cache:                      # a temporary file (several MB of ASCII UFF58): gone once read
+        path.unlink()
+        path.parent.rmdir()
     steps = list(src.steps)
     artefacts = artefact_causes(src.quality(), total=len(src.steps) + len(src.rejected))
     t_load = time.perf_counter() - t0
