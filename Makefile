@@ -50,6 +50,7 @@ bench: setup
 	$(PY) benchmarks/bench_procedure.py
 	$(PY) benchmarks/bench_studies.py
 	$(PY) benchmarks/bench_analysis.py
+	$(PY) benchmarks/bench_analysis.py --source independent --cases 60 --levels 3 --freqs 10
 	$(PY) benchmarks/bench_artefacts.py
 	$(PY) benchmarks/bench_identification.py
 	$(PY) benchmarks/bench_twin.py

@@ -14,6 +14,16 @@ physical cause in <= 5 % of cases, clean cases with no cause >= 95 %, a 90-step 
 <= 30 s (median <= 15 s) on one core.
 
     python benchmarks/bench_analysis.py [--cases 60] [--first 0] [--workers 1] [--scheduler tcp://host:port] [--json out.json]
+    python benchmarks/bench_analysis.py --source independent [--cases 36] [--levels 5 --freqs 18] [--cache DIR]
+
+``--source independent``: the cases come from tests/independent_masing.py (solve_ivp on
+the documented equations, no code shared with ``sim/``), written to an untagged UFF58
+file and analysed as ``bench analyze FILE`` does (``bench.sources.load_source``, the
+step-quality check's artefacts, ``analyze_steps``).  Kinds: clean, every catalog effect,
+every form, and two artefacts (a mains line on the probe, too few settle cycles), at the
+same seeded strengths as the plant's cases (``draw_effect``), n in 0.55-3 (the solver
+needs minutes per step for n < 0.5 at small force).  ``--cache DIR`` keeps the files (a
+rerun analyses them again without simulating).
 
 The case loop is a plain map over ``run_case``, so a scheduler (dask) can run it too.
 """
@@ -34,10 +44,24 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from sim.discrepancy import analyze_steps  # noqa: E402
-from sim.discrepancy.cases import CATALOG, FORMS, make_case, observable_rig, truth_size  # noqa: E402
+from sim.discrepancy.cases import (  # noqa: E402
+    CATALOG,
+    FORMS,
+    draw_effect,
+    friction_resonance_Hz,
+    make_case,
+    observable_rig,
+    plan_grid,
+    truth_size,
+)
 from sim.identify import Identifier, synthesize  # noqa: E402
+from sim.synthetic import draw_rig  # noqa: E402
 
 KINDS = ("clean",) + CATALOG + tuple(FORMS)
+# independent data: also the two artefacts the simulator can make, and the artefact id each must be named by
+ARTEFACTS = {"mains_line": "line_interference", "unsettled": "unsettled_transient"}
+INDEPENDENT_KINDS = KINDS + tuple(ARTEFACTS)
+INDEPENDENT_SETTLE = (40, 60, 8)      # settle periods per step, of a level's first step (from rest), measured
 
 
 def expected_id(kind: str) -> str | None:
@@ -47,6 +71,35 @@ def expected_id(kind: str) -> str | None:
 
 def case_kind(seed: int) -> str:
     return KINDS[seed % len(KINDS)]
+
+
+COVARIANCES = {"": "cov", "_jacobian": "cov_jacobian"}   # row suffix -> Fit attribute (the sandwich; the Jacobian's)
+
+
+def _interval_checks(a, case, kind: str, want: str | None, obs: dict) -> dict:
+    """The named cause's size against the truth and its 95 % interval (covers? relative
+    half-width), and when the final model is the true one the pulls of F_s, x_s, n, m
+    (error / standard error, in the fit's coordinates); for each covariance the final fit
+    carries (:data:`COVARIANCES`)."""
+    from dataclasses import replace
+
+    out: dict = dict(size_error=None, interval_covers_truth=None, base_pulls=None)
+    covs = {sfx: getattr(a.final, attr) for sfx, attr in COVARIANCES.items() if getattr(a.final, attr, None) is not None}
+    if want in a.causes:
+        name, truth = truth_size(case, kind)
+        if name:
+            for sfx, cov in covs.items():
+                p = a.cause_parameters(want, replace(a.final, cov=cov))[name]
+                out["size_error"] = p["value"] / truth - 1
+                out["interval_covers_truth" + sfx] = bool(p["low"] <= truth <= p["high"])
+                out["half_width" + sfx] = float((p["high"] - p["low"]) / 2 / abs(p["value"]))
+    if set(a.causes) == ({want} - {None}) and not a.unexplained:
+        truth = np.array([np.log(obs["F_s_N"]), np.log(obs["x_s_m"]), obs["n"], np.log(obs["mass_kg"])])
+        for sfx, cov in covs.items():
+            sd = np.sqrt(np.diag(cov)[:4])
+            out["base_pulls" + sfx] = ((a.final.theta[:4] - truth) / sd).tolist()
+            out["base_sd" + sfx] = sd.tolist()
+    return out
 
 
 def run_case(seed: int) -> dict:
@@ -77,30 +130,136 @@ def run_case(seed: int) -> dict:
     x = synthesize(np.array([st.harmonics.disp[:9] for st in case.steps]), 256)
     amp_over_xs = float(0.5 * (x.max(axis=1) - x.min(axis=1)).max() / case.rig["x_s_m"])
     first = a.selection.named[0] if a.selection.named else None
-    size_error = covered = None
-    if want in named:
-        name, truth = truth_size(case, kind)
-        if name:
-            p = a.cause_parameters(want, a.final)[name]
-            size_error = p["value"] / truth - 1
-            covered = bool(p["low"] <= truth <= p["high"])
-    # the final model's F_s, x_s, n, m against the rig (as the data can show it), when the
-    # final model is the true one: pulls (error / standard error, in the fit's coordinates)
-    base_pulls = None
-    if set(named) == ({want} - {None}) and not a.unexplained:
-        obs = observable_rig(case)
-        truth = np.array([np.log(obs["F_s_N"]), np.log(obs["x_s_m"]), obs["n"], np.log(obs["mass_kg"])])
-        base_pulls = ((a.final.theta[:4] - truth) / np.sqrt(np.diag(a.final.cov)[:4])).tolist()
+    checks = _interval_checks(a, case, kind, want, observable_rig(case))
     return dict(seed=seed, kind=kind, n=case.rig["n"], steps=len(case.steps), named=named,
                 unexplained=a.unexplained, detected=want in named, wrong=[c for c in named if c != want],
                 discovered=[c.id for c in a.selection.named if c.kind == "discovered"],
                 heldout_before=a.selection.heldout_base,
                 heldout_after=(a.selection.named[-1].heldout_error if first else a.selection.heldout_base),
                 base_chi2=a.base.reduced_chi2, final_chi2=a.final.reduced_chi2,
-                size_error=size_error, interval_covers_truth=covered, base_pulls=base_pulls,
-                amplitude_over_true_x_s=amp_over_xs,
+                **checks, amplitude_over_true_x_s=amp_over_xs,
                 spring_separable=a.spring_separable(),
                 t_generate_s=t_gen, t_analysis_s=t_an, t_identify_s=t_ref)
+
+
+def _uff_effects(fx: dict, rig: dict) -> dict:
+    """tests/independent_masing.generate_uff's arguments for RigModel fields (draw_effect's)."""
+    names = dict(cubic_spring_N_per_m3="cubic_N_per_m3", quadratic_damping_N_s2_per_m2="quadratic_N_s2_per_m2",
+                 friction_asymmetry="asymmetry")
+    out: dict = {}
+    pitch = {}
+    for k, v in fx.items():
+        if k.startswith(("pitch_", "drive_height", "cg_height")):
+            pitch[dict(pitch_inertia_kg_m2="J", pitch_stiffness_N_m_per_rad="k_th",
+                       pitch_damping_N_m_s_per_rad="c_th", drive_height_m="h", cg_height_m="e")[k]] = v
+        else:
+            out[names.get(k, k)] = v
+    if pitch:
+        out["pitch"] = pitch
+    return out
+
+
+def independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str | None = None):
+    """(UFF58 path, kind, rig, effects as RigModel fields, f_res, generation time) of one
+    seeded independent case; simulated unless ``cache`` holds it already."""
+    import tempfile
+
+    from tests.independent_masing import generate_uff
+
+    kind = INDEPENDENT_KINDS[seed % len(INDEPENDENT_KINDS)]
+    rng = np.random.default_rng(5000 + seed)
+    rig = draw_rig(rng, (0.55, 3.0), n_gap=0.2)
+    fx = {} if kind in ("clean",) + tuple(ARTEFACTS) else draw_effect(kind, rig, rng)
+    if "accel_gain_error" in fx:         # the simulator scales the probe: the same ratio, probe side
+        fx = dict(disp_gain_error=1.0 / (1.0 + fx["accel_gain_error"]) - 1.0)
+    kw = _uff_effects(fx, rig)
+    settle, first, measure = INDEPENDENT_SETTLE
+    if kind == "mains_line":             # 3-10 x the probe's noise, mains of either kind
+        kw.update(line_Hz=float(rng.choice([50.0, 60.0])), line_m=0.002 * rig["x_s_m"] * rng.uniform(3, 10))
+    if kind == "unsettled":
+        settle, first = 1, 1
+    levels_N, freqs_Hz = plan_grid(rig, levels, freqs, 0.3 if kind == "asymmetric_friction" else 0.85)
+    d = Path(cache) if cache else Path(tempfile.mkdtemp(prefix="bench_indep_"))
+    d.mkdir(parents=True, exist_ok=True)
+    path = d / f"indep_{seed:03d}_{levels}x{freqs}.uff"
+    t0 = time.perf_counter()
+    if not path.exists():
+        tmp = path.with_suffix(".part")
+        generate_uff(tmp, rig["F_s_N"], rig["x_s_m"], rig["n"], rig["mass_kg"], list(levels_N), list(freqs_Hz),
+                     settle=settle, settle_first=first, measure=measure, seed=seed, rtol=1e-9, **kw)
+        tmp.rename(path)
+    return path, kind, rig, fx, friction_resonance_Hz(rig), time.perf_counter() - t0
+
+
+def _mains_Hz(seed: int) -> float:
+    """The mains frequency of independent case ``seed`` (as independent_case draws it)."""
+    rng = np.random.default_rng(5000 + seed)
+    draw_rig(rng, (0.55, 3.0), n_gap=0.2)
+    return float(rng.choice([50.0, 60.0]))
+
+
+def run_independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str | None = None) -> dict:
+    """One independent case, analysed as ``bench analyze`` analyses a UFF58 file."""
+    from types import SimpleNamespace
+
+    from bench.sources import load_source
+    from sim.artefacts import artefact_causes
+
+    path, kind, rig, fx, f_res, t_gen = independent_case(seed, levels, freqs, cache)
+    rng = np.random.default_rng(seed)
+    guess = {k: v * rng.uniform(0.7, 1.3) for k, v in rig.items()}
+    t0 = time.perf_counter()
+    src = load_source(path)
+    if not cache:                      # a temporary file (several MB of ASCII UFF58): gone once read
+        path.unlink()
+        path.parent.rmdir()
+    steps = list(src.steps)
+    artefacts = artefact_causes(src.quality(), total=len(src.steps) + len(src.rejected))
+    t_load = time.perf_counter() - t0
+    detail = [dict(id=c["id"], channel=c.get("channel"), steps=len(c.get("evidence", {}).get("steps", [])),
+                   freq_Hz=c.get("parameters", {}).get("frequency", {}).get("value")) for c in artefacts]
+    row = dict(seed=seed, kind=kind, n=rig["n"], steps=len(steps), steps_rejected=len(src.rejected),
+               artefacts=sorted({c["id"] for c in artefacts}), artefact_detail=detail,
+               t_generate_s=t_gen, t_load_s=t_load)
+    if kind == "mains_line":            # named: a line on the probe at the mains frequency
+        line_Hz = _mains_Hz(seed)
+        row["line_Hz"] = line_Hz
+        row["mains_named"] = any(a["id"] == "line_interference" and a["channel"] == "disp" and a["freq_Hz"]
+                                 and abs(a["freq_Hz"] / line_Hz - 1) < 0.005 for a in detail)
+    want = None if kind in ("clean",) + tuple(ARTEFACTS) else FORMS.get(kind, kind)
+    t0 = time.perf_counter()
+    ident = Identifier(guess, 9)
+    for s in steps:
+        ident.add(s.harmonics)
+    ident.fit(max_nfev=200)
+    row["t_identify_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    try:
+        a = analyze_steps(steps, guess, artefacts=artefacts)
+    except Exception as e:          # a failure is a result
+        return dict(row, failed=f"{type(e).__name__}: {e}", named=[], unexplained=False, detected=False,
+                    wrong=[], heldout_before=np.nan, heldout_after=np.nan, base_chi2=np.nan, final_chi2=np.nan,
+                    t_analysis_s=time.perf_counter() - t0)
+    t_an = time.perf_counter() - t0
+    named = a.causes
+    case = SimpleNamespace(effects={kind: fx}, f_res_Hz=f_res, rig=rig)
+    checks = _interval_checks(a, case, kind, want, rig)
+    if kind in ARTEFACTS:              # records disturbed on purpose: no coverage figures from them
+        checks = {k: v for k, v in checks.items() if not k.startswith(("base_pulls", "base_sd"))}
+    row.update(checks)
+    x = synthesize(np.array([st.harmonics.disp[:9] for st in steps]), 256)
+    first = a.selection.named[0] if a.selection.named else None
+    row.update(named=named, unexplained=a.unexplained,
+               detected=(row["mains_named"] if kind == "mains_line" else ARTEFACTS[kind] in row["artefacts"])
+               if kind in ARTEFACTS else want in named,
+               wrong=[c for c in named if c != want],
+               discovered=[c.id for c in a.selection.named if c.kind == "discovered"],
+               heldout_before=a.selection.heldout_base,
+               heldout_after=(a.selection.named[-1].heldout_error if first else a.selection.heldout_base),
+               base_chi2=a.base.reduced_chi2, final_chi2=a.final.reduced_chi2,
+               amplitude_over_true_x_s=float(0.5 * (x.max(axis=1) - x.min(axis=1)).max() / rig["x_s_m"]),
+               spring_separable=a.spring_separable(), t_analysis_s=t_an)
+    return row
 
 
 def summarise(rows: list[dict]) -> str:
@@ -109,7 +268,7 @@ def summarise(rows: list[dict]) -> str:
     if failed:
         out.append(f"analysis failed in {len(failed)} case(s): " + "; ".join(f"{r['seed']}: {r['failed']}" for r in failed))
     out.append(f"{'cause':30s} {'cases':>5s} {'named':>6s} {'rate':>6s} {'n<1':>7s} {'wrong':>6s} {'unexpl':>6s}")
-    eff = [r for r in rows if r["kind"] != "clean"]
+    eff = [r for r in rows if r["kind"] not in ("clean",) + tuple(ARTEFACTS)]
     for kind in CATALOG + tuple(FORMS):
         rs = [r for r in eff if r["kind"] == kind]
         if not rs:
@@ -144,16 +303,27 @@ def summarise(rows: list[dict]) -> str:
                    f"-> {100 * np.median([r['heldout_after'] for r in det]):.3f} %")
     sized = [r for r in det if r.get("size_error") is not None]
     if sized:
-        out.append(f"effect size (c, k, f_p, delay, gain, alpha): median |error| "
-                   f"{100 * np.median([abs(r['size_error']) for r in sized]):.2f} %, 95 % interval covers the "
-                   f"truth in {sum(r['interval_covers_truth'] for r in sized)} of {len(sized)}")
-    pulls = np.array([r["base_pulls"] for r in rows if r.get("base_pulls")])
-    if pulls.size:
-        cover = np.abs(pulls) < 1.959964
-        out.append(f"F_s, x_s, n, m of the final model (cases where it is the true model): 95 % intervals cover "
-                   f"the rig's values in {cover.sum()} of {cover.size} ({100 * cover.mean():.1f} %); pulls "
-                   f"(error / standard error) rms " + ", ".join(f"{k} {v:.2f}" for k, v in zip(
-                       ("F_s", "x_s", "n", "m"), np.sqrt((pulls ** 2).mean(axis=0)))))
+        out.append(f"effect size (c, k, f_p, delay, gain, alpha, k3, c2, a): median |error| "
+                   f"{100 * np.median([abs(r['size_error']) for r in sized]):.2f} %")
+    out.extend(coverage_lines(rows))
+    for kind, art in ARTEFACTS.items():
+        rs = [r for r in rows if r["kind"] == kind]
+        if rs:
+            out.append(f"artefact {kind:21s} {len(rs):3d} cases, named ({art}"
+                       f"{' on the probe at the mains frequency' if kind == 'mains_line' else ''}) in "
+                       f"{sum(r['detected'] for r in rs)}, "
+                       f"a physical cause named in {sum(bool(r['named']) for r in rs)}, steps rejected median "
+                       f"{np.median([r.get('steps_rejected', 0) for r in rs]):.0f}")
+    quiet = [r for r in rows if r["kind"] not in ARTEFACTS and "artefacts" in r]
+    if quiet:
+        out.append(f"cases without a simulated artefact where one was named: {sum(bool(r['artefacts']) for r in quiet)} "
+                   f"of {len(quiet)} (" + ", ".join(sorted({a for r in quiet for a in r['artefacts']})) + "); with n < 1: "
+                   f"{sum(bool(r['artefacts']) for r in quiet if r['n'] < 1)} of {sum(r['n'] < 1 for r in quiet)}")
+        tr = [(r, a["steps"]) for r in rows for a in r.get("artefact_detail", []) if a["id"] == "unsettled_transient"]
+        for kind in ("clean", "unsettled"):
+            k = [st for r, st in tr if r["kind"] == kind]
+            out.append(f"  steps with an unsettled transient, {kind} cases: median {np.median(k) if k else 0:.0f} "
+                       f"(in {len(k)} of {sum(r['kind'] == kind for r in rows)} cases)")
     out.extend(issue16_rates(rows))
     ta = np.array([r["t_analysis_s"] for r in rows])
     tr = np.array([r["t_identify_s"] for r in rows])
@@ -161,6 +331,30 @@ def summarise(rows: list[dict]) -> str:
     out.append(f"time per case ({rows[0]['steps']} steps): analysis median {np.median(ta):.1f} s (max {ta.max():.1f} s), "
                f"{np.median(ta / tr):.1f}x one base identification; data generation median {np.median(tg):.1f} s")
     return "\n".join(out)
+
+
+def coverage_lines(rows: list[dict]) -> list[str]:
+    """Coverage of the 95 % intervals of the named cause's size and of F_s, x_s, n, m (when the
+    final model is the true one), with the median relative half-width, per covariance."""
+    out = []
+    for sfx, label in (("", "sandwich (reported)"), ("_jacobian", "Jacobian only (before 0031)")):
+        sized = [r for r in rows if r.get("interval_covers_truth" + sfx) is not None]
+        if sized:
+            forms = [r for r in sized if r["kind"] in FORMS]
+            out.append(f"{label:28s} cause size: 95 % interval covers the truth in "
+                       f"{sum(r['interval_covers_truth' + sfx] for r in sized)} of {len(sized)} "
+                       f"(forms {sum(r['interval_covers_truth' + sfx] for r in forms)} of {len(forms)}), "
+                       f"median half-width {100 * np.median([r['half_width' + sfx] for r in sized]):.2f} %")
+        pulls = np.array([r["base_pulls" + sfx] for r in rows if r.get("base_pulls" + sfx)])
+        if pulls.size:
+            cover = np.abs(pulls) < 1.959964
+            sd = np.array([r["base_sd" + sfx] for r in rows if r.get("base_pulls" + sfx)])
+            out.append(f"{label:28s} F_s, x_s, n, m: 95 % intervals cover the truth in {cover.sum()} of "
+                       f"{cover.size} ({100 * cover.mean():.1f} %); pulls rms " + ", ".join(
+                           f"{k} {v:.2f}" for k, v in zip(("F_s", "x_s", "n", "m"), np.sqrt((pulls ** 2).mean(axis=0))))
+                       + "; median standard error (relative; n absolute) " + ", ".join(
+                           f"{k} {v:.2g}" for k, v in zip(("F_s", "x_s", "n", "m"), np.median(sd, axis=0))))
+    return out
 
 
 def issue16_rates(rows: list[dict]) -> list[str]:
@@ -183,7 +377,8 @@ def issue16_rates(rows: list[dict]) -> list[str]:
         rs = [r for r in forms if r["kind"] == kind]
         if rs:
             lines.append(f"  {FORMS[kind]:28s} named {sum(r['detected'] for r in rs)}/{len(rs)}, interval covers the "
-                         f"truth {sum(bool(r.get('interval_covers_truth')) for r in rs)}/{len(rs)}")
+                         f"truth {sum(bool(r.get('interval_covers_truth')) for r in rs)}/{len(rs)} (Jacobian only: "
+                         f"{sum(bool(r.get('interval_covers_truth_jacobian')) for r in rs)}/{len(rs)})")
     ta = np.array([r["t_analysis_s"] for r in rows])
     lines.append(f"{'time per case (analysis)':45s} median {np.median(ta):.1f} s, max {ta.max():.1f} s   "
                  f"bar median <= 15 s, max <= 30 s (90 steps, one core)")
@@ -193,7 +388,10 @@ def issue16_rates(rows: list[dict]) -> list[str]:
 def _progress(row: dict) -> dict:
     """Print a case's outcome as it arrives (stderr), pass the row on."""
     print(f"case {row['seed']:3d} {row['kind']:28s} n={row['n']:.2f} named={','.join(row['named']) or '-':30s} "
-          f"unexplained={row['unexplained']!s:5s} analysis {row['t_analysis_s']:.1f} s", file=sys.stderr, flush=True)
+          f"unexplained={row['unexplained']!s:5s} analysis {row['t_analysis_s']:.1f} s"
+          + (f" generation {row['t_generate_s']:.0f} s artefacts={','.join(row['artefacts']) or '-'}"
+             if "artefacts" in row else "") + (f" FAILED {row['failed']}" if row.get("failed") else ""),
+          file=sys.stderr, flush=True)
     return row
 
 
@@ -204,18 +402,29 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--scheduler", help="run the cases on this dask scheduler (tcp://host:port)")
     ap.add_argument("--json", help="write the rows here")
+    ap.add_argument("--source", choices=("plant", "independent"), default="plant",
+                    help="the RK4 plant (sim/) or the independent solve_ivp simulator via UFF58")
+    ap.add_argument("--levels", type=int, default=5, help="independent source: force levels")
+    ap.add_argument("--freqs", type=int, default=18, help="independent source: frequencies per level")
+    ap.add_argument("--cache", help="independent source: keep the UFF58 files here (and reuse them)")
     args = ap.parse_args(argv)
     seeds = range(args.first, args.first + args.cases)
+    if args.source == "independent":
+        from functools import partial
+        case_fn = partial(run_independent_case, levels=args.levels, freqs=args.freqs, cache=args.cache)
+    else:
+        case_fn = run_case
     t0 = time.perf_counter()
     if args.workers > 1 or args.scheduler:
         from bench.studies import map_cases  # the study engine: local cores or a dask cluster
         def done(i, total, label):
             print(f"{label}: {i}/{total} cases done, {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
-        rows = [_progress(r) for r in map_cases(run_case, list(seeds), scheduler=args.scheduler,
+        rows = [_progress(r) for r in map_cases(case_fn, list(seeds), scheduler=args.scheduler,
                                                   workers=args.workers, progress=done)]
     else:
-        rows = list(map(_progress, map(run_case, seeds)))
-    print(f"bench_analysis: {args.cases} cases in {time.perf_counter() - t0:.0f} s ({args.workers} worker(s))")
+        rows = list(map(_progress, map(case_fn, seeds)))
+    print(f"bench_analysis ({args.source}): {args.cases} cases in {time.perf_counter() - t0:.0f} s "
+          f"({args.workers} worker(s))")
     print(summarise(rows))
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))

@@ -51,28 +51,69 @@ class MasingCarriage:
 
 def simulate_level(n: float, gamma0: float, betas, periods_settle: int, periods_measure: int,
                    samples_per_unit_time: float, rtol: float = 1e-10, cubic: float = 0.0, quadratic: float = 0.0,
-                   asymmetry: float = 0.0):
+                   asymmetry: float = 0.0, viscous: float = 0.0, spring: float = 0.0, speed: float = 0.0,
+                   delay: float = 0.0, pitch: tuple[float, float, float, float] | None = None,
+                   settle_first: int | None = None):
     """Up-sweep through frequency ratios ``betas`` at force gamma0 (dimensionless).
-    Yields per step (t', u, u'', force) sampled over the measured periods at a fixed rate.
+    Yields per step (t', u, a, force) sampled over the measured periods at a fixed rate:
+    u the displacement probe, a the accelerometer (both dimensionless).
 
-    Forms outside the Masing model (dimensionless, 0 = off): a spring ``cubic`` u^3, a
-    damping ``quadratic`` u'|u'|, and friction higher one way, F (1 + ``asymmetry`` sign F)."""
+    Effects outside the Masing model (dimensionless, 0 = off), written from the plant's
+    documented equations (docs/decisions/0013, 0023), not from its code:
+
+    - a spring ``cubic`` u^3 and ``spring`` u, a damping ``quadratic`` u'|u'| and ``viscous`` u';
+    - friction higher one way, F (1 + ``asymmetry`` sign F), and faster,
+      F (1 + ``speed`` |u'|) (``speed`` = alpha x_s omega_s / v_ref);
+    - ``delay``: the probe reads u(t' - delay);
+    - ``pitch`` = (a, r, kappa, zeta): a pitching column, a = m h^2 / J, r = e / h,
+      kappa = k_th / (J omega_s^2), zeta = c_th / (J omega_s); with phi = th h / x_s
+
+          u'' + r phi'' = P - F_total,   a r u'' + phi'' = a P - kappa phi - zeta phi',
+
+      and the accelerometer (at the drive height) reads u'' + phi''.
+
+    ``settle_first``: settle periods of the first step (from rest; default ``periods_settle``)."""
     car = MasingCarriage(n)
 
     def total(u, v):
         F = car.force(u)
-        return F * (1.0 + asymmetry * math.copysign(1.0, F)) + cubic * u ** 3 + quadratic * v * abs(v)
-    y = np.array([0.0, 0.0])
+        return (F * (1.0 + asymmetry * math.copysign(1.0, F)) * (1.0 + speed * abs(v)) + cubic * u ** 3
+                + quadratic * v * abs(v) + viscous * v + spring * u)
+
+    if pitch is None:
+        y = np.array([0.0, 0.0])
+    else:
+        a_c, r_c, kappa, zeta = pitch
+        det = 1.0 - a_c * r_c * r_c
+        if not det > 0:
+            raise ValueError(f"pitch: J must exceed m e^2 (a r^2 = {a_c * r_c * r_c:.3g} >= 1)")
+        y = np.array([0.0, 0.0, 0.0, 0.0])
+
+    def accelerations(P, yy):
+        """(u'', accelerometer) at drive force P."""
+        if pitch is None:
+            acc = P - total(yy[0], yy[1])
+            return acc, acc
+        f1 = P - total(yy[0], yy[1])
+        f2 = a_c * P - kappa * yy[2] - zeta * yy[3]
+        uu = (f1 - r_c * f2) / det
+        pp = (f2 - a_c * r_c * f1) / det
+        return uu, uu + pp
+
     t = 0.0
     phase = 0.0
-    for beta in betas:
+    for i_step, beta in enumerate(betas):
         T = 2 * math.pi / beta
         t_start = t
         ph0 = phase
+        settle = periods_settle if i_step or settle_first is None else settle_first
 
         def rhs(tt, yy):
             P = gamma0 * math.sin(beta * (tt - t_start) + ph0)
-            return [yy[1], P - total(yy[0], yy[1])]
+            uu, acc = accelerations(P, yy)
+            if pitch is None:
+                return [yy[1], uu]
+            return [yy[1], uu, yy[3], acc - uu]
 
         def ev_rev(tt, yy):
             return yy[1]
@@ -84,29 +125,34 @@ def simulate_level(n: float, gamma0: float, betas, periods_settle: int, periods_
         ev_close.terminal = True
         ev_close.direction = 1
 
-        t_end = t_start + (periods_settle + periods_measure) * T
-        t_meas = t_start + periods_settle * T
+        t_end = t_start + (settle + periods_measure) * T
+        t_meas = t_start + settle * T
         dt = 1.0 / samples_per_unit_time
         grid = t_meas + dt * np.arange(int(periods_measure * T / dt))
+        # what each sample time needs: the drive-side records at grid, the probe at grid - delay
+        grids = (grid, grid - delay)
+        a_s = np.empty(grid.size)
         u_s = np.empty(grid.size)
-        v_s = np.empty(grid.size)
-        f_s = np.empty(grid.size)
-        j = 0
+        jj = [0, 0]
         while t < t_end - 1e-12:
             ev_rev.direction = -car.d if car.d != 0 else 0
             sol = solve_ivp(rhs, (t, t_end), y, method="DOP853", rtol=rtol, atol=1e-12,
                             events=(ev_rev, ev_close), dense_output=True)
             t_stop = sol.t[-1]
             # sample the piece (the branch is fixed over it)
-            k = j
-            while k < grid.size and grid[k] <= t_stop:
-                k += 1
-            if k > j:
-                yy = sol.sol(grid[j:k])
-                u_s[j:k] = yy[0]
-                v_s[j:k] = yy[1]
-                f_s[j:k] = [total(u, v) for u, v in zip(yy[0], yy[1])]
-                j = k
+            for g_i, (g, out) in enumerate(zip(grids, (a_s, u_s))):
+                j = jj[g_i]
+                k = j
+                while k < g.size and g[k] <= t_stop:
+                    k += 1
+                if k > j:
+                    yy = sol.sol(g[j:k])
+                    if g_i == 0:
+                        P_k = gamma0 * np.sin(beta * (g[j:k] - t_start) + ph0)
+                        out[j:k] = [accelerations(P, col)[1] for P, col in zip(P_k, yy.T)]
+                    else:
+                        out[j:k] = yy[0]
+                    jj[g_i] = k
             y = sol.y[:, -1].copy()
             t = t_stop
             if sol.status == 1:
@@ -126,30 +172,51 @@ def simulate_level(n: float, gamma0: float, betas, periods_settle: int, periods_
                 car.d = 1.0 if rhs(t, y)[1] >= 0 else -1.0
         phase = (ph0 + beta * (t_end - t_start)) % (2 * math.pi)
         P = gamma0 * np.sin(beta * (grid - t_start) + ph0)
-        yield grid, u_s[:j], P[:j] - f_s[:j], P[:j]
+        j = min(jj)
+        yield grid[:j], u_s[:j], a_s[:j], P[:j]
 
 
 def generate_uff(path, F_s_N, x_s_m, n, mass_kg, levels_N, freqs_Hz, *, fs_Hz=None, settle=25, measure=8,
                  noise=(0.003, 0.005, 0.002), seed=0, cubic_N_per_m3=0.0, quadratic_N_s2_per_m2=0.0,
-                 asymmetry=0.0):
+                 asymmetry=0.0, viscous_N_s_per_m=0.0, spring_N_per_m=0.0, friction_alpha=0.0,
+                 friction_v_ref_m_per_s=1.0, disp_delay_s=0.0, disp_gain_error=0.0, pitch=None,
+                 line_Hz=0.0, line_m=0.0, rtol=1e-10, settle_first=None):
     """Simulate the up-sweeps and write them to ``path`` as UFF58 (no tags). Returns the
-    number of steps written.  Optional forms in SI: k3 x^3, c2 v|v|, friction asymmetry a."""
+    number of steps written.  Effects in SI (0 = off): forms k3 x^3, c2 v|v|, friction
+    asymmetry a; catalog c v, k x, friction F (1 + alpha |v| / v_ref), the probe delayed by
+    ``disp_delay_s`` and scaled by 1 + ``disp_gain_error``, ``pitch`` = dict(J, k_th, c_th,
+    h, e) (kg m^2, N m/rad, N m s/rad, m, m; equations in :func:`simulate_level`).
+    Artefacts: a line of ``line_m`` (amplitude) at ``line_Hz`` on the probe, on the
+    simulation's own clock (not locked to the drive); a short ``settle`` leaves the
+    transient of each frequency change in the record (``settle_first``: of the first step of
+    each level, which starts from rest)."""
     import pyuff
 
     rng = np.random.default_rng(seed)
     w_s = math.sqrt(F_s_N / (x_s_m * mass_kg))
     fs = fs_Hz or 128.0 * max(freqs_Hz) * 1.037       # not a multiple of any step frequency
+    v_unit = x_s_m * w_s
+    effects = dict(cubic=cubic_N_per_m3 * x_s_m ** 3 / F_s_N,
+                   quadratic=quadratic_N_s2_per_m2 * v_unit ** 2 / F_s_N, asymmetry=asymmetry,
+                   viscous=viscous_N_s_per_m * v_unit / F_s_N, spring=spring_N_per_m * x_s_m / F_s_N,
+                   speed=friction_alpha * v_unit / friction_v_ref_m_per_s, delay=disp_delay_s * w_s)
+    if pitch:
+        J, h = pitch["J"], pitch["h"]
+        effects["pitch"] = (mass_kg * h * h / J, pitch["e"] / h, pitch["k_th"] / (J * w_s ** 2),
+                            pitch["c_th"] / (J * w_s))
+    line_phase = rng.uniform(0, 2 * math.pi)
     sets = []
     case = 0
     for level in levels_N:
         betas = [2 * math.pi * f / w_s for f in sorted(freqs_Hz)]
-        forms = dict(cubic=cubic_N_per_m3 * x_s_m ** 3 / F_s_N,
-                     quadratic=quadratic_N_s2_per_m2 * (x_s_m * w_s) ** 2 / F_s_N, asymmetry=asymmetry)
-        for _t, u, acc, P in simulate_level(n, level / F_s_N, betas, settle, measure, fs / w_s, **forms):
+        for t_dim, u, acc, P in simulate_level(n, level / F_s_N, betas, settle, measure, fs / w_s, rtol=rtol,
+                                               settle_first=settle_first, **effects):
             case += 1
             force = P * F_s_N
             accel = acc * F_s_N / mass_kg
-            disp = u * x_s_m
+            disp = u * x_s_m * (1.0 + disp_gain_error)
+            if line_m:
+                disp = disp + line_m * np.sin(2 * math.pi * line_Hz * t_dim / w_s + line_phase)
             force = force + noise[0] * F_s_N * rng.standard_normal(force.size)
             accel = accel + noise[1] * np.std(accel) * rng.standard_normal(accel.size)
             disp = disp + noise[2] * x_s_m * rng.standard_normal(disp.size)

@@ -20,7 +20,12 @@ fixed once per analysis (from the base fit), so the chi-square of every candidat
 BIC = chi2 + p ln N compare directly.  Intervals come from the Jacobian, scaled by the
 reduced chi-square when it is above 1.  The final model is refitted with
 :meth:`Weights.propagated`: the noise of its own residuals, and the mean the noise itself
-adds to them (decision records 0020, 0022).
+adds to them (decision records 0020, 0022); those weights also carry how each noise
+component moves every residual of its step, and the final fit's covariance is then the
+sandwich H^-1 J' Sigma J H^-1 with Sigma the whitened residuals' full noise covariance
+(decision record 0031): one noise component of a step (the probe's harmonic 3, say) moves
+the Masing friction residual at every harmonic of that step, so the residuals are
+correlated, which the Jacobian alone (Sigma = I) ignores.
 """
 
 from __future__ import annotations
@@ -55,6 +60,9 @@ class Weights:
     s_Kc: np.ndarray
     bias_F: np.ndarray | float = 0.0
     bias_K: np.ndarray | float = 0.0
+    # (components, 2, steps, K) complex: each noise component's effect on (r_F, r_K), weight
+    # folded in (their outer products summed over components are the residuals' covariance)
+    responses: np.ndarray | None = None
 
     @classmethod
     def from_data(cls, d: Data, mass_kg: float, rel_floor: float = REL_FLOOR,
@@ -117,11 +125,13 @@ class Weights:
 
         acc = np.zeros((6,) + d.X.shape)      # var F re, im; var K re, im; cov re, im
         bias = np.zeros((2,) + d.X.shape, complex)
+        responses: list[np.ndarray] = []
 
         def add(gF, gK, bF, bK, w: float = 1.0) -> None:
             acc[:] += w * np.stack([gF.real ** 2, gF.imag ** 2, gK.real ** 2, gK.imag ** 2,
                                     gF.real * gK.real, gF.imag * gK.imag])
             bias[:] += w * np.stack([bF, bK])
+            responses.append(math.sqrt(w) * np.stack([gF, gK]))
         zero = np.zeros(Xf.shape, complex)
         for ch in ("P", "A", "X"):
             for j in range(min(K, Kf)):
@@ -143,11 +153,28 @@ class Weights:
         var_F = np.maximum(acc[:2], tiny)
         var_K = np.maximum(acc[2:4], tiny)
         c = acc[4:]
-        return cls(np.sqrt(var_F), c, np.sqrt(np.maximum(var_K - c ** 2 / var_F, 1e-6 * var_K)), *bias)
+        return cls(np.sqrt(var_F), c, np.sqrt(np.maximum(var_K - c ** 2 / var_F, 1e-6 * var_K)), bias[0], bias[1],
+                   responses=np.array(responses))
 
     def subset(self, mask: np.ndarray) -> Weights:
         pick = lambda b: b[mask] if np.ndim(b) else b       # noqa: E731
-        return Weights(self.s_F[:, mask], self.c[:, mask], self.s_Kc[:, mask], pick(self.bias_F), pick(self.bias_K))
+        return Weights(self.s_F[:, mask], self.c[:, mask], self.s_Kc[:, mask], pick(self.bias_F), pick(self.bias_K),
+                       None if self.responses is None else self.responses[:, :, mask])
+
+    def noise_scores(self, jac: np.ndarray) -> np.ndarray | None:
+        """J' Sigma J of the whitened residuals (Sigma their noise covariance, from
+        ``responses``; steps independent of each other), or None without responses."""
+        if self.responses is None:
+            return None
+        R, _, S, K = self.responses.shape
+        J4 = jac.reshape(4, S, K, -1)
+        M = np.zeros((jac.shape[1], jac.shape[1]))
+        for gF, gK in self.responses:
+            wF, wK = self.whiten(gF, gK, bias=False)
+            w4 = np.stack([wF.real, wF.imag, wK.real, wK.imag])
+            U = np.einsum("bskp,bsk->sp", J4, w4)          # per step: its residuals' score
+            M += U.T @ U
+        return M
 
     def whiten(self, rF: np.ndarray, rK: np.ndarray, bias: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Whitened residuals; ``bias=False`` for a change of the residuals (linear part only)."""
@@ -168,6 +195,7 @@ class Fit:
     n_data: int                  # real numbers in the residual
     jac: np.ndarray | None = None       # whitened residuals' Jacobian at theta (the screen's projection)
     resid: np.ndarray | None = None     # whitened residuals at theta
+    cov_jacobian: np.ndarray | None = None   # with a sandwich ``cov``: the Jacobian's alone (for comparison)
 
     @property
     def dof(self) -> int:
@@ -229,5 +257,11 @@ def fit(model: Model, theta0: np.ndarray, d: Data, W: Weights, max_nfev: int = 1
     chi2 = float(res.fun @ res.fun)
     _, sv, Vt = np.linalg.svd(res.jac, full_matrices=False)
     sv = np.maximum(sv, sv.max() * 1e-12)
-    cov = (Vt.T / sv ** 2) @ Vt * max(chi2 / max(1, res.fun.size - model.size), 1.0)
-    return Fit(model, res.x, cov, chi2, res.fun.size, res.jac, res.fun)
+    phi = max(chi2 / max(1, res.fun.size - model.size), 1.0)
+    H_inv = (Vt.T / sv ** 2) @ Vt
+    cov = H_inv * phi
+    M = W.noise_scores(res.jac)
+    if M is None:
+        return Fit(model, res.x, cov, chi2, res.fun.size, res.jac, res.fun)
+    sandwich = H_inv @ M @ H_inv * phi
+    return Fit(model, res.x, sandwich, chi2, res.fun.size, res.jac, res.fun, cov_jacobian=cov)

@@ -315,12 +315,18 @@ def widen(f: Fit, s: dict, thetas: list) -> tuple[Fit, float]:
     to a standard error."""
     worst = max([s["reduced_chi2"]] + s["by_harmonic"] + s["by_level"] + s["by_frequency_band"])
     factor = math.sqrt(max(1.0, worst / max(1.0, s["reduced_chi2"])))
-    sd = np.sqrt(np.maximum(np.diag(f.cov), 0.0)) * factor
+    jack = None
     if len(thetas) >= 2:
         T = np.array(thetas)
         L = T.shape[0]
         jack = np.sqrt((L - 1) / L * ((T - T.mean(axis=0)) ** 2).sum(axis=0))
-        sd = np.maximum(sd, jack)
-    base_sd = np.sqrt(np.maximum(np.diag(f.cov), 1e-300))
-    D = sd / base_sd
-    return replace(f, cov=f.cov * np.outer(D, D)), float(D.max())
+
+    def widened(cov: np.ndarray) -> tuple[np.ndarray, float]:
+        sd = np.sqrt(np.maximum(np.diag(cov), 0.0)) * factor
+        if jack is not None:
+            sd = np.maximum(sd, jack)
+        D = sd / np.sqrt(np.maximum(np.diag(cov), 1e-300))
+        return cov * np.outer(D, D), float(D.max())
+    cov, inflation = widened(f.cov)
+    cov_j = None if f.cov_jacobian is None else widened(f.cov_jacobian)[0]
+    return replace(f, cov=cov, cov_jacobian=cov_j), inflation
