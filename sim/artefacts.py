@@ -238,9 +238,23 @@ def find_dropouts(ch: str, x: np.ndarray, fs: float, f: float, clipped: list[Art
     if runs[0][1] == n:
         return [Artefact("dropout", ch, float(x[0]), "rejected", time_s=0.0, duration_s=n / fs,
                          evidence="the channel holds one value over the whole record")]
-    log_chance, dev, noise, q = natural_run_chance(x, fs, f, runs)
+    # a long hold far from the signal pulls the fitted harmonics (and the noise) with it, which
+    # makes natural runs elsewhere look unlikely: the fit is made again with the runs found held
+    # bridged by a straight line between the samples either side, until the runs found stop changing
     limit = math.log(DROPOUT_FALSE_ALARM / n)
-    bad = [(run, lc, d) for run, lc, d in zip(runs, log_chance, dev) if lc < limit]
+    fill, found = x, None
+    for _ in range(4):
+        log_chance, dev, noise, q = natural_run_chance(x, fs, f, runs, fill)
+        held = [i for i, lc in enumerate(log_chance) if lc < limit]
+        if held == found or not held:
+            break
+        mask = np.zeros(n, bool)
+        for i in held:
+            mask[runs[i][0]:runs[i][0] + runs[i][1]] = True
+        idx = np.arange(n)
+        found, fill = held, x.copy()
+        fill[mask] = np.interp(idx[mask], idx[~mask], x[~mask])
+    bad = [(runs[i], log_chance[i], dev[i]) for i in held]
     if not bad:
         return []
     (s0, n0), lc0, d0 = bad[0]
@@ -254,10 +268,11 @@ def find_dropouts(ch: str, x: np.ndarray, fs: float, f: float, clipped: list[Art
                               f"(limit {DROPOUT_FALSE_ALARM:g} per record)")]
 
 
-def natural_run_chance(x: np.ndarray, fs: float, f: float, runs: list[tuple[int, int]]
-                       ) -> tuple[np.ndarray, np.ndarray, float, float]:
+def natural_run_chance(x: np.ndarray, fs: float, f: float, runs: list[tuple[int, int]],
+                       fit_to: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float, float]:
     """For each (start, length) run of identical samples of ``x``: the log of the probability
-    that the signal itself made it, and how far the signal was from the held value.
+    that the signal itself made it and how far the signal was from the held value; then the
+    noise s_n and the quantum.  The signal is the periodic fit to ``fit_to`` (default ``x``).
 
     Sample i of a record quantised with step q (the smallest step between its values) is
     Q(m_i + e_i): m the signal, e Gaussian noise of rms s_n.  Given the first sample c of a
@@ -270,7 +285,7 @@ def natural_run_chance(x: np.ndarray, fs: float, f: float, runs: list[tuple[int,
     holds the quantisation error too).  The runs themselves are left out of s."""
     n = x.size
     q = _quantum(x)
-    m = _periodic_part(x, fs, f)
+    m = _periodic_part(x if fit_to is None else fit_to, fs, f)
     keep = np.ones(n, bool)
     for s_, L in runs:
         keep[s_:s_ + L] = False
