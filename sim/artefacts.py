@@ -292,7 +292,7 @@ def natural_run_chance(x: np.ndarray, fs: float, f: float, runs: list[tuple[int,
     r = (x - m)[keep]
     s_tot = math.sqrt(float(np.mean(r * r))) if r.size else 0.0
     s_n = math.sqrt(max(s_tot ** 2 - q * q / 12.0, 0.0))
-    s_m = s_tot / math.sqrt(max(1, int(math.floor(n * f / fs + 1e-9))))
+    s_m = s_tot / math.sqrt(max(1, int(math.floor(n * f / fs + 1e-9))))     # the fit's error
     sig = math.hypot(s_n, s_m)
     z = np.linspace(-6.0, 6.0, 49) if s_m > 0 else np.zeros(1)
     log_w = -0.5 * z * z - logsumexp(-0.5 * z * z)
@@ -307,6 +307,20 @@ def natural_run_chance(x: np.ndarray, fs: float, f: float, runs: list[tuple[int,
             log_p = ln_hi + np.log(-np.expm1(log_ndtr(lo) - ln_hi))
     else:
         log_p = np.where(np.abs(dd) <= 0.5 * q * (1 + 1e-9), 0.0, -np.inf)
+    periods = int(math.floor(n * f / fs + 1e-9))
+    spp = int(round(fs / f)) if abs(fs / f - round(fs / f)) * periods < 0.02 else 0
+    if spp:
+        # samples at the drive's phases: where the fit (the mean period) is within a quantum of
+        # the held value, the other periods show how often that sample had it (rule of
+        # succession).  The mean of quantised samples is not the signal where the noise is below
+        # the quantum: near a step between two levels it lies between them.
+        i = np.concatenate([np.arange(s_ + 1, s_ + L) for s_, L in runs])
+        c = np.concatenate([np.full(L - 1, x[s_]) for s_, L in runs])
+        same = x[:periods * spp].reshape(periods, spp)[:, i % spp] == c        # (periods, samples)
+        own = i // spp < periods
+        count = same.sum(axis=0) - own * same[np.minimum(i // spp, periods - 1), np.arange(i.size)]
+        share = np.log((count + 1.0) / (periods - own + 2.0))
+        log_p = np.where(np.abs(d) < q, np.maximum(log_p, share), log_p)
     starts = np.cumsum([0] + [L - 1 for _, L in runs[:-1]])
     log_run = np.add.reduceat(log_p, starts, axis=1)                  # (nodes, runs)
     dev = np.maximum.reduceat(np.abs(d), starts)

@@ -312,11 +312,16 @@ def _runs_of_equal(x, at_least):
     return [(s, e - s + 1) for s, e in zip(d[::2], d[1::2]) if e - s + 1 >= at_least]
 
 
-def test_a_quantised_slow_sine_with_long_runs_at_its_turning_points_gives_no_dropout():
+@pytest.mark.parametrize("f, noise_q, periods", [(6.0, 0.2, 8),      # 4266.7 samples per period
+                                                 (6.25, 0.05, 12)])  # 4096, as the bench's DAQ: a mean period
+def test_a_quantised_slow_sine_with_long_runs_at_its_turning_points_gives_no_dropout(f, noise_q, periods):
     """The repeat-rate rule (runs geometric, with the record's share of repeats) named these
-    runs drop-outs on all three channels; they are the signal's own (decision 0034)."""
-    fs, f = 25600.0, 6.0
-    clean, sig, quantum = quantised_slow_step()
+    runs drop-outs on all three channels; they are the signal's own (decision 0034).  With a
+    whole number of samples per period and noise far below the quantum, the mean period lies
+    between two levels where the signal crosses from one to the other: the fit alone would
+    call the crossing sample of a run unlikely."""
+    fs = 25600.0
+    clean, sig, quantum = quantised_slow_step(f=f, noise_q=noise_q, periods=periods)
     for ch in AMPS:
         long_runs = _runs_of_equal(sig[ch], 8)
         assert len(long_runs) >= 10, ch
