@@ -331,12 +331,13 @@ def test_a_quantised_slow_sine_with_long_runs_at_its_turning_points_gives_no_dro
     assert not of_kind(q, "dropout") and q.status != "rejected", q.reason
 
 
+@pytest.mark.parametrize("f", [6.0, 6.25])
 @pytest.mark.parametrize("where, length", [("fast", 4), ("slow", 8)])
-def test_a_short_hold_where_the_quantised_signal_moves_is_a_dropout_with_its_time_and_length(where, length):
+def test_a_short_hold_where_the_quantised_signal_moves_is_a_dropout_with_its_time_and_length(where, length, f):
     """Held where the force moves fastest (about 12 quanta per sample) or where it moves at
     a tenth of that (near a turning point, 8 samples: about 10 quanta)."""
-    fs, f = 25600.0, 6.0
-    clean, sig, quantum = quantised_slow_step()
+    fs = 25600.0
+    clean, sig, quantum = quantised_slow_step(f=f)
     slope = np.abs(np.diff(clean["force"])) / quantum["force"]
     third = slice(int(2 * fs / f), int(3 * fs / f))
     cand = np.flatnonzero(slope[third] > 0.9 * slope.max()) if where == "fast" else \
