@@ -294,7 +294,7 @@ def natural_run_chance(x: np.ndarray, fs: float, f: float, runs: list[tuple[int,
     s_n = math.sqrt(max(s_tot ** 2 - q * q / 12.0, 0.0))
     s_m = s_tot / math.sqrt(max(1, int(math.floor(n * f / fs + 1e-9))))     # the fit's error
     sig = math.hypot(s_n, s_m)
-    z = np.linspace(-6.0, 6.0, 49) if s_m > 0 else np.zeros(1)
+    z = np.linspace(-6.0, 6.0, 25) if s_m > 0 else np.zeros(1)
     log_w = -0.5 * z * z - logsumexp(-0.5 * z * z)
     d = np.concatenate([m[s_ + 1:s_ + L] - x[s_] for s_, L in runs])     # signal - held value, after the first
     dd = d[None, :] + s_m * z[:, None]
