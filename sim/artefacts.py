@@ -9,8 +9,11 @@ channel).  Per channel (force, accel, disp), on the raw samples:
 
 - **clipping**: samples piled up at the record's extreme value (a flat top at the
   range); rejects the step (the harmonics of a clipped record are wrong).
-- **drop-out**: a run of identical samples (held value or zeros) longer than the
-  channel's own quantisation makes likely (probability < 1e-4 per record); rejects.
+- **drop-out**: a run of identical samples (held value or zeros) the signal could not have
+  made: the chance that noise and quantisation put every sample of the run on the held
+  value, where the periodic fit says the signal was, is below 1e-4 per record; rejects.
+  Runs cluster where a quantised signal is slow (its turning points): those are its own
+  (decision record 0034).
 
 Then, on the residual of the periodic fit (offset and every harmonic of the drive below
 Nyquist, :mod:`sim.records`):
