@@ -254,6 +254,8 @@ def find_dropouts(ch: str, x: np.ndarray, fs: float, f: float, clipped: list[Art
         mask = np.zeros(n, bool)
         for i in held:
             mask[runs[i][0]:runs[i][0] + runs[i][1]] = True
+        if mask.all():
+            break
         idx = np.arange(n)
         found, fill = held, x.copy()
         fill[mask] = np.interp(idx[mask], idx[~mask], x[~mask])
@@ -268,7 +270,7 @@ def find_dropouts(ch: str, x: np.ndarray, fs: float, f: float, clipped: list[Art
                               f"{max(L for (_, L), _, _ in bad)}; during the first the signal (periodic fit) was up "
                               f"to {si(d0, UNIT[ch])} from the held value, against a noise of {si(noise, UNIT[ch])} "
                               f"and a quantum of {si(q, UNIT[ch])}: a chance of {chance} "
-                              f"(limit {DROPOUT_FALSE_ALARM:g} per record)")]
+                              f"(limit {DROPOUT_FALSE_ALARM / n:.1g} a run, {DROPOUT_FALSE_ALARM:g} per record)")]
 
 
 def natural_run_chance(x: np.ndarray, fs: float, f: float, runs: list[tuple[int, int]],
@@ -285,7 +287,10 @@ def natural_run_chance(x: np.ndarray, fs: float, f: float, runs: list[tuple[int,
     :mod:`sim.records` fits them), whose error s_m = s / sqrt(periods) (s the residual rms)
     is integrated over as an offset shared by the run's samples (a normal law) and also
     added to the noise sample by sample; s_n^2 = s^2 - q^2 / 12 (Sheppard: the residual
-    holds the quantisation error too).  The runs themselves are left out of s."""
+    holds the quantisation error too).  The runs themselves are left out of s.  With a whole
+    number of samples per period, where the fit is within a quantum of the held value, the
+    share of the other periods in which the sample had that value ((k + 1) / (P - 1 + 2)) is
+    used when it is larger: the mean of quantised samples is not the signal there."""
     n = x.size
     q = _quantum(x)
     m = _periodic_part(x if fit_to is None else fit_to, fs, f)
@@ -312,7 +317,7 @@ def natural_run_chance(x: np.ndarray, fs: float, f: float, runs: list[tuple[int,
         log_p = np.where(np.abs(dd) <= 0.5 * q * (1 + 1e-9), 0.0, -np.inf)
     periods = int(math.floor(n * f / fs + 1e-9))
     spp = int(round(fs / f)) if abs(fs / f - round(fs / f)) * periods < 0.02 else 0
-    if spp:
+    if spp and periods >= 2:
         # samples at the drive's phases: where the fit (the mean period) is within a quantum of
         # the held value, the other periods show how often that sample had it (rule of
         # succession).  The mean of quantised samples is not the signal where the noise is below
