@@ -16,11 +16,20 @@ none:
 - ``drift``: a linear offset drift of 20-100 x the noise's standard error on one channel;
 - ``clean``: nothing (the false-alarm check).
 
+``--quantised N`` adds N clean steps and N drop-out steps (kinds ``clean-q`` and
+``dropout-q``) quantised as an ADC does at a realistic resolution: a slow drive (3-30 Hz,
+400-10000 samples per period), a 12-, 14- or 16-bit converter whose range is 1.05-3 x the
+signal's peak, noise 0.05-3 quanta rms (where the old repeat-rate rule named the natural
+runs at the turning points drop-outs; decision record 0034).  A held value at a turning
+point that stays within one quantum of the signal is not a drop-out any test can see:
+``dropout-q`` prints how far the signal moved under each missed hold.
+
 Prints, per kind, the detection rate (the right kind on the right channel; a line's
 frequency within 0.1 % and amplitude within 10 %; a transient's decay rate within 25 %),
-other artefacts reported (false alarms) and the time per step.
+other artefacts reported (false alarms; how many of them are drop-outs) and the time per
+step.
 
-    python benchmarks/bench_artefacts.py [--cases 60] [--first 0] [--json out.json]
+    python benchmarks/bench_artefacts.py [--cases 60] [--first 0] [--quantised 0] [--json out.json]
 """
 
 from __future__ import annotations
@@ -121,12 +130,47 @@ def make_step(seed: int, kind: str | None = None):
     return sig, fs, f, kind, truth
 
 
-def run_case(seed: int) -> dict:
-    sig, fs, f, kind, truth = make_step(seed)
+def make_quantised(seed: int, dropout: bool):
+    """(records, fs, f, kind, truth) of a clean (or drop-out) step quantised at a realistic
+    ADC resolution, with a slow drive: many samples per period (module doc)."""
+    rng = np.random.default_rng(10_000 + seed)
+    f = float(np.exp(rng.uniform(np.log(3), np.log(30))))
+    fs = f * int(rng.integers(400, 10_000)) if rng.uniform() < 0.5 else float(rng.uniform(8000, 30000))
+    spp = fs / f
+    if not 400 <= spp <= 10_000:
+        fs = f * float(np.clip(spp, 400, 10_000))
+    periods = max(4, min(int(rng.integers(8, 31)), int(60_000 * f / fs)))
+    n = int(periods * fs / f)
+    t = np.arange(n) / fs
+    k = np.arange(1, 40, 2)
+    k = k[k * f < 0.45 * fs]
+    sig, quantum, clean = {}, {}, {}
+    for ch in CHANNELS:
+        amps = SCALE[ch] / k ** 2 * rng.uniform(0.5, 1.0, k.size)
+        y = np.sin(2 * np.pi * f * np.outer(t, k) + rng.uniform(0, 2 * np.pi, k.size)) @ amps
+        q = 2 * rng.uniform(1.05, 3.0) * np.max(np.abs(y)) / 2 ** int(rng.choice([12, 14, 16]))
+        noise = q * float(np.exp(rng.uniform(np.log(0.05), np.log(3.0))))
+        sig[ch] = np.round((y + noise * rng.standard_normal(n)) / q) * q
+        quantum[ch], clean[ch] = q, y
+    truth: dict = {}
+    if dropout:
+        ch = str(rng.choice(CHANNELS))
+        i0, m = int(rng.integers(0, n - 60)), int(rng.integers(10, 61))
+        held = 0.0 if rng.uniform() < 0.5 else float(sig[ch][i0])
+        # how far the signal itself moved under the hold, and how far it was from the held value, in quanta
+        under = clean[ch][i0:i0 + m]
+        truth = dict(channel=ch, start=i0, length=m, held=held, moved=float(np.ptp(under)) / quantum[ch],
+                     away=float(np.max(np.abs(under - held))) / quantum[ch])
+        sig[ch][i0:i0 + m] = held
+    return sig, fs, f, "dropout-q" if dropout else "clean-q", truth
+
+
+def run_case(seed: int, quantised: str = "") -> dict:
+    sig, fs, f, kind, truth = make_quantised(seed, quantised == "dropout") if quantised else make_step(seed)
     t0 = time.perf_counter()
     q = assess_step(sig["force"], sig["accel"], sig["disp"], fs, f).quality
     dt = time.perf_counter() - t0
-    want = EXPECT.get(kind)
+    want = EXPECT.get(kind.removesuffix("-q"))
     hit = False
     for a in q.artefacts:
         if a.kind != want or a.channel != truth.get("channel"):
@@ -144,8 +188,13 @@ def run_case(seed: int) -> dict:
     others = [f"{a.kind}@{a.channel}" for a in q.artefacts
               if not (a.kind == want and a.channel == truth.get("channel"))
               and not (kind == "transient" and a.kind == "unsettled_transient")]
-    return dict(seed=seed, kind=kind, detected=bool(hit), false_alarms=others, status=q.status, seconds=dt,
-                periods=int(len(sig["force"]) * f / fs))
+    row = dict(seed=seed, kind=kind, detected=bool(hit), false_alarms=others, status=q.status, seconds=dt,
+               periods=int(len(sig["force"]) * f / fs), spp=fs / f)
+    if kind == "dropout-q" and not hit:
+        row["note"] = (f"{truth['channel']} held {'at zero' if truth['held'] == 0 else ''} for {truth['length']} "
+                       f"samples at phase {(truth['start'] * f / fs) % 1:.3f}: the signal moved {truth['moved']:.2f} "
+                       f"quanta under it, at most {truth['away']:.2f} quanta from the held value")
+    return row
 
 
 def main(argv=None) -> int:
@@ -153,24 +202,28 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", type=int, default=60)
     ap.add_argument("--first", type=int, default=0)
     ap.add_argument("--json", type=Path)
+    ap.add_argument("--quantised", type=int, default=0,
+                    help="also this many clean-q and dropout-q steps (quantised ADC, slow drive)")
     ap.add_argument("--modes", type=int, default=0,
                     help="instead: this many slowly decaying modes (decision 0033), named a line or a vibration")
     args = ap.parse_args(argv)
     if args.modes:
         return modes(args.first, args.modes)
     rows = [run_case(s) for s in range(args.first, args.first + args.cases)]
-    print(f"{'kind':<10} {'cases':>5} {'detected':>9} {'with false alarms':>18}")
-    for kind in KINDS:
+    rows += [run_case(s, which) for s in range(args.first, args.first + args.quantised) for which in ("clean", "dropout")]
+    print(f"{'kind':<10} {'cases':>5} {'detected':>9} {'with false alarms':>18} {'of them a drop-out':>19}")
+    for kind in KINDS + ("clean-q", "dropout-q"):
         r = [x for x in rows if x["kind"] == kind]
         if not r:
             continue
-        det = "-" if kind == "clean" else f"{sum(x['detected'] for x in r)}/{len(r)}"
+        det = "-" if kind.startswith("clean") else f"{sum(x['detected'] for x in r)}/{len(r)}"
         fa = sum(bool(x["false_alarms"]) for x in r)
-        print(f"{kind:<10} {len(r):>5} {det:>9} {fa:>13}/{len(r)}")
+        fd = sum(any(a.startswith("dropout@") for a in x["false_alarms"]) for x in r)
+        print(f"{kind:<10} {len(r):>5} {det:>9} {fa:>13}/{len(r)} {fd:>14}/{len(r)}")
     for x in rows:
-        if (x["kind"] != "clean" and not x["detected"]) or x["false_alarms"]:
-            print(f"  seed {x['seed']} ({x['kind']}, {x['periods']} periods): detected={x['detected']} "
-                  f"other={x['false_alarms']}")
+        if (not x["kind"].startswith("clean") and not x["detected"]) or x["false_alarms"]:
+            print(f"  seed {x['seed']} ({x['kind']}, {x['periods']} periods of {x['spp']:.0f} samples): "
+                  f"detected={x['detected']} other={x['false_alarms']} {x.get('note', '')}")
     sec = [x["seconds"] for x in rows]
     print(f"time per step: median {np.median(sec):.3f} s, max {max(sec):.3f} s")
     if args.json:

@@ -9,8 +9,11 @@ channel).  Per channel (force, accel, disp), on the raw samples:
 
 - **clipping**: samples piled up at the record's extreme value (a flat top at the
   range); rejects the step (the harmonics of a clipped record are wrong).
-- **drop-out**: a run of identical samples (held value or zeros) longer than the
-  channel's own quantisation makes likely (probability < 1e-4 per record); rejects.
+- **drop-out**: a run of identical samples (held value or zeros) the signal could not have
+  made: the chance that noise and quantisation put every sample of the run on the held
+  value, where the periodic fit says the signal was, is below 1e-4 per record; rejects.
+  Runs cluster where a quantised signal is slow (its turning points): those are its own
+  (decision record 0034).
 
 Then, on the residual of the periodic fit (offset and every harmonic of the drive below
 Nyquist, :mod:`sim.records`):
@@ -61,6 +64,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.special import log_ndtr, logsumexp
 
 from .records import CHANNELS, PeriodicRecords, analyse_channel, analyse_records, checked_records
 
@@ -76,7 +80,8 @@ DECAY_Z = 6.0                 # a line's decay rate, in standard errors, above w
 DECAY_FRACTION = 0.8          # ... and its amplitude at the end / at the start below this
 ENVELOPE_Z = 10.0             # first block's residual power above the noise, in standard errors
 MIN_PERIODS = 4
-DROPOUT_FALSE_ALARM = 1e-4
+DROPOUT_FALSE_ALARM = 1e-4       # per record and channel
+DROPOUT_MIN_SAMPLES = 4          # shortest run of identical samples examined
 
 LABEL = {"force": "force sensor", "accel": "accelerometer", "disp": "displacement probe"}
 UNIT = {"force": "N", "accel": "m/s^2", "disp": "m"}
@@ -221,24 +226,113 @@ def _quantum(x: np.ndarray) -> float:
     return float(d.min()) if d.size else 0.0
 
 
-def find_dropouts(ch: str, x: np.ndarray, fs: float, clipped: list[Artefact]) -> list[Artefact]:
-    """Runs of identical samples longer than the record's own quantisation makes likely
-    (not at a clipping level); one artefact per channel: the first, with the count."""
-    same = np.diff(x) == 0
-    runs = _runs(same)                     # a run of r equal diffs = r + 1 equal samples
-    short = sum(r for _, r in runs if r < 8)
-    p0 = short / max(1, same.size)         # chance that a sample repeats the previous one
-    min_len = 4 if p0 <= 0 else max(4, math.ceil(1 + math.log(DROPOUT_FALSE_ALARM / x.size) / math.log(p0)))
+def find_dropouts(ch: str, x: np.ndarray, fs: float, f: float, clipped: list[Artefact]) -> list[Artefact]:
+    """Runs of at least ``DROPOUT_MIN_SAMPLES`` identical samples (not at a clipping level)
+    that the signal could not have made: their probability, given where the periodic fit
+    puts the signal during the run, its noise and the quantum (:func:`natural_run_chance`),
+    is below ``DROPOUT_FALSE_ALARM`` / samples.  One artefact per channel: the first, with
+    the count.  A record holding one value throughout is a drop-out over its whole length."""
+    n = x.size
     tol = 1e-9 * max(float(np.ptp(x)), 1e-300)
-    bad = [(s_, r + 1) for s_, r in runs
-           if r + 1 >= min_len and not any(abs(x[s_] - a.size) <= tol for a in clipped)]
+    runs = [(s_, r + 1) for s_, r in _runs(np.diff(x) == 0)          # r equal diffs = r + 1 equal samples
+            if r + 1 >= DROPOUT_MIN_SAMPLES and not any(abs(x[s_] - a.size) <= tol for a in clipped)]
+    if not runs:
+        return []
+    if runs[0][1] == n:
+        return [Artefact("dropout", ch, float(x[0]), "rejected", time_s=0.0, duration_s=n / fs,
+                         evidence="the channel holds one value over the whole record")]
+    # a long hold far from the signal pulls the fitted harmonics (and the noise) with it, which
+    # makes natural runs elsewhere look unlikely: the fit is made again with the runs found held
+    # bridged by a straight line between the samples either side, until the runs found stop changing
+    limit = math.log(DROPOUT_FALSE_ALARM / n)
+    fill, found = x, None
+    for _ in range(4):
+        log_chance, dev, noise, q = natural_run_chance(x, fs, f, runs, fill)
+        held = [i for i, lc in enumerate(log_chance) if lc < limit]
+        if held == found or not held:
+            break
+        mask = np.zeros(n, bool)
+        for i in held:
+            mask[runs[i][0]:runs[i][0] + runs[i][1]] = True
+        if mask.all():
+            break
+        idx = np.arange(n)
+        found, fill = held, x.copy()
+        fill[mask] = np.interp(idx[mask], idx[~mask], x[~mask])
+    bad = [(runs[i], log_chance[i], dev[i]) for i in held]
     if not bad:
         return []
-    s0, n0 = bad[0]
-    total = sum(n for _, n in bad)
+    (s0, n0), lc0, d0 = bad[0]
+    total = sum(L for (_, L), _, _ in bad)
+    chance = f"{math.exp(lc0):.1g}" if lc0 > -700 else f"1e{lc0 / math.log(10):.0f}"
     return [Artefact("dropout", ch, float(x[s0]), "rejected", time_s=s0 / fs, duration_s=n0 / fs,
                      evidence=f"{len(bad)} run(s) of identical samples, {total} samples in all, longest "
-                              f"{max(n for _, n in bad)}; {min_len} in a row are already unlikely in this record")]
+                              f"{max(L for (_, L), _, _ in bad)}; during the first the signal (periodic fit) was up "
+                              f"to {si(d0, UNIT[ch])} from the held value, against a noise of {si(noise, UNIT[ch])} "
+                              f"and a quantum of {si(q, UNIT[ch])}: a chance of {chance} "
+                              f"(limit {DROPOUT_FALSE_ALARM / n:.1g} a run, {DROPOUT_FALSE_ALARM:g} per record)")]
+
+
+def natural_run_chance(x: np.ndarray, fs: float, f: float, runs: list[tuple[int, int]],
+                       fit_to: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """For each (start, length) run of identical samples of ``x``: the log of the probability
+    that the signal itself made it and how far the signal was from the held value; then the
+    noise s_n and the quantum.  The signal is the periodic fit to ``fit_to`` (default ``x``).
+
+    Sample i of a record quantised with step q (the smallest step between its values) is
+    Q(m_i + e_i): m the signal, e Gaussian noise of rms s_n.  Given the first sample c of a
+    run, the next ones all equal c with probability prod_i P(|m_i + e_i - c| <= q/2) (the
+    noise of different samples is independent; the signal is not, which is why repeats
+    cluster where it is slow).  m is the periodic fit (offset and every harmonic, as
+    :mod:`sim.records` fits them), whose error s_m = s / sqrt(periods) (s the residual rms)
+    is integrated over as an offset shared by the run's samples (a normal law) and also
+    added to the noise sample by sample; s_n^2 = s^2 - q^2 / 12 (Sheppard: the residual
+    holds the quantisation error too).  The runs themselves are left out of s.  With a whole
+    number of samples per period, where the fit is within a quantum of the held value, the
+    share of the other periods in which the sample had that value ((k + 1) / (P - 1 + 2)) is
+    used when it is larger: the mean of quantised samples is not the signal there."""
+    n = x.size
+    q = _quantum(x)
+    m = _periodic_part(x if fit_to is None else fit_to, fs, f)
+    keep = np.ones(n, bool)
+    for s_, L in runs:
+        keep[s_:s_ + L] = False
+    r = (x - m)[keep]
+    s_tot = math.sqrt(float(np.mean(r * r))) if r.size else 0.0
+    s_n = math.sqrt(max(s_tot ** 2 - q * q / 12.0, 0.0))
+    s_m = s_tot / math.sqrt(max(1, int(math.floor(n * f / fs + 1e-9))))     # the fit's error
+    sig = math.hypot(s_n, s_m)
+    z = np.linspace(-6.0, 6.0, 25) if s_m > 0 else np.zeros(1)
+    log_w = -0.5 * z * z - logsumexp(-0.5 * z * z)
+    d = np.concatenate([m[s_ + 1:s_ + L] - x[s_] for s_, L in runs])     # signal - held value, after the first
+    dd = d[None, :] + s_m * z[:, None]
+    if sig > 0:
+        lo, hi = (-0.5 * q - dd) / sig, (0.5 * q - dd) / sig
+        flip = lo + hi > 0                       # keep to the lower tail, where log_ndtr is accurate
+        lo, hi = np.where(flip, -hi, lo), np.where(flip, -lo, hi)
+        ln_hi = log_ndtr(hi)
+        with np.errstate(divide="ignore"):
+            log_p = ln_hi + np.log(-np.expm1(log_ndtr(lo) - ln_hi))
+    else:
+        log_p = np.where(np.abs(dd) <= 0.5 * q * (1 + 1e-9), 0.0, -np.inf)
+    periods = int(math.floor(n * f / fs + 1e-9))
+    spp = int(round(fs / f)) if abs(fs / f - round(fs / f)) * periods < 0.02 else 0
+    if spp and periods >= 2:
+        # samples at the drive's phases: where the fit (the mean period) is within a quantum of
+        # the held value, the other periods show how often that sample had it (rule of
+        # succession).  The mean of quantised samples is not the signal where the noise is below
+        # the quantum: near a step between two levels it lies between them.
+        i = np.concatenate([np.arange(s_ + 1, s_ + L) for s_, L in runs])
+        c = np.concatenate([np.full(L - 1, x[s_]) for s_, L in runs])
+        same = x[:periods * spp].reshape(periods, spp)[:, i % spp] == c        # (periods, samples)
+        own = i // spp < periods
+        count = same.sum(axis=0) - own * same[np.minimum(i // spp, periods - 1), np.arange(i.size)]
+        share = np.log((count + 1.0) / (periods - own + 2.0))
+        log_p = np.where(np.abs(d) < q, np.maximum(log_p, share), log_p)
+    starts = np.cumsum([0] + [L - 1 for _, L in runs[:-1]])
+    log_run = np.add.reduceat(log_p, starts, axis=1)                  # (nodes, runs)
+    dev = np.maximum.reduceat(np.abs(d), starts)
+    return logsumexp(log_w[:, None] + log_run, axis=0), dev, s_n, q
 
 
 # ---------------------------------------------------------------------------- periodic part
@@ -603,7 +697,7 @@ def assess_step(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None
     q = StepQuality(freq_Hz=f, level_N=_fundamental(sig["force"], fs_Hz, f))
     for ch in CHANNELS:
         clip = find_clipping(ch, sig[ch], fs_Hz)
-        q.artefacts += clip + find_dropouts(ch, sig[ch], fs_Hz, clip)
+        q.artefacts += clip + find_dropouts(ch, sig[ch], fs_Hz, f, clip)
     if q.artefacts:
         q.status = "rejected"
         q.reason = "; ".join(a.describe() for a in q.artefacts)

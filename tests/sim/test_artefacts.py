@@ -289,3 +289,88 @@ def test_a_steady_line_on_the_short_record_is_still_a_line(hum_m, accel_share, w
     lines = of_kind(q, "line_interference")
     assert any(a.channel == "disp" and abs(a.freq_Hz - 50.0) < 1.0 for a in lines), (why, q.notes)
     assert not of_kind(q, "unsettled_transient"), (why, q.notes)
+
+
+def quantised_slow_step(seed=5, f=6.0, fs=25600.0, periods=8, bits=14, noise_q=0.2):
+    """A slow drive (4267 samples per period) through a ``bits``-bit converter whose range is
+    1.2 x each channel's peak, with noise of ``noise_q`` quanta rms before the converter:
+    (clean signals, quantised records, quanta).  At every turning point the signal stays
+    within one quantum for 10-20 samples: runs of identical samples the signal makes itself."""
+    t = np.arange(int(round(periods * fs / f))) / fs
+    rng = np.random.default_rng(seed)
+    clean, sig, quantum = {}, {}, {}
+    for ch, amps in AMPS.items():
+        y = sum(a * np.sin(2 * np.pi * (k + 1) * f * t + 0.3 * k) for k, a in enumerate(amps))
+        q = 2 * 1.2 * np.max(np.abs(y)) / 2 ** bits
+        clean[ch], quantum[ch] = y, q
+        sig[ch] = np.round((y + noise_q * q * rng.standard_normal(t.size)) / q) * q
+    return clean, sig, quantum
+
+
+def _runs_of_equal(x, at_least):
+    d = np.flatnonzero(np.diff(np.concatenate([[0], (np.diff(x) == 0).astype(int), [0]])))
+    return [(s, e - s + 1) for s, e in zip(d[::2], d[1::2]) if e - s + 1 >= at_least]
+
+
+@pytest.mark.parametrize("f, noise_q, periods", [(6.0, 0.2, 8),      # 4266.7 samples per period
+                                                 (6.25, 0.05, 12)])  # 4096, as the bench's DAQ: a mean period
+def test_a_quantised_slow_sine_with_long_runs_at_its_turning_points_gives_no_dropout(f, noise_q, periods):
+    """The repeat-rate rule (runs geometric, with the record's share of repeats) named these
+    runs drop-outs on all three channels; they are the signal's own (decision 0034).  With a
+    whole number of samples per period and noise far below the quantum, the mean period lies
+    between two levels where the signal crosses from one to the other: the fit alone would
+    call the crossing sample of a run unlikely."""
+    fs = 25600.0
+    clean, sig, quantum = quantised_slow_step(f=f, noise_q=noise_q, periods=periods)
+    for ch in AMPS:
+        long_runs = _runs_of_equal(sig[ch], 8)
+        assert len(long_runs) >= 10, ch
+        for s, n in long_runs:            # made by the signal: it moved less than 1.5 quanta under each
+            assert np.ptp(clean[ch][s:s + n]) < 1.5 * quantum[ch], (ch, s, n)
+    q = assess(sig, fs, f).quality
+    assert not of_kind(q, "dropout") and q.status != "rejected", q.reason
+
+
+@pytest.mark.parametrize("f", [6.0, 6.25])
+@pytest.mark.parametrize("where, length", [("fast", 4), ("slow", 8)])
+def test_a_short_hold_where_the_quantised_signal_moves_is_a_dropout_with_its_time_and_length(where, length, f):
+    """Held where the force moves fastest (about 12 quanta per sample) or where it moves at
+    a tenth of that (near a turning point, 8 samples: about 10 quanta)."""
+    fs = 25600.0
+    clean, sig, quantum = quantised_slow_step(f=f)
+    slope = np.abs(np.diff(clean["force"])) / quantum["force"]
+    third = slice(int(2 * fs / f), int(3 * fs / f))
+    cand = np.flatnonzero(slope[third] > 0.9 * slope.max()) if where == "fast" else \
+        np.flatnonzero(np.abs(slope[third] - 0.1 * slope.max()) < 0.01 * slope.max())
+    i0 = third.start + int(cand[0])
+    assert np.ptp(clean["force"][i0:i0 + length]) > 3 * quantum["force"]       # the signal moved under the hold
+    sig["force"][i0:i0 + length] = sig["force"][i0]
+    q = assess(sig, fs, f).quality
+    (d,) = of_kind(q, "dropout")
+    assert d.channel == "force" and q.status == "rejected"
+    assert d.time_s == pytest.approx(i0 / fs, abs=0.5 / fs)
+    assert d.duration_s == pytest.approx(length / fs, abs=0.5 / fs)
+
+
+def test_zeros_at_a_turning_point_of_a_quantised_record_are_a_dropout():
+    """Where the signal barely moves, but far from zero: the held value is not where it was."""
+    fs, f = 25600.0, 6.0
+    clean, sig, quantum = quantised_slow_step()
+    third = slice(int(2 * fs / f), int(3 * fs / f))
+    i0 = third.start + int(np.argmax(clean["accel"][third])) - 6
+    assert np.ptp(clean["accel"][i0:i0 + 12]) < quantum["accel"]
+    sig["accel"][i0:i0 + 12] = 0.0
+    q = assess(sig, fs, f).quality
+    (d,) = of_kind(q, "dropout")
+    assert d.channel == "accel" and d.size == 0.0 and d.time_s == pytest.approx(i0 / fs, abs=0.5 / fs)
+    assert d.duration_s == pytest.approx(12 / fs, abs=0.5 / fs)
+
+
+def test_a_channel_holding_one_value_throughout_is_a_dropout_over_the_record():
+    _, clean, noise = records()
+    sig = {ch: clean[ch] + noise[ch] for ch in clean}
+    sig["disp"] = np.zeros_like(sig["disp"])          # a dead probe
+    q = assess(sig).quality
+    (d,) = of_kind(q, "dropout")
+    assert d.channel == "disp" and d.time_s == 0.0 and d.duration_s == pytest.approx(sig["disp"].size / 25600.0)
+    assert "one value over the whole record" in d.describe()
