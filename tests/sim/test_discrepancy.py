@@ -138,7 +138,9 @@ def test_a_spring_in_pre_rolling_is_exactly_a_masing_curve_with_other_parameters
 @pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_a_spring_the_data_cannot_separate_is_not_named_and_the_verdict_says_why():
-    case = make_case(1044, ("linear_spring",))         # n = 0.38, every step below x_s
+    # n = 0.38, every step below x_s; 3 levels x 10 frequencies: the inseparability does not
+    # depend on the grid, and n < 0.5 needs the plant's raised resolution (the cost is there)
+    case = make_case(1044, ("linear_spring",), levels=3, freqs=10)
     assert case.rig["n"] < 1
     a = analyse(case, 44)
     d = a.to_dict()
