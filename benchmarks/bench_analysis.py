@@ -15,6 +15,7 @@ physical cause in <= 5 % of cases, clean cases with no cause >= 95 %, a 90-step 
 
     python benchmarks/bench_analysis.py [--cases 60] [--first 0] [--workers 1] [--scheduler tcp://host:port] [--json out.json]
     python benchmarks/bench_analysis.py --source independent [--cases 36] [--levels 5 --freqs 18] [--cache DIR]
+    python benchmarks/bench_analysis.py ... [--profile] [--drop-transients]
 
 ``--source independent``: the cases come from tests/independent_masing.py (solve_ivp on
 the documented equations, no code shared with ``sim/``), written to an untagged UFF58
@@ -24,6 +25,12 @@ every form, and two artefacts (a mains line on the probe, too few settle cycles)
 same seeded strengths as the plant's cases (``draw_effect``), n in 0.55-3 (the solver
 needs minutes per step for n < 0.5 at small force).  ``--cache DIR`` keeps the files (a
 rerun analyses them again without simulating).
+
+``--profile``: also the profile-likelihood intervals of F_s, x_s, n, m
+(``sim.discrepancy.fit.profile_interval``, decision record 0035): their coverage against the
+reported ones per parameter and kind, the half-width ratio, how far from quadratic the
+chi-square is at the reported ends, and their time.  ``--drop-transients`` (independent
+source, an experiment of 0035): the steps flagged with an unsettled transient are left out.
 
 The case loop is a plain map over ``run_case``, so a scheduler (dask) can run it too.
 """
