@@ -108,3 +108,13 @@ def test_a_fit_without_its_jacobian_is_refused_by_name():
     model, d, W, f = pre_rolling_case(rel_noise=2e-5)
     with pytest.raises(ValueError, match="Jacobian"):
         profile_interval(replace(f, jac=None), d, W, 0)
+
+
+def test_an_end_beyond_a_parameter_bound_stops_at_the_bound(monkeypatch):
+    import sim.discrepancy.fit as fitmod
+    model, d, W, f = pre_rolling_case(rel_noise=2e-5)
+    wald = Z95 * math.sqrt(f.cov[2, 2])
+    monkeypatch.setattr(fitmod, "N_BOUNDS", (f.theta[2] - 0.5 * wald, 6.0))    # n's lower bound inside its interval
+    lo, hi = profile_interval(f, d, W, 2)
+    assert lo == pytest.approx(f.theta[2] - 0.5 * wald, abs=1e-3 * wald)
+    assert hi - f.theta[2] == pytest.approx(wald, rel=0.03)
