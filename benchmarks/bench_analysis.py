@@ -15,6 +15,7 @@ physical cause in <= 5 % of cases, clean cases with no cause >= 95 %, a 90-step 
 
     python benchmarks/bench_analysis.py [--cases 60] [--first 0] [--workers 1] [--scheduler tcp://host:port] [--json out.json]
     python benchmarks/bench_analysis.py --source independent [--cases 36] [--levels 5 --freqs 18] [--cache DIR]
+    python benchmarks/bench_analysis.py ... [--profile] [--drop-transients]
 
 ``--source independent``: the cases come from tests/independent_masing.py (solve_ivp on
 the documented equations, no code shared with ``sim/``), written to an untagged UFF58
@@ -24,6 +25,12 @@ every form, and two artefacts (a mains line on the probe, too few settle cycles)
 same seeded strengths as the plant's cases (``draw_effect``), n in 0.55-3 (the solver
 needs minutes per step for n < 0.5 at small force).  ``--cache DIR`` keeps the files (a
 rerun analyses them again without simulating).
+
+``--profile``: also the profile-likelihood intervals of F_s, x_s, n, m
+(``sim.discrepancy.fit.profile_interval``, decision record 0035): their coverage against the
+reported ones per parameter and kind, the half-width ratio, how far from quadratic the
+chi-square is at the reported ends, and their time.  ``--drop-transients`` (independent
+source, an experiment of 0035): the steps flagged with an unsettled transient are left out.
 
 The case loop is a plain map over ``run_case``, so a scheduler (dask) can run it too.
 """
@@ -73,6 +80,8 @@ def case_kind(seed: int) -> str:
     return KINDS[seed % len(KINDS)]
 
 
+DROP_TRANSIENTS = False   # --drop-transients: leave out steps flagged with an unsettled transient
+PROFILE = False      # --profile: also the profile-likelihood intervals of F_s, x_s, n, m
 COVARIANCES = {"": "cov", "_jacobian": "cov_jacobian"}   # row suffix -> Fit attribute (the sandwich; the Jacobian's)
 
 
@@ -99,6 +108,26 @@ def _interval_checks(a, case, kind: str, want: str | None, obs: dict) -> dict:
             sd = np.sqrt(np.diag(cov)[:4])
             out["base_pulls" + sfx] = ((a.final.theta[:4] - truth) / sd).tolist()
             out["base_sd" + sfx] = sd.tolist()
+        if PROFILE:                    # profile-likelihood intervals of the same four (decision 0035)
+            from sim.discrepancy.fit import _jacobian_inverse, profile_chi2, profile_interval, profile_threshold
+            t0 = time.perf_counter()
+            iv = [profile_interval(a.final, a.data, a.selection.final_weights, i) for i in range(4)]
+            out["t_profile_s"] = time.perf_counter() - t0
+            out["profile_low"] = [lo for lo, _ in iv]
+            out["profile_high"] = [hi for _, hi in iv]
+            out["profile_truth"] = truth.tolist()
+            out["profile_theta"] = a.final.theta[:4].tolist()
+            # how far from quadratic the profile is where the Wald interval ends: the signed
+            # root there over its target (1 where the model is linear over the interval), and
+            # at twice that distance over twice the target
+            f, wald = a.final, []
+            for i in range(4):
+                T = profile_threshold(f, i)
+                h = math.sqrt(T * _jacobian_inverse(f)[i, i])
+                wald.append([math.sqrt(max(profile_chi2(f, a.data, a.selection.final_weights, i,
+                                                        f.theta[i] + k * h)[0] - f.chi2, 0.0) / (k * k * T))
+                             for k in (-1.0, 1.0, -2.0, 2.0)])
+            out["profile_root_ratio"] = wald
     return out
 
 
@@ -214,6 +243,8 @@ def run_independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str
         path.unlink()
         path.parent.rmdir()
     steps = list(src.steps)
+    if DROP_TRANSIENTS:                # an experiment (decision 0035): the steps flagged unsettled left out
+        steps = [s for s in steps if not any(a.kind == "unsettled_transient" for a in s.quality.artefacts)]
     artefacts = artefact_causes(src.quality(), total=len(src.steps) + len(src.rejected))
     t_load = time.perf_counter() - t0
     detail = [dict(id=c["id"], channel=c.get("channel"), steps=len(c.get("evidence", {}).get("steps", [])),
@@ -228,18 +259,18 @@ def run_independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str
                                  and abs(a["freq_Hz"] / line_Hz - 1) < 0.005 for a in detail)
     want = None if kind in ("clean",) + tuple(ARTEFACTS) else FORMS.get(kind, kind)
     t0 = time.perf_counter()
-    ident = Identifier(guess, 9)
-    for s in steps:
-        ident.add(s.harmonics)
-    ident.fit(max_nfev=200)
-    row["t_identify_s"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
     try:
+        ident = Identifier(guess, 9)
+        for s in steps:
+            ident.add(s.harmonics)
+        ident.fit(max_nfev=200)
+        row["t_identify_s"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
         a = analyze_steps(steps, guess, artefacts=artefacts)
     except Exception as e:          # a failure is a result
         return dict(row, failed=f"{type(e).__name__}: {e}", named=[], unexplained=False, detected=False,
                     wrong=[], heldout_before=np.nan, heldout_after=np.nan, base_chi2=np.nan, final_chi2=np.nan,
-                    t_analysis_s=time.perf_counter() - t0)
+                    t_analysis_s=time.perf_counter() - t0, t_identify_s=row.get("t_identify_s", np.nan))
     t_an = time.perf_counter() - t0
     named = a.causes
     case = SimpleNamespace(effects={kind: fx}, f_res_Hz=f_res, rig=rig)
@@ -354,6 +385,44 @@ def coverage_lines(rows: list[dict]) -> list[str]:
                            f"{k} {v:.2f}" for k, v in zip(("F_s", "x_s", "n", "m"), np.sqrt((pulls ** 2).mean(axis=0))))
                        + "; median standard error (relative; n absolute) " + ", ".join(
                            f"{k} {v:.2g}" for k, v in zip(("F_s", "x_s", "n", "m"), np.median(sd, axis=0))))
+    out.extend(profile_lines(rows))
+    return out
+
+
+def profile_lines(rows: list[dict]) -> list[str]:
+    """Coverage of the profile-likelihood intervals of F_s, x_s, n, m (``--profile``) against
+    the reported (Wald, sandwich) ones on the same cases, per parameter and per kind; the
+    half-width ratio profile / Wald (each side's mean), and the profile's time."""
+    rs = [r for r in rows if r.get("profile_low") and r.get("base_pulls")]
+    if not rs:
+        return []
+    names = ("F_s", "x_s", "n", "m")
+    lo = np.array([r["profile_low"] for r in rs])
+    hi = np.array([r["profile_high"] for r in rs])
+    tr = np.array([r["profile_truth"] for r in rs])
+    th = np.array([r["profile_theta"] for r in rs])
+    sd = np.array([r["base_sd"] for r in rs])
+    wald = np.abs(np.array([r["base_pulls"] for r in rs])) < 1.959964
+    prof = (lo <= tr) & (tr <= hi)
+    ratio = (hi - lo) / 2 / (1.959964 * sd)
+    out = [f"profile vs Wald on {len(rs)} cases: F_s, x_s, n, m covered {prof.sum()} / {wald.sum()} of {prof.size} "
+           f"({100 * prof.mean():.1f} % / {100 * wald.mean():.1f} %); per parameter "
+           + ", ".join(f"{k} {p}/{w}" for k, p, w in zip(names, prof.sum(axis=0), wald.sum(axis=0)))]
+    out.append("  half-width profile / Wald: median " + ", ".join(f"{k} {v:.2f}" for k, v in zip(names, np.median(ratio, axis=0)))
+               + f"; overall median {np.median(ratio):.2f}, min {ratio.min():.2f}, max {ratio.max():.2f}; "
+               f"asymmetry (high - theta) / (theta - low) median {np.median((hi - th) / np.maximum(th - lo, 1e-300)):.2f}")
+    for kind in sorted({r["kind"] for r in rs}):
+        k = np.array([r["kind"] == kind for r in rs])
+        out.append(f"  {kind:28s} {k.sum():2d} cases: profile {prof[k].sum()}/{prof[k].size}, Wald {wald[k].sum()}/"
+                   f"{wald[k].size}, half-width ratio median {np.median(ratio[k]):.2f} max {ratio[k].max():.2f}")
+    rr = np.array([r["profile_root_ratio"] for r in rs])        # cases x 4 x (-w, +w, -2w, +2w)
+    out.append("  signed root / its quadratic value at the Wald ends (+-1, +-2 half-widths): median "
+               + ", ".join(f"{np.median(rr[..., j]):.4f}" for j in range(4)) + "; range over cases and parameters "
+               + ", ".join(f"{rr[..., j].min():.3f}-{rr[..., j].max():.3f}" for j in range(4)))
+    tp = np.array([r["t_profile_s"] for r in rs])
+    ta = np.array([r["t_analysis_s"] for r in rs])
+    out.append(f"  time: analysis median {np.median(ta):.1f} s (max {ta.max():.1f} s), profile of the four median "
+               f"{np.median(tp):.1f} s (max {tp.max():.1f} s)")
     return out
 
 
@@ -407,7 +476,13 @@ def main(argv=None) -> int:
     ap.add_argument("--levels", type=int, default=5, help="independent source: force levels")
     ap.add_argument("--freqs", type=int, default=18, help="independent source: frequencies per level")
     ap.add_argument("--cache", help="independent source: keep the UFF58 files here (and reuse them)")
+    ap.add_argument("--profile", action="store_true",
+                    help="also profile-likelihood intervals of F_s, x_s, n, m (coverage, width and time)")
+    ap.add_argument("--drop-transients", action="store_true",
+                    help="independent source: leave out the steps flagged with an unsettled transient (an experiment)")
     args = ap.parse_args(argv)
+    global PROFILE, DROP_TRANSIENTS
+    PROFILE, DROP_TRANSIENTS = args.profile, args.drop_transients
     seeds = range(args.first, args.first + args.cases)
     if args.source == "independent":
         from functools import partial

@@ -265,3 +265,88 @@ def fit(model: Model, theta0: np.ndarray, d: Data, W: Weights, max_nfev: int = 1
         return Fit(model, res.x, cov, chi2, res.fun.size, res.jac, res.fun)
     sandwich = H_inv @ M @ H_inv * phi
     return Fit(model, res.x, sandwich, chi2, res.fun.size, res.jac, res.fun, cov_jacobian=cov)
+
+
+def profile_chi2(f: Fit, d: Data, W: Weights, i: int, value: float, start: np.ndarray | None = None,
+                 max_nfev: int = 40) -> tuple[float, np.ndarray]:
+    """Chi-square of ``f.model`` with parameter ``i`` held at ``value`` (fit coordinates)
+    and every other parameter refitted; returns it and the refitted theta.  ``start``
+    (default: the optimum moved along the covariance's regression on parameter ``i``, the
+    linear prediction of the profile path)."""
+    lo, hi = bounds(f.model)
+    free = np.arange(f.model.size) != i
+    if start is None:
+        H_inv = _jacobian_inverse(f)
+        start = f.theta + (value - f.theta[i]) * H_inv[:, i] / H_inv[i, i]
+    th = np.array(start, float)
+    th[i] = value
+    x0 = np.clip(th[free], lo[free] + 1e-9, hi[free] - 1e-9)
+
+    def r(x: np.ndarray) -> np.ndarray:
+        th[free] = x
+        return whitened(th, f.model, d, W)
+    res = least_squares(r, x0, bounds=(lo[free], hi[free]), x_scale="jac", max_nfev=max_nfev, method="trf")
+    th[free] = res.x
+    return float(res.fun @ res.fun), th.copy()
+
+
+def _jacobian_inverse(f: Fit) -> np.ndarray:
+    if f.jac is None:
+        raise ValueError("profile intervals need the fit's Jacobian (Fit.jac is None)")
+    _, sv, Vt = np.linalg.svd(f.jac, full_matrices=False)
+    sv = np.maximum(sv, sv.max() * 1e-12)
+    return (Vt.T / sv ** 2) @ Vt
+
+
+def profile_threshold(f: Fit, i: int, level_z: float = Z95) -> float:
+    """The rise of the chi-square that bounds parameter ``i``'s profile interval: z^2 times
+    the ratio of the reported variance (sandwich, reduced chi-square, any widening) to the
+    Jacobian's (J'J)^-1, so that where the model is linear in the parameters the profile
+    interval is the reported one exactly and only the nonlinearity changes it."""
+    return level_z ** 2 * float(f.cov[i, i]) / float(_jacobian_inverse(f)[i, i])
+
+
+def profile_interval(f: Fit, d: Data, W: Weights, i: int, level_z: float = Z95, iterations: int = 5,
+                     rtol: float = 0.02) -> tuple[float, float]:
+    """95 % profile-likelihood interval of parameter ``i`` (fit coordinates: log F_s, log
+    x_s, n, log m for 0..3): each end is where the profile chi-square (every other parameter
+    refitted, :func:`profile_chi2`) has risen by :func:`profile_threshold` above the optimum.
+
+    Found on the signed root s(v) = +-sqrt(chi2_profile(v) - chi2_min), which is linear in v
+    where the model is: the first trial is the Wald end, then secant steps on s (through
+    the optimum first), until s is within ``rtol`` of its target.  An end that would cross
+    a bound (n in N_BOUNDS) stops at the bound."""
+    lo_b, hi_b = bounds(f.model)
+    H_inv = _jacobian_inverse(f)
+    T = profile_threshold(f, i, level_z)
+    target = math.sqrt(T)
+    th0 = f.theta[i]
+    w = target * math.sqrt(H_inv[i, i])              # the Wald half-width (= reported)
+    ends = []
+    for sign in (-1.0, 1.0):
+        bound = lo_b[i] if sign < 0 else hi_b[i]
+        pts = [(0.0, 0.0)]                           # (offset from the optimum, signed root)
+        off = w
+        start = None
+        for _ in range(iterations):
+            v = th0 + sign * off
+            if (v - bound) * sign >= 0:              # the bound: stop there if inside the threshold
+                v = bound - sign * 1e-9
+                off = abs(v - th0)
+                c, start = profile_chi2(f, d, W, i, v, start)
+                if c - f.chi2 <= T:
+                    break
+            else:
+                c, start = profile_chi2(f, d, W, i, v, start)
+            s = math.sqrt(max(c - f.chi2, 0.0))
+            pts.append((off, s))
+            if abs(s - target) <= rtol * target:
+                break
+            (o1, s1), (o2, s2) = pts[-2], pts[-1]
+            slope = (s2 - s1) / (o2 - o1) if o2 != o1 else 0.0
+            if slope <= 0:                           # the profile did not rise: step out
+                off = 2.0 * o2
+            else:
+                off = min(max(o2 + (target - s2) / slope, 0.25 * o2), 4.0 * o2)
+        ends.append(th0 + sign * off)
+    return ends[0], ends[1]
