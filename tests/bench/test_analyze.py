@@ -10,29 +10,7 @@ import pytest
 from bench.cli import main
 from sim.discrepancy.cases import make_case
 
-
-def write_foreign_uff(case, path, periods=8):
-    """One averaged period per channel repeated, with fresh sensor noise in every period
-    (the issue's levels), as a record of ``periods`` periods."""
-    import pyuff
-    rng = np.random.default_rng(0)
-    sets = []
-    for s in case.steps:
-        fs = s.fs_Hz
-        for sdt, unit, rec, noise in ((13, "N", s.force_N, 0.003 * case.rig["F_s_N"]),
-                                      (12, "m/s^2", s.accel_m_s2, 0.005 * np.std(s.accel_m_s2)),
-                                      (8, "m", s.disp_m, 0.002 * case.rig["x_s_m"])):
-            y = np.tile(rec, periods) + noise * rng.standard_normal(rec.size * periods)
-            sets.append(pyuff.prepare_58(
-                binary=1, id1=f"record {len(sets) + 1}", id2="other software", id3="NONE", id4="NONE", id5="NONE",
-                func_type=1, ver_num=0, load_case_id=len(sets) // 3 + 1, rsp_ent_name="carriage", rsp_node=1,
-                rsp_dir=1, ref_ent_name="shaker", ref_node=1, ref_dir=1, abscissa_spacing=1, abscissa_min=0.0,
-                abscissa_inc=1.0 / fs, abscissa_spec_data_type=17, abscissa_axis_units_lab="s",
-                ordinate_spec_data_type=sdt, ordinate_axis_units_lab=unit, orddenom_spec_data_type=0,
-                data=y, x=np.arange(y.size) / fs))
-    pyuff.UFF(str(path)).write_sets(sets, mode="add")
-    return path
-
+from .twin_sources import write_foreign_uff
 
 
 def within_interval(truth: float, q: dict) -> None:
@@ -42,6 +20,7 @@ def within_interval(truth: float, q: dict) -> None:
     centre, half = (q["low"] + q["high"]) / 2, (q["high"] - q["low"]) / 2
     assert 0 < half < 0.01 * truth, q
     assert abs(truth - centre) <= 2 * half, (truth, q)
+
 
 @pytest.fixture(scope="module")
 def analysed(tmp_path_factory):
