@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers import plan_block
-from sim.artefacts import assess_step, si
+from sim.artefacts import HARMONIC_GUARD, assess_step, si
 from sim.step_result import ControlIteration, FitSummary, StepMeasurement, StepResult
 
 from .analysis import HarmonicFit, fit_harmonics
@@ -24,7 +24,7 @@ from .instruments import Block, BlockSource, SineSource, StepMarker
 from .plan import Plan, StepSpec
 from .safety import LimitExceeded
 
-__all__ = ["MIN_VPP", "DriveState", "ForceUnreachable", "SteppedSine", "StepResult", "next_drive", "unsettled"]
+__all__ = ["MIN_VPP", "DriveState", "ForceUnreachable", "SteppedSine", "StepResult", "Unsettled", "next_drive", "unsettled"]
 
 Record = Callable[[StepSpec, StepResult, dict[str, np.ndarray]], None]
 
@@ -61,22 +61,48 @@ def next_drive(vpp: float, force: float, target: float, prev: tuple[float, float
 
 
 SETTLE_KINDS = ("unsettled_transient", "offset_drift")   # what settling longer cures
+MAX_SETTLE_WAIT_S = 2.0      # the longest extra wait one re-settle takes on the check's advice
 
 
-def unsettled(block: Block, freq_Hz: float) -> str:
+@dataclass(frozen=True)
+class Unsettled:
+    """What :func:`unsettled` found: the check's words ('' = settled), the drive cycles its
+    transients still need (0 when it gives none) and the frequencies of the vibrations in
+    the block (to know them again in the next block of the step)."""
+
+    why: str = ""
+    cycles: int = 0
+    vibrations_Hz: tuple[float, ...] = ()
+
+
+def unsettled(block: Block, freq_Hz: float, ringing_at: tuple[float, ...] = ()) -> Unsettled:
     """What the offline step-quality check (:func:`sim.artefacts.assess_step`, the one the
     report and ``bench analyze`` apply to the stored records) would find in ``block`` that
     settling longer cures: an unsettled transient or free vibration, an offset drift, or a
-    record not periodic enough (the carriage still moving between the halves).  Its own
-    words (channel, size, decay), or '' when there is none.  Clipping, drop-outs and lines
-    are left to the offline check: waiting does not remove them."""
+    record not periodic enough (the carriage still moving between the halves), in its own
+    words (channel, size, decay).  Clipping, drop-outs and lines are left to the offline
+    check: waiting does not remove them, with one exception the procedure can see and one
+    record cannot: a "line" at the frequency of a vibration an earlier block of the same
+    step showed (``ringing_at``) is that vibration, now too weak for the record alone to
+    show it decay or to see it on the accelerometer (decision 0033), so still unsettled."""
     try:
         q = assess_step(block.force_N, block.accel_m_s2, block.disp_m, block.fs_Hz, freq_Hz).quality
     except ValueError:
-        return ""       # too short to assess: the offline check says so; waiting does not change it
+        return Unsettled()  # too short to assess: the offline check says so; waiting does not change it
+    guard = HARMONIC_GUARD * block.fs_Hz / max(block.n_samples, 1)
+    arts = [a for a in q.artefacts if a.kind in SETTLE_KINDS]
+    still = [a for a in q.artefacts if a.kind == "line_interference"
+             and any(abs(a.freq_Hz - fr) <= guard for fr in ringing_at)]
     if q.status == "rejected":
-        return q.reason if q.reason.startswith("not periodic enough") else ""
-    return "; ".join(a.describe() for a in q.artefacts if a.kind in SETTLE_KINDS)
+        if not q.reason.startswith("not periodic enough"):
+            return Unsettled()
+        words = [q.reason]         # it names the transient it saw, if any
+    else:
+        words = [a.describe() for a in arts]
+    words += [f"{a.describe()}: at the frequency of the vibration the block before showed, so that vibration, "
+              f"weaker" for a in still]
+    freqs = tuple(a.freq_Hz for a in arts + still if math.isfinite(a.freq_Hz))
+    return Unsettled("; ".join(words), max((a.settle_cycles for a in arts), default=0), freqs)
 
 
 @dataclass
@@ -268,21 +294,25 @@ class SteppedSine:
             self.marker.mark_step(step.key)
         block = self._acquire(f, periods)
         fits = self._fit_block(block, f)
-        extra, before = 0, math.inf
+        extra, before, found = 0, math.inf, Unsettled()
+        settle = max(self.plan.settle_cycles, math.ceil(self.plan.min_settle_s * f))
         while True:
-            why = unsettled(block, f)
+            found = unsettled(block, f, found.vibrations_Hz)
             noise = fits["disp"].noise_rms
             ringing = noise > 3 * self.disp_noise_floor_m and noise < 0.9 * before
-            if not (why or ringing) or extra >= self.plan.max_extra_settle_blocks:
+            if not (found.why or ringing) or extra >= self.plan.max_extra_settle_blocks:
                 break
             log.info("step %s: settling one more block (%d of at most %d): %s", step.key, extra + 1,
-                     self.plan.max_extra_settle_blocks, why or
+                     self.plan.max_extra_settle_blocks, found.why or
                      f"displacement residual {si(noise, 'm')} > 3 x the noise at rest "
                      f"{si(self.disp_noise_floor_m, 'm')}")
+            if found.why:        # the plan's settle again, or what the check says the transient needs
+                self._wait(f, 0.0, min_periods=max(settle, min(found.cycles, math.ceil(MAX_SETTLE_WAIT_S * f))))
             before = noise
             block = self._acquire(f, periods)
             fits = self._fit_block(block, f)
             extra += 1
+        why = found.why
         if why:
             log.warning("step %s: still unsettled after %d extra blocks (plan: max_extra_settle_blocks = %d), "
                         "recorded as it is: %s", step.key, extra, self.plan.max_extra_settle_blocks, why)
