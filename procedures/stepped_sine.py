@@ -306,8 +306,10 @@ class SteppedSine:
                      self.plan.max_extra_settle_blocks, found.why or
                      f"displacement residual {si(noise, 'm')} > 3 x the noise at rest "
                      f"{si(self.disp_noise_floor_m, 'm')}")
-            if found.why:        # the plan's settle again, or what the check says the transient needs
-                self._wait(f, 0.0, min_periods=max(settle, min(found.cycles, math.ceil(MAX_SETTLE_WAIT_S * f))))
+            if found.why:        # the plan's settle again, or what the check says the transient still
+                # needs: its cycles count from the block's start, and the block has passed
+                need = min(found.cycles - periods, math.ceil(MAX_SETTLE_WAIT_S * f))
+                self._wait(f, 0.0, min_periods=max(settle, need))
             before = noise
             block = self._acquire(f, periods)
             fits = self._fit_block(block, f)
