@@ -193,16 +193,21 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(starts.tolist(), (ends - starts).tolist()))
 
 
-def find_clipping(ch: str, x: np.ndarray, fs: float) -> list[Artefact]:
+def find_clipping(ch: str, x: np.ndarray, fs: float, f: float) -> list[Artefact]:
     """Samples piled up at the record's largest or smallest value (a flat top): at least 5,
     in flat runs, and 5 times more than at the next value inwards (a quantised record
-    that is not clipped has about as many there)."""
+    that is not clipped has about as many there); on a converter coarser than the noise,
+    also a signal that would have gone beyond the level during the longest run (:func:`_beyond`)."""
     out: list[Artefact] = []
     span = float(x.max() - x.min())
     if not span > 0:
         return out
     tol = 1e-9 * span
     q = _quantum(x)
+    # below a quantum of noise a slow signal dwells at its own top value for a few samples at
+    # every turning point, and coherent sampling makes the counts per value lumpy: there the
+    # pile-up alone does not tell a clipped top (decision 0039)
+    coarse = q > 0 and _robust_noise(x - _periodic_part(x, fs, f)) < q
     for level in (float(x.max()), float(x.min())):
         at = np.abs(x - level) <= tol
         n_at = int(at.sum())
@@ -211,11 +216,34 @@ def find_clipping(ch: str, x: np.ndarray, fs: float) -> list[Artefact]:
         inward = level - math.copysign(q, level - float(np.median(x)))
         n_next = int((np.abs(x - inward) <= tol).sum()) if q > 10 * tol else 0
         runs = [r for r in _runs(at) if r[1] >= 2]
-        if n_at >= 5 * (n_next + 1) and runs:
+        if n_at >= 5 * (n_next + 1) and runs and (not coarse or _beyond(x, max(runs, key=lambda r: r[1]), level, q)):
             out.append(Artefact("clipping", ch, level, "rejected", time_s=runs[0][0] / fs, duration_s=n_at / fs,
                                 evidence=f"{n_at} samples ({100 * n_at / x.size:.2g} % of the record) flat at the "
                                          f"extreme value in {len(runs)} runs"))
     return out
+
+
+def _beyond(x: np.ndarray, run: tuple[int, int], level: float, q: float) -> bool:
+    """Would the signal have gone beyond ``level`` during this flat run?  A parabola through
+    the samples just either side of it, carried into the run, passes the level by more than
+    3 quanta and 3 standard errors of that prediction: a clipped top.  A quantised signal
+    turning within its top quantum by itself gives a parabola that turns there (0039)."""
+    s_, L = run
+    m = max(L // 4, 8)
+    idx = np.r_[max(s_ - m, 0):s_, s_ + L:min(s_ + L + m, x.size)]
+    if idx.size < 6:
+        return True                           # nothing to carry in from: the histogram decides
+    t = (idx - (s_ + 0.5 * (L - 1))) / m
+    A = np.column_stack([np.ones(idx.size), t, t * t])
+    coef, *_ = np.linalg.lstsq(A, x[idx], rcond=None)
+    resid = x[idx] - A @ coef
+    s2 = float(resid @ resid) / (idx.size - 3) + q * q / 12.0
+    tt = np.linspace(-0.5 * L / m, 0.5 * L / m, 9)
+    B = np.column_stack([np.ones(tt.size), tt, tt * tt])
+    inside = B @ coef
+    se = np.sqrt(s2 * np.einsum("ij,jk,ik->i", B, np.linalg.inv(A.T @ A), B))
+    beyond = inside - level if level >= float(np.median(x)) else level - inside
+    return bool(np.any(beyond > np.maximum(3.0 * q, 3.0 * se)))
 
 
 def _quantum(x: np.ndarray) -> float:
@@ -245,20 +273,31 @@ def find_dropouts(ch: str, x: np.ndarray, fs: float, f: float, clipped: list[Art
     # makes natural runs elsewhere look unlikely: the fit is made again with the runs found held
     # bridged by a straight line between the samples either side, until the runs found stop changing
     limit = math.log(DROPOUT_FALSE_ALARM / n)
-    fill, found = x, None
-    for _ in range(4):
-        log_chance, dev, noise, q = natural_run_chance(x, fs, f, runs, fill)
-        held = [i for i, lc in enumerate(log_chance) if lc < limit]
-        if held == found or not held:
+    extra: np.ndarray | None = None
+    for with_lines in (False, True):
+        fill, found = x, None
+        for _ in range(4):
+            log_chance, dev, noise, q = natural_run_chance(x, fs, f, runs, fill, extra)
+            held = [i for i, lc in enumerate(log_chance) if lc < limit]
+            if held == found or not held:
+                break
+            mask = np.zeros(n, bool)
+            for i in held:
+                mask[runs[i][0]:runs[i][0] + runs[i][1]] = True
+            if mask.all():
+                break
+            idx = np.arange(n)
+            found, fill = held, x.copy()
+            fill[mask] = np.interp(idx[mask], idx[~mask], x[~mask])
+        if not held or with_lines:
             break
-        mask = np.zeros(n, bool)
-        for i in held:
-            mask[runs[i][0]:runs[i][0] + runs[i][1]] = True
-        if mask.all():
+        # a line not locked to the drive (hum) moves the signal away from the periodic fit: on a
+        # converter coarser than the noise, runs the line made itself look impossible.  Its
+        # lines, fitted with the held runs bridged, join the signal and the runs are judged again
+        lines, _ = _find_lines(fill - _periodic_part(fill, fs, f), fs, f)
+        if not lines:
             break
-        idx = np.arange(n)
-        found, fill = held, x.copy()
-        fill[mask] = np.interp(idx[mask], idx[~mask], x[~mask])
+        extra = np.sum([ln.model for ln in lines], axis=0)
     bad = [(runs[i], log_chance[i], dev[i]) for i in held]
     if not bad:
         return []
@@ -274,10 +313,12 @@ def find_dropouts(ch: str, x: np.ndarray, fs: float, f: float, clipped: list[Art
 
 
 def natural_run_chance(x: np.ndarray, fs: float, f: float, runs: list[tuple[int, int]],
-                       fit_to: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float, float]:
+                       fit_to: np.ndarray | None = None,
+                       extra: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float, float]:
     """For each (start, length) run of identical samples of ``x``: the log of the probability
     that the signal itself made it and how far the signal was from the held value; then the
-    noise s_n and the quantum.  The signal is the periodic fit to ``fit_to`` (default ``x``).
+    noise s_n and the quantum.  The signal is the periodic fit to ``fit_to`` (default ``x``)
+    plus ``extra`` (lines not locked to the drive, when given).
 
     Sample i of a record quantised with step q (the smallest step between its values) is
     Q(m_i + e_i): m the signal, e Gaussian noise of rms s_n.  Given the first sample c of a
@@ -294,6 +335,8 @@ def natural_run_chance(x: np.ndarray, fs: float, f: float, runs: list[tuple[int,
     n = x.size
     q = _quantum(x)
     m = _periodic_part(x if fit_to is None else fit_to, fs, f)
+    if extra is not None:
+        m = m + extra
     keep = np.ones(n, bool)
     for s_, L in runs:
         keep[s_:s_ + L] = False
@@ -393,6 +436,23 @@ def _trend(r: np.ndarray, noise: float) -> tuple[np.ndarray, float, float]:
     z = math.sqrt(max(float(b @ np.linalg.solve(cov, b)), 0.0)) if noise > 0 else math.inf
     trend = A[:, 1:] @ b
     return trend, float(trend[-1] - trend[0]), z
+
+
+def quantisation_line_bound(q: float, noise: float) -> float:
+    """The largest amplitude one spectral line of a quantiser's error can have (decision 0039).
+
+    The error of Q(y + e) - y, a function of the signal y under Gaussian noise e (rms
+    ``noise`` before quantisation), is a Fourier series in y with terms
+    (q / (pi m)) exp(-2 pi^2 m^2 noise^2 / q^2) sin(2 pi m y / q) (Widrow's quantisation
+    theory).  A periodic y makes each term periodic with the drive: its harmonics go far
+    above Nyquist and fold back as steady "lines" at any frequency.  No such line exceeds
+    the sum of the terms' amplitudes, nor 2 q / pi (the largest sinusoid in an error
+    bounded by q / 2).  0 for an unquantised record."""
+    if q <= 0:
+        return 0.0
+    m = np.arange(1, 51)
+    terms = np.exp(-2.0 * (math.pi * noise / q) ** 2 * m * m) / m
+    return float(min(2.0 / math.pi, terms.sum() / math.pi) * q)
 
 
 def _robust_noise(r: np.ndarray) -> float:
@@ -527,18 +587,27 @@ def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
     n = x.size
     zero = np.zeros(n)
     removed = zero
+    # a quantiser adds at least q^2/12 of noise (Sheppard), which neighbour differences do not
+    # see on a slow signal with little noise (they are mostly zero), and folds its error's
+    # harmonics back as tiny steady lines: neither is the rig's (decision 0039)
+    q = _quantum(x)
+    floor = q / math.sqrt(12.0)
     for _pass in range(4):        # a trend converges more slowly than lines: more passes only for it
         periodic, C = _periodic_fit(x - removed, fs, f)
         r = x - periodic
-        noise = _robust_noise(r)
+        seen = _robust_noise(r)
+        noise = max(seen, floor)
+        below = quantisation_line_bound(q, math.sqrt(max(seen * seen - floor * floor, 0.0)))
         aliases = _aliases(C, noise * math.sqrt(2.0 / n), f, fs)
         lines, transients = _find_lines(r, fs, f, aliases)
+        lines = [ln for ln in lines if ln.amp > below]
         removed_part = sum((ln.model for ln in lines + transients), zero)
         trend, change, z = _trend(r - removed_part, noise)
         if not z > TREND_Z:
             trend, change, z = zero, 0.0, 0.0
         elif lines or transients:     # what the trend's low-frequency leakage made look like a line goes
             lines, transients = _find_lines(r - trend, fs, f, aliases)
+            lines = [ln for ln in lines if ln.amp > below]
             removed_part = sum((ln.model for ln in lines + transients), zero)
             trend, change, z = _trend(r - removed_part, noise)
             if not z > TREND_Z:
@@ -549,7 +618,7 @@ def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
         removed = new
     cleaned = x - new
     rest = (r - new)[n // 2:]          # what is left, in the second half (after any transient): the noise
-    noise = min(float(1.4826 * np.median(np.abs(rest - np.median(rest)))) or noise, noise)
+    noise = max(min(float(1.4826 * np.median(np.abs(rest - np.median(rest)))) or noise, noise), floor)
     arts = []
     if z > 0:
         arts.append(Artefact("offset_drift", ch, change, "removed",
@@ -564,7 +633,7 @@ def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
         # the periodic part of the second half (the most settled), extrapolated to the whole
         # record: what is left in the first half and not in the second is still settling
         base = x - sum((ln.model for ln in lines), zero)
-        env = _envelope_transient(base, fs, f, _robust_noise(r))
+        env = _envelope_transient(base, fs, f, max(_robust_noise(r), floor))
         if env is not None:
             found.append(env + (False,))
             if z > 0:                  # the trend was the transient seen over the whole record
@@ -705,7 +774,7 @@ def assess_step(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None
     sig, f = checked_records(force_N, accel_m_s2, disp_m, fs_Hz, freq_Hz)
     q = StepQuality(freq_Hz=f, level_N=_fundamental(sig["force"], fs_Hz, f))
     for ch in CHANNELS:
-        clip = find_clipping(ch, sig[ch], fs_Hz)
+        clip = find_clipping(ch, sig[ch], fs_Hz, f)
         q.artefacts += clip + find_dropouts(ch, sig[ch], fs_Hz, f, clip)
     if q.artefacts:
         q.status = "rejected"

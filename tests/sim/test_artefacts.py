@@ -376,6 +376,83 @@ def test_a_channel_holding_one_value_throughout_is_a_dropout_over_the_record():
     assert "one value over the whole record" in d.describe()
 
 
+@pytest.mark.parametrize("f, noise_q, periods, bits, seed", [
+    (6.0, 0.05, 8, 14, 5),         # 4266.7 samples per period: the error's harmonics fold back as lines
+    (6.25, 0.05, 12, 14, 6),       # 4096 per period: the mean period holds the error; the rest is not white
+    (7.3, 0.3, 10, 12, 7),         # 3507 per period, a 12-bit converter
+    (11.0, 0.02, 20, 16, 8),
+    (25600 / 994.99, 0.02, 12, 16, 9)])   # nearly whole samples per period: lumpy counts per value
+def test_a_clean_quantised_slow_step_gives_no_drift_and_no_line(f, noise_q, periods, bits, seed):
+    """With noise below the quantum, neighbouring samples are mostly equal: their differences
+    see almost no noise, so any trend looked like a drift (17 of 40 clean quantised steps of
+    bench_artefacts named drifts or lines).  The quantiser's q^2/12 is noise all the same,
+    and its error's folded harmonics are lines no larger than the quantum allows (0039)."""
+    fs = 25600.0
+    _, sig, _ = quantised_slow_step(seed=seed, f=f, periods=periods, bits=bits, noise_q=noise_q)
+    q = assess(sig, fs, f).quality
+    assert not q.artefacts and q.status == "usable", q.notes
+
+
+@pytest.mark.parametrize("f, noise_q", [(6.0, 0.05), (7.3, 0.3)])
+def test_hum_above_the_quantum_on_a_quantised_probe_is_still_found(f, noise_q):
+    """The quantiser's allowance is its own error's size: a 50 Hz line of 3 quanta on the
+    quantised probe is larger, and is named with its frequency and size."""
+    fs, periods, bits = 25600.0, 10, 14
+    t = np.arange(int(round(periods * fs / f))) / fs
+    rng = np.random.default_rng(11)
+    y = sum(a * np.sin(2 * np.pi * (k + 1) * f * t + 0.3 * k) for k, a in enumerate(AMPS["disp"]))
+    quantum = 2 * 1.2 * np.max(np.abs(y)) / 2 ** bits
+    hum = 3 * quantum * np.sin(2 * np.pi * 50.0 * t + 1.0)
+    _, sig, _ = quantised_slow_step(f=f, periods=periods, bits=bits, noise_q=noise_q)
+    sig["disp"] = np.round((y + hum + noise_q * quantum * rng.standard_normal(t.size)) / quantum) * quantum
+    (line,) = of_kind(assess(sig, fs, f).quality, "line_interference")
+    assert line.channel == "disp" and line.freq_Hz == pytest.approx(50.0, abs=0.05)
+    assert line.size == pytest.approx(3 * quantum, rel=0.1)
+
+
+@pytest.mark.parametrize("noise_q", [0.0, 0.1, 0.2, 0.3])
+def test_the_quantisation_line_bound_holds_the_largest_line_of_a_quantisers_error(noise_q):
+    """Independent fact: the error Q(y + e) - (y + e) of a slow sine, averaged over its 200
+    periods (what is periodic, as a line from it is), its largest harmonic above the second.
+    The bound must hold it and not be loose by more than the 50 error terms it sums."""
+    from sim.artefacts import quantisation_line_bound
+    spp, periods, q = 2000, 200, 1.0
+    t = np.arange(spp * periods) / spp
+    y = 37.3 * q * np.sin(2 * np.pi * t)
+    e = np.random.default_rng(3).standard_normal(t.size) * noise_q * q
+    err = (np.round((y + e) / q) * q - (y + e)).reshape(periods, spp).mean(axis=0)
+    spec = 2 * np.abs(np.fft.rfft(err)) / spp
+    largest = spec[3:].max()
+    white = 4 * (q / np.sqrt(12)) * np.sqrt(2 / t.size)      # what the average leaves of the white part
+    bound = quantisation_line_bound(q, noise_q * q)
+    assert largest <= bound + white
+    assert bound < 60 * max(largest, white)
+
+
+@pytest.mark.parametrize("f, noise_q, depth", [(6.0, 0.05, 0.9), (25600 / 994.99, 0.02, 0.97), (7.3, 0.3, 0.95)])
+def test_a_clipped_top_on_a_quantised_slow_record_is_still_clipping(f, noise_q, depth):
+    """Where the pile-up at the top value alone cannot tell (the converter coarser than the
+    noise), the signal carried into the flat run from either side passes the level."""
+    fs = 25600.0
+    _, sig, quantum = quantised_slow_step(seed=12, f=f, periods=10, bits=16, noise_q=noise_q)
+    top = np.round(depth * sig["force"].max() / quantum["force"]) * quantum["force"]
+    sig["force"] = np.minimum(sig["force"], top)
+    q = assess(sig, fs, f).quality
+    (c,) = of_kind(q, "clipping")
+    assert c.channel == "force" and c.size == pytest.approx(top) and q.status == "rejected"
+
+
+def test_a_quantised_slow_top_with_lumpy_counts_is_not_clipping():
+    """bench_artefacts' clean quantised step 38 (16 bits, 995.0 samples per period, noise 0.02
+    quanta): coherent sampling puts 26 samples on the force's top value and 4 on the next, so
+    the pile-up rule named clipping; each visit lasts 2 samples, as a parabola turning
+    within the top quantum does."""
+    from benchmarks.bench_artefacts import make_quantised
+    sig, fs, f, _, _ = make_quantised(38, dropout=False)
+    q = assess(sig, fs, f).quality
+    assert not of_kind(q, "clipping") and q.status != "rejected", q.reason
+
+
 def test_a_rejection_without_a_line_names_no_mains_hum():
     """The demo's 100 N / 154 Hz case (decision 0037): 31 periods at 154 Hz put 150 Hz mains
     inside the guard of the fundamental, but what changes between the halves is the probe's
