@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers import plan_block
+from sim.artefacts import HARMONIC_GUARD, assess_step, si
 from sim.step_result import ControlIteration, FitSummary, StepMeasurement, StepResult
 
 from .analysis import HarmonicFit, fit_harmonics
@@ -23,7 +24,7 @@ from .instruments import Block, BlockSource, SineSource, StepMarker
 from .plan import Plan, StepSpec
 from .safety import LimitExceeded
 
-__all__ = ["MIN_VPP", "DriveState", "ForceUnreachable", "SteppedSine", "StepResult", "next_drive"]
+__all__ = ["MIN_VPP", "DriveState", "ForceUnreachable", "SteppedSine", "StepResult", "Unsettled", "next_drive", "unsettled"]
 
 Record = Callable[[StepSpec, StepResult, dict[str, np.ndarray]], None]
 
@@ -57,6 +58,51 @@ def next_drive(vpp: float, force: float, target: float, prev: tuple[float, float
                 s = min(max(slope, 0.25), 2.0)
     nxt = vpp * (target / force) ** (1.0 / s)
     return min(max(nxt, vpp / MAX_FACTOR), vpp * MAX_FACTOR)
+
+
+SETTLE_KINDS = ("unsettled_transient", "offset_drift")   # what settling longer cures
+MAX_SETTLE_WAIT_S = 2.0      # the longest extra wait one re-settle takes on the check's advice
+
+
+@dataclass(frozen=True)
+class Unsettled:
+    """What :func:`unsettled` found: the check's words ('' = settled), the drive cycles its
+    transients still need (0 when it gives none) and the frequencies of the vibrations in
+    the block (to know them again in the next block of the step)."""
+
+    why: str = ""
+    cycles: int = 0
+    vibrations_Hz: tuple[float, ...] = ()
+
+
+def unsettled(block: Block, freq_Hz: float, ringing_at: tuple[float, ...] = ()) -> Unsettled:
+    """What the offline step-quality check (:func:`sim.artefacts.assess_step`, the one the
+    report and ``bench analyze`` apply to the stored records) would find in ``block`` that
+    settling longer cures: an unsettled transient or free vibration, an offset drift, or a
+    record not periodic enough (the carriage still moving between the halves), in its own
+    words (channel, size, decay).  Clipping, drop-outs and lines are left to the offline
+    check: waiting does not remove them, with one exception the procedure can see and one
+    record cannot: a "line" at the frequency of a vibration an earlier block of the same
+    step showed (``ringing_at``) is that vibration, now too weak for the record alone to
+    show it decay or to see it on the accelerometer (decision 0033), so still unsettled."""
+    try:
+        q = assess_step(block.force_N, block.accel_m_s2, block.disp_m, block.fs_Hz, freq_Hz).quality
+    except ValueError:
+        return Unsettled()  # too short to assess: the offline check says so; waiting does not change it
+    guard = HARMONIC_GUARD * block.fs_Hz / max(block.n_samples, 1)
+    arts = [a for a in q.artefacts if a.kind in SETTLE_KINDS]
+    still = [a for a in q.artefacts if a.kind == "line_interference"
+             and any(abs(a.freq_Hz - fr) <= guard for fr in ringing_at)]
+    if q.status == "rejected":
+        if not q.reason.startswith("not periodic enough"):
+            return Unsettled()
+        words = [q.reason]         # it names the transient it saw, if any
+    else:
+        words = [a.describe() for a in arts]
+    words += [f"{a.describe()}: at the frequency of the vibration the block before showed, so that vibration, "
+              f"weaker" for a in still]
+    freqs = tuple(a.freq_Hz for a in arts + still if math.isfinite(a.freq_Hz))
+    return Unsettled("; ".join(words), max((a.settle_cycles for a in arts), default=0), freqs)
 
 
 @dataclass
@@ -231,13 +277,16 @@ class SteppedSine:
                 for name, x in (("force", block.force_N), ("accel", block.accel_m_s2), ("disp", block.disp_m))}
 
     def measure(self, step: StepSpec) -> tuple[StepMeasurement, dict[str, np.ndarray]]:
-        """Settle, then measure; re-measure while a free vibration is still dying out.
+        """Settle, then measure; re-measure while the block is not settled (decision 0037).
 
-        A weakly damped mode (small-amplitude pre-rolling, n > 1) can ring for hundreds of
-        periods after a change.  While the displacement residual (what the harmonics do not
-        explain) is above 3x the sensor noise at rest and still falling by more than 10 %
-        from block to block, the block is discarded and another taken (at most
-        ``max_extra_settle_blocks`` of the plan)."""
+        A block is discarded and another taken (at most ``max_extra_settle_blocks`` of the
+        plan) while the offline step-quality check would find in it something that
+        settling cures (:func:`unsettled`: a transient, a free vibration, an offset drift,
+        a record not periodic enough), each time logged with the check's words, or while
+        the displacement residual is above 3x the sensor noise at rest and still falling
+        by more than 10 % from block to block (a weakly damped mode, small-amplitude
+        pre-rolling, can ring for hundreds of periods).  What the check still finds after
+        the limit is logged as a warning and kept in the result (``unsettled``)."""
         f = step.freq_Hz
         periods = max(self.plan.measure_cycles, math.ceil(self.plan.min_measure_s * f))
         self._wait(f, self.plan.min_settle_s, min_periods=self.plan.settle_cycles)
@@ -245,15 +294,30 @@ class SteppedSine:
             self.marker.mark_step(step.key)
         block = self._acquire(f, periods)
         fits = self._fit_block(block, f)
-        extra = 0
-        while extra < self.plan.max_extra_settle_blocks and fits["disp"].noise_rms > 3 * self.disp_noise_floor_m:
-            nxt = self._acquire(f, periods)
-            nfits = self._fit_block(nxt, f)
-            extra += 1
-            improved = nfits["disp"].noise_rms < 0.9 * fits["disp"].noise_rms
-            block, fits = nxt, nfits
-            if not improved:
+        extra, before, found = 0, math.inf, Unsettled()
+        settle = max(self.plan.settle_cycles, math.ceil(self.plan.min_settle_s * f))
+        while True:
+            found = unsettled(block, f, found.vibrations_Hz)
+            noise = fits["disp"].noise_rms
+            ringing = noise > 3 * self.disp_noise_floor_m and noise < 0.9 * before
+            if not (found.why or ringing) or extra >= self.plan.max_extra_settle_blocks:
                 break
+            log.info("step %s: settling one more block (%d of at most %d): %s", step.key, extra + 1,
+                     self.plan.max_extra_settle_blocks, found.why or
+                     f"displacement residual {si(noise, 'm')} > 3 x the noise at rest "
+                     f"{si(self.disp_noise_floor_m, 'm')}")
+            if found.why:        # the plan's settle again, or what the check says the transient still
+                # needs: its cycles count from the block's start, and the block has passed
+                need = min(found.cycles - periods, math.ceil(MAX_SETTLE_WAIT_S * f))
+                self._wait(f, 0.0, min_periods=max(settle, need))
+            before = noise
+            block = self._acquire(f, periods)
+            fits = self._fit_block(block, f)
+            extra += 1
+        why = found.why
+        if why:
+            log.warning("step %s: still unsettled after %d extra blocks (plan: max_extra_settle_blocks = %d), "
+                        "recorded as it is: %s", step.key, extra, self.plan.max_extra_settle_blocks, why)
         F1 = fits["force"].fundamental
         X1 = fits["disp"].fundamental
         A1 = fits["accel"].fundamental
@@ -270,7 +334,7 @@ class SteppedSine:
             force=_fit_summary(fits["force"]), accel=_fit_summary(fits["accel"]),
             disp=_fit_summary(fits["disp"]),
             fs_Hz=block.fs_Hz, n_samples=block.n_samples, t0_s=block.t0_s, block_id=block.block_id,
-            resends=block.resends, settle_extra_blocks=extra)
+            resends=block.resends, settle_extra_blocks=extra, unsettled=why)
         raw = dict(force_N=block.force_N, accel_m_s2=block.accel_m_s2, disp_m=block.disp_m,
                    fs_Hz=np.array(block.fs_Hz), t0_s=np.array(block.t0_s))
         return result, raw

@@ -695,19 +695,28 @@ def _fundamental(x: np.ndarray, fs: float, f: float) -> float:
     return float(2.0 / n * abs(np.dot(x[:n] - x[:n].mean(), np.exp(-2j * np.pi * f * t))))
 
 
-def _mains_hint(f: float, periods: int) -> str:
+def _mains_hint(f: float, periods: int, failed: str, lines: list[Artefact]) -> str:
     """Mains (50/60 Hz, harmonics 1-3) too close to a drive harmonic to be separated in
-    ``periods`` periods: what to do, or ''."""
+    ``periods`` periods: what to do, or ''.  Named only when the records make it plausible
+    (decision 0037): the periodicity gate failed on that very harmonic (``failed``, the
+    gate's "harmonic k"; a line within the guard of harmonic k beats with it, and the
+    halves differ there, not in the offset or another harmonic), or a line at a mains
+    frequency was found elsewhere in the step (``lines``)."""
     guard = HARMONIC_GUARD * f / periods
+    found = [a for a in lines if a.kind == "line_interference" and mains(a.freq_Hz)]
+    k_failed = int(failed.split()[-1]) if failed.startswith("harmonic ") else 0
     for base in MAINS_HZ:
         for m in (1, 2, 3):
             fm = m * base
             k = max(1, round(fm / f))
             gap = abs(fm - k * f)
-            if 0 < gap <= guard:
+            seen = [a for a in found if mains(a.freq_Hz).startswith(f"{base:g} Hz")]
+            if 0 < gap <= guard and (k == k_failed or seen):
+                why = (f"a {seen[0].freq_Hz:.4g} Hz line was found on the {LABEL[seen[0].channel]}" if seen
+                       else f"harmonic {k} is what changed")
                 return (f"mains hum, if present, at {fm:g} Hz lies {gap:.2g} Hz from drive harmonic {k} "
-                        f"({k * f:.4g} Hz) and cannot be separated from the response in {periods} periods: "
-                        f"measure at least {math.ceil(HARMONIC_GUARD * f / gap)} periods")
+                        f"({k * f:.4g} Hz) and cannot be separated from the response in {periods} periods "
+                        f"({why}): measure at least {math.ceil(HARMONIC_GUARD * f / gap)} periods")
     return ""
 
 
@@ -826,7 +835,7 @@ def assess_step(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None
         q.reason = (f"not periodic enough on the {LABEL.get(ch, ch)} ({ch}): its {what} changes by "
                     f"{rec.drift_sigma:.0f} standard errors between the two halves of the record "
                     f"(limit {DRIFT_LIMIT:g})")
-        hint = _mains_hint(f, periods)
+        hint = _mains_hint(f, periods, what, q.artefacts)
         if hint:
             q.reason += f"; {hint}"
         if tr_arts:

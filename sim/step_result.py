@@ -64,6 +64,9 @@ class StepMeasurement(TypedDict):
     block_id: int
     resends: int
     settle_extra_blocks: int
+    # what the step-quality check still finds that settling longer would cure, after the
+    # plan's max_extra_settle_blocks (decision 0037); absent or "" = settled
+    unsettled: NotRequired[str]
 
 
 class ControlIteration(TypedDict):

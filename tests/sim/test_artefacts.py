@@ -451,3 +451,22 @@ def test_a_quantised_slow_top_with_lumpy_counts_is_not_clipping():
     sig, fs, f, _, _ = make_quantised(38, dropout=False)
     q = assess(sig, fs, f).quality
     assert not of_kind(q, "clipping") and q.status != "rejected", q.reason
+
+
+def test_a_rejection_without_a_line_names_no_mains_hum():
+    """The demo's 100 N / 154 Hz case (decision 0037): 31 periods at 154 Hz put 150 Hz mains
+    inside the guard of the fundamental, but what changes between the halves is the probe's
+    offset (the carriage's mean position relaxing at 25.7 /s), which no hum can make, and no
+    line is anywhere: the rejection names the transient, not a hum.  Hum added at 150 Hz to
+    the same records (so the fundamental beats) is named."""
+    f, fs = 154.0, 25600.0
+    t, clean, noise = records(fs, periods=31, f=f, seed=4)
+    creep = 35e-9 * np.exp(-25.7 * t)             # the mean position relaxing (the demo: 35 nm)
+    sig = {ch: clean[ch] + noise[ch] for ch in clean}
+    sig["disp"] = sig["disp"] + creep
+    q = assess(sig, fs, f).quality
+    assert q.status == "rejected" and "displacement probe (disp)" in q.reason, q.text
+    assert "mains" not in q.reason and "hum" not in q.reason
+    sig["disp"] = sig["disp"] - creep + 100e-9 * np.sin(2 * np.pi * 150.0 * t)
+    q = assess(sig, fs, f).quality
+    assert q.status == "rejected" and "mains hum, if present, at 150 Hz lies 4 Hz from drive harmonic 1" in q.reason
