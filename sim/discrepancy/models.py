@@ -143,12 +143,14 @@ class Model:
         (``scale``: the new effect's coefficient unit, see ``scales``).
 
         A stiffness term (:data:`CENTRED`) brings the springs' rest position x_c with it
-        unless the model has it already (one shared per run; it starts at the median step's
-        mean displacement, in units of the current x_s)."""
+        unless the model has it already (one shared per run, fitted in units of the current
+        x_s; ``init`` may then carry its start as a second entry, else it starts at the
+        median step's mean displacement, 0)."""
         if effect in CENTRED and CENTRE not in self.effects:
             m = Model(self.effects + (effect, CENTRE), self.K, self.M,
                       dict(self.scales, **{effect: scale, CENTRE: math.exp(theta[1])}))
-            return m, np.concatenate([theta, init, np.zeros(1)])
+            init = np.asarray(init, float)
+            return m, np.concatenate([theta, init[:1], init[1:2] if init.size > 1 else np.zeros(1)])
         m = Model(self.effects + (effect,), self.K, self.M, dict(self.scales, **{effect: scale}))
         return m, np.concatenate([theta, init])
 

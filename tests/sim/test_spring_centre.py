@@ -75,7 +75,7 @@ def _uff_case(tmp_path, centre_over_x_s):
     w = math.sqrt(F_s / (x_s * rig["mass_kg"]))
     path = tmp_path / "rig.uff"
     generate_uff(path, **rig, levels_N=list(np.linspace(0.1, 0.85, 3) * F_s),
-                 freqs_Hz=list(np.geomspace(0.4, 2.5, 6) * w / (2 * math.pi)), settle=6, measure=4, seed=3,
+                 freqs_Hz=list(np.geomspace(0.4, 2.5, 6) * w / (2 * math.pi)), settle=40, settle_first=60, measure=6, seed=4,
                  cubic_N_per_m3=k3, spring_centre_m=centre_over_x_s * x_s)
     steps = load_source(path).steps
     # the truth on the analysis' scale: the rest position minus the median step's mean position
