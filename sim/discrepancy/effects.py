@@ -14,9 +14,9 @@ Library terms (``kind = "discovered"``), all with one coefficient that is 0 when
 ==========================  =========================================  ==============
 id                          added force                                coefficient
 ==========================  =========================================  ==============
-``cubic_stiffness``         k3 x^3                                     N/m^3
-``quadratic_stiffness``     k2 x abs(x)   (odd, softening if k2 < 0)   N/m^2
-``even_stiffness``          ke x^2        (even: a one-sided spring)   N/m^2
+``cubic_stiffness``         k3 (x - x_c)^3                             N/m^3
+``quadratic_stiffness``     k2 (x - x_c) abs(x - x_c)   (odd)          N/m^2
+``even_stiffness``          ke (x - x_c)^2  (even: a one-sided spring) N/m^2
 ``quadratic_damping``       c2 v abs(v)   (oil, air)                   N s^2/m^2
 ``cubic_damping``           c3 v^3                                     N s^3/m^3
 ``coulomb_friction``        F_c sign(v)   (constant-sign Coulomb)      N
@@ -31,7 +31,10 @@ id                          added force                                coefficie
                             e-fold of the step's amplitude X
 ==========================  =========================================  ==============
 
-(M: the dimensionless Masing friction along the path; F_M = F_s M.)  Each is linear in its
+(M: the dimensionless Masing friction along the path; F_M = F_s M; x: the step's mean
+displacement relative to the median step's plus the motion; x_c: the springs' rest position
+on that scale, :data:`CENTRE`, a parameter of the model from the first stiffness term on,
+shared by all of them, decision record 0038.)  Each is linear in its
 coefficient except ``similarity_ratio`` (exact in lambda), ``asymmetric_friction`` (exact
 in a) and ``amplitude_dependent_n`` (first order in b).  ``step`` is the coefficient change the cheap screen uses
 (:func:`sim.discrepancy.select.screen`): 1 for the linear terms.
