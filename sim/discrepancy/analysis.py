@@ -312,7 +312,7 @@ class Analysis:
         if "x_c" in p:
             xc = p["x_c"]
             at = interval_text(1e6 * xc["value"], 1e6 * xc["low"], 1e6 * xc["high"], " um", signed=True)
-            what += f", acting about x_c = {at} (the springs' rest position from the median step's mean displacement)"
+            what += f", acting about x_c = {at} (the springs' rest position, measured from the median step's mean position)"
         return what + peak_s
 
     def _phrase(self, c) -> str:
