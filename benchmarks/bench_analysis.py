@@ -481,6 +481,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", type=int, default=60)
     ap.add_argument("--first", type=int, default=0, help="seed of the first case (a fresh sample: --first 56)")
+    ap.add_argument("--seeds", help="these seeds instead of --first/--cases (e.g. 7,8,9,17,18,19: the plant's forms "
+                                    "are the seeds with seed %% 10 in 7, 8, 9)")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--scheduler", help="run the cases on this dask scheduler (tcp://host:port)")
     ap.add_argument("--json", help="write the rows here")
@@ -496,7 +498,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     global PROFILE, DROP_TRANSIENTS
     PROFILE, DROP_TRANSIENTS = args.profile, args.drop_transients
-    seeds = range(args.first, args.first + args.cases)
+    seeds = [int(x) for x in args.seeds.split(",")] if args.seeds else range(args.first, args.first + args.cases)
     if args.source == "independent":
         from functools import partial
         case_fn = partial(run_independent_case, levels=args.levels, freqs=args.freqs, cache=args.cache)
@@ -511,7 +513,7 @@ def main(argv=None) -> int:
                                                   workers=args.workers, progress=done)]
     else:
         rows = list(map(_progress, map(case_fn, seeds)))
-    print(f"bench_analysis ({args.source}): {args.cases} cases in {time.perf_counter() - t0:.0f} s "
+    print(f"bench_analysis ({args.source}): {len(seeds)} cases in {time.perf_counter() - t0:.0f} s "
           f"({args.workers} worker(s))")
     print(summarise(rows))
     if args.json:
