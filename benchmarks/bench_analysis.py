@@ -102,6 +102,14 @@ def _interval_checks(a, case, kind: str, want: str | None, obs: dict) -> dict:
                 out["size_error"] = p["value"] / truth - 1
                 out["interval_covers_truth" + sfx] = bool(p["low"] <= truth <= p["high"])
                 out["half_width" + sfx] = float((p["high"] - p["low"]) / 2 / abs(p["value"]))
+                out["size_pull" + sfx] = float((p["value"] - truth) / ((p["high"] - p["low"]) / (2 * 1.959964)))
+        params = a.cause_parameters(want, a.final)
+        if "x_c" in params:            # the springs' rest position: the probe's zero (where the simulated
+            #                            spring acts) relative to the median step's mean displacement
+            q = params["x_c"]
+            truth_c = -float(np.nanmedian([np.mean(s.disp_m) for s in a.steps]))
+            out.update(centre_m=q["value"], centre_truth_m=truth_c, centre_covers_truth=bool(q["low"] <= truth_c <= q["high"]),
+                       centre_pull=float((q["value"] - truth_c) / ((q["high"] - q["low"]) / (2 * 1.959964))))
     if set(a.causes) == ({want} - {None}) and not a.unexplained:
         truth = np.array([np.log(obs["F_s_N"]), np.log(obs["x_s_m"]), obs["n"], np.log(obs["mass_kg"])])
         for sfx, cov in covs.items():
@@ -376,6 +384,11 @@ def coverage_lines(rows: list[dict]) -> list[str]:
                        f"{sum(r['interval_covers_truth' + sfx] for r in sized)} of {len(sized)} "
                        f"(forms {sum(r['interval_covers_truth' + sfx] for r in forms)} of {len(forms)}), "
                        f"median half-width {100 * np.median([r['half_width' + sfx] for r in sized]):.2f} %")
+            centred = [r for r in rows if r.get("centre_covers_truth") is not None]
+            if centred and not sfx:
+                out.append(f"{'':28s} springs' rest position x_c: covers the truth in "
+                           f"{sum(r['centre_covers_truth'] for r in centred)} of {len(centred)}; pulls "
+                           + ", ".join(f"{r['centre_pull']:+.1f}" for r in centred))
         pulls = np.array([r["base_pulls" + sfx] for r in rows if r.get("base_pulls" + sfx)])
         if pulls.size:
             cover = np.abs(pulls) < 1.959964
@@ -468,6 +481,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", type=int, default=60)
     ap.add_argument("--first", type=int, default=0, help="seed of the first case (a fresh sample: --first 56)")
+    ap.add_argument("--seeds", help="these seeds instead of --first/--cases (e.g. 7,8,9,17,18,19: the plant's forms "
+                                    "are the seeds with seed %% 10 in 7, 8, 9)")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--scheduler", help="run the cases on this dask scheduler (tcp://host:port)")
     ap.add_argument("--json", help="write the rows here")
@@ -483,7 +498,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     global PROFILE, DROP_TRANSIENTS
     PROFILE, DROP_TRANSIENTS = args.profile, args.drop_transients
-    seeds = range(args.first, args.first + args.cases)
+    seeds = [int(x) for x in args.seeds.split(",")] if args.seeds else range(args.first, args.first + args.cases)
     if args.source == "independent":
         from functools import partial
         case_fn = partial(run_independent_case, levels=args.levels, freqs=args.freqs, cache=args.cache)
@@ -498,7 +513,7 @@ def main(argv=None) -> int:
                                                   workers=args.workers, progress=done)]
     else:
         rows = list(map(_progress, map(case_fn, seeds)))
-    print(f"bench_analysis ({args.source}): {args.cases} cases in {time.perf_counter() - t0:.0f} s "
+    print(f"bench_analysis ({args.source}): {len(seeds)} cases in {time.perf_counter() - t0:.0f} s "
           f"({args.workers} worker(s))")
     print(summarise(rows))
     if args.json:

@@ -53,7 +53,7 @@ def simulate_level(n: float, gamma0: float, betas, periods_settle: int, periods_
                    samples_per_unit_time: float, rtol: float = 1e-10, cubic: float = 0.0, quadratic: float = 0.0,
                    asymmetry: float = 0.0, viscous: float = 0.0, spring: float = 0.0, speed: float = 0.0,
                    delay: float = 0.0, pitch: tuple[float, float, float, float] | None = None,
-                   settle_first: int | None = None):
+                   settle_first: int | None = None, centre: float = 0.0):
     """Up-sweep through frequency ratios ``betas`` at force gamma0 (dimensionless).
     Yields per step (t', u, a, force) sampled over the measured periods at a fixed rate:
     u the displacement probe, a the accelerometer (both dimensionless).
@@ -61,7 +61,9 @@ def simulate_level(n: float, gamma0: float, betas, periods_settle: int, periods_
     Effects outside the Masing model (dimensionless, 0 = off), written from the plant's
     documented equations (docs/decisions/0013, 0023), not from its code:
 
-    - a spring ``cubic`` u^3 and ``spring`` u, a damping ``quadratic`` u'|u'| and ``viscous`` u';
+    - a spring ``cubic`` (u - ``centre``)^3 and ``spring`` (u - ``centre``) (the springs' rest
+      position ``centre`` away from where the carriage starts, the probe's zero), a damping
+      ``quadratic`` u'|u'| and ``viscous`` u';
     - friction higher one way, F (1 + ``asymmetry`` sign F), and faster,
       F (1 + ``speed`` |u'|) (``speed`` = alpha x_s omega_s / v_ref);
     - ``delay``: the probe reads u(t' - delay);
@@ -77,8 +79,8 @@ def simulate_level(n: float, gamma0: float, betas, periods_settle: int, periods_
 
     def total(u, v):
         F = car.force(u)
-        return (F * (1.0 + asymmetry * math.copysign(1.0, F)) * (1.0 + speed * abs(v)) + cubic * u ** 3
-                + quadratic * v * abs(v) + viscous * v + spring * u)
+        return (F * (1.0 + asymmetry * math.copysign(1.0, F)) * (1.0 + speed * abs(v)) + cubic * (u - centre) ** 3
+                + quadratic * v * abs(v) + viscous * v + spring * (u - centre))
 
     if pitch is None:
         y = np.array([0.0, 0.0])
@@ -180,12 +182,14 @@ def generate_uff(path, F_s_N, x_s_m, n, mass_kg, levels_N, freqs_Hz, *, fs_Hz=No
                  noise=(0.003, 0.005, 0.002), seed=0, cubic_N_per_m3=0.0, quadratic_N_s2_per_m2=0.0,
                  asymmetry=0.0, viscous_N_s_per_m=0.0, spring_N_per_m=0.0, friction_alpha=0.0,
                  friction_v_ref_m_per_s=1.0, disp_delay_s=0.0, disp_gain_error=0.0, pitch=None,
-                 line_Hz=0.0, line_m=0.0, rtol=1e-10, settle_first=None):
+                 line_Hz=0.0, line_m=0.0, rtol=1e-10, settle_first=None, spring_centre_m=0.0):
     """Simulate the up-sweeps and write them to ``path`` as UFF58 (no tags). Returns the
     number of steps written.  Effects in SI (0 = off): forms k3 x^3, c2 v|v|, friction
     asymmetry a; catalog c v, k x, friction F (1 + alpha |v| / v_ref), the probe delayed by
     ``disp_delay_s`` and scaled by 1 + ``disp_gain_error``, ``pitch`` = dict(J, k_th, c_th,
-    h, e) (kg m^2, N m/rad, N m s/rad, m, m; equations in :func:`simulate_level`).
+    h, e) (kg m^2, N m/rad, N m s/rad, m, m; equations in :func:`simulate_level`); the
+    springs (k3, k) act about ``spring_centre_m`` on the probe's scale (each level's
+    carriage starts at rest at the probe's zero).
     Artefacts: a line of ``line_m`` (amplitude) at ``line_Hz`` on the probe, on the
     simulation's own clock (not locked to the drive); a short ``settle`` leaves the
     transient of each frequency change in the record (``settle_first``: of the first step of
@@ -199,7 +203,8 @@ def generate_uff(path, F_s_N, x_s_m, n, mass_kg, levels_N, freqs_Hz, *, fs_Hz=No
     effects = dict(cubic=cubic_N_per_m3 * x_s_m ** 3 / F_s_N,
                    quadratic=quadratic_N_s2_per_m2 * v_unit ** 2 / F_s_N, asymmetry=asymmetry,
                    viscous=viscous_N_s_per_m * v_unit / F_s_N, spring=spring_N_per_m * x_s_m / F_s_N,
-                   speed=friction_alpha * v_unit / friction_v_ref_m_per_s, delay=disp_delay_s * w_s)
+                   speed=friction_alpha * v_unit / friction_v_ref_m_per_s, delay=disp_delay_s * w_s,
+                   centre=spring_centre_m / x_s_m)
     if pitch:
         J, h = pitch["J"], pitch["h"]
         effects["pitch"] = (mass_kg * h * h / J, pitch["e"] / h, pitch["k_th"] / (J * w_s ** 2),

@@ -27,7 +27,7 @@ from ..errors import ConfigurationError
 from ..identify import Estimate, Identifier, displacement_harmonics, synthesize
 from .fit import Fit, Weights, fit, whitened
 from .gain import frf
-from .models import BASE_PARAMS, EFFECTS, LIBRARY, Data, Model
+from .models import BASE_PARAMS, CENTRE, CENTRED, EFFECTS, LIBRARY, Data, Model
 from .rounding import interval_text
 from .select import Selection, select, settle_final
 from .terms import accelerance_pair, second_mode_phrase, speed_friction, speed_friction_phrase
@@ -194,6 +194,8 @@ class Analysis:
             term = EFFECTS[effect]
             for name, unit in zip(term.names, term.units):
                 put(name, iv[f"{effect}.{name}"], unit)
+            if effect in CENTRED and CENTRE in f.model.slices:     # the springs' rest position (shared)
+                put("x_c", iv[f"{CENTRE}.x_c"], "m")
         if EFFECTS[effect].force is not None:
             peak = self.term_peak_N(effect, f)
             out["peak_force_relative_to_F_s"] = dict(value=peak / v["F_s_N"], low=math.nan, high=math.nan, unit="1")
@@ -307,6 +309,10 @@ class Analysis:
             what = f"a Masing similarity ratio lambda = {size} instead of 2 ({e.words})"
         else:
             what = f"{e.label} {e.formula}, {name} = {size} ({e.words})"
+        if "x_c" in p:
+            xc = p["x_c"]
+            at = interval_text(1e6 * xc["value"], 1e6 * xc["low"], 1e6 * xc["high"], " um", signed=True)
+            what += f", acting about x_c = {at} (the springs' rest position, measured from the median step's mean position)"
         return what + peak_s
 
     def _phrase(self, c) -> str:

@@ -14,9 +14,9 @@ Library terms (``kind = "discovered"``), all with one coefficient that is 0 when
 ==========================  =========================================  ==============
 id                          added force                                coefficient
 ==========================  =========================================  ==============
-``cubic_stiffness``         k3 x^3                                     N/m^3
-``quadratic_stiffness``     k2 x abs(x)   (odd, softening if k2 < 0)   N/m^2
-``even_stiffness``          ke x^2        (even: a one-sided spring)   N/m^2
+``cubic_stiffness``         k3 (x - x_c)^3                             N/m^3
+``quadratic_stiffness``     k2 (x - x_c) abs(x - x_c)   (odd)          N/m^2
+``even_stiffness``          ke (x - x_c)^2  (even: a one-sided spring) N/m^2
 ``quadratic_damping``       c2 v abs(v)   (oil, air)                   N s^2/m^2
 ``cubic_damping``           c3 v^3                                     N s^3/m^3
 ``coulomb_friction``        F_c sign(v)   (constant-sign Coulomb)      N
@@ -31,7 +31,10 @@ id                          added force                                coefficie
                             e-fold of the step's amplitude X
 ==========================  =========================================  ==============
 
-(M: the dimensionless Masing friction along the path; F_M = F_s M.)  Each is linear in its
+(M: the dimensionless Masing friction along the path; F_M = F_s M; x: the step's mean
+displacement relative to the median step's plus the motion; x_c: the springs' rest position
+on that scale, :data:`CENTRE`, a parameter of the model from the first stiffness term on,
+shared by all of them, decision record 0038.)  Each is linear in its
 coefficient except ``similarity_ratio`` (exact in lambda), ``asymmetric_friction`` (exact
 in a) and ``amplitude_dependent_n`` (first order in b).  ``step`` is the coefficient change the cheap screen uses
 (:func:`sim.discrepancy.select.screen`): 1 for the linear terms.
@@ -91,15 +94,18 @@ class Path:
     cache: Callable           # (key, make) -> value
     mkey: tuple
     x0: np.ndarray | None = None
+    centre: float = 0.0       # the springs' rest position relative to the median step's mean (m)
     _v: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def x_abs(self) -> np.ndarray:
-        """The path about the springs' origin: the harmonics carry no mean, so the step's
-        measured mean displacement ``x0`` is added (a carriage that walked off under
-        friction sits off centre, and a spring acts on where it is)."""
+        """The path about the springs' rest position: the harmonics carry no mean, so the
+        step's measured mean displacement ``x0`` (relative to the median step's) is added (a
+        carriage that walked off under friction sits off centre, and a spring acts on where
+        it is), and the rest position ``centre`` on that scale is subtracted."""
         x = self.x - self.x.mean(axis=1, keepdims=True)
-        return x if self.x0 is None else x + self.x0[:, None]
+        x = x if self.x0 is None else x + self.x0[:, None]
+        return x - self.centre if self.centre else x
 
     @property
     def K(self) -> int:
@@ -178,9 +184,9 @@ def _rate_friction(ctx: Path, p):          # F (1 + beta |v|) - F
     return p[0] * ctx.F_s * ctx.basis("F|v|", lambda: ctx.M_dimless * np.abs(ctx.v), friction=True)
 
 
-def _lin(name: str, fn, friction: bool = False, times_F_s: bool = False):
+def _lin(name: str, fn, friction: bool = False, times_F_s: bool = False, centred: bool = False):
     def force(ctx: Path, p):
-        b = ctx.basis(name, lambda: fn(ctx), friction)
+        b = ctx.basis(f"{name}@{ctx.centre!r}" if centred else name, lambda: fn(ctx), friction)
         return p[0] * (ctx.F_s if times_F_s else 1.0) * b
     return force
 
@@ -201,6 +207,9 @@ def _amplitude_n(ctx: Path):
 
 
 A_BOUND = 0.9
+CENTRE = "spring_centre"    # the springs' rest position: a parameter of the model whenever a stiffness term is
+CENTRED = ("cubic_stiffness", "quadratic_stiffness", "even_stiffness")   # one of these (their shared centre)
+CENTRE_BOUND = 100.0        # |x_c| in its fit unit (x_s when the centre joined the model)
 
 
 def _asymmetric(ctx: Path, p):
@@ -237,12 +246,12 @@ EFFECTS = {e.id: e for e in (
            formula="pitching mode seen by the accelerometer, not the probe"),
     # ---------------- library (discovered)
     Effect("cubic_stiffness", "cubic stiffness", ("k3",), ("N/m^3",), "discovered", "k3 x^3",
-           _lin("x^3", lambda c: c.x_abs ** 3), words="a spring that stiffens (k3 > 0) or softens with amplitude"),
+           _lin("x^3", lambda c: c.x_abs ** 3, centred=True), words="a spring that stiffens (k3 > 0) or softens with amplitude"),
     Effect("quadratic_stiffness", "odd quadratic stiffness", ("k2",), ("N/m^2",), "discovered", "k2 x |x|",
-           _lin("x|x|", lambda c: c.x_abs * np.abs(c.x_abs)), words="a spring whose stiffness grows in proportion to the "
+           _lin("x|x|", lambda c: c.x_abs * np.abs(c.x_abs), centred=True), words="a spring whose stiffness grows in proportion to the "
                                                               "amplitude"),
     Effect("even_stiffness", "one-sided (even) stiffness", ("ke",), ("N/m^2",), "discovered", "ke x^2",
-           _lin("x^2", lambda c: c.x_abs ** 2), words="a spring stiffer in one direction than in the other (a preload, "
+           _lin("x^2", lambda c: c.x_abs ** 2, centred=True), words="a spring stiffer in one direction than in the other (a preload, "
                                                    "a one-sided stop)"),
     Effect("quadratic_damping", "quadratic damping", ("c2",), ("N s^2/m^2",), "discovered", "c2 v |v|",
            _lin("v|v|", lambda c: c.v * np.abs(c.v)), words="damping growing with the square of the speed (oil, air)"),
@@ -265,6 +274,11 @@ EFFECTS = {e.id: e for e in (
     Effect("amplitude_dependent_n", "exponent n changing with amplitude", ("b",), ("1",), "discovered",
            "n(X) = n + b ln(X / x_s)", _lin("dM/dn ln X", _amplitude_n, friction=True, times_F_s=True),
            words="a friction curve whose shape changes with the amplitude"),
+    # ---------------- the stiffness terms' shared rest position (no force of its own)
+    Effect(CENTRE, "the springs' rest position", ("x_c",), ("m",), "centre",
+           "stiffness terms act on x - x_c (x: the step's mean displacement relative to the median step's, plus "
+           "the motion)", bounds=((-CENTRE_BOUND, CENTRE_BOUND),),
+           words="where the spring force's odd part is centred, relative to the median step's mean displacement"),
 )}
 CATALOG = tuple(e for e in EFFECTS if EFFECTS[e].kind == "catalog")
 LIBRARY = tuple(e for e in EFFECTS if EFFECTS[e].kind == "discovered")

@@ -50,7 +50,7 @@ import numpy as np
 
 from ..errors import ConfigurationError
 from ..identify import POINTS_PER_PERIOD, path_friction, period_paths
-from .effects import CATALOG, EFFECTS, LIBRARY, Effect, Path  # noqa: F401  (re-exported)
+from .effects import CATALOG, CENTRE, CENTRED, EFFECTS, LIBRARY, Effect, Path  # noqa: F401  (re-exported)
 
 BASE_PARAMS = ("F_s_N", "x_s_m", "n", "mass_kg")
 MOTION_EFFECTS = ("sensor_delay", "sensor_gain_error", "second_mode")   # they change the rebuilt x
@@ -140,7 +140,17 @@ class Model:
 
     def extend(self, theta: np.ndarray, effect: str, init: np.ndarray, scale: float = 1.0) -> tuple[Model, np.ndarray]:
         """This model with one more effect, and the parameter vector warm-started from ``theta``
-        (``scale``: the new effect's coefficient unit, see ``scales``)."""
+        (``scale``: the new effect's coefficient unit, see ``scales``).
+
+        A stiffness term (:data:`CENTRED`) brings the springs' rest position x_c with it
+        unless the model has it already (one shared per run, fitted in units of the current
+        x_s; ``init`` may then carry its start as a second entry, else it starts at the
+        median step's mean displacement, 0)."""
+        if effect in CENTRED and CENTRE not in self.effects:
+            m = Model(self.effects + (effect, CENTRE), self.K, self.M,
+                      dict(self.scales, **{effect: scale, CENTRE: math.exp(theta[1])}))
+            init = np.asarray(init, float)
+            return m, np.concatenate([theta, init[:1], init[1:2] if init.size > 1 else np.zeros(1)])
         m = Model(self.effects + (effect,), self.K, self.M, dict(self.scales, **{effect: scale}))
         return m, np.concatenate([theta, init])
 
@@ -216,8 +226,8 @@ class Model:
         n = v["n"] if abs(v["n"] - 1.0) >= 1e-6 else 1.0 + 1e-6
         M = self._cached(d, mkey + (float(theta[1]), n), lambda: path_friction(paths, v["x_s_m"], n))
         K = d.X.shape[1]
-        ctx = Path(X=x[:, :K], Om=d.Omega, x=paths, starts=starts, x0=d.x0, F_s=v["F_s_N"], x_s=v["x_s_m"], n=n,
-                   M_dimless=M, xf=x, omega=d.omega, cache=lambda key, make: self._cached(d, key, make), mkey=mkey)
+        ctx = Path(X=x[:, :K], Om=d.Omega, x=paths, starts=starts, x0=d.x0, centre=v.get(f"{CENTRE}.x_c", 0.0),
+                   F_s=v["F_s_N"], x_s=v["x_s_m"], n=n, M_dimless=M, xf=x, omega=d.omega, cache=lambda key, make: self._cached(d, key, make), mkey=mkey)
         F = v["F_s_N"] * ctx.basis("M", lambda: M, friction=True)
         return F, ctx
 

@@ -34,7 +34,7 @@ import numpy as np
 
 from .fit import Fit, Weights, fit, whitened
 from .gain import heldout_error
-from .models import CATALOG, EFFECTS, LIBRARY, Data
+from .models import CATALOG, CENTRE, CENTRED, EFFECTS, LIBRARY, Data, Path
 from .rounding import percent_text
 
 log = logging.getLogger(__name__)
@@ -46,6 +46,7 @@ CHI2_UNEXPLAINED = 2.0
 GROUP_UNEXPLAINED = 3.0
 HELDOUT_CANDIDATES = 2          # per round, the best by BIC get the (costlier) held-out test
 LIBRARY_FITS = 3                # per round, the library terms the screen ranks first get a full fit
+CENTRE_POINTS = 61              # trial rest positions of the springs in the screen (centre_grid)
 
 
 @dataclass
@@ -197,12 +198,40 @@ def explain(s: dict) -> list[str]:
     return out
 
 
-def screen(current: Fit, d: Data, W: Weights, terms: tuple[str, ...]) -> list[tuple[str, float]]:
+def _score(ctx: Path, Q: np.ndarray, r: np.ndarray, W: Weights, t: str) -> tuple[float, float]:
+    """(chi-square fall, coefficient) of one linear step in term ``t``'s coefficient from the
+    residual ``r``, with the current parameters free (``Q``: their Jacobian's basis)."""
+    e = EFFECTS[t]
+    assert e.force is not None, t
+    dG = e.force(ctx, np.array([e.step])) / e.step
+    wF, wK = W.whiten(-dG, np.zeros_like(dG), bias=False)
+    b = np.concatenate([wF.real.ravel(), wF.imag.ravel(), wK.real.ravel(), wK.imag.ravel()])
+    b = b - Q @ (Q.T @ b)
+    bb = float(b @ b)
+    if not (bb > 1e-300 and np.isfinite(bb)):
+        return 0.0, 0.0
+    return float((b @ r) ** 2 / bb), float(-(b @ r) / bb)
+
+
+def centre_grid(ctx: Path, points: int = CENTRE_POINTS) -> np.ndarray:
+    """Trial rest positions (m, on the scale of the steps' mean displacements x0): the
+    steps' span of x0 widened by three of the largest amplitudes either way."""
+    x0 = ctx.x0 if ctx.x0 is not None else np.zeros(1)
+    amp = float(0.5 * (ctx.x.max(axis=1) - ctx.x.min(axis=1)).max())
+    return np.linspace(float(x0.min()) - 3 * amp, float(x0.max()) + 3 * amp, points)
+
+
+def screen(current: Fit, d: Data, W: Weights, terms: tuple[str, ...],
+           centres: dict | None = None) -> list[tuple[str, float]]:
     """Each library term's estimated fall of chi-square if it joined ``current`` (the score
     test: the term's whitened force at a unit coefficient, projected off the current
     Jacobian, against the current whitened residual), largest first.  Exact for a term
     linear in its coefficient when the rest of the model is linear near the fit; it costs
-    one evaluation of the term, not a fit."""
+    one evaluation of the term, not a fit.
+
+    A stiffness term that would bring the springs' rest position x_c with it (the model has
+    none yet) is scored at every x_c of :func:`centre_grid` and keeps the best; ``centres``
+    (if given) receives ``{term: (x_c in m, coefficient)}`` there, the fit's start."""
     if current.jac is None or current.resid is None:
         raise ValueError("screening needs the current fit's Jacobian")
     ctx = current.model.context(current.theta, d)
@@ -210,14 +239,18 @@ def screen(current: Fit, d: Data, W: Weights, terms: tuple[str, ...]) -> list[tu
     r = current.resid
     out = []
     for t in terms:
-        e = EFFECTS[t]
-        assert e.force is not None, t
-        dG = e.force(ctx, np.array([e.step])) / e.step
-        wF, wK = W.whiten(-dG, np.zeros_like(dG), bias=False)
-        b = np.concatenate([wF.real.ravel(), wF.imag.ravel(), wK.real.ravel(), wK.imag.ravel()])
-        b = b - Q @ (Q.T @ b)
-        bb = float(b @ b)
-        out.append((t, float((b @ r) ** 2 / bb) if bb > 1e-300 and np.isfinite(bb) else 0.0))
+        if t in CENTRED and CENTRE not in current.model.effects:
+            best = (-1.0, 0.0, 0.0)
+            for x_c in centre_grid(ctx):
+                trial = replace(ctx, centre=float(x_c), cache=lambda key, make: make())    # not memoised
+                drop, coef = _score(trial, Q, r, W, t)
+                if drop > best[0]:
+                    best = (drop, float(x_c), coef)
+            if centres is not None:
+                centres[t] = best[1:]
+            out.append((t, best[0]))
+        else:
+            out.append((t, _score(ctx, Q, r, W, t)[0]))
     return sorted(out, key=lambda x: -x[1])
 
 
@@ -247,7 +280,8 @@ def select(base: Fit, d: Data, W: Weights, catalog: tuple[str, ...] = CATALOG, m
         phi = max(1.0, current.reduced_chi2)
         cands = []
         lib = tuple(t for t in library if t not in current.model.effects)
-        scores = screen(current, d, W, lib) if lib else []
+        centres: dict = {}
+        scores = screen(current, d, W, lib, centres) if lib else []
         screened.extend((rnd, t, x) for t, x in scores)
         gate = -BIC_GATE + math.log(current.n_data)            # a term must at least be able to pass
         picks = [t for t, x in scores[:library_fits] if x / phi > gate]
@@ -256,8 +290,11 @@ def select(base: Fit, d: Data, W: Weights, catalog: tuple[str, ...] = CATALOG, m
         for e in tuple(catalog) + tuple(picks):
             if e in current.model.effects:
                 continue
-            model, th0 = current.model.extend(current.theta, e, init_effect(e, current, d, W),
-                                              scale_of.get(e, 1.0))
+            init = init_effect(e, current, d, W)
+            if e in centres:           # a stiffness term with its rest position: the screen's best start
+                x_c, coef = centres[e]
+                init = np.array([coef / scale_of.get(e, 1.0), x_c / math.exp(current.theta[1])])
+            model, th0 = current.model.extend(current.theta, e, init, scale_of.get(e, 1.0))
             try:
                 f = fit(model, th0, d, W, max_nfev=SELECT_NFEV)
             except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:

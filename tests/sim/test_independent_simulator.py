@@ -136,3 +136,21 @@ def test_too_few_settle_cycles_leave_a_decaying_transient_in_the_record():
     assert first > 0.02 and last < first          # unsettled: large and still decaying
     settled_first, _ = period_change(40)
     assert settled_first < 0.1 * first
+
+
+def test_a_cubic_spring_acts_about_its_rest_position(tmp_path):
+    """k3 (x - x_c)^3 about a rest position off the probe's zero: at a tiny amplitude about
+    the measured mean position x_bar it is the linear spring 3 k3 (x_bar - x_c)^2 (the carriage
+    starts at the probe's zero and settles where friction holds the spring's static force).
+    With the rest position ignored (x_bar is 0.11 x_s) the added stiffness would be ~70x
+    smaller."""
+    x_c = X_S
+    k3 = 0.4 * K0 / (3 * x_c ** 2)                 # 3 k3 x_c^2 = 0.4 K0; static force 0.27 F_s
+    freqs = [0.5 * W_S / (2 * math.pi), 1.6 * W_S / (2 * math.pi)]
+    recs = records(tmp_path, freqs, viscous_N_s_per_m=C_DAMP, cubic_N_per_m3=k3, spring_centre_m=x_c)
+    for (P, A, X, fs), f in zip(recs, freqs):
+        x_bar = float(np.mean(X))
+        assert 0.02 * X_S < x_bar < 0.5 * X_S          # it moved toward the rest position and stuck
+        x_ref, a_ref = linear_frf(2 * math.pi * f, k=3 * k3 * (x_bar - x_c) ** 2)
+        x = phasor(X, fs, f) / phasor(P, fs, f)
+        assert x == pytest.approx(x_ref, rel=0.01), (f, x, x_ref)
