@@ -25,7 +25,9 @@ component moves every residual of its step, and the final fit's covariance is th
 sandwich H^-1 J' Sigma J H^-1 with Sigma the whitened residuals' full noise covariance
 (decision record 0031): one noise component of a step (the probe's harmonic 3, say) moves
 the Masing friction residual at every harmonic of that step, so the residuals are
-correlated, which the Jacobian alone (Sigma = I) ignores.
+correlated, which the Jacobian alone (Sigma = I) ignores.  Each of its variances is then
+raised to at least the empirical per-step sandwich's (:func:`at_least_empirical`, decision
+record 0036): the steps' actual scores also hold misfit the noise model does not.
 """
 
 from __future__ import annotations
