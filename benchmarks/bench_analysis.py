@@ -82,7 +82,42 @@ def case_kind(seed: int) -> str:
 
 DROP_TRANSIENTS = False   # --drop-transients: leave out steps flagged with an unsettled transient
 PROFILE = False      # --profile: also the profile-likelihood intervals of F_s, x_s, n, m
-COVARIANCES = {"": "cov", "_jacobian": "cov_jacobian"}   # row suffix -> Fit attribute (the sandwich; the Jacobian's)
+# row suffix -> Fit attribute: the reported covariance; the Jacobian's; the noise model's sandwich (before 0036)
+COVARIANCES = {"": "cov", "_jacobian": "cov_jacobian", "_noise_model": "cov_noise_model"}
+
+
+VARIANTS = False     # --variants: also the empirical per-step (Huber-White) sandwiches of decision 0036
+
+
+def covariance_variants(a) -> dict:
+    """Alternative covariances of the final fit (row suffix -> matrix), an experiment of
+    decision 0036: the empirical per-step sandwich H^-1 (sum_s u_s u_s') H^-1 with u_s the
+    step's score J_s' r_s (HC0), times S / (S - p) (HC1), with leverage-corrected residuals
+    (CR3); max(model-based, HC1) per variance; the model-based meat plus the empirical
+    excess (the positive part of HC1's meat minus the model's)."""
+    from sim.discrepancy.fit import _jacobian_inverse, step_scores
+
+    f, W = a.final, a.selection.final_weights
+    S, p = a.data.X.shape[0], f.model.size
+    H_inv = _jacobian_inverse(f)
+    phi = max(f.reduced_chi2, 1.0)
+    M_model = W.noise_scores(f.jac) * phi
+    U0 = step_scores(f.jac, f.resid, S)
+    U3 = step_scores(f.jac, f.resid, S, H_inv)
+    M0 = U0.T @ U0
+    M1 = M0 * S / max(S - p, 1)
+    M3 = U3.T @ U3
+    sand = lambda M: H_inv @ M @ H_inv      # noqa: E731
+    out = {"_hc0": sand(M0), "_hc1": sand(M1), "_cr3": sand(M3)}
+    model = sand(M_model)
+    for name, emp in (("_max1", out["_hc1"]), ("_max3", out["_cr3"])):
+        D = np.sqrt(np.maximum(np.diag(emp), np.diag(model)) / np.maximum(np.diag(model), 1e-300))
+        out[name] = model * np.outer(D, D)
+    ev, V = np.linalg.eigh(M1 - M_model)
+    out["_excess1"] = sand(M_model + (V * np.maximum(ev, 0)) @ V.T)
+    ev, V = np.linalg.eigh(M3 - M_model)
+    out["_excess3"] = sand(M_model + (V * np.maximum(ev, 0)) @ V.T)
+    return out
 
 
 def _interval_checks(a, case, kind: str, want: str | None, obs: dict) -> dict:
@@ -112,6 +147,13 @@ def _interval_checks(a, case, kind: str, want: str | None, obs: dict) -> dict:
                        centre_pull=float((q["value"] - truth_c) / ((q["high"] - q["low"]) / (2 * 1.959964))))
     if set(a.causes) == ({want} - {None}) and not a.unexplained:
         truth = np.array([np.log(obs["F_s_N"]), np.log(obs["x_s_m"]), obs["n"], np.log(obs["mass_kg"])])
+        if VARIANTS:
+            covs.update(covariance_variants(a))
+            out["variant_steps"], out["variant_params"] = int(a.data.X.shape[0]), int(a.final.model.size)
+            # the fit's convergence: the Gauss-Newton step left at the optimum, in standard errors
+            from sim.discrepancy.fit import _jacobian_inverse
+            step = -_jacobian_inverse(a.final) @ (a.final.jac.T @ a.final.resid)
+            out["newton_step_sd"] = (step[:4] / np.sqrt(np.diag(a.final.cov)[:4])).tolist()
         for sfx, cov in covs.items():
             sd = np.sqrt(np.diag(cov)[:4])
             out["base_pulls" + sfx] = ((a.final.theta[:4] - truth) / sd).tolist()
@@ -399,6 +441,35 @@ def coverage_lines(rows: list[dict]) -> list[str]:
                        + "; median standard error (relative; n absolute) " + ", ".join(
                            f"{k} {v:.2g}" for k, v in zip(("F_s", "x_s", "n", "m"), np.median(sd, axis=0))))
     out.extend(profile_lines(rows))
+    out.extend(variant_lines(rows))
+    return out
+
+
+def variant_lines(rows: list[dict]) -> list[str]:
+    """``--variants`` (decision 0036): per covariance, coverage of F_s, x_s, n, m (also with
+    the t quantile of S - p degrees of freedom), pulls mean and rms, and the standard
+    error's ratio to the reported one (median and worst over cases)."""
+    from scipy.stats import t as student_t
+
+    rs = [r for r in rows if r.get("variant_steps") and r.get("base_pulls")]
+    if not rs:
+        return []
+    ref = np.array([r["base_sd"] for r in rs])
+    q_t = np.array([student_t.ppf(0.975, max(r["variant_steps"] - r["variant_params"], 1)) for r in rs])[:, None]
+    out = [f"covariances on {len(rs)} cases (t quantile: median {np.median(q_t):.3f}):",
+           f"  {'':9s} covered (of {len(rs)} each: F_s x_s n m | all; with t)   pull mean            pull rms"
+           "             sd / reported: median; worst"]
+    for sfx in [k[len("base_pulls"):] for k in rs[0] if k.startswith("base_pulls")]:
+        P = np.array([r["base_pulls" + sfx] for r in rs])
+        sd = np.array([r["base_sd" + sfx] for r in rs])
+        cz, ct = np.abs(P) < 1.959964, np.abs(P) < q_t
+        ratio = sd / ref
+        out.append(f"  {sfx.lstrip('_') or 'reported':9s} " + " ".join(f"{c:2d}" for c in cz.sum(axis=0))
+                   + f" | {cz.sum():3d} ({100 * cz.mean():.1f} %); {ct.sum():3d} ({100 * ct.mean():.1f} %)   "
+                   + " ".join(f"{v:+.2f}" for v in P.mean(axis=0)) + "   "
+                   + " ".join(f"{v:.2f}" for v in np.sqrt((P ** 2).mean(axis=0))) + "   "
+                   + " ".join(f"{v:.2f}" for v in np.median(ratio, axis=0)) + "; "
+                   + " ".join(f"{v:.2f}" for v in ratio.max(axis=0)))
     return out
 
 
@@ -495,9 +566,11 @@ def main(argv=None) -> int:
                     help="also profile-likelihood intervals of F_s, x_s, n, m (coverage, width and time)")
     ap.add_argument("--drop-transients", action="store_true",
                     help="independent source: leave out the steps flagged with an unsettled transient (an experiment)")
+    ap.add_argument("--variants", action="store_true",
+                    help="also the empirical per-step sandwiches (decision 0036): coverage per covariance")
     args = ap.parse_args(argv)
-    global PROFILE, DROP_TRANSIENTS
-    PROFILE, DROP_TRANSIENTS = args.profile, args.drop_transients
+    global PROFILE, DROP_TRANSIENTS, VARIANTS
+    PROFILE, DROP_TRANSIENTS, VARIANTS = args.profile, args.drop_transients, args.variants
     seeds = [int(x) for x in args.seeds.split(",")] if args.seeds else range(args.first, args.first + args.cases)
     if args.source == "independent":
         from functools import partial

@@ -25,7 +25,9 @@ component moves every residual of its step, and the final fit's covariance is th
 sandwich H^-1 J' Sigma J H^-1 with Sigma the whitened residuals' full noise covariance
 (decision record 0031): one noise component of a step (the probe's harmonic 3, say) moves
 the Masing friction residual at every harmonic of that step, so the residuals are
-correlated, which the Jacobian alone (Sigma = I) ignores.
+correlated, which the Jacobian alone (Sigma = I) ignores.  Each of its variances is then
+raised to at least the empirical per-step sandwich's (:func:`at_least_empirical`, decision
+record 0036): the steps' actual scores also hold misfit the noise model does not.
 """
 
 from __future__ import annotations
@@ -196,6 +198,7 @@ class Fit:
     jac: np.ndarray | None = None       # whitened residuals' Jacobian at theta (the screen's projection)
     resid: np.ndarray | None = None     # whitened residuals at theta
     cov_jacobian: np.ndarray | None = None   # with a sandwich ``cov``: the Jacobian's alone (for comparison)
+    cov_noise_model: np.ndarray | None = None  # with a sandwich: the noise model's alone, before the empirical floor
 
     @property
     def dof(self) -> int:
@@ -264,7 +267,24 @@ def fit(model: Model, theta0: np.ndarray, d: Data, W: Weights, max_nfev: int = 1
     if M is None:
         return Fit(model, res.x, cov, chi2, res.fun.size, res.jac, res.fun)
     sandwich = H_inv @ M @ H_inv * phi
-    return Fit(model, res.x, sandwich, chi2, res.fun.size, res.jac, res.fun, cov_jacobian=cov)
+    reported = at_least_empirical(sandwich, H_inv, step_scores(res.jac, res.fun, d.X.shape[0]))
+    return Fit(model, res.x, reported, chi2, res.fun.size, res.jac, res.fun, cov_jacobian=cov,
+               cov_noise_model=sandwich)
+
+
+def at_least_empirical(cov: np.ndarray, H_inv: np.ndarray, scores: np.ndarray) -> np.ndarray:
+    """``cov`` (the noise model's sandwich) with each variance raised to at least the
+    empirical per-step sandwich's, H^-1 (sum_s u_s u_s') H^-1 S / (S - p) (Huber-White
+    with the steps as the independent units, u_s = J_s' r_s each step's score, S / (S - p)
+    the small-sample factor), the correlations kept (decision record 0036).  The noise
+    model holds the records' noise; the steps' scores also hold what it does not (free
+    vibration left in a record, a small model error per step); the larger of the two
+    bounds each parameter's interval."""
+    S, p = scores.shape
+    emp = H_inv @ (scores.T @ scores) @ H_inv * S / max(S - p, 1)
+    var = np.maximum(np.diag(cov), 1e-300)
+    D = np.sqrt(np.maximum(np.diag(emp), var) / var)
+    return cov * np.outer(D, D)
 
 
 def profile_chi2(f: Fit, d: Data, W: Weights, i: int, value: float, start: np.ndarray | None = None,
@@ -350,3 +370,20 @@ def profile_interval(f: Fit, d: Data, W: Weights, i: int, level_z: float = Z95, 
                 off = min(max(o2 + (target - s2) / slope, 0.25 * o2), 4.0 * o2)
         ends.append(th0 + sign * off)
     return ends[0], ends[1]
+
+
+def step_scores(jac: np.ndarray, resid: np.ndarray, steps: int, H_inv: np.ndarray | None = None) -> np.ndarray:
+    """Each step's score J_s' r_s of the whitened residuals (steps x parameters), the rows
+    laid out as :func:`whitened` lays them (real/imaginary of r_F, r_K, step, harmonic).
+    With ``H_inv`` ((J'J)^-1) the residuals are first corrected for the step's leverage,
+    (I - J_s H^-1 J_s')^-1 r_s (the jackknife-like small-sample form, "CR3")."""
+    p = jac.shape[1]
+    J = jac.reshape(4, steps, -1, p).transpose(1, 0, 2, 3).reshape(steps, -1, p)
+    r = resid.reshape(4, steps, -1).transpose(1, 0, 2).reshape(steps, -1)
+    if H_inv is None:
+        return np.einsum("srp,sr->sp", J, r)
+    out = np.empty((steps, p))
+    for s in range(steps):
+        A = np.eye(J.shape[1]) - J[s] @ H_inv @ J[s].T
+        out[s] = J[s].T @ np.linalg.solve(A, r[s])
+    return out

@@ -366,4 +366,5 @@ def widen(f: Fit, s: dict, thetas: list) -> tuple[Fit, float]:
         return cov * np.outer(D, D), float(D.max())
     cov, inflation = widened(f.cov)
     cov_j = None if f.cov_jacobian is None else widened(f.cov_jacobian)[0]
-    return replace(f, cov=cov, cov_jacobian=cov_j), inflation
+    cov_m = None if f.cov_noise_model is None else widened(f.cov_noise_model)[0]
+    return replace(f, cov=cov, cov_jacobian=cov_j, cov_noise_model=cov_m), inflation
