@@ -35,7 +35,7 @@ paper: setup
 	$(VENV)/bin/bench paper --out out/paper
 
 test: setup
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q --durations=15
 
 # Static checks (CI runs them before the tests): lint and import order, the layer
 # contract bench -> procedures -> drivers -> sim, types of sim/, drivers/, procedures/.

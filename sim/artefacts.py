@@ -207,7 +207,9 @@ def find_clipping(ch: str, x: np.ndarray, fs: float, f: float) -> list[Artefact]
     # below a quantum of noise a slow signal dwells at its own top value for a few samples at
     # every turning point, and coherent sampling makes the counts per value lumpy: there the
     # pile-up alone does not tell a clipped top (decision 0039)
-    coarse = q > 0 and _robust_noise(x - _periodic_part(x, fs, f)) < q
+    def coarse() -> bool:
+        return q > 0 and _robust_noise(x - _periodic_part(x, fs, f)) < q
+
     for level in (float(x.max()), float(x.min())):
         at = np.abs(x - level) <= tol
         n_at = int(at.sum())
@@ -216,7 +218,7 @@ def find_clipping(ch: str, x: np.ndarray, fs: float, f: float) -> list[Artefact]
         inward = level - math.copysign(q, level - float(np.median(x)))
         n_next = int((np.abs(x - inward) <= tol).sum()) if q > 10 * tol else 0
         runs = [r for r in _runs(at) if r[1] >= 2]
-        if n_at >= 5 * (n_next + 1) and runs and (not coarse or _beyond(x, max(runs, key=lambda r: r[1]), level, q)):
+        if n_at >= 5 * (n_next + 1) and runs and (not coarse() or _beyond(x, max(runs, key=lambda r: r[1]), level, q)):
             out.append(Artefact("clipping", ch, level, "rejected", time_s=runs[0][0] / fs, duration_s=n_at / fs,
                                 evidence=f"{n_at} samples ({100 * n_at / x.size:.2g} % of the record) flat at the "
                                          f"extreme value in {len(runs)} runs"))

@@ -20,7 +20,7 @@ from bench.sources import load_source
 from procedures.online_id import identifiability
 from sim.identify import identify_results
 
-N_RIGS = 10
+N_RIGS = 6          # a seeded sample (six full default plans); the base fit over many rigs: benchmarks/bench_identification.py
 TRUTH_KEYS = ("F_s_N", "x_s_m", "n", "mass_kg")
 
 
@@ -65,7 +65,7 @@ def outcomes(tmp_path_factory):
 
 
 @pytest.mark.slow
-@pytest.mark.timeout(1800)   # the fixture runs ten full default plans
+@pytest.mark.timeout(1800)   # the fixture runs six full default plans
 def test_final_estimates_within_tolerance_on_random_rigs(outcomes):
     tol = dict(F_s_N=0.03, mass_kg=0.03, x_s_m=0.05, n=0.05)
     misses = []
