@@ -15,12 +15,12 @@ Checked by Monte Carlo coverage against a known truth, made two ways:
   alone do not.
 """
 
-import math
 
 import numpy as np
 
 from sim.discrepancy.fit import Weights, at_least_empirical, fit, step_scores
 from sim.discrepancy.models import Data, Model
+from tests.sim.sine_steps import LEVEL, OMEGA, TRUTH, K, sine_steps
 
 Z95 = 1.959964
 
@@ -90,24 +90,15 @@ def test_step_scores_sum_the_steps_rows_and_correct_for_leverage():
         assert np.allclose(H_inv @ U3[s], est - est_s)
 
 
-TRUTH = np.array([math.log(10.0), math.log(20e-6), 2.0, math.log(5.0)])    # F_s 10 N, x_s 20 um, n 2, m 5 kg
 
 
 def masing_coverage(disturbance: float, draws: int, seed: int = 0) -> tuple[float, float]:
     """Coverage of F_s, x_s, n, m by the reported and the noise model's intervals on a
     12-step case (3 levels x 4 frequencies, amplitudes 0.5-1.5 x_s) whose force fundamental
     carries, besides its noise, a complex offset of ``disturbance`` x its noise per step."""
-    model = Model((), harmonics=5)
-    om = 2 * np.pi * np.tile([20.0, 40.0, 80.0, 160.0], 3)
-    amp = np.repeat([0.5, 1.0, 1.5], 4) * math.exp(TRUTH[1])
-    S, K = om.size, 5
-    X = np.zeros((S, K), complex)
-    X[:, 0] = amp
-    zero = np.zeros(S)
-    level = np.repeat(np.arange(3), 4)
-    clean = Data(om, np.zeros((S, K), complex), -(om[:, None] * np.arange(1, K + 1)) ** 2 * X, X,
-                 zero, zero, zero, level)
-    P, A = model.predict(TRUTH, clean)
+    model = Model((), harmonics=K)
+    X, P, A = sine_steps([0.5, 1.0, 1.5], model)
+    om, level, S, amp = OMEGA, LEVEL, OMEGA.size, np.abs(X[:, 0])
     rng = np.random.default_rng(seed)
     sP, sA, sX = 1e-3 * np.abs(P[:, 0]), 1e-3 * np.abs(A[:, 0]), 1e-4 * amp
     reported, noise_model = [], []

@@ -18,25 +18,17 @@ from scipy.optimize import minimize
 
 from sim.discrepancy.fit import Weights, fit, profile_interval, whitened
 from sim.discrepancy.models import Data, Model
+from tests.sim.sine_steps import LEVEL, OMEGA, TRUTH, K, sine_steps
 
-TRUTH = np.array([math.log(10.0), math.log(20e-6), 2.0, math.log(5.0)])    # F_s 10 N, x_s 20 um, n 2, m 5 kg
 Z95 = 1.959964
 
 
 def pre_rolling_case(rel_noise: float, seed: int = 0):
     """12 steps (3 levels x 4 frequencies) of pure-sine displacement below x_s; the force
     and acceleration the base model predicts, with noise ``rel_noise`` x |P_1| on P."""
-    model = Model((), harmonics=5)
-    amp = np.repeat([0.3, 0.6, 1.0], 4) * 0.4 * math.exp(TRUTH[1])
-    om = 2 * np.pi * np.tile([20.0, 40.0, 80.0, 160.0], 3)
-    S, K = om.size, 5
-    X = np.zeros((S, K), complex)
-    X[:, 0] = amp
-    zero = np.zeros(S)
-    level = np.repeat(np.arange(3), 4)
-    clean = Data(om, np.zeros((S, K), complex), -(om[:, None] * np.arange(1, K + 1)) ** 2 * X, X,
-                 zero, zero, zero, level)
-    P, A = model.predict(TRUTH, clean)
+    model = Model((), harmonics=K)
+    X, P, A = sine_steps([0.12, 0.24, 0.4], model)
+    om, level, S, amp = OMEGA, LEVEL, OMEGA.size, np.abs(X[:, 0])
     rng = np.random.default_rng(seed)
     sP, sA, sX = rel_noise * np.abs(P[:, 0]), 1e-6 * np.abs(A[:, 0]), 1e-6 * amp
 
