@@ -14,6 +14,7 @@ import argparse
 import logging
 import sys
 import time
+from dataclasses import replace
 from enum import IntEnum
 from pathlib import Path
 
@@ -101,7 +102,7 @@ def _run(args, resume: bool) -> int:
     from .storage import RunStatus, RunStore
 
     if resume:
-        from .config import parse_plan, parse_rig, plan_toml, rig_toml
+        from .config import parse_rig, parse_stored_plan, rig_toml
         store = RunStore.open(Path(args.run))
         meta, acc = store.metadata, store.account()
         retry = bool(getattr(args, "retry_skipped", False)) and bool(acc.skipped)
@@ -114,7 +115,8 @@ def _run(args, resume: bool) -> int:
               f"resume: every planned step is there{' or was skipped at run time' if acc.skipped else ''}; "
               f"finishing the run (it ended '{meta.get('status', '?')}')",
               flush=True)
-        plan = parse_plan({"plan": plan_toml(meta["plan"])}, f"{args.run}/run.json")
+        # validated as account() did; the envelope's skips are worked out again (limits may have changed)
+        plan = replace(parse_stored_plan(meta["plan"], f"{args.run}/run.json"), skip=())
         rig = parse_rig({"rig": rig_toml(meta["rig"])}, f"{args.run}/run.json")
         out, seed = Path(args.run), meta.get("sim_seed")
     else:
@@ -327,14 +329,16 @@ def cmd_check(args) -> int:
     one line, then the count; exit 1 if there is any problem.  A step skipped at run time
     (force unreachable) as the plan allows (``infeasible = "skip"``) is listed and counted,
     not a problem (exit 0 when it is the only gap) unless ``--strict`` (decision 0033)."""
-    from .storage import RunDirError, RunStore
+    from .storage import NewerFormat, RunDirError, RunStore
 
     store = RunStore(Path(args.run))
     if not store.path.is_dir():
         RunStore.open(store.path)             # raises the one-line usage error
     try:
         acc = store.account()
-    except RunDirError:                       # run.json damaged: the files alone, no plan to count against
+    except NewerFormat:
+        raise                                 # refused by name (exit 2), as report and resume do
+    except RunDirError:                       # run.json damaged or its plan not valid: the files alone
         acc = None
     problems = store.check() if acc is None else acc.missing + acc.damaged + acc.orphan
     skipped = [] if acc is None else acc.skipped
@@ -343,8 +347,9 @@ def cmd_check(args) -> int:
     for p in problems:
         print(f"{p.kind:>9}  {p}")
     if acc is None:
-        print(f"{store.path}: {len(store.step_files())} step result files; run.json unreadable, so the steps "
-              f"cannot be counted against the plan; {len(problems)} problem{'s' if len(problems) != 1 else ''}")
+        print(f"{store.path}: {len(store.step_files())} step result files; run.json unreadable or its plan not "
+              f"valid, so the steps cannot be counted against the plan; {len(problems)} "
+              f"problem{'s' if len(problems) != 1 else ''}")
         return ExitCode.FAILURE
     print(f"{store.path}: {acc.summary()}"
           + (f" (bench resume {store.path} measures missing and damaged steps again, keeping damaged "

@@ -43,14 +43,18 @@ import stat
 import tempfile
 import threading
 import zipfile
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
-from sim.errors import RunDirectoryError
+from procedures.plan import Plan
+from sim.errors import ConfigurationError, RunDirectoryError
 from sim.step_result import STEP_FORMAT_VERSION, StepResult, check_step_version
+
+from .config import parse_stored_plan
+from .files import UnreadableFile, read_file
 
 log = logging.getLogger(__name__)
 
@@ -181,6 +185,10 @@ def _canonical(obj) -> bytes:
 RunDirError = RunDirectoryError    # not a readable run directory (missing, or run.json damaged)
 
 
+class NewerFormat(RunDirectoryError):
+    """run.json was written by a newer guideway-bench: refused by name, never taken for damage."""
+
+
 class DamagedStep(RunDirectoryError):
     """A completed step's files are missing, truncated or fail their checksum."""
 
@@ -200,7 +208,13 @@ class StepProblem:
     count: int = 1    # steps concerned (more than one: an adaptive sweep's shortfall)
 
     def __str__(self) -> str:
-        return f"{self.path}: {self.reason}"
+        return f"{shown(self.path)}: {self.reason}"
+
+
+def shown(name) -> str:
+    """A file name as it can be printed: bytes that are not UTF-8 (a name made elsewhere)
+    as ``\\xff`` escapes, not an error on the terminal."""
+    return os.fsencode(str(name)).decode("utf-8", "backslashreplace")
 
 
 PROBLEM_KINDS = ("missing", "truncated", "corrupt", "checksum", "unknown", "skipped")
@@ -239,10 +253,7 @@ class RunStore:
             raise RunDirError(f"{path}: no such directory (expected a run directory made by 'bench run')")
         if not (store.path / "run.json").is_file():
             raise RunDirError(f"{path}: not a run directory (no run.json; expected a directory made by 'bench run')")
-        version = store.metadata.get("format_version", 1)   # a damaged run.json is named now, not deep inside a reader
-        if not isinstance(version, int) or isinstance(version, bool) or version > RUN_FORMAT_VERSION:
-            raise RunDirError(f"{store.path / 'run.json'}: run format version {version!r}, written by a newer "
-                              f"guideway-bench (this one reads versions up to {RUN_FORMAT_VERSION}); update to read it")
+        _ = store.metadata          # a damaged run.json or a newer format is named now, not deep inside a reader
         store.refuse_links()
         return store
 
@@ -257,17 +268,27 @@ class RunStore:
 
     @property
     def metadata(self) -> dict:
+        """run.json's content; :class:`RunDirError` names it when it is missing, not a regular
+        file, too large, damaged, or :class:`NewerFormat` when a newer version wrote it."""
         p = self.path / "run.json"
         try:
-            meta = json.loads(p.read_bytes())
+            meta = json.loads(read_file(p))
         except FileNotFoundError:
             raise RunDirError(f"{p}: missing (not a run directory?)") from None
+        except UnreadableFile as e:
+            raise RunDirError(f"{e} (run.json holds the run's plan; nothing can be counted without it)") from None
         except json.JSONDecodeError as e:
             raise RunDirError(f"{p}: damaged ({_json_reason(e)})") from None
-        except UnicodeDecodeError:
-            raise RunDirError(f"{p}: damaged (not text)") from None
+        except UnicodeDecodeError as e:
+            raise RunDirError(f"{p}: damaged (not text: byte {e.start} is not UTF-8)") from None
+        except RecursionError:
+            raise RunDirError(f"{p}: damaged (nested too deeply to be a run's metadata)") from None
         if not isinstance(meta, dict):
             raise RunDirError(f"{p}: damaged (a JSON object was expected, found {type(meta).__name__})")
+        version = meta.get("format_version", 1)
+        if not isinstance(version, int) or isinstance(version, bool) or version > RUN_FORMAT_VERSION:
+            raise NewerFormat(f"{p}: run format version {version!r}, written by a newer guideway-bench "
+                              f"(this one reads versions up to {RUN_FORMAT_VERSION}); update to read it")
         return meta
 
     def update(self, **fields) -> None:
@@ -288,18 +309,41 @@ class RunStore:
     def events(self) -> list[dict]:
         out = []
         p = self.path / "events.jsonl"
-        if not p.exists():
+        try:
+            data = read_file(p)
+        except FileNotFoundError:
             return out
-        for n, line in enumerate(p.read_bytes().decode(errors="replace").splitlines(), 1):
+        except UnreadableFile as e:
+            log.warning("%s; its events are not used", e)
+            return out
+        for n, line in enumerate(data.decode(errors="replace").splitlines(), 1):
             try:
                 e = json.loads(line)
-            except json.JSONDecodeError:
+            except (json.JSONDecodeError, RecursionError):
                 log.warning("%s: line %d damaged (torn or not JSON); skipped", p, n)
                 continue
             if isinstance(e, dict):
                 out.append(e)
             else:
                 log.warning("%s: line %d is not an event object; skipped", p, n)
+        return out
+
+    def identification_history(self) -> list[dict]:
+        """identification.jsonl's estimates, one a step (a damaged line is skipped)."""
+        p = self.path / "identification.jsonl"
+        try:
+            data = read_file(p)
+        except FileNotFoundError:
+            return []
+        except UnreadableFile as e:
+            log.warning("%s; the identification history is not shown", e)
+            return []
+        out = []
+        for line in data.decode(errors="replace").splitlines():
+            try:
+                out.append(json.loads(line))
+            except (json.JSONDecodeError, RecursionError):
+                pass
         return out
 
     # ------------------------------------------------------------------ steps: writing
@@ -320,7 +364,11 @@ class RunStore:
     # ------------------------------------------------------------------ steps: reading
     def step_files(self) -> list[Path]:
         """The steps' JSON files present (intact or not), in key order."""
-        return sorted(self.steps_dir.glob("*.json")) if self.steps_dir.is_dir() else []
+        return sorted(self.steps_dir.glob("*.json")) if self._steps_here() else []
+
+    def _steps_here(self) -> bool:
+        """``steps/`` is a directory inside the run directory (not a link leading out of it)."""
+        return self.steps_dir.is_dir() and not self.steps_dir.is_symlink()
 
     def verify_step(self, key: str) -> StepResult:
         """The step's result after checking both its files (JSON content, the .npz's size
@@ -328,7 +376,8 @@ class RunStore:
         jp, zp = self.steps_dir / f"{key}.json", self.steps_dir / f"{key}.npz"
         result, integrity = _read_step_json(jp, key)
         try:
-            stamp = (zp.stat().st_mtime_ns, zp.stat().st_size, (integrity or {}).get("npz_sha256"))
+            st = os.lstat(zp)          # a link put in its place later is not the block verified
+            stamp = (st.st_mtime_ns, st.st_size, (integrity or {}).get("npz_sha256"))
         except FileNotFoundError:
             stamp = None
         if stamp is None or self._npz_ok.get(key) != stamp:   # hash each block once per store
@@ -358,8 +407,10 @@ class RunStore:
         self.verify_step(key)
         zp = self.steps_dir / f"{key}.npz"
         try:
-            with np.load(zp) as z:
+            with np.load(io.BytesIO(read_file(zp)), allow_pickle=False) as z:
                 return {k: z[k] for k in z.files}
+        except UnreadableFile as e:
+            raise DamagedStep(StepProblem(key, zp, "corrupt", str(e).split(": ", 1)[-1])) from None
         except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as e:
             raise DamagedStep(StepProblem(key, zp, "corrupt", f"unreadable ({type(e).__name__}: {e})")) from None
 
@@ -377,12 +428,17 @@ class RunStore:
         """Every problem of the run directory: damaged run.json or steps (missing, truncated,
         corrupt, checksum mismatch) and step files the plan does not know."""
         problems: list[StepProblem] = []
+        known = None
         try:
-            meta = self.metadata
+            known = planned_keys(self.metadata, self.path / "run.json")
+        except NewerFormat:
+            raise                                # not damage: refused by name
         except RunDirError as e:
             problems.append(StepProblem("", self.path / "run.json", "corrupt", str(e).split(": ", 1)[-1]))
-            meta = None
-        known = planned_keys(meta) if meta else None
+        if self.steps_dir.is_symlink():
+            problems.append(StepProblem("", self.steps_dir, "corrupt", "is a symbolic link; a run's steps are read "
+                                        "only inside the run directory"))
+            return problems
         if not self.steps_dir.is_dir():
             problems.append(StepProblem("", self.steps_dir, "missing", "no steps/ directory"))
             return problems
@@ -427,16 +483,12 @@ class RunStore:
     def account(self) -> Accounting:
         """The run's steps counted against its stored plan: intact, missing (no files, or
         only one of the pair), damaged and orphan files, each named (see :class:`Accounting`)."""
-        meta = self.metadata
-        plan = stored_plan(meta)
+        plan = stored_plan(self.metadata, self.path / "run.json")     # RunDirError naming the key
         problems = self.check()
         orphan = [p for p in problems if p.kind == "unknown" or not p.key]
         bad = {p.key: p for p in problems if p.key and p.kind != "unknown"}
         have_json = {p.stem for p in self.step_files()}
-        have_npz = {p.stem for p in self.steps_dir.glob("*.npz")} if self.steps_dir.is_dir() else set()
-        if plan is None:
-            intact = sorted(have_json - set(bad))
-            return Accounting(None, intact, [], [p for p in bad.values()], orphan)
+        have_npz = {p.stem for p in self.steps_dir.glob("*.npz")} if self._steps_here() else set()
         sweeps = _sweeps(plan)
         k = plan.adaptive_per_sweep
         # a run-time skip counts only where the plan allows it (the procedure writes the event
@@ -503,9 +555,11 @@ def _read_step_json(path: Path, key: str) -> tuple[StepResult, dict | None]:
     def bad(kind, reason):
         return DamagedStep(StepProblem(key, path, kind, reason))
     try:
-        data = path.read_bytes()
+        data = read_file(path)
     except FileNotFoundError:
         raise bad("missing", "missing (the step's result file)") from None
+    except UnreadableFile as e:
+        raise bad("corrupt", str(e).split(": ", 1)[-1]) from None
     except OSError as e:
         raise bad("corrupt", f"unreadable ({e.strerror})") from None
     if not data.strip():
@@ -536,44 +590,39 @@ def _check_npz(path: Path, key: str, integrity: dict | None) -> None:
     def bad(kind, reason):
         return DamagedStep(StepProblem(key, path, kind, reason))
     try:
-        size = path.stat().st_size
+        data = read_file(path)
     except FileNotFoundError:
         raise bad("missing", "missing (the step's raw block; its result file is there)") from None
+    except UnreadableFile as e:
+        raise bad("corrupt", str(e).split(": ", 1)[-1]) from None
+    except OSError as e:
+        raise bad("corrupt", f"unreadable ({e.strerror})") from None
+    size = len(data)
     if integrity is None:                       # a step written before checksums existed
-        if not zipfile.is_zipfile(path):
+        if not zipfile.is_zipfile(io.BytesIO(data)):
             raise bad("corrupt", "not a readable .npz (truncated or overwritten?)")
         return
     want_bytes = integrity.get("npz_bytes")
     if isinstance(want_bytes, int) and size != want_bytes:
         kind = "truncated" if size < want_bytes else "corrupt"
         raise bad(kind, f"{'truncated: ' if size < want_bytes else ''}{size} bytes, {want_bytes} were written")
-    if _sha256(path.read_bytes()) != integrity.get("npz_sha256"):
+    if _sha256(data) != integrity.get("npz_sha256"):
         raise bad("checksum", "checksum mismatch: the raw block differs from what was written")
 
 
-def stored_plan(meta: dict | None):
-    """The run's stored plan as a :class:`procedures.plan.Plan` (None if it cannot be rebuilt)."""
-    from procedures.plan import Plan
-
-    p = (meta or {}).get("plan")
-    if not isinstance(p, dict):
-        return None
+def stored_plan(meta: dict, source: Path | str) -> Plan:
+    """The run's stored plan, checked by the validator of a plan file
+    (:func:`bench.config.parse_stored_plan`: ranges, the size bounds, the format); a
+    :class:`RunDirError` names ``source`` (its run.json) and the key."""
     try:
-        kw = {f.name: p[f.name] for f in fields(Plan) if f.name in p}
-        kw.update(levels_N=tuple(p["levels_N"]), freqs_Hz=tuple(p["freqs_Hz"]),
-                  skip=tuple(tuple(s) for s in p.get("skip") or ()))
-        plan = Plan(**kw)
-        plan.schedule()
-        return plan
-    except Exception as e:  # noqa: BLE001 - a damaged plan entry: then keys cannot be judged
-        log.warning("run.json: the stored plan cannot be rebuilt (%s); step keys not checked", e)
-        return None
+        return parse_stored_plan(meta.get("plan"), str(source))
+    except ConfigurationError as e:
+        raise RunDirError(f"{e} (the plan stored in run.json; nothing is counted against it)") from None
 
 
-def planned_keys(meta: dict | None) -> set[str] | None:
-    """Keys of every step of the run's stored plan (None if the plan cannot be rebuilt)."""
-    plan = stored_plan(meta)
-    return None if plan is None else {s.key for s in plan.schedule()}
+def planned_keys(meta: dict, source: Path | str) -> set[str]:
+    """Keys of every step of the run's stored plan (:class:`RunDirError` if it is not valid)."""
+    return {s.key for s in stored_plan(meta, source).schedule()}
 
 
 # ---------------------------------------------------------------------------- accounting
@@ -638,7 +687,7 @@ class Accounting:
         return (f"{len(self.intact)} intact / {'?' if self.planned is None else self.planned} planned; {skipped}"
                 f"missing: {_keys_text(missing) or 'none'}; "
                 f"damaged: {_keys_text([f'{p.key} ({p.kind})' for p in self.damaged]) or 'none'}; "
-                f"orphan: {_keys_text([p.path.name for p in self.orphan]) or 'none'}")
+                f"orphan: {_keys_text([shown(p.path.name) for p in self.orphan]) or 'none'}")
 
 
 def _missing_label(p: StepProblem) -> str:
