@@ -19,7 +19,7 @@ from drivers import check_daq_url, check_generator_url, check_sensor_url
 from procedures.plan import Limits, Plan, Rig
 from sim.errors import ConfigurationError
 
-from .files import UnreadableFile, read_file
+from .files import TooLarge, UnreadableFile, read_file
 
 log = logging.getLogger(__name__)
 
@@ -165,9 +165,10 @@ def _load(path: Path) -> dict:
         data = read_file(path, MAX_FILE_BYTES)
     except FileNotFoundError:
         raise ConfigError(f"{path}: file not found") from None
+    except TooLarge as e:
+        raise ConfigError(f"{path}: {e.size} bytes; a plan or rig file is at most {MAX_FILE_BYTES} bytes") from None
     except UnreadableFile as e:
-        raise ConfigError(str(e).replace("; not read", "; a plan or rig file is at most "
-                                         f"{MAX_FILE_BYTES} bytes") if "bytes" in str(e) else str(e)) from None
+        raise ConfigError(str(e)) from None
     except IsADirectoryError:
         raise ConfigError(f"{path}: a directory, not a TOML file") from None
     if data[:2] in (b"\xff\xfe", b"\xfe\xff"):

@@ -39,6 +39,15 @@ class UnreadableFile(RunDirectoryError):
     larger than its kind's bound; the message names it."""
 
 
+class TooLarge(UnreadableFile):
+    """A regular file larger than its kind's bound."""
+
+    def __init__(self, path: Path, size: int | None, limit: int):
+        said = f"{size} bytes" if size is not None else "grew while read"
+        super().__init__(f"{path}: {said}, more than the {limit} bytes a file of this kind may have; not read")
+        self.size, self.limit = size, limit
+
+
 def max_bytes(path: Path) -> int:
     path = Path(path)
     return MAX_BYTES.get(path.name, MAX_BYTES.get(path.suffix, MAX_BYTES[".json"]))
@@ -73,8 +82,7 @@ def read_file(path: Path, limit: int | None = None) -> bytes:
     try:
         size = os.fstat(fd).st_size
         if size > limit:
-            raise UnreadableFile(f"{path}: {size} bytes, more than the {limit} bytes a file of "
-                                 f"this kind may have; not read")
+            raise TooLarge(path, size, limit)
         chunks, got = [], 0
         while got <= limit:
             chunk = os.read(fd, min(limit + 1 - got, 2**20))
@@ -83,7 +91,7 @@ def read_file(path: Path, limit: int | None = None) -> bytes:
             chunks.append(chunk)
             got += len(chunk)
         if got > limit:                          # grew while being read
-            raise UnreadableFile(f"{path}: more than the {limit} bytes a file of this kind may have; not read")
+            raise TooLarge(path, None, limit)
         return b"".join(chunks)
     finally:
         os.close(fd)
