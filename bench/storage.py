@@ -51,7 +51,7 @@ import numpy as np
 
 from procedures.plan import Plan
 from sim.errors import ConfigurationError, RunDirectoryError
-from sim.step_result import STEP_FORMAT_VERSION, StepResult, check_step_version
+from sim.step_result import STEP_FORMAT_VERSION, StepResult, check_step_version, step_fields_problem
 
 from .config import parse_stored_plan
 from .files import UnreadableFile, read_file
@@ -211,6 +211,15 @@ class StepProblem:
         return f"{shown(self.path)}: {self.reason}"
 
 
+def _utf8(name: str) -> bool:
+    """A file name that is text (a name of bytes that are not UTF-8 is never a step's)."""
+    try:
+        name.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
+
+
 def shown(name) -> str:
     """A file name as it can be printed: bytes that are not UTF-8 (a name made elsewhere)
     as ``\\xff`` escapes, not an error on the terminal."""
@@ -364,7 +373,7 @@ class RunStore:
     # ------------------------------------------------------------------ steps: reading
     def step_files(self) -> list[Path]:
         """The steps' JSON files present (intact or not), in key order."""
-        return sorted(self.steps_dir.glob("*.json")) if self._steps_here() else []
+        return sorted(p for p in self.steps_dir.glob("*.json") if _utf8(p.name)) if self._steps_here() else []
 
     def _steps_here(self) -> bool:
         """``steps/`` is a directory inside the run directory (not a link leading out of it)."""
@@ -457,6 +466,9 @@ class RunStore:
         for p in sorted(self.steps_dir.iterdir()):
             if p.name.startswith(".") and p.name.endswith(".tmp"):
                 continue       # a write cut short by a kill: harmless, replaced on resume
+            if not _utf8(p.name):
+                problems.append(StepProblem("", p, "unknown", "not a step file (its name is not UTF-8)"))
+                continue
             if p.suffix == ".npz" and p.stem in jsons:
                 continue
             if p.suffix == ".json":
@@ -583,6 +595,9 @@ def _read_step_json(path: Path, key: str) -> tuple[StepResult, dict | None]:
     if obj.get("key") != key:
         raise bad("corrupt", f"the result inside is for step {obj.get('key')!r}, not {key!r}")
     check_step_version(obj, str(path))       # a newer format is refused, not taken for damage
+    problem = step_fields_problem(obj)       # a step of the format before checksums, crafted by hand
+    if problem:
+        raise bad("corrupt", problem)
     return obj, integrity
 
 
