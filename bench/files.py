@@ -67,7 +67,7 @@ def open_regular(path: Path) -> int:
     st = os.fstat(fd)
     if not stat.S_ISREG(st.st_mode):
         os.close(fd)
-        raise UnreadableFile(f"{path}: not a regular file ({_file_kind(st.st_mode)}); not read")
+        raise UnreadableFile(f"{path}: not a regular file ({file_kind(st.st_mode)}); not read")
     return fd
 
 
@@ -97,10 +97,10 @@ def read_file(path: Path, limit: int | None = None) -> bytes:
         os.close(fd)
 
 
-def _file_kind(mode: int) -> str:
+def file_kind(mode: int) -> str:
     for test, name in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
                        (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"),
-                       (stat.S_ISDIR, "a directory")):
+                       (stat.S_ISDIR, "a directory"), (stat.S_ISREG, "a regular file")):
         if test(mode):
             return name
     return "not a regular file"

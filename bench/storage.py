@@ -34,6 +34,7 @@ it: ``mkstemp`` alone makes them 0o600).  See docs/decisions/0028-hardening.md.
 from __future__ import annotations
 
 import enum
+import errno
 import hashlib
 import io
 import json
@@ -54,7 +55,7 @@ from sim.errors import ConfigurationError, RunDirectoryError
 from sim.step_result import STEP_FORMAT_VERSION, StepResult, check_step_version, step_fields_problem
 
 from .config import parse_stored_plan
-from .files import UnreadableFile, read_file
+from .files import UnreadableFile, file_kind, read_file
 
 log = logging.getLogger(__name__)
 
@@ -126,11 +127,14 @@ def real_dir(path: Path, *, create: bool = False) -> Path:
 def open_append(path: Path):
     """``path`` opened for appending text, never through a symbolic link (``O_NOFOLLOW``)."""
     try:
-        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o666)
-    except OSError:
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC,
+                     0o666)
+    except OSError as e:
         if os.path.islink(path):
             raise RunDirError(f"{path}: is a symbolic link; a run writes nothing through links "
                               f"(remove it)") from None
+        if e.errno == errno.ENXIO:             # a FIFO nobody reads: never waited on
+            raise RunDirError(f"{path}: not a regular file (a FIFO)") from None
         raise
     if not stat.S_ISREG(os.fstat(fd).st_mode):
         os.close(fd)
@@ -266,14 +270,25 @@ class RunStore:
         store.refuse_links()
         return store
 
-    def refuse_links(self) -> None:
+    def refuse_links(self, *, writing: bool = False) -> None:
         """Raise :class:`RunDirError` if anything the run writes is a symbolic link, before
-        anything is written (a link could lead the writes out of the run directory)."""
+        anything is written (a link could lead the writes out of the run directory); with
+        ``writing`` (a session about to write) also if one is not a regular file or
+        directory (a FIFO would hold the session; the readers skip it)."""
         for name in WRITTEN:
+            kind = "directory" if name in ("steps", "damaged") else "file"
             if (self.path / name).is_symlink():
                 raise RunDirError(f"{self.path / name}: is a symbolic link; a run writes nothing "
-                                  f"through links (replace it with a real "
-                                  f"{'directory' if name in ('steps', 'damaged') else 'file'})")
+                                  f"through links (replace it with a real {kind})")
+            if not writing:
+                continue
+            try:
+                mode = os.lstat(self.path / name).st_mode
+            except FileNotFoundError:
+                continue
+            if not (stat.S_ISDIR(mode) if kind == "directory" else stat.S_ISREG(mode)):
+                raise RunDirError(f"{self.path / name}: not a {'directory' if kind == 'directory' else 'regular file'} "
+                                  f"({file_kind(mode)}); a run writes only regular files (replace or remove it)")
 
     @property
     def metadata(self) -> dict:

@@ -119,7 +119,7 @@ def step_fields_problem(result: dict) -> str | None:
     if missing:
         return f"not a step result: lacks {', '.join(missing)}"
     if result["direction"] not in ("up", "down"):
-        return f"direction: 'up' or 'down' expected, found {str(result['direction'])[:40]!r}"
+        return f"not a step result: direction: 'up' or 'down' expected, found {str(result['direction'])[:40]!r}"
     problem = _typed_problem(result, StepResult, "")
     return f"not a step result: {problem}" if problem else None
 
