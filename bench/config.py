@@ -173,16 +173,19 @@ def _load(path: Path) -> dict:
         raise ConfigError(f"{path}: a directory, not a TOML file") from None
     if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
         raise ConfigError(f"{path}: saved as UTF-16; TOML files are UTF-8 (save it again as UTF-8)")
+    nul = data.find(b"\x00")
+    if nul >= 0:                  # never in TOML; every other byte of UTF-16 text without its mark
+        raise ConfigError(f"{path}: NUL bytes at offset {nul}: the file seems saved as UTF-16 "
+                          f"without a byte-order mark; TOML files are UTF-8 (save it again as UTF-8)")
     if data.startswith(b"\xef\xbb\xbf"):
         data = data[3:]
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:
         line = data[:e.start].count(b"\n") + 1
-        hint = ("saved as UTF-16 without a byte-order mark" if b"\x00" in data[:64] else
-                "saved in another encoding (Latin-1, Windows-1252, ...)")
         raise ConfigError(f"{path}: not UTF-8: byte 0x{data[e.start]:02x} at line {line} "
-                          f"(offset {e.start}); the file seems {hint}; TOML files are UTF-8 "
+                          f"(offset {e.start}); the file seems saved in another encoding (Latin-1, "
+                          f"Windows-1252, ...); TOML files are UTF-8 "
                           f"(save it again as UTF-8)") from None
     try:
         return tomllib.loads(text)

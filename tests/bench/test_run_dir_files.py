@@ -226,7 +226,7 @@ def test_crafted_steps_of_the_format_before_checksums_are_damaged_not_an_interna
     out = capsys.readouterr().out
     for (_, said), key in zip(CRAFTED, keys[1::3]):
         assert f"corrupt  {copy}/steps/{key}.json: not a step result: {said}" in out
-    assert f"14 intact / 20 planned" in out
+    assert "14 intact / 20 planned" in out
     assert main(["report", str(copy)]) == ExitCode.OK
     assert main(["export", str(copy), "--no-time"]) == ExitCode.OK
     assert "14 used / 20 planned" in (copy / "report" / "report.md").read_text()
