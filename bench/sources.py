@@ -25,8 +25,9 @@ quality: ``bench analyze`` and the run report both show it (``Source.quality``).
 A step whose records are missing, inconsistent (lengths, sample rates), non-finite, too
 short, spoiled by an artefact, or not periodic enough after cleaning (harmonics or offset
 changing between the two halves of the record by more than DRIFT_LIMIT standard errors)
-is rejected with a reason, never silently dropped.  An unreadable file raises ValueError naming the record.  Nothing is
-written: the user's files are left as they are.
+is rejected with a reason, never silently dropped; so is a step with a record pyuff cannot
+read (the rest of the file is used).  A file that is not a universal file raises
+ValueError naming it.  Nothing is written: the user's files are left as they are.
 """
 
 from __future__ import annotations

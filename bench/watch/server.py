@@ -16,9 +16,12 @@ token (or an earlier server's) it can say what is needed, while the run's data a
 while bound to loopback (a web page elsewhere cannot reach the server by DNS rebinding).
 
 Bounds (docs/decisions/0028-hardening.md): at most :data:`MAX_CONNECTIONS` connections are
-served at once (one more is closed unanswered) and :data:`MAX_STREAMS` of them event
-streams (503 beyond); a client silent for :data:`CLIENT_TIMEOUT_S` in the middle of a
-request, or between requests, is dropped; a request body must have a valid
+served at once, :data:`STOP_RESERVE` more for a stop request only (anything else 503;
+one more is closed unanswered), and :data:`MAX_STREAMS` of them event streams (503
+beyond); a client silent for :data:`CLIENT_TIMEOUT_S` in the middle of a request, or
+between requests, is dropped, and each whole request must arrive within
+:data:`REQUEST_DEADLINE_S` however it trickles in (decision record 0041), so slow clients
+cannot lock the stop control out; a client that goes away is not a traceback; a request body must have a valid
 ``Content-Length`` (400 otherwise) of at most :data:`MAX_BODY` bytes (413), and is read
 whole, never taken for a next request.  Every answer carries a Content-Security-Policy
 (scripts from this server only, no framing), ``X-Frame-Options: DENY`` and
