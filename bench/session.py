@@ -1,7 +1,7 @@
 """Run a plan on a rig: open the instruments, check the envelope, run, store, clean up.
 
 Exit paths all end with the generator's output off: normal end, exception, Ctrl-C,
-SIGTERM, instrument error, lost connection, safety limit.  (kill -9 cannot be caught:
+SIGTERM, SIGHUP, SIGQUIT, instrument error, lost connection, a storage error, safety limit.  (kill -9 cannot be caught:
 on the real rig the generator then keeps its last output; stored data stays intact.)
 """
 
@@ -205,15 +205,18 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
     warnings = identifiability(plan, rig)
     for w in warnings:
         log.warning("identifiability: %s", w)
-    store = _open_store(plan, rig, out, resume=resume, sim_seed=sim_seed, warnings=warnings)
-    log_handler = _log_to(store.path / "bench.log")
-    try:
-        _supervised(plan, rig, store, progress=progress, sim_seed=sim_seed, identify=identify,
-                    retry_skipped=retry_skipped)
-    finally:
-        if log_handler:
-            logging.getLogger().removeHandler(log_handler)
-            log_handler.close()
+    latch = SignalLatch()
+    with latch.installed():
+        latch.hold()          # a signal while the directory is set up acts once it says "running"
+        store = _open_store(plan, rig, out, resume=resume, sim_seed=sim_seed, warnings=warnings)
+        log_handler = _log_to(store.path / "bench.log")
+        try:
+            _supervised(plan, rig, store, latch, progress=progress, sim_seed=sim_seed, identify=identify,
+                        retry_skipped=retry_skipped)
+        finally:
+            if log_handler:
+                logging.getLogger().removeHandler(log_handler)
+                log_handler.close()
     return store
 
 
@@ -233,15 +236,16 @@ def _open_store(plan: Plan, rig: Rig, out: Path, *, resume: bool, sim_seed: int 
     return store
 
 
-def _supervised(plan: Plan, rig: Rig, store: RunStore, *, progress, sim_seed: int | None,
+def _supervised(plan: Plan, rig: Rig, store: RunStore, latch: SignalLatch, *, progress, sim_seed: int | None,
                 identify: bool, retry_skipped: bool = False) -> None:
     """The safety path: open the instruments, measure, and on every way out ramp down,
-    switch the output off (confirmed), close everything and record how the run ended."""
+    switch the output off (confirmed), close everything and record how the run ended.
+    ``latch`` is installed and held: released here, inside the path that records the end."""
     status = RunStatus.FAILED
     sup: Supervisor | None = None
-    latch = SignalLatch()
-    with ExitStack() as stack, latch.installed():
+    with ExitStack() as stack:
         try:
+            latch.release()            # a signal latched while the directory was set up acts now
             ins = open_instruments(rig, stack, sim_seed=sim_seed,
                                    on_output_off=lambda ok: store.event("output_off", confirmed=ok))
             store.update(identities=ins.identities)
@@ -273,7 +277,7 @@ def _supervised(plan: Plan, rig: Rig, store: RunStore, *, progress, sim_seed: in
         finally:
             with uninterruptible("switching the output off"):
                 stack.close()    # output off, then close links and twins
-            store.finish(status, steps_done=len(store.done_keys()), steps_total=planned_count(plan))
+                store.finish(status, steps_done=len(store.done_keys()), steps_total=planned_count(plan))
 
 
 def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Supervisor, latch: SignalLatch,

@@ -1,0 +1,169 @@
+"""Every signal that ends a session goes through the safe-off path, also with the terminal
+gone (issue 24): SIGHUP when the terminal closes, SIGQUIT, and the random-signal campaign
+(a small seeded sample; `benchmarks/bench_signals.py` runs a bigger one).
+
+`bench run` runs in a process of its own against twins held by the test process, so the
+generator's own state (and an `OUTP?` over a new link) judges "off" after the signal.
+"""
+
+from __future__ import annotations
+
+import os
+import pty
+import random
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from bench.storage import RunStore
+from drivers import ScpiFunctionGenerator, start_twins
+from sim.rig import RigModel, SimulatedRig
+
+from .test_exit_paths import REPO, event_kinds, meta, rig_toml_for, wait_for
+
+FREQS = [40.0 + 10 * k for k in range(30)]          # far more steps than a test gets to
+
+
+def write_inputs(tmp: Path, twins) -> tuple[Path, Path]:
+    (tmp / "rig.toml").write_text(rig_toml_for(twins))
+    (tmp / "plan.toml").write_text(textwrap.dedent(f"""\
+        [plan]
+        levels_N = [1.0]
+        [plan.frequencies]
+        list_Hz = {FREQS}
+        [plan.control]
+        settle_cycles = 4
+        min_settle_s = 0.0
+        measure_cycles = 4
+        control_cycles = 2
+        ramp_s = 0.0
+        """))
+    return tmp / "plan.toml", tmp / "rig.toml"
+
+
+def bench_run(tmp: Path, twins, out: Path, **popen) -> subprocess.Popen:
+    plan, rig = write_inputs(tmp, twins)
+    return subprocess.Popen([sys.executable, "-m", "bench.cli", "run", "--plan", str(plan), "--rig", str(rig),
+                             "--out", str(out), "--no-report"], cwd=REPO, **popen)
+
+
+def driving(out: Path, twins) -> bool:
+    steps = out / "steps"
+    return steps.is_dir() and any(steps.glob("*.json")) and twins.generator.state.output_on
+
+
+def assert_safe_after(out: Path, twins, reason: str) -> None:
+    """Output off (the twin's state and OUTP? over a new link), confirmed in events.jsonl,
+    run.json ended as interrupted by ``reason``."""
+    assert not twins.generator.state.output_on
+    with ScpiFunctionGenerator(twins.generator_url) as gen:
+        assert gen.output_enabled() is False                      # OUTP? -> 0
+    m = meta(out)
+    assert m["status"] == "interrupted", m["status"]
+    events = RunStore(out).events()
+    offs = [e for e in events if e["event"] == "output_off"]
+    assert [e["confirmed"] for e in offs] == [True]
+    assert [e["reason"] for e in events if e["event"] == "interrupted"] == [reason]
+    assert event_kinds(out)[-1] == "end"
+
+
+def stop(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
+
+
+@pytest.mark.timeout(120)
+def test_closing_the_terminal_switches_the_output_off(tmp_path):
+    """bench runs on a pseudo-terminal it holds as its controlling terminal; the test closes
+    the terminal's master side, as a closed window or a lost SSH link does: the kernel sends
+    SIGHUP, and every later write to the terminal fails with EIO."""
+    with start_twins(SimulatedRig(RigModel(seed=3))) as twins:
+        master, slave = pty.openpty()
+        out = tmp_path / "run"
+        plan, rig = write_inputs(tmp_path, twins)
+        proc = subprocess.Popen(["setsid", "--ctty", sys.executable, "-m", "bench.cli", "run", "--plan", str(plan),
+                                 "--rig", str(rig), "--out", str(out), "--no-report"],
+                                cwd=REPO, stdin=slave, stdout=slave, stderr=slave)
+        os.close(slave)
+        seen = bytearray()
+        try:
+            os.set_blocking(master, False)
+
+            def read_terminal() -> bool:          # keep the terminal drained while waiting
+                try:
+                    seen.extend(os.read(master, 65536))
+                except (BlockingIOError, OSError):
+                    pass
+                return driving(out, twins)
+            wait_for(read_terminal, 60, "the first step with the output on", proc)
+            assert twins.generator.state.output_on
+            os.close(master)                     # the terminal is gone: SIGHUP
+            rc = proc.wait(timeout=30)
+        finally:
+            stop(proc)
+        assert b"WARNING" in seen                # it was writing to that terminal
+        assert rc == 130
+        assert_safe_after(out, twins, f"signal {int(signal.SIGHUP)}")
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize("signum", [signal.SIGHUP, signal.SIGQUIT])
+def test_a_signal_with_stdout_and_stderr_closed_switches_the_output_off(tmp_path, signum):
+    """The terminal's pipes are closed before the signal (every write raises BrokenPipe):
+    neither the progress line nor the closing messages may cut the switch-off short."""
+    with start_twins(SimulatedRig(RigModel(seed=3))) as twins:
+        out = tmp_path / "run"
+        proc = bench_run(tmp_path, twins, out, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        try:
+            wait_for(lambda: driving(out, twins), 60, "the first step with the output on", proc)
+            proc.stdout.close()
+            proc.stderr.close()
+            time.sleep(0.3)                      # a progress line or two into the closed pipe
+            proc.send_signal(signum)
+            rc = proc.wait(timeout=30)
+        finally:
+            stop(proc)
+        assert rc == 130
+        assert_safe_after(out, twins, f"signal {int(signum)}")
+
+
+# --------------------------------------------------------------------------- random signals
+
+CAMPAIGN_SEED = 24
+
+
+def campaign_moments(n: int, seed: int = CAMPAIGN_SEED) -> list[tuple[int, float]]:
+    """(signal, delay after the output came on) of each run of the campaign."""
+    rng = random.Random(seed)
+    return [(rng.choice((signal.SIGHUP, signal.SIGQUIT, signal.SIGTERM, signal.SIGINT)), rng.uniform(0.0, 1.5))
+            for _ in range(n)]
+
+
+@pytest.mark.timeout(180)
+def test_random_signals_at_random_moments_end_with_the_output_off(tmp_path):
+    """A small seeded sample of the campaign: each signal at a random moment after the
+    output came on, with the terminal's pipes closed on every other run."""
+    with start_twins(SimulatedRig(RigModel(seed=3))) as twins:
+        for i, (signum, delay) in enumerate(campaign_moments(3)):
+            out = tmp_path / f"run{i}"
+            closed = i % 2 == 0
+            proc = bench_run(tmp_path, twins, out, stdout=subprocess.PIPE if closed else subprocess.DEVNULL,
+                             stderr=subprocess.PIPE if closed else subprocess.DEVNULL)
+            try:
+                wait_for(lambda: twins.generator.state.output_on, 60, "the output on", proc)  # noqa: B023
+                if closed:
+                    proc.stdout.close()
+                    proc.stderr.close()
+                time.sleep(delay)
+                proc.send_signal(signum)
+                rc = proc.wait(timeout=30)
+            finally:
+                stop(proc)
+            assert rc == 130, (i, signum, delay)
+            assert_safe_after(out, twins, "Ctrl-C" if signum == signal.SIGINT else f"signal {int(signum)}")
