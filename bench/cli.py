@@ -105,6 +105,18 @@ def _run(args, resume: bool) -> int:
 
 
 def _session(args, resume: bool) -> int:
+    from contextlib import ExitStack
+
+    with ExitStack() as held:
+        if resume:           # the run directory is ours before its steps are counted
+            from . import runlock
+            from .storage import RunStore
+            RunStore.open(Path(args.run))
+            held.enter_context(runlock.run_dir(Path(args.run)))
+        return _session_held(args, resume)
+
+
+def _session_held(args, resume: bool) -> int:
     from .session import run_plan
     from .storage import RunStatus, RunStore
 

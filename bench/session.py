@@ -36,6 +36,7 @@ from procedures.safety import LimitExceeded, SupervisedDaq, SupervisedGenerator,
 from procedures.stepped_sine import SteppedSine, StepResult
 from sim.errors import EnvelopeError
 
+from . import runlock
 from .config import Plan, Rig
 from .signals import SignalLatch, uninterruptible
 from .storage import RunStatus, RunStore, open_append, planned_count
@@ -206,7 +207,17 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
     for w in warnings:
         log.warning("identifiability: %s", w)
     latch = SignalLatch()
-    with latch.installed():
+    out = Path(out)
+    if not resume:
+        RunStore.check_new(out)            # before anything, the lock file included, is written
+        out.mkdir(parents=True, exist_ok=True)
+    else:
+        RunStore.open(out)                 # a run directory (else a one-line error), before its lock
+    with ExitStack() as held, latch.installed():
+        held.enter_context(runlock.run_dir(out))          # one session at a time on a run directory ...
+        if not rig.simulated:                             # ... and on an instrument (a simulated rig's are its own)
+            for url in (rig.generator_url, rig.daq_url, rig.sensor_url):
+                held.enter_context(runlock.instrument(url, out))
         latch.hold()          # a signal while the directory is set up acts once it says "running"
         store = _open_store(plan, rig, out, resume=resume, sim_seed=sim_seed, warnings=warnings)
         log_handler = _log_to(store.path / "bench.log")

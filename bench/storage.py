@@ -52,6 +52,8 @@ import numpy as np
 from sim.errors import RunDirectoryError
 from sim.step_result import STEP_FORMAT_VERSION, StepResult, check_step_version
 
+from .runlock import LOCK_NAME
+
 log = logging.getLogger(__name__)
 
 
@@ -207,7 +209,7 @@ PROBLEM_KINDS = ("missing", "truncated", "corrupt", "checksum", "unknown", "skip
 
 
 # what a run writes inside its directory: none of them may be a symbolic link
-WRITTEN = ("steps", "damaged", "events.jsonl", "bench.log", "identification.jsonl", "stop.request")
+WRITTEN = ("steps", "damaged", "events.jsonl", "bench.log", "identification.jsonl", "stop.request", LOCK_NAME)
 
 
 class RunStore:
@@ -218,12 +220,19 @@ class RunStore:
         self._npz_ok: dict[str, tuple] = {}        # key -> stamp of a block already verified
 
     # ------------------------------------------------------------------ life cycle
+    @staticmethod
+    def check_new(path: Path) -> None:
+        """Raise ``FileExistsError`` unless ``path`` can become a new run directory (absent,
+        or empty but for the session lock the new session holds: bench.runlock)."""
+        path = Path(path)
+        if path.exists() and any(p.name != LOCK_NAME for p in path.iterdir()):
+            raise FileExistsError(f"run directory {path} exists and is not empty; "
+                                  f"use 'bench resume {path}' or choose another --out")
+
     @classmethod
     def create(cls, path: Path, metadata: dict) -> RunStore:
         path = Path(path)
-        if path.exists() and any(path.iterdir()):
-            raise FileExistsError(f"run directory {path} exists and is not empty; "
-                                  f"use 'bench resume {path}' or choose another --out")
+        cls.check_new(path)
         path.mkdir(parents=True, exist_ok=True)
         real_dir(path / "steps", create=True)
         store = cls(path)
