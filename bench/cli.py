@@ -266,13 +266,17 @@ def cmd_resume(args) -> int:
 
 def cmd_demo(args) -> int:
     """The main job: the default plan on the simulated rig, then its report."""
+    from . import runlock
+    from .demo import check_out_dir, clear_earlier_demo
+
     args.plan = args.rig = None
     args.seed = None
     out = Path(args.out)
-    if out.exists() and any(out.iterdir()):
-        import shutil
-        shutil.rmtree(out)   # the demo always starts afresh
-    return _run(args, resume=False)
+    if not check_out_dir(out):       # refuses (deleting nothing) unless out holds only an earlier demo's files
+        return _run(args, resume=False)
+    with runlock.run_dir(out):       # not while another session uses it
+        clear_earlier_demo(out)
+        return _run(args, resume=False)
 
 
 def cmd_report(args) -> int:
@@ -502,7 +506,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_paper)
 
     s = sub.add_parser("demo", help="the main job: the default plan on the simulated rig, with its report")
-    s.add_argument("--out", default="out/demo", help="run directory (emptied first: the demo starts afresh)")
+    s.add_argument("--out", default="out/demo", help="run directory (an earlier demo run there is deleted first; anything else is refused)")
     _add_watch_options(s)
     s.set_defaults(func=cmd_demo)
 
