@@ -34,7 +34,7 @@ from procedures.online_id import OnlineIdentification, identifiability
 from procedures.plan import StepSpec
 from procedures.safety import LimitExceeded, SupervisedDaq, SupervisedGenerator, Supervisor, check_gap, tightest
 from procedures.stepped_sine import SteppedSine, StepResult
-from sim.errors import EnvelopeError
+from sim.errors import EnvelopeError, StorageError
 
 from . import runlock
 from .config import Plan, Rig
@@ -254,11 +254,13 @@ def _supervised(plan: Plan, rig: Rig, store: RunStore, latch: SignalLatch, *, pr
     ``latch`` is installed and held: released here, inside the path that records the end."""
     status = RunStatus.FAILED
     sup: Supervisor | None = None
+    unrecorded: StorageError | None = None
     with ExitStack() as stack:
         try:
             latch.release()            # a signal latched while the directory was set up acts now
+            store.check_writable()     # a step can be stored, before the output goes on
             ins = open_instruments(rig, stack, sim_seed=sim_seed,
-                                   on_output_off=lambda ok: store.event("output_off", confirmed=ok))
+                                   on_output_off=lambda ok: _note(store, "output_off", confirmed=ok))
             store.update(identities=ins.identities)
             sup = Supervisor(tightest(rig.limits, plan.limits), ins.generator)
             _measure(plan, rig, store, ins, sup, latch, progress=progress, identify=identify,
@@ -266,11 +268,11 @@ def _supervised(plan: Plan, rig: Rig, store: RunStore, latch: SignalLatch, *, pr
             status = RunStatus.COMPLETED
         except LimitExceeded as e:
             status = RunStatus.ABORTED
-            store.event("abort", reason=str(e))
+            _note(store, "abort", reason=str(e))
             log.error("aborted: %s", e)
         except KeyboardInterrupt as e:
             status = RunStatus.INTERRUPTED
-            store.event("interrupted", reason=str(e) or "Ctrl-C")
+            _note(store, "interrupted", reason=str(e) or "Ctrl-C")
             if sup is not None:
                 with uninterruptible("ramping down"):
                     sup.shutdown()       # ramp down; the output is switched off below
@@ -279,16 +281,35 @@ def _supervised(plan: Plan, rig: Rig, store: RunStore, latch: SignalLatch, *, pr
             raise
         except InstrumentError as e:
             status = RunStatus.INSTRUMENT_ERROR
-            store.event("instrument_error", error=f"{type(e).__name__}: {e}")
+            _note(store, "instrument_error", error=f"{type(e).__name__}: {e}")
             log.error("instrument error: %s: %s", type(e).__name__, e)
+        except StorageError as e:          # named, no traceback: the output goes off below
+            _note(store, "storage_error", error=str(e))
+            log.error("storage error: %s; the output is switched off, the steps stored so far are intact", e)
+            raise
         except Exception as e:
-            store.event("error", error=f"{type(e).__name__}: {e}")
+            _note(store, "error", error=f"{type(e).__name__}: {e}")
             log.exception("run failed")
             raise
         finally:
             with uninterruptible("switching the output off"):
                 stack.close()    # output off, then close links and twins
-                store.finish(status, steps_done=len(store.done_keys()), steps_total=planned_count(plan))
+                try:
+                    store.finish(status, steps_done=len(store.done_keys()), steps_total=planned_count(plan))
+                except StorageError as e:
+                    log.error("the run's end (%s) could not be recorded: %s", status, e)
+                    unrecorded = e
+    if unrecorded is not None:          # only when nothing else is on its way out
+        raise unrecorded
+
+
+def _note(store: RunStore, kind: str, **fields) -> None:
+    """An event on an exit path: one that cannot be stored (a full disk) is logged, and
+    the path goes on (the ramp-down, the switch-off)."""
+    try:
+        store.event(kind, **fields)
+    except StorageError as e:
+        log.error("event %s not recorded: %s", kind, e)
 
 
 def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Supervisor, latch: SignalLatch,
