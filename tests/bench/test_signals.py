@@ -20,6 +20,8 @@ from pathlib import Path
 
 import pytest
 
+import bench.session as bench_session
+
 from bench.storage import RunStore
 from drivers import ScpiFunctionGenerator, start_twins
 from sim.rig import RigModel, SimulatedRig
@@ -167,3 +169,35 @@ def test_random_signals_at_random_moments_end_with_the_output_off(tmp_path):
                 stop(proc)
             assert rc == 130, (i, signum, delay)
             assert_safe_after(out, twins, "Ctrl-C" if signum == signal.SIGINT else f"signal {int(signum)}")
+
+
+@pytest.mark.parametrize("signum", [signal.SIGHUP, signal.SIGQUIT])
+def test_a_signal_inside_a_generator_query_ends_with_the_output_off_confirmed(tmp_path, mocker, caplog, signum):
+    """The signal itself (not an injected exception) arrives between `VOLT?` and its reply:
+    the ramp-down and the off command go over the same link, resynchronised."""
+    from bench.session import run_plan
+
+    from .test_exit_paths import SIM_RIG, small_plan
+    twins = mocker.spy(bench_session, "start_twins")
+    real = ScpiFunctionGenerator._read_line
+    sent = []
+
+    def read_line(self, command):
+        if not sent and command == "VOLT?" and twins.spy_return.generator.state.output_on \
+                and len(RunStore(tmp_path / "run").results()) >= 1:
+            sent.append(command)
+            os.kill(os.getpid(), signum)          # delivered here, before the reply is read
+            for _ in range(10_000):
+                pass
+        return real(self, command)
+
+    mocker.patch.object(ScpiFunctionGenerator, "_read_line", autospec=True, side_effect=read_line)
+    with pytest.raises(KeyboardInterrupt):
+        run_plan(small_plan(), SIM_RIG, tmp_path / "run", sim_seed=1, identify=False)
+    assert sent == ["VOLT?"]
+    assert not twins.spy_return.generator.state.output_on
+    events = RunStore(tmp_path / "run").events()
+    assert [e["confirmed"] for e in events if e["event"] == "output_off"] == [True]
+    assert [e["reason"] for e in events if e["event"] == "interrupted"] == [f"signal {int(signum)}"]
+    assert meta(tmp_path / "run")["status"] == "interrupted"
+    assert "resynchronising" in caplog.text and "reconnecting" not in caplog.text
