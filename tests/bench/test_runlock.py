@@ -62,6 +62,7 @@ def test_a_second_session_on_a_run_directory_in_use_is_refused_and_measures_noth
         assert f"run directory {out} is in use by process {first.pid} on {socket.gethostname()} since " \
             in second.stderr
         assert "bench run" in second.stderr and "Traceback" not in second.stderr
+        assert second.stdout == ""               # refused before it counted (or set aside) any step
         assert other.returncode == 1, other.stderr
         assert f"instrument {twins.generator_url} is in use by process {first.pid}" in other.stderr
         assert f"run directory {out}" in other.stderr                   # which session holds it

@@ -201,3 +201,26 @@ def test_a_signal_inside_a_generator_query_ends_with_the_output_off_confirmed(tm
     assert [e["reason"] for e in events if e["event"] == "interrupted"] == [f"signal {int(signum)}"]
     assert meta(tmp_path / "run")["status"] == "interrupted"
     assert "resynchronising" in caplog.text and "reconnecting" not in caplog.text
+
+
+def test_a_signal_while_the_run_directory_is_set_up_does_not_leave_it_running(tmp_path, mocker):
+    """SIGHUP just after run.json says "running" (while the session clears old stop
+    requests): latched, it acts once the path that records the end is entered."""
+    from bench.session import run_plan
+
+    from .test_exit_paths import SIM_RIG, small_plan
+    twins = mocker.spy(bench_session, "start_twins")
+    real = bench_session.stop_request.clear
+
+    def clear(path):
+        assert meta(tmp_path / "run")["status"] == "running"
+        os.kill(os.getpid(), signal.SIGHUP)
+        for _ in range(10_000):
+            pass
+        return real(path)
+    mocker.patch.object(bench_session.stop_request, "clear", side_effect=clear)
+    with pytest.raises(KeyboardInterrupt):
+        run_plan(small_plan(), SIM_RIG, tmp_path / "run", sim_seed=1, identify=False)
+    assert meta(tmp_path / "run")["status"] == "interrupted"
+    assert event_kinds(tmp_path / "run") == ["start", "interrupted", "end"]
+    assert twins.call_count == 0                       # stopped before any instrument was opened
