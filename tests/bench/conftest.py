@@ -58,3 +58,10 @@ def signal_in_a_finalizer(mocker):
         Finalized(signum)                    # made and dropped: __del__ runs at once
     send.dropped = dropped
     return send
+
+
+@pytest.fixture
+def twins_of_run(mocker):
+    """The spy's ``spy_return`` is the Twins the session started (None until it starts)."""
+    import bench.session
+    return mocker.spy(bench.session, "start_twins")

@@ -21,8 +21,17 @@ from drivers._can_transport import CanTcpBridge, TcpCanBus
 from sim.errors import StorageError
 from sim.rig import RigModel, SimulatedRig
 
-from .test_exit_paths import FREQS, SIM_RIG, fail_on_call, meta, output_on, rig_toml_for, run, small_plan, the
-from .test_exit_paths import twins_of_run  # noqa: F401 - the fixture
+from .test_exit_paths import (
+    FREQS,
+    SIM_RIG,
+    fail_on_call,
+    meta,
+    output_on,
+    rig_toml_for,
+    run,
+    small_plan,
+    the,
+)
 
 
 def plan_toml(tmp_path):

@@ -21,7 +21,6 @@ from pathlib import Path
 import pytest
 
 import bench.session as bench_session
-
 from bench.storage import RunStore
 from drivers import ScpiFunctionGenerator, start_twins
 from sim.rig import RigModel, SimulatedRig
