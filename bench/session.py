@@ -1,9 +1,10 @@
 """Run a plan on a rig: open the instruments, check the envelope, run, store, clean up.
 
 Exit paths all end with the generator's output off: normal end, exception, Ctrl-C,
-SIGTERM, SIGHUP, SIGQUIT, instrument error, lost connection, a storage error, safety limit.  (kill -9 cannot be caught:
-on the real rig the generator then keeps its last output; stored data stays intact.)
-"""
+SIGTERM, SIGHUP, SIGQUIT, instrument error, lost connection, a storage error, safety
+limit.  (kill -9 cannot be caught: on the real rig the generator then keeps its last
+output; stored data stays intact.)  One session at a time holds a run directory and a
+real rig's instruments (bench.runlock)."""
 
 from __future__ import annotations
 
