@@ -112,7 +112,7 @@ def hold(path: Path, what: str, run: Path | None = None):
 
 def run_dir(path: Path):
     """The lock of the run directory ``path`` (which must exist)."""
-    return hold(Path(path) / LOCK_NAME, f"run directory {path}", run=Path(path))
+    return hold(Path(path) / LOCK_NAME, f"run directory {path}")
 
 
 def lock_dir() -> Path:
