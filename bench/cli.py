@@ -117,16 +117,18 @@ def _run(args, resume: bool) -> int:
         plan = parse_plan({"plan": plan_toml(meta["plan"])}, f"{args.run}/run.json")
         rig = parse_rig({"rig": rig_toml(meta["rig"])}, f"{args.run}/run.json")
         out, seed = Path(args.run), meta.get("sim_seed")
+        labels = None
     else:
         plan, rig = _load_configs(args)
         out, seed = Path(args.out), args.seed
+        labels = parse_labels(getattr(args, "label", None))
     if rig.simulated:
         _warm_up()
     before = _event_count(out)
     watch = _start_watch(out, args)
     try:
         store = run_plan(plan, rig, out, resume=resume, progress=Progress("stepped sine"), sim_seed=seed,
-                         retry_skipped=bool(getattr(args, "retry_skipped", False)))
+                         retry_skipped=bool(getattr(args, "retry_skipped", False)), labels=labels)
     finally:
         if watch:
             watch.close()
@@ -410,6 +412,33 @@ def cmd_compare(args) -> int:
     return ExitCode.OK if result["overall"]["within_tolerance"] else ExitCode.FAILURE
 
 
+def cmd_modes(args) -> int:
+    """Each run's modes per force level into OUT/modes.csv, with the seed's Figs. 13 and 17."""
+    from .modes import write_modes
+    runs, files = write_modes([Path(r) for r in args.runs], Path(args.out), model=not args.no_model)
+    for r in runs:
+        for e in r.modes:
+            if e.ok:
+                print(f"{r.label}: {e.mode} at {e.level_N:g} N: {e.resonance_Hz:.5g} Hz "
+                      f"[{e.resonance_low_Hz:.5g}, {e.resonance_high_Hz:.5g}], damping ratio "
+                      f"{100 * e.damping_ratio:.3g} % [{100 * e.damping_ratio_low:.3g}, {100 * e.damping_ratio_high:.3g}]")
+            else:
+                print(f"{r.label}: {e.mode} at {e.level_N:g} N: {e.status}" + (f" ({e.note})" if e.note else ""))
+    print("wrote " + ", ".join(str(f) for f in files))
+    return ExitCode.OK
+
+
+def parse_labels(items: list[str] | None) -> dict[str, str]:
+    """``--label key=value`` (repeatable) -> {key: value}; a malformed one is a usage error."""
+    out: dict[str, str] = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigurationError(f"--label {item!r}: expected KEY=VALUE, e.g. --label lubricant=\"ISO VG 32\"")
+        out[key.strip()] = value.strip()
+    return out
+
+
 def _add_twin_parsers(sub) -> None:
     s = sub.add_parser("twin", help="write rig.toml and plan.toml of a simulated twin of the rig that measured "
                                     "SOURCE (identified friction, named causes, noise)")
@@ -498,6 +527,9 @@ def build_parser() -> argparse.ArgumentParser:
             s.add_argument("--out", required=True, help="new run directory (bench resume continues it)")
             s.add_argument("--seed", type=int, help="noise seed of a simulated rig (default: the rig file's)")
             s.add_argument("--no-report", action="store_true", help="do not write the report at the end")
+            s.add_argument("--label", action="append", metavar="KEY=VALUE",
+                           help="a label kept in run.json (repeatable), used by the legends of `bench modes`, "
+                                "e.g. --label lubricant=\"ISO VG 32\"")
             _add_watch_options(s)
         s.set_defaults(func=func)
 
@@ -570,6 +602,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_check)
 
     _add_twin_parsers(sub)
+
+    s = sub.add_parser("modes", help="each mode's resonance and damping ratio per force level of one or more runs: "
+                                     "modes.csv and the seed's Figs. 13 and 17 from the measurements")
+    s.add_argument("runs", nargs="+", metavar="RUN", help="run directories (legends use each run's --label)")
+    s.add_argument("--out", required=True, help="output directory for modes.csv and the figures")
+    s.add_argument("--no-model", action="store_true", help="leave out the rig model's prediction (simulated rigs)")
+    s.set_defaults(func=cmd_modes)
 
     from .studies.cli import add_parsers as add_study_parsers
     add_study_parsers(sub, Progress)

@@ -194,7 +194,8 @@ def open_instruments(rig: Rig, stack: ExitStack, *, sim_seed: int | None = None,
 
 
 def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=None,
-             sim_seed: int | None = None, identify: bool = True, retry_skipped: bool = False) -> RunStore:
+             sim_seed: int | None = None, identify: bool = True, retry_skipped: bool = False,
+             labels: dict[str, str] | None = None) -> RunStore:
     """Run (or resume) ``plan`` on ``rig`` into the run directory ``out``.
 
     The plan is checked against the rig's limits before anything is opened; the run's
@@ -206,6 +207,8 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
     for w in warnings:
         log.warning("identifiability: %s", w)
     store = _open_store(plan, rig, out, resume=resume, sim_seed=sim_seed, warnings=warnings)
+    if labels:
+        store.update(labels=labels)
     log_handler = _log_to(store.path / "bench.log")
     try:
         _supervised(plan, rig, store, progress=progress, sim_seed=sim_seed, identify=identify,
@@ -273,7 +276,9 @@ def _supervised(plan: Plan, rig: Rig, store: RunStore, *, progress, sim_seed: in
         finally:
             with uninterruptible("switching the output off"):
                 stack.close()    # output off, then close links and twins
-            store.finish(status, steps_done=len(store.done_keys()), steps_total=planned_count(plan))
+            done = store.done_keys()
+            refined = sum(1 for k in done if plan.refined_key_ok(k))   # refinement steps: counted as run
+            store.finish(status, steps_done=len(done), steps_total=planned_count(plan) + refined)
 
 
 def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Supervisor, latch: SignalLatch,
@@ -324,7 +329,16 @@ def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Super
         from procedures.online_id import choose_frequencies
         choose = lambda sweep: choose_frequencies(           # noqa: E731
             sweep, online.current() if online else None, plan.adaptive_per_sweep)
-    proc.run(store.done_keys() | skipped, record, show, choose=choose)
+    refiner = None
+    if plan.refine:
+        from procedures.resonance import Refiner
+        band = None
+        if rig.simulated and rig.model:
+            from sim.modal import pitch_band_Hz
+            from sim.rig import RigModel
+            band = pitch_band_Hz(RigModel.from_dict(rig.model))
+        refiner = Refiner(plan, lambda: store.results(warn=False), band).next_step
+    proc.run(store.done_keys() | skipped, record, show, choose=choose, refine=refiner)
     if online:
         store.update(identification=online.final())
 
