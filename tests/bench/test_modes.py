@@ -1,0 +1,130 @@
+"""Resonance search and `bench modes` end to end on the simulated rigs, against independent
+references: the feed mode against the peak of the shooting engine's compliance_pp computed
+densely (sim.frf.find_peaks); the pitching mode against a brute-force dense window of steps
+(0.5 Hz apart) of the same rig.  benchmarks/bench_modes.py runs the full bars (3 levels,
+wider dense runs, half-power damping)."""
+
+from __future__ import annotations
+
+import csv
+import math
+
+import numpy as np
+import pytest
+
+from bench.cli import main
+from bench.config import DEFAULTS, load_rig, parse_plan
+from bench.modes import run_modes
+from bench.session import run_plan
+from bench.storage import RunStore
+from sim.frf import find_peaks
+from sim.shooting import frf_shooting
+
+
+def _plan(name, levels, freqs, resonance=None):
+    p = {"name": name, "levels_N": levels, "frequencies": freqs, "control": {"harmonics": 5}}
+    if resonance:
+        p["resonance"] = resonance
+    return parse_plan({"plan": p})
+
+
+@pytest.fixture(scope="module")
+def feed_run(tmp_path_factory):
+    """1 N on the plain rig, 12 log points 30-300 Hz, the feed peak refined."""
+    plan = _plan("coarse refined", [1.0], {"start_Hz": 30.0, "stop_Hz": 300.0, "points": 12},
+                 {"refine": True, "modes": ["feed"]})
+    store = run_plan(plan, load_rig(DEFAULTS / "sim_rig.toml"), tmp_path_factory.mktemp("feed") / "run",
+                     identify=False, labels={"rig": "plain"})
+    assert store.metadata["status"] == "completed"
+    return store
+
+
+@pytest.fixture(scope="module")
+def pitch_run(tmp_path_factory):
+    """1 N on the pitching rig, 8 log points 120-300 Hz (the feed mode below the grid),
+    the pitching peak refined."""
+    plan = _plan("pitch refined", [1.0], {"start_Hz": 120.0, "stop_Hz": 300.0, "points": 8},
+                 {"refine": True, "modes": ["pitch"]})
+    store = run_plan(plan, load_rig(DEFAULTS / "sim_rig_pitch.toml"), tmp_path_factory.mktemp("pitch") / "run",
+                     identify=False, labels={"lubricant": "ISO VG 32"})
+    assert store.metadata["status"] == "completed"
+    return store
+
+
+def test_refined_feed_resonance_matches_the_engines_dense_peak(feed_run):
+    keys = [r["key"] for r in feed_run.results()]
+    refined = [k for k in keys if "-RF" in k]
+    assert 3 <= len(refined) <= 10                       # the budget holds; the steps are ordinary steps
+    assert feed_run.account().complete and not feed_run.check()
+    assert feed_run.metadata["steps_total"] == len(keys)
+    ws = math.sqrt(10.0 / (10e-6 * 10.0))                 # the rig file's F_s, x_s, m
+    f = np.linspace(60, 75, 61)
+    fr, _ = frf_shooting(2 * np.pi * f / ws, 0.1, 1.5)
+    ref = find_peaks(fr)[0].beta * ws / (2 * math.pi)
+    (feed,) = run_modes(feed_run.path, model=False).modes
+    assert feed.ok and feed.resonance_Hz == pytest.approx(ref, rel=0.01)
+    assert abs(feed.resonance_Hz / ref - 1) < 0.003       # measured: 0.06 %
+    assert 0 < feed.damping_ratio_low < feed.damping_ratio < feed.damping_ratio_high < 0.3
+
+
+def test_refined_pitch_resonance_matches_a_dense_window_and_the_feed_is_below_the_grid(pitch_run, tmp_path):
+    modes = {e.mode: e for e in run_modes(pitch_run.path, model=False).modes}
+    assert modes["feed"].status == "below grid" and math.isnan(modes["feed"].resonance_Hz)
+    pitch = modes["pitch"]
+    assert pitch.ok and pitch.damping_ratio_low < pitch.damping_ratio < pitch.damping_ratio_high
+    # brute force: 0.5 Hz steps around the estimate, the peak of their parabola
+    centre = round(pitch.resonance_Hz * 2) / 2
+    dense = [centre + 0.5 * k for k in range(-2, 3)]
+    store = run_plan(_plan("dense", [1.0], {"list_Hz": dense}), load_rig(DEFAULTS / "sim_rig_pitch.toml"),
+                     tmp_path / "dense", identify=False)
+    res = sorted(store.results(), key=lambda r: r["freq_Hz"])
+    acc = np.array([r["accelerance_abs_kg_inv"] for r in res])
+    i = int(np.argmax(acc))
+    assert 0 < i < len(dense) - 1                         # the dense window holds the peak
+    a, b, _ = np.polyfit(dense[i - 1:i + 2], acc[i - 1:i + 2], 2)
+    assert pitch.resonance_Hz == pytest.approx(-b / (2 * a), rel=0.005)
+    assert abs(pitch.resonance_Hz / (-b / (2 * a)) - 1) < 0.001
+
+
+def test_bench_modes_writes_two_runs_with_their_labels(feed_run, pitch_run, tmp_path, capsys):
+    assert main(["modes", str(feed_run.path), str(pitch_run.path), "--out", str(tmp_path / "m"), "--no-model"]) == 0
+    rows = list(csv.DictReader(open(tmp_path / "m" / "modes.csv")))
+    need = {"run", "mode", "level_N", "resonance_Hz", "resonance_low_Hz", "resonance_high_Hz", "damping_ratio",
+            "damping_ratio_low", "damping_ratio_high", "peak_compliance_m_per_N"}
+    assert need <= set(rows[0])
+    assert {(r["label"], r["mode"], r["status"]) for r in rows} == {
+        ("rig=plain", "feed", "ok"), ("lubricant=ISO VG 32", "feed", "below grid"),
+        ("lubricant=ISO VG 32", "pitch", "ok")}
+    below = next(r for r in rows if r["status"] == "below grid")
+    assert below["resonance_Hz"] == "nan"                 # said to be there, never given a value
+    assert (tmp_path / "m" / "fig13_feed.png").stat().st_size > 10_000
+    assert (tmp_path / "m" / "fig17_modes.png").stat().st_size > 10_000
+    assert "below grid" in capsys.readouterr().out
+
+
+def test_resume_continues_the_refinement_where_it_stopped(feed_run, tmp_path):
+    """A run cut after its first refinement steps, resumed, ends with the same refined
+    frequencies as the uninterrupted run (the choice depends on the stored steps only)."""
+    import shutil
+    cut = tmp_path / "cut"
+    shutil.copytree(feed_run.path, cut)
+    refined = sorted(p for p in (cut / "steps").glob("*-RF*"))
+    keep = {p.stem for p in refined[:4]}                  # R000, R001 (json + npz)
+    for p in refined:
+        if p.stem not in keep:
+            p.unlink()
+    RunStore.open(cut).update(status="interrupted")
+    assert main(["resume", str(cut), "--no-report"]) == 0
+    want = sorted(round(r["freq_Hz"], 4) for r in feed_run.results() if "-RF" in r["key"])
+    got = sorted(round(r["freq_Hz"], 4) for r in RunStore.open(cut).results() if "-RF" in r["key"])
+    assert got == pytest.approx(want, rel=2e-3), (got, want)
+
+
+def test_a_misspelled_resonance_key_is_named():
+    from bench.config import ConfigError
+    with pytest.raises(ConfigError, match=r"\[plan.resonance\] tolerence: unknown key; did you mean tolerance"):
+        parse_plan({"plan": {"levels_N": [1.0], "frequencies": {"list_Hz": [50.0, 60.0]},
+                             "resonance": {"refine": True, "tolerence": 0.01}}})
+    with pytest.raises(ConfigError, match="modes"):
+        parse_plan({"plan": {"levels_N": [1.0], "frequencies": {"list_Hz": [50.0, 60.0]},
+                             "resonance": {"modes": ["roll"]}}})
