@@ -75,10 +75,22 @@ def _load_configs(args):
 def cmd_dry_run(args) -> int:
     from .session import EnvelopeError, check_envelope, envelope, envelope_report
 
+    from .session import planned_steps
+
     plan, rig = _load_configs(args)
     steps = plan.schedule()
+    n, refined, seconds = planned_steps(plan)
+    runs = (f"{n} measured (adaptive: {plan.adaptive_per_sweep} per sweep, chosen online)"
+            if plan.adaptive_per_sweep and n != len(steps) else f"{n} measured")
+    if refined:
+        runs += (f" + at most {refined} refinement steps ([plan.resonance]: {plan.refine_steps} per mode and level, "
+                 f"modes {', '.join(plan.refine_modes)}, tolerance {100 * plan.refine_tolerance:g} %)")
     print(f"plan '{plan.name}': {len(plan.levels_N)} levels x {len(plan.freqs_Hz)} frequencies "
-          f"({plan.direction}) = {len(steps)} steps; rig '{rig.name}'{' (simulated)' if rig.simulated else ''}")
+          f"({plan.direction}) = {len(steps)} steps, {runs}; rig '{rig.name}'{' (simulated)' if rig.simulated else ''}")
+    print(f"expected rig time: about {_duration(seconds)}"
+          + (" with the refinement budget used up" if refined else "")
+          + " (force control, settling, measured blocks and ramps; a simulated rig runs faster or slower "
+            "than real time)")
     print(envelope_report(envelope(plan, rig)))
     from procedures.online_id import identifiability
     try:
@@ -94,6 +106,12 @@ def cmd_dry_run(args) -> int:
     for w in identifiability(runnable, rig):
         print(f"identifiability warning: {w}")
     return 0
+
+
+def _duration(seconds: float) -> str:
+    m, s = divmod(int(round(seconds)), 60)
+    h, m = divmod(m, 60)
+    return f"{h} h {m:02d} min" if h else f"{m} min {s:02d} s" if m else f"{s} s"
 
 
 def _run(args, resume: bool) -> int:
@@ -414,7 +432,7 @@ def cmd_compare(args) -> int:
 
 def cmd_modes(args) -> int:
     """Each run's modes per force level into OUT/modes.csv, with the seed's Figs. 13 and 17."""
-    from .modes import write_modes
+    from .reports import write_modes
     runs, files = write_modes([Path(r) for r in args.runs], Path(args.out), model=not args.no_model)
     for r in runs:
         for e in r.modes:

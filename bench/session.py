@@ -117,6 +117,43 @@ def check_envelope(plan: Plan, rig: Rig) -> Plan:
     return plan
 
 
+CONTROL_ITERATIONS_EXPECTED = 3    # force-control iterations a step typically takes (rig time estimate)
+
+
+def step_seconds(plan: Plan, f: float, *, from_rest: bool) -> float:
+    """Rig time of one step at ``f``: force control (CONTROL_ITERATIONS_EXPECTED iterations of
+    settle + acquire ``control_cycles``), settle, the measured block; from rest (a new sweep,
+    a refinement step) also the ramp up and down (at least 40 periods or ``ramp_s`` each).
+    Extra settle blocks are not counted (an estimate, not a bound)."""
+    t = CONTROL_ITERATIONS_EXPECTED * 2 * plan.control_cycles / f
+    t += max(plan.settle_cycles / f, plan.min_settle_s) + max(plan.measure_cycles / f, plan.min_measure_s)
+    if from_rest:
+        t += 2 * max(40 / f, plan.ramp_s)
+    return t
+
+
+def planned_steps(plan: Plan) -> tuple[int, int, float]:
+    """(steps of the grid as they will run, refinement steps at most, expected rig time in s
+    with the refinement budget used up): an adaptive plan counts its chosen number per
+    sweep (at the sweep's median frequency each), a refined plan adds at most
+    ``refine_steps`` per mode and level, each from rest, at the grid's geometric middle."""
+    from .storage import _sweeps
+    steps = plan.schedule()
+    by_key = {s.key: s for s in steps}
+    n, t = 0, 0.0
+    for keys in _sweeps(plan).values():
+        sw = [by_key[k] for k in keys]
+        k = min(len(sw), plan.adaptive_per_sweep) if plan.adaptive_per_sweep else len(sw)
+        chosen = sw if k == len(sw) else [sorted(sw, key=lambda s: s.freq_Hz)[len(sw) // 2]] * k
+        n += k
+        t += sum(step_seconds(plan, s.freq_Hz, from_rest=i == 0) for i, s in enumerate(chosen))
+    refined = plan.refine_steps * len(plan.refine_modes) * len(plan.levels_N) if plan.refine else 0
+    if refined:
+        fm = math.sqrt(min(plan.freqs_Hz) * max(plan.freqs_Hz))
+        t += refined * step_seconds(plan, fm, from_rest=True)
+    return n, refined, t
+
+
 def versions() -> dict:
     out = {"python": sys.version.split()[0], "platform": platform.platform()}
     for pkg in ("guideway-bench", "numpy", "scipy", "numba", "pyserial", "python-can", "cantools", "pymodbus"):

@@ -47,6 +47,7 @@ KINDS = ("receptance", "accelerance")
 MIN_POINTS = 4              # 8 real equations for 6 parameters
 WINDOW_LEVEL = 1 / math.sqrt(2)   # the fit's window: the peak's half-power band ...
 MAX_POINTS = 15             # ... at most this many points nearest the peak
+MIN_IN_BAND = 3             # a resolved peak: at least this many measured points in its half-power band
 OTHER_MODE_GAP = 1.3        # a pitching peak lies at least this factor above the feed mode
 
 
@@ -208,7 +209,9 @@ class ModeEstimate:
     """One mode at one force level.  ``status``: "ok", "below grid" / "above grid" (the
     peak lies at or beyond the data's edge ``edge_Hz``: no value given), "not found" (no
     maximum of this mode in the data) or "no fit" (too few points, or the fit's peak left
-    its window).  ``peak`` is the fitted peak of the curve the resonance is read from
+    its window), "coarse" (fewer than MIN_IN_BAND points in the half-power band: the
+    resonance's interval is the bracket of the measured maximum, no damping ratio).  ``peak``
+    is the fitted peak of the curve the resonance is read from
     (compliance_pp in m/N for the feed mode, |A1/F1| in 1/kg for the pitching mode)."""
 
     mode: str
@@ -343,6 +346,19 @@ def estimate_mode(f_Hz: Sequence[float], H: Sequence[complex], *, mode: str, kin
         est.note = f"the fitted peak {fpk:.4g} Hz lies at the edge of its window {f[sel[0]]:.4g}-{f[sel[-1]]:.4g} Hz"
         return est
     z, sd_z = fit.damping()
+    in_band = int(np.sum(mag >= hpk / math.sqrt(2)))
+    if in_band < MIN_IN_BAND:
+        # the grid does not resolve the peak: the fit extrapolates from its flanks, and its
+        # covariance knows nothing of the shape it did not see.  The peak lies between the
+        # measured maximum's neighbours (a bracket that holds for any single peak); no
+        # damping ratio.
+        est.status = "coarse"
+        est.resonance_Hz = min(max(fpk, float(f[ip - 1])), float(f[ip + 1]))
+        est.resonance_low_Hz, est.resonance_high_Hz = float(f[ip - 1]), float(f[ip + 1])
+        est.peak, est.n_points, est.window_Hz = float(mag[ip]), int(sel.size), (float(f[sel[0]]), float(f[sel[-1]]))
+        est.note = (f"{in_band} measured point(s) in the peak's half-power band: the grid does not resolve it; "
+                    f"the interval is the bracket of the measured maximum (refine: [plan.resonance])")
+        return est
     est.resonance_Hz, est.resonance_low_Hz, est.resonance_high_Hz = fpk, fpk - t * sd_f, fpk + t * sd_f
     est.damping_ratio, est.damping_ratio_low, est.damping_ratio_high = z, max(z - t * sd_z, 0.0), z + t * sd_z
     est.peak, est.peak_low, est.peak_high = hpk, hpk - t * sd_h, hpk + t * sd_h

@@ -1,6 +1,6 @@
 """Figures (matplotlib ``Figure`` objects with the Agg canvas, never pyplot's global state).
 
-Run report: compliance, accelerance, signal quality, resonance vs force, model vs
+Run report: compliance, accelerance, signal quality, modes vs force, model vs
 measurement (simulated rig), online identification.  Analysis page: measured vs base and
 final model per force level, hysteresis loops, residuals of the base model.  Each function
 takes prepared data and returns a Figure; :func:`save_png` writes one, :func:`png_bytes`
@@ -21,7 +21,6 @@ from matplotlib.patches import Patch
 from ._analysis import FRF_QUANTITIES, level_groups, relative_error
 from ._identification import ID_PARAMS, IdentificationData, finite, steps_of
 from ._model import ModelComparison
-from ._run import Resonance
 from ._steps import UNSETTLED_RESIDUAL, phase_deg, residual_ratio
 
 DIRECTION_STYLE = {"up": "-", "down": "--"}
@@ -189,30 +188,6 @@ def plot_model(series, colours, title, cmp: ModelComparison) -> Figure:
                        label=f"measured, {d} sweep") for d in ("up", "down") if d in {s.direction for s in series}]
     ax1.legend(handles=handles + extra, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     fig.suptitle(f"Model vs measurement (simulated rig): {title}")
-    return fig
-
-
-def plot_resonance(res: list[Resonance], title) -> Figure:
-    fig = Figure(figsize=(10, 5), layout="constrained")
-    ax1, ax2 = fig.subplots(1, 2)
-    F = np.array([r.level_N for r in res])
-    ax1.plot(F, [r.freq_Hz for r in res], "o-", label="measured (grid maximum)")
-    ax2.plot(F, [r.compliance_pp_m_per_N for r in res], "o-", label="measured (grid maximum)")
-    if any(math.isfinite(r.model_freq_Hz) for r in res):
-        ax1.plot(F, [r.model_freq_Hz for r in res], "s--", mfc="none", label="model (dense grid)")
-        ax2.plot(F, [r.model_compliance_pp_m_per_N for r in res], "s--", mfc="none", label="model (dense grid)")
-    edge = [r for r in res if r.at_grid_edge]
-    if edge:
-        ax1.plot([r.level_N for r in edge], [r.freq_Hz for r in edge], "rx", ms=10,
-                 label="at the edge of the grid (not a peak)")
-    ax1.set(xscale="log", yscale="log", xlabel="force amplitude (N)", ylabel="resonance frequency (Hz)",
-            title="harmonic resonance frequency")
-    ax2.set(xscale="log", yscale="log", xlabel="force amplitude (N)", ylabel="compliance_pp at resonance (m/N)",
-            title="compliance at the resonance")
-    for ax in (ax1, ax2):
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
-    fig.suptitle(f"Resonance vs force (largest compliance_pp per level): {title}")
     return fig
 
 
@@ -600,7 +575,7 @@ def plot_fig13(runs: list) -> Figure:
     return fig
 
 
-def plot_fig17(runs: list) -> Figure:
+def plot_fig17(runs: list, title: str = "") -> Figure:
     """Seed Fig. 17 (and 15) from measurements: each mode's resonance frequency and
     damping ratio against the force amplitude, per run (one colour each)."""
     fig = Figure(figsize=(11, 8), layout="constrained")
@@ -647,5 +622,5 @@ def plot_fig17(runs: list) -> Figure:
                             label="no peak inside the grid:\nat or beyond this edge"))
     h, _ = axes[0][0].get_legend_handles_labels()
     axes[0][0].legend(handles=h + extra, fontsize=7)
-    fig.suptitle("Seed Fig. 17 from measurements: each mode's resonance and damping against force")
+    fig.suptitle(title or "Seed Fig. 17 from measurements: each mode's resonance and damping against force")
     return fig

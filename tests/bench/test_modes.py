@@ -14,7 +14,7 @@ import pytest
 
 from bench.cli import main
 from bench.config import DEFAULTS, load_rig, parse_plan
-from bench.modes import run_modes
+from bench.reports import run_modes
 from bench.session import run_plan
 from bench.storage import RunStore
 from sim.frf import find_peaks

@@ -134,3 +134,14 @@ def test_refinement_brackets_the_peak_within_tolerance():
     assert fs[i + 1] / fs[i] - 1 <= 1.01 * tol and fs[i] / fs[i - 1] - 1 <= 1.01 * tol
     assert fs[i - 1] < peak_Hz("receptance") < fs[i + 1]
     assert len(f) - 12 <= 8
+
+
+def test_a_peak_the_grid_does_not_resolve_gets_the_bracket_not_the_fits_interval():
+    """5 log points 30-300 Hz around a 3 % peak: no point in its half-power band but the
+    maximum, so the resonance's interval is the measured maximum's bracket (it holds the
+    analytic peak) and there is no damping ratio."""
+    f = np.geomspace(30, 300, 5)
+    e = estimate_mode(f, sdof(f, fn=70.0), mode="feed", kind="receptance")
+    assert e.status == "coarse" and math.isnan(e.damping_ratio)
+    assert e.resonance_low_Hz < peak_Hz("receptance", fn=70.0) < e.resonance_high_Hz
+    assert (e.resonance_low_Hz, e.resonance_high_Hz) == (f[1], f[2]) or (e.resonance_low_Hz, e.resonance_high_Hz) == (f[0], f[2])

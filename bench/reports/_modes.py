@@ -1,4 +1,4 @@
-"""`bench modes RUN [RUN ...] --out DIR`: each run's modes per force level (sim.modal,
+"""`bench modes RUN [RUN ...] --out DIR` and the run report's modes: each run's modes per force level (sim.modal,
 decision record 0043) in one ``modes.csv`` and the seed's Figs. 13 and 17 from the
 measurements, one colour per run with its label, 95 % intervals as bars, the rig model's
 prediction as lines (simulated rigs).
@@ -22,7 +22,8 @@ import numpy as np
 
 from sim.modal import LevelData, ModeEstimate, pitch_band_Hz, track_modes
 
-from .storage import RunStore
+from ..storage import RunStore
+from ._model import ModelComparison, model_comparison
 
 log = logging.getLogger(__name__)
 
@@ -67,15 +68,11 @@ def run_label(meta: dict, path: Path) -> str:
     return ", ".join(f"{k}={v}" for k, v in labels.items()) if labels else Path(path).name
 
 
-def model_feed_peaks(meta: dict, results: list[dict]) -> dict[float, tuple[float, float, str]]:
-    """Level -> (frequency, compliance_pp, note) of the rig model's feed peak (simulated rigs
-    with a stored model; empty otherwise).  A peak at the engine grid's edge: NaN, noted."""
-    from .reports._model import model_comparison
-    try:
-        cmp = model_comparison(meta, results)
-    except Exception as e:  # noqa: BLE001 - the measured modes come out without the model
-        log.warning("model prediction failed: %s", e)
-        return {}
+def model_feed_peaks(cmp: ModelComparison | None) -> dict[float, tuple[float, float, str]]:
+    """Level -> (frequency, compliance_pp, note) of the rig model's feed peak, from the
+    report's model comparison (simulated rigs with a stored model; empty otherwise): the
+    curve's maximum refined by a parabola in log-log; a maximum at the engine grid's edge
+    is NaN, noted."""
     if cmp is None:
         return {}
     out = {}
@@ -85,8 +82,8 @@ def model_feed_peaks(meta: dict, results: list[dict]) -> dict[float, tuple[float
             out[level] = (math.nan, math.nan, "no model value")
             continue
         i = int(np.nanargmax(np.where(ok, c, -np.inf)))
-        if i in (0, f.size - 1):
-            out[level] = (math.nan, math.nan, f"model peak at or beyond the grid edge {f[i]:.4g} Hz")
+        if i in (0, f.size - 1) or not np.all(ok[i - 1:i + 2]):
+            out[level] = (math.nan, math.nan, f"model peak at or beyond the edge of its grid, {f[i]:.4g} Hz")
             continue
         x, y = np.log(f[i - 1:i + 2]), np.log(c[i - 1:i + 2])
         a, b, cc = np.polyfit(x, y, 2)
@@ -95,10 +92,9 @@ def model_feed_peaks(meta: dict, results: list[dict]) -> dict[float, tuple[float
     return out
 
 
-def run_modes(path: Path, *, model: bool = True) -> RunModes:
-    """The modes of a run directory (every level; tracked as sim.modal.track_modes does)."""
-    store = RunStore.open(Path(path))
-    meta, results = store.metadata, store.results()
+def modes_of(path: Path, meta: dict, results: list[dict], cmp: ModelComparison | None) -> RunModes:
+    """The modes of a run's stored steps (every level; tracked as sim.modal.track_modes
+    does, the feed mode by the model's peak when ``cmp`` has one)."""
     plan, rig = meta.get("plan") or {}, meta.get("rig") or {}
     levels_N = plan.get("levels_N") or sorted({r["target_force_N"] for r in results})
     by_level: dict[int, list[dict]] = {}
@@ -106,7 +102,7 @@ def run_modes(path: Path, *, model: bool = True) -> RunModes:
         by_level.setdefault(r["level_index"], []).append(r)
     data = [LevelData.from_steps(float(levels_N[li]) if li < len(levels_N) else steps[0]["target_force_N"], steps)
             for li, steps in sorted(by_level.items()) if len(steps) >= 3]
-    feed_model = model_feed_peaks(meta, results) if model else {}
+    feed_model = model_feed_peaks(cmp)
     band = None
     if rig.get("simulated") and rig.get("model"):
         from sim.rig import RigModel
@@ -116,6 +112,20 @@ def run_modes(path: Path, *, model: bool = True) -> RunModes:
     if band is None and not any(e.mode == "pitch" and e.ok for e in modes):
         modes = [e for e in modes if e.mode != "pitch"]    # no pitching mode in the data nor the model
     return RunModes(Path(path), run_label(meta, path), modes, feed_model, band)
+
+
+def run_modes(path: Path, *, model: bool = True) -> RunModes:
+    """The modes of a run directory (with the rig model's prediction when ``model`` and
+    the rig is simulated with a stored model)."""
+    store = RunStore.open(Path(path))
+    meta, results = store.metadata, store.results()
+    cmp = None
+    if model:
+        try:
+            cmp = model_comparison(meta, results)
+        except Exception as e:  # noqa: BLE001 - the measured modes come out without the model
+            log.warning("model prediction failed: %s", e)
+    return modes_of(Path(path), meta, results, cmp)
 
 
 def write_csv(runs: list[RunModes], path: Path) -> Path:
@@ -130,7 +140,7 @@ def write_csv(runs: list[RunModes], path: Path) -> Path:
 
 def write_modes(sources: list[Path], out: Path, *, model: bool = True) -> tuple[list[RunModes], list[Path]]:
     """modes.csv, fig13_feed.png and fig17_modes.png of ``sources`` into ``out``."""
-    from .reports import _figures as figures
+    from . import _figures as figures
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     runs = [run_modes(p, model=model) for p in sources]
