@@ -73,9 +73,7 @@ def _load_configs(args):
 
 
 def cmd_dry_run(args) -> int:
-    from .session import EnvelopeError, check_envelope, envelope, envelope_report
-
-    from .session import planned_steps
+    from .session import EnvelopeError, check_envelope, envelope, envelope_report, planned_steps
 
     plan, rig = _load_configs(args)
     steps = plan.schedule()

@@ -40,6 +40,7 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy import optimize, stats
 
 MODES = ("feed", "pitch")
@@ -139,7 +140,7 @@ def _jacobian(p: np.ndarray, x: np.ndarray, kind: str) -> np.ndarray:
     return np.vstack([J.real, J.imag])
 
 
-def fit_single_mode(f_Hz: Sequence[float], H: Sequence[complex], kind: str = "receptance",
+def fit_single_mode(f_Hz: ArrayLike, H: ArrayLike, kind: str = "receptance",
                     guess_Hz: float | None = None, guess_zeta: float = 0.05) -> SingleModeFit:
     """Fit the single-mode model (module docstring) to the complex FRF values ``H`` at
     ``f_Hz`` (every point given is used; choose the window before).  Raises ValueError
@@ -182,7 +183,7 @@ def fit_single_mode(f_Hz: Sequence[float], H: Sequence[complex], kind: str = "re
     return SingleModeFit(kind, w0, scale, p, cov, dof, float(f.min()), float(f.max()), int(f.size))
 
 
-def half_power_zeta(f_Hz: Sequence[float], mag: Sequence[float], f_peak: float, peak: float) -> float:
+def half_power_zeta(f_Hz: ArrayLike, mag: ArrayLike, f_peak: float, peak: float) -> float:
     """zeta ~ (f2 - f1) / (2 f_r) from the measured points where ``mag`` crosses
     peak / sqrt(2) either side of ``f_peak`` (linear interpolation); NaN when the data do
     not reach the half-power level on both sides."""
@@ -302,8 +303,8 @@ def _nearest(f: np.ndarray, idx: list[int], target: float) -> int:
     return min(idx, key=lambda i: abs(math.log(f[i] / target)))
 
 
-def estimate_mode(f_Hz: Sequence[float], H: Sequence[complex], *, mode: str, kind: str, level_N: float = math.nan,
-                  curve: Sequence[float] | None = None, curve_name: str = "", peak_index: int | None = None,
+def estimate_mode(f_Hz: ArrayLike, H: ArrayLike, *, mode: str, kind: str, level_N: float = math.nan,
+                  curve: ArrayLike | None = None, curve_name: str = "", peak_index: int | None = None,
                   guess_zeta: float = 0.05) -> ModeEstimate:
     """The mode whose maximum of ``curve`` (default |H|) is at ``peak_index`` (default the
     curve's largest value), from the complex FRF ``H`` at ``f_Hz`` (any order; one value
@@ -495,7 +496,7 @@ def pitch_band_Hz(model) -> tuple[float, float] | None:
     return float(math.sqrt(max(w2)) / (2 * math.pi)), math.inf
 
 
-def next_refinement_Hz(f_Hz: Sequence[float], mag: Sequence[float], peak_index: int, estimate_Hz: float,
+def next_refinement_Hz(f_Hz: ArrayLike, mag: ArrayLike, peak_index: int, estimate_Hz: float,
                        zeta: float, tolerance: float, f_min: float, f_max: float) -> float | None:
     """The next frequency to measure to know a peak within ``tolerance`` (relative), or
     None when it is known: the measured maximum has measured neighbours within

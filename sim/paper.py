@@ -489,13 +489,15 @@ def fig15_17_pitch_resonance(rep: Report, grids: Grids):
     if gone:
         ax_feed.text(0.97, 0.5, "no feed peak at\n" + ", ".join(f"{g:g} N" for g in gone), ha="right",
                      transform=ax_feed.transAxes, fontsize=8, color="grey")
-    ax_feed.set_title("Seed Fig. 16: feed mode falls, then is gone")
+    ax_feed.set_title("Seed Fig. 15 (feed mode): falls, then is gone")
     ax_pitch.set_title("Seed Fig. 17: pitching mode falls with force")
     rep.table("fig15_17_pitch_resonance", ["force [N]", "freq [Hz]", "compliance [m/N]"], curves)
     # NaN: the mode shows no peak at that force (the feed mode above F_s, as in the seed)
     rep.table("fig15_17_pitch_resonance_peaks", ["force [N]", "feed_resonance [Hz]", "pitch_resonance [Hz]"], rows)
-    rep.figure(fig, "fig15_17_pitch_resonance", "Figs. 15-17",
-               "feed and pitching modes' resonance frequencies against force (pitching rig, RK4 plant)")
+    rep.figure(fig, "fig15_17_pitch_resonance", "Figs. 15 and 17",
+               "feed and pitching modes' resonance frequencies against force (pitching rig, RK4 plant; the seed's "
+               "Fig. 16, the mode shapes, has no counterpart here); measured modes with damping ratios: "
+               "`bench modes RUN ... --out DIR`")
     return rows
 
 

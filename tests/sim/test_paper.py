@@ -86,7 +86,7 @@ def test_index_names_every_figure_and_its_seed_figure(run):
     for stem in EXPECTED:
         assert f"{stem}.png" in readme
     for seed_fig in ("Fig. 3", "Fig. 4", "Fig. 6", "Fig. 7", "Fig. 8", "Fig. 9", "Fig. 10", "Fig. 11",
-                     "Fig. 12", "Fig. 13", "Figs. 15-17"):
+                     "Fig. 12", "Fig. 13", "Figs. 15 and 17"):
         assert seed_fig in readme
     with (out / "summary.csv").open() as fh:
         rows = list(csv.DictReader(fh))
