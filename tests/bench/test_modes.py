@@ -128,3 +128,26 @@ def test_a_misspelled_resonance_key_is_named():
     with pytest.raises(ConfigError, match="modes"):
         parse_plan({"plan": {"levels_N": [1.0], "frequencies": {"list_Hz": [50.0, 60.0]},
                              "resonance": {"modes": ["roll"]}}})
+
+
+def test_dry_run_counts_the_refinement_and_its_rig_time_is_the_runs(feed_run, tmp_path, capsys):
+    """dry-run names the refinement budget and an expected rig time; with the refinement
+    steps the run took, the estimate is within a factor 1.5 of the simulated rig's clock."""
+    import math as _m
+
+    from bench.session import planned_steps, step_seconds
+    from bench.storage import stored_plan
+    plan_file = tmp_path / "p.toml"
+    plan_file.write_text('[plan]\nlevels_N = [1.0]\n[plan.frequencies]\nstart_Hz = 30.0\nstop_Hz = 300.0\n'
+                         'points = 12\n[plan.resonance]\nrefine = true\nmodes = ["feed"]\n')
+    assert main(["dry-run", "--plan", str(plan_file)]) == 0
+    out = capsys.readouterr().out
+    assert "12 measured + at most 10 refinement steps" in out and "expected rig time: about" in out
+    plan = stored_plan(feed_run.metadata)
+    res = feed_run.results()
+    n, budget, t = planned_steps(plan)
+    used = sum("-RF" in r["key"] for r in res)
+    est = t - (budget - used) * step_seconds(plan, _m.sqrt(30 * 300), from_rest=True)
+    last = max(res, key=lambda r: r["t0_s"])
+    actual = last["t0_s"] + last["n_samples"] / last["fs_Hz"]
+    assert 1 / 1.5 < est / actual < 1.5, (est, actual)
