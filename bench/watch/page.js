@@ -96,6 +96,21 @@ function renderIdent(s) {
   $("ident").innerHTML = html;
 }
 
+function renderModes(s) {
+  const ms = s.modes || [];
+  let html = "<tr><th>mode</th><th class='num'>level (N)</th><th>status</th><th class='num'>resonance (Hz)</th>" +
+             "<th class='num'>95 % interval</th><th class='num'>damping ratio</th><th class='num'>95 % interval</th></tr>";
+  for (const m of ms) {
+    const status = m.status === "below grid" || m.status === "above grid"
+      ? `${m.status}: at or ${m.status === "below grid" ? "below" : "above"} ${num(m.edge_Hz, 4)} Hz` : m.status;
+    html += `<tr><td>${esc(m.mode)}</td><td class="num">${num(m.level_N)}</td><td>${esc(status)}</td>` +
+            `<td class="num">${num(m.resonance_Hz, 5)}</td><td class="num">[${num(m.resonance_low_Hz, 5)}, ${num(m.resonance_high_Hz, 5)}]</td>` +
+            `<td class="num">${pct2(m.damping_ratio)}</td><td class="num">[${pct2(m.damping_ratio_low)}, ${pct2(m.damping_ratio_high)}]</td></tr>`;
+  }
+  if (!ms.length) html += "<tr><td colspan='7' class='muted'>none yet: a level needs at least 3 steps</td></tr>";
+  $("modes").innerHTML = html;
+}
+
 const FONT = {family: "system-ui, sans-serif", size: 12};
 
 function renderCompliance(s) {
@@ -189,6 +204,7 @@ function render(s) {
   renderCurrent(s);
   renderIdent(s);
   renderCompliance(s);
+  renderModes(s);
   renderIdentPlot(s);
   renderEvents(s);
 }

@@ -151,3 +151,26 @@ def test_dry_run_counts_the_refinement_and_its_rig_time_is_the_runs(feed_run, tm
     last = max(res, key=lambda r: r["t0_s"])
     actual = last["t0_s"] + last["n_samples"] / last["fs_Hz"]
     assert 1 / 1.5 < est / actual < 1.5, (est, actual)
+
+
+def test_the_watch_state_and_page_show_the_modes_as_found(pitch_run):
+    """The live page's state holds each mode per level (the grid-edge feed mode said to lie
+    below the grid, the pitching mode near the report's value) and the page shows them."""
+    from bench.watch import serve
+    from bench.watch.snapshot import RunReader
+
+    from .chromium import CHROMIUM, Browser
+    state = RunReader(pitch_run.path).snapshot()
+    modes = {m["mode"]: m for m in state["modes"]}
+    assert modes["feed"]["status"] == "below grid" and modes["feed"]["resonance_Hz"] is None
+    report = {e.mode: e for e in run_modes(pitch_run.path, model=False).modes}
+    assert modes["pitch"]["resonance_Hz"] == pytest.approx(report["pitch"].resonance_Hz, rel=1e-9)
+    assert state["progress"]["total"] == state["progress"]["done"] == len(pitch_run.results())
+    if CHROMIUM is None:
+        pytest.skip("chromium not installed (make setup)")
+    with serve(pitch_run.path) as server, Browser() as browser:
+        browser.goto(server.url)
+        text = browser.wait_for("document.getElementById('modes').textContent.includes('pitch') && "
+                                "document.getElementById('modes').textContent", 30, "the modes table")
+        assert "below grid: at or below 120.0 Hz" in text
+        assert f"{report['pitch'].resonance_Hz:.5g}" in text
