@@ -358,8 +358,14 @@ def cmd_check(args) -> int:
     skipped = [] if acc is None else acc.skipped
     for p in skipped:
         print(f"{p.kind:>9}  {p.key}: {p.reason}")
+    tail = _not_yet_measured(store, acc) if acc is not None else []
     for p in problems:
-        print(f"{p.kind:>9}  {p}")
+        if p not in tail:
+            print(f"{p.kind:>9}  {p}")
+    if tail:
+        last = max((k for k in acc.intact), default=None)
+        print(f"{'missing':>9}  interrupted after step {last or '(none)'}; {len(tail)} not yet measured "
+              f"(the plan's steps after it; bench resume {store.path} measures them)")
     if acc is None:
         print(f"{store.path}: {len(store.step_files())} step result files; run.json unreadable, so the steps "
               f"cannot be counted against the plan; {len(problems)} problem{'s' if len(problems) != 1 else ''}")
@@ -373,6 +379,26 @@ def cmd_check(args) -> int:
               + ("counted as problems (--strict)" if args.strict else
                  "not a problem (--strict counts them); bench resume --retry-skipped measures them again"))
     return ExitCode.FAILURE if problems or (skipped and args.strict) else ExitCode.OK
+
+
+def _not_yet_measured(store, acc) -> list:
+    """The missing steps of a run that was stopped (not completed) that are simply the
+    plan's steps after the last one stored, with no file at all: one line says so instead
+    of one line each.  Any other missing step is listed by key."""
+    from .storage import RunStatus, stored_plan
+    try:
+        meta = store.metadata
+    except Exception:  # noqa: BLE001 - no plan to judge against: list every step
+        return []
+    plan = stored_plan(meta)
+    if plan is None or meta.get("status") == RunStatus.COMPLETED or plan.adaptive_per_sweep:
+        return []
+    order = [s.key for s in plan.schedule()]
+    present = {k for k in acc.intact} | {p.key for p in acc.damaged} | {p.key for p in acc.skipped}
+    last = max((order.index(k) for k in present if k in order), default=-1)
+    tail = [p for p in acc.missing if p.reason.startswith("missing: neither") and p.key in order
+            and order.index(p.key) > last]
+    return tail if len(tail) > 1 else []
 
 
 def cmd_warmup(args) -> int:

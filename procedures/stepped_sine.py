@@ -383,7 +383,7 @@ class SteppedSine:
                 finished += 1
                 if progress:
                     progress(finished, total, f"{step.force_N:g} N {step.freq_Hz:7.1f} Hz {step.direction:4s} "
-                             + (f"err {100 * res['force_error']:+.1f}% THD(x) {res['disp']['thd']:.2f}"
+                             + (f"err {100 * res['force_error']:+.1f}% THD(x) {100 * res['disp']['thd']:.1f}%"
                                 if res else "skipped: force unreachable"))
                 prev = step
             if refine and (n_sweep == len(sweeps) - 1 or sweeps[n_sweep + 1][0].level_index != sweep[0].level_index):

@@ -174,3 +174,33 @@ def test_the_watch_state_and_page_show_the_modes_as_found(pitch_run):
                                 "document.getElementById('modes').textContent", 30, "the modes table")
         assert "below grid: at or below 120.0 Hz" in text
         assert f"{report['pitch'].resonance_Hz:.5g}" in text
+
+
+def test_the_batch_summary_gets_mode_columns(pitch_run, tmp_path):
+    from bench.studies.batch import MODE_COLUMNS, mode_columns
+    cols = mode_columns(pitch_run.path)
+    assert set(cols) == set(MODE_COLUMNS)
+    assert cols["feed_status"] == "1:below grid" and cols["feed_resonance_Hz"] == "1:nan"
+    pitch = next(e for e in run_modes(pitch_run.path, model=False).modes if e.mode == "pitch")
+    assert cols["pitch_resonance_Hz"] == f"1:{pitch.resonance_Hz:.6g}" and cols["pitch_status"] == "1:ok"
+    assert set(mode_columns(tmp_path).values()) == {""}          # not a run directory: empty, not an error
+
+
+def test_check_of_an_interrupted_run_says_so_in_one_line(small_run, tmp_path, capsys):
+    """An interrupted run's unmeasured tail is one line ('interrupted after step K; 8 not
+    yet measured'), not one line per step; a step missing inside the measured part is
+    still named."""
+    import shutil
+    from bench.cli import ExitCode
+    run = tmp_path / "run"
+    shutil.copytree(small_run.path, run, ignore=shutil.ignore_patterns("report", "export", "analysis"))
+    keys = sorted(p.stem for p in (run / "steps").glob("*.json"))
+    for key in keys[12:] + [keys[3]]:
+        for ext in (".json", ".npz"):
+            (run / "steps" / f"{key}{ext}").unlink()
+    RunStore.open(run).update(status="interrupted")
+    assert main(["check", str(run)]) == ExitCode.FAILURE
+    lines = capsys.readouterr().out.splitlines()
+    assert any(f"interrupted after step {keys[11]}; 8 not yet measured" in ln for ln in lines), lines
+    assert any(ln.strip().startswith("missing") and keys[3] in ln for ln in lines)
+    assert not any(ln.strip().startswith("missing") and keys[15] in ln and "interrupted" not in ln for ln in lines[:-1])
