@@ -191,6 +191,7 @@ def test_check_of_an_interrupted_run_says_so_in_one_line(small_run, tmp_path, ca
     yet measured'), not one line per step; a step missing inside the measured part is
     still named."""
     import shutil
+
     from bench.cli import ExitCode
     run = tmp_path / "run"
     shutil.copytree(small_run.path, run, ignore=shutil.ignore_patterns("report", "export", "analysis"))
