@@ -270,6 +270,7 @@ class RunReader:
                             freq_Hz=[r["freq_Hz"] for r in rs],
                             abs_m_per_N=[r["compliance_abs_m_per_N"] for r in rs],
                             phase_deg=[_phase_deg(r["compliance_phase_rad"]) for r in rs],
+                            accel_abs_per_kg=[r.get("accelerance_abs_kg_inv") for r in rs],
                             converged=[bool(r.get("force_converged", True)) for r in rs]))
         return out
 

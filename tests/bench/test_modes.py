@@ -174,6 +174,12 @@ def test_the_watch_state_and_page_show_the_modes_as_found(pitch_run):
                                 "document.getElementById('modes').textContent", 30, "the modes table")
         assert "below grid: at or below 120.0 Hz" in text
         assert f"{report['pitch'].resonance_Hz:.5g}" in text
+        n = len(pitch_run.results())
+        browser.wait_for(f"document.getElementById('accelerance').dataset.points === '{n}'", 30, "the accelerance")
+        # the phase axis is not clipped to [-180, 0]: past the pitching mode the phase goes below -180
+        lowest = min(p for c in state["compliance"] for p in c["phase_deg"])
+        assert lowest < -200
+        assert browser.js("document.getElementById('compliance').layout.yaxis2.range[0]") < lowest
 
 
 def test_the_batch_summary_gets_mode_columns(pitch_run, tmp_path):
