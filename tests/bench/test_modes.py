@@ -211,3 +211,19 @@ def test_check_of_an_interrupted_run_says_so_in_one_line(small_run, tmp_path, ca
     assert any(f"interrupted after step {keys[11]}; 8 not yet measured" in ln for ln in lines), lines
     assert any(ln.strip().startswith("missing") and keys[3] in ln for ln in lines)
     assert not any(ln.strip().startswith("missing") and keys[15] in ln and "interrupted" not in ln for ln in lines[:-1])
+
+
+def test_bench_paper_rig_needs_a_pitching_model(capsys):
+    from bench.cli import ExitCode
+    assert main(["paper", "--quick", "--out", "/nonexistent/never", "--rig", str(DEFAULTS / "sim_rig.toml")]) \
+        == ExitCode.USAGE
+    assert "no pitching mode" in capsys.readouterr().err
+
+
+def test_paper_model_is_the_rig_files_without_noise_line_or_shaker():
+    from bench.rig_model import LEFT_OUT, paper_model
+    rig = load_rig(DEFAULTS / "sim_rig_pitch.toml")
+    model = paper_model(rig, "sim_rig_pitch.toml")
+    assert model["pitch_inertia_kg_m2"] == rig.model["pitch_inertia_kg_m2"] and model["friction_alpha"] == 0.5
+    assert not any(k in model for k in LEFT_OUT if not k.endswith("noise_N") and "noise" not in k)
+    assert model["disp_noise_m"] == model["force_noise_N"] == model["accel_noise_m_s2"] == 0.0
