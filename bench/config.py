@@ -33,7 +33,8 @@ LIMIT_KEYS = ("drive_V", "force_N", "disp_m", "accel_m_s2")
 # the close valid one, before any value is read (a misspelled required key is reported as
 # the misspelling, not as the key it was meant to be).  [rig.model]: MODEL_SCHEMA below.
 KEYS = {
-    "plan": ("name", "levels_N", "frequencies", "control", "limits", "infeasible", "adaptive_per_sweep"),
+    "plan": ("name", "levels_N", "frequencies", "control", "limits", "infeasible", "adaptive_per_sweep", "resonance"),
+    "plan.resonance": ("refine", "tolerance", "max_steps", "modes"),
     "plan.frequencies": ("list_Hz", "start_Hz", "stop_Hz", "points", "spacing", "direction"),
     "plan.control": ("settle_cycles", "min_settle_s", "measure_cycles", "min_measure_s", "control_cycles",
                      "force_tolerance", "max_iterations", "harmonics", "ramp_s", "min_sample_rate_Hz",
@@ -192,6 +193,10 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
     fr.done()
     c = p.table("control")
     lim = p.table("limits")
+    res = p.table("resonance")
+    modes = res._get("modes", ["feed", "pitch"])
+    if not isinstance(modes, list) or not modes or any(m not in ("feed", "pitch") for m in modes):
+        raise ConfigError(f"{res.where('modes')}: must be a non-empty list of \"feed\", \"pitch\", got {modes!r}")
     plan = Plan(
         name=p.text("name", "stepped sine"), levels_N=tuple(levels), freqs_Hz=tuple(freqs),
         direction=direction,
@@ -208,7 +213,12 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
         max_extra_settle_blocks=c.number("max_extra_settle_blocks", 3, 0, 100, integer=True),
         limits=_limits(lim, required=False) if lim.data else None,
         infeasible=p.choice("infeasible", "refuse", ("refuse", "skip")),
-        adaptive_per_sweep=p.number("adaptive_per_sweep", 0, 0, 10000, integer=True))
+        adaptive_per_sweep=p.number("adaptive_per_sweep", 0, 0, 10000, integer=True),
+        refine=res.flag("refine", False),
+        refine_tolerance=res.number("tolerance", 0.002, 0, 0.1, lo_open=True),
+        refine_steps=res.number("max_steps", 10, 1, 999, integer=True),
+        refine_modes=tuple(dict.fromkeys(modes)))
+    res.done()
     # every fitted harmonic must stay below Nyquist at the highest frequency (the DAQ samples
     # at >= min_sample_rate_Hz); above it harmonics alias and the fit's amplitudes are wrong
     max_harmonics = math.ceil(plan.min_sample_rate_Hz / (2 * max(plan.freqs_Hz))) - 1
@@ -345,6 +355,10 @@ def plan_toml(p: dict) -> dict:
            "adaptive_per_sweep": p.get("adaptive_per_sweep", 0),
            "frequencies": {"list_Hz": list(p["freqs_Hz"]), "direction": p["direction"]},
            "control": {k: p[k] for k in keys if k in p}}
+    if p.get("refine"):
+        out["resonance"] = {"refine": True, "tolerance": p.get("refine_tolerance", 0.002),
+                            "max_steps": p.get("refine_steps", 10),
+                            "modes": list(p.get("refine_modes") or ("feed", "pitch"))}
     if p.get("limits"):
         out["limits"] = {k: v for k, v in p["limits"].items() if v is not None}   # None: the rig's
     return out

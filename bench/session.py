@@ -119,6 +119,43 @@ def check_envelope(plan: Plan, rig: Rig) -> Plan:
     return plan
 
 
+CONTROL_ITERATIONS_EXPECTED = 3    # force-control iterations a step typically takes (rig time estimate)
+
+
+def step_seconds(plan: Plan, f: float, *, from_rest: bool) -> float:
+    """Rig time of one step at ``f``: force control (CONTROL_ITERATIONS_EXPECTED iterations of
+    settle + acquire ``control_cycles``), settle, the measured block; from rest (a new sweep,
+    a refinement step) also the ramp up and down (at least 40 periods or ``ramp_s`` each).
+    Extra settle blocks are not counted (an estimate, not a bound)."""
+    t = CONTROL_ITERATIONS_EXPECTED * 2 * plan.control_cycles / f
+    t += max(plan.settle_cycles / f, plan.min_settle_s) + max(plan.measure_cycles / f, plan.min_measure_s)
+    if from_rest:
+        t += 2 * max(40 / f, plan.ramp_s)
+    return t
+
+
+def planned_steps(plan: Plan) -> tuple[int, int, float]:
+    """(steps of the grid as they will run, refinement steps at most, expected rig time in s
+    with the refinement budget used up): an adaptive plan counts its chosen number per
+    sweep (at the sweep's median frequency each), a refined plan adds at most
+    ``refine_steps`` per mode and level, each from rest, at the grid's geometric middle."""
+    from .storage import _sweeps
+    steps = plan.schedule()
+    by_key = {s.key: s for s in steps}
+    n, t = 0, 0.0
+    for keys in _sweeps(plan).values():
+        sw = [by_key[k] for k in keys]
+        k = min(len(sw), plan.adaptive_per_sweep) if plan.adaptive_per_sweep else len(sw)
+        chosen = sw if k == len(sw) else [sorted(sw, key=lambda s: s.freq_Hz)[len(sw) // 2]] * k
+        n += k
+        t += sum(step_seconds(plan, s.freq_Hz, from_rest=i == 0) for i, s in enumerate(chosen))
+    refined = plan.refine_steps * len(plan.refine_modes) * len(plan.levels_N) if plan.refine else 0
+    if refined:
+        fm = math.sqrt(min(plan.freqs_Hz) * max(plan.freqs_Hz))
+        t += refined * step_seconds(plan, fm, from_rest=True)
+    return n, refined, t
+
+
 def versions() -> dict:
     out = {"python": sys.version.split()[0], "platform": platform.platform()}
     for pkg in ("guideway-bench", "numpy", "scipy", "numba", "pyserial", "python-can", "cantools", "pymodbus"):
@@ -196,7 +233,8 @@ def open_instruments(rig: Rig, stack: ExitStack, *, sim_seed: int | None = None,
 
 
 def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=None,
-             sim_seed: int | None = None, identify: bool = True, retry_skipped: bool = False) -> RunStore:
+             sim_seed: int | None = None, identify: bool = True, retry_skipped: bool = False,
+             labels: dict[str, str] | None = None) -> RunStore:
     """Run (or resume) ``plan`` on ``rig`` into the run directory ``out``.
 
     The plan is checked against the rig's limits before anything is opened; the run's
@@ -221,6 +259,8 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
                 held.enter_context(runlock.instrument(url, out))
         latch.hold()          # a signal while the directory is set up acts once it says "running"
         store = _open_store(plan, rig, out, resume=resume, sim_seed=sim_seed, warnings=warnings)
+        if labels:
+            store.update(labels=labels)
         log_handler = _log_to(store.path / "bench.log")
         try:
             _supervised(plan, rig, store, latch, progress=progress, sim_seed=sim_seed, identify=identify,
@@ -296,7 +336,9 @@ def _supervised(plan: Plan, rig: Rig, store: RunStore, latch: SignalLatch, *, pr
             with uninterruptible("switching the output off"):
                 stack.close()    # output off, then close links and twins
                 try:
-                    store.finish(status, steps_done=len(store.done_keys()), steps_total=planned_count(plan))
+                    done = store.done_keys()
+                    refined = sum(1 for k in done if plan.refined_key_ok(k))   # refinement steps: counted as run
+                    store.finish(status, steps_done=len(done), steps_total=planned_count(plan) + refined)
                 except StorageError as e:
                     log.error("the run's end (%s) could not be recorded: %s", status, e)
                     unrecorded = e
@@ -361,7 +403,16 @@ def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Super
         from procedures.online_id import choose_frequencies
         choose = lambda sweep: choose_frequencies(           # noqa: E731
             sweep, online.current() if online else None, plan.adaptive_per_sweep)
-    proc.run(store.done_keys() | skipped, record, show, choose=choose)
+    refiner = None
+    if plan.refine:
+        from procedures.resonance import Refiner
+        band = None
+        if rig.simulated and rig.model:
+            from sim.modal import pitch_band_Hz
+            from sim.rig import RigModel
+            band = pitch_band_Hz(RigModel.from_dict(rig.model))
+        refiner = Refiner(plan, lambda: store.results(warn=False), band).next_step
+    proc.run(store.done_keys() | skipped, record, show, choose=choose, refine=refiner)
     if online:
         store.update(identification=online.final())
 

@@ -7,6 +7,7 @@ produce them.
 
 from __future__ import annotations
 
+import re
 from dataclasses import asdict, dataclass, field
 
 
@@ -39,6 +40,13 @@ class Plan:
     infeasible: str = "refuse"           # steps the limits cannot hold: "refuse" the plan or "skip" them
     adaptive_per_sweep: int = 0          # > 0: measure only this many frequencies per sweep, chosen online
     skip: tuple[tuple[int, int], ...] = ()   # (level index, frequency index) left out
+    # [plan.resonance] (decision 0043): after each level's sweeps, refine each peak the data
+    # show with extra steps until its frequency is known within refine_tolerance (relative),
+    # at most refine_steps per mode and level; the modes refined ("feed", "pitch")
+    refine: bool = False
+    refine_tolerance: float = 0.002
+    refine_steps: int = 10            # per mode and level
+    refine_modes: tuple[str, ...] = ("feed", "pitch")
 
     def sweeps(self) -> list[tuple[str, tuple[float, ...]]]:
         up = ("up", self.freqs_Hz)
@@ -61,6 +69,20 @@ class Plan:
     def to_dict(self) -> dict:
         return asdict(self)
 
+    def refined_key_ok(self, key: str) -> bool:
+        """Whether ``key`` names a refinement step this plan may add (refine on, a level of
+        the plan, its number within the budget, the level's last sweep's direction)."""
+        m = REFINED_KEY.fullmatch(key)
+        if not (self.refine and m):
+            return False
+        li, j, direction = int(m["level"]), int(m["n"]), m["dir"]
+        last = [s for s in self.schedule() if s.level_index == li]
+        return bool(last) and j < self.refine_steps and direction == last[-1].direction \
+            and int(m["index"]) == last[-1].index and {"F": "feed", "P": "pitch"}[m["mode"]] in self.refine_modes
+
+
+REFINED_KEY = re.compile(r"(?P<index>\d{5})-L(?P<level>\d{2})-R(?P<mode>[FP])(?P<n>\d{3})-(?P<dir>up|down)")
+
 
 @dataclass(frozen=True)
 class StepSpec:
@@ -70,9 +92,14 @@ class StepSpec:
     direction: str
     force_N: float
     freq_Hz: float
+    refined: int = -1        # >= 0: the level's n-th refinement step of a mode (frequency chosen online)
+    refined_mode: str = ""   # that mode: "feed" or "pitch"
 
     @property
     def key(self) -> str:
+        if self.refined >= 0:    # sorts after the level's sweep (its last step's index; R after F)
+            return (f"{self.index:05d}-L{self.level_index:02d}-R{self.refined_mode[:1].upper()}{self.refined:03d}"
+                    f"-{self.direction}")
         return f"{self.index:05d}-L{self.level_index:02d}-F{self.freq_index:03d}-{self.direction}"
 
 
