@@ -67,8 +67,10 @@ def envelope(plan: Plan, rig: Rig) -> list[EnvelopePoint]:
     lim = tightest(rig.limits, plan.limits)
     m = f"x {FORCE_MARGIN:g} margin"
     out = []
+    # phase resonance: its frequency window's ends bound what the loop can drive
+    window = (plan.backbone.min_Hz, plan.backbone.max_Hz) if plan.backbone else ()
     for F in plan.levels_N:
-        for f in plan.freqs_Hz:
+        for f in window or plan.freqs_Hz:
             Fp = F * FORCE_MARGIN
             w = 2 * math.pi * f
             drive = F / rig.amp_gain_N_per_V
@@ -104,6 +106,10 @@ def check_envelope(plan: Plan, rig: Rig) -> Plan:
     points = envelope(plan, rig)
     bad = [p for p in points if p.problems]
     if bad and plan.infeasible == "skip":
+        if plan.backbone:
+            raise EnvelopeError(f"infeasible = \"skip\" cannot skip part of a phase-resonance window: "
+                                f"{bad[0].force_N:g} N at {bad[0].freq_Hz:g} Hz: {'; '.join(bad[0].problems)}\n"
+                                + envelope_report(points))
         li = {F: i for i, F in enumerate(plan.levels_N)}
         fi = {f: i for i, f in enumerate(plan.freqs_Hz)}
         skip = tuple(sorted({(li[p.force_N], fi[p.freq_Hz]) for p in bad}))
@@ -202,7 +208,7 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
     not measure again the steps skipped at run time (force unreachable, ``infeasible =
     "skip"``) unless ``retry_skipped`` (after raising a limit, say)."""
     plan = check_envelope(plan, rig)
-    warnings = identifiability(plan, rig)
+    warnings = identifiability(plan, rig) if plan.procedure == "stepped_sine" else []
     for w in warnings:
         log.warning("identifiability: %s", w)
     store = _open_store(plan, rig, out, resume=resume, sim_seed=sim_seed, warnings=warnings)
@@ -293,6 +299,11 @@ def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Super
     # reference position with the output off
     rest = ins.daq.acquire_periods(100.0, 10).disp_m
     sup.x_ref_m = float(np.mean(rest))
+    if plan.procedure == "phase_resonance":
+        from .backbone import run_backbone
+        run_backbone(plan, rig, store, gen, daq, sensor_check, marker=ins.generator, drive_limit_V=sup.limits.drive_V,
+                     noise_floor_m=float(np.std(rest)), progress=progress)
+        return
     proc = SteppedSine(plan, gen, daq, amp_gain_N_per_V=rig.amp_gain_N_per_V,
                        sensor_check=sensor_check, marker=ins.generator, drive_limit_V=sup.limits.drive_V,
                        on_skip=lambda step, why: store.event("step_skipped", key=step.key, reason=why))
