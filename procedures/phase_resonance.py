@@ -104,14 +104,15 @@ class PhaseResonance(SteppedSine):
                 self.f_locked = r["freq_Hz"]
 
     # ------------------------------------------------------------------ the phase
-    def _phase(self, block: Block, f: float) -> tuple[float, float, float, np.ndarray, np.ndarray]:
-        """Phase (deg) and amplitudes of the block's fundamentals (response against force),
-        and each period's phase error and response amplitude."""
+    def _phase(self, block: Block, f: float, last: int = 0) -> tuple[float, float, float, np.ndarray, np.ndarray]:
+        """Phase (deg) and amplitudes of the fundamentals (response against force) of the
+        block's ``last`` periods (0: all), and each period's phase error and response amplitude."""
         resp = block.disp_m if self.bb.response == "disp" else block.accel_m_s2
-        F = fit_harmonics(block.force_N, block.fs_Hz, f, 1)
-        R = fit_harmonics(resp, block.fs_Hz, f, 1)
-        phase = math.degrees(R.phase_rad[0] - F.phase_rad[0])
         per = max(1, int(round(block.n_samples * f / block.fs_Hz)))
+        tail = -(block.n_samples * min(last, per) // per) if last else 0
+        F = fit_harmonics(block.force_N[tail:], block.fs_Hz, f, 1)
+        R = fit_harmonics(resp[tail:], block.fs_Hz, f, 1)
+        phase = math.degrees(R.phase_rad[0] - F.phase_rad[0])
         errs, amps = [], []
         for fp, rp in zip(np.array_split(block.force_N, per), np.array_split(resp, per)):
             if fp.size < 8:
@@ -168,12 +169,18 @@ class PhaseResonance(SteppedSine):
         count, amps_in_run = 0, []
         errors: list[float] = []
         largest = 0.0
-        prev_fp: tuple[float, float] | None = None
+        prev_fp: tuple[float, float, float] | None = None     # (frequency, phase, drive) of the block before
         prev_drive: tuple[float, float] | None = None
+        changed = True
         self.history = []
         for b in range(1, bb.max_blocks + 1):
-            block = self._acquire(f, bb.block_periods)
-            phase, F1, R1, errs, amps = self._phase(block, f)
+            # the loop's estimate comes from the block's last block_periods; the periods
+            # before let a change's transient decay (a linear mode's time constant is
+            # |d phase / d f| / 360 s; two of them) and count for the settle rule
+            wait = min(math.ceil(2 * abs(self.slope) / 360.0 * f), 5 * bb.block_periods) if changed else 0
+            block = self._acquire(f, wait + bb.block_periods)
+            phase, F1, R1, errs, amps = self._phase(block, f, bb.block_periods)
+            changed = False
             err = phase_error_deg(phase, bb.phase_deg)
             vpp = self.drive.amplitude_Vpp
             self.history.append((vpp, F1))
@@ -211,21 +218,25 @@ class PhaseResonance(SteppedSine):
                 prev_drive = (vpp, F1)
                 if nxt != vpp:
                     self._change(vpp=nxt)
-            # phase control: a Newton step on the error, slope updated by secants
-            if prev_fp is not None and abs(f - prev_fp[0]) > 1e-4 * f:
+                    changed = True
+            # phase control: a Newton step on the error; the slope follows secants between
+            # blocks at the same drive (an amplitude change moves a nonlinear mode's phase
+            # too), blended geometrically; one that does not fall is not a resonance's
+            if prev_fp is not None and abs(f - prev_fp[0]) > 1e-4 * f and prev_fp[2] == vpp:
                 s = phase_error_deg(phase, prev_fp[1]) / (f - prev_fp[0])
-                if self.slope * 4 < s < self.slope / 4:
-                    self.slope = s
-            prev_fp = (f, phase)
+                if s < 0:
+                    self.slope = -math.sqrt(self.slope * s)
+            prev_fp = (f, phase, self.drive.amplitude_Vpp)
             df = -bb.gain * err / self.slope
             df = max(-bb.max_step_Hz, min(bb.max_step_Hz, df))
             nf = f + df
             if not bb.min_Hz <= nf <= bb.max_Hz:
                 raise LockLost(f"frequency {nf:.4g} Hz left the window {bb.min_Hz:g}-{bb.max_Hz:g} Hz "
                                f"(phase error {err:+.1f} deg at {f:.4g} Hz)")
-            if abs(df) > 1e-9 * f:
+            if abs(err) > bb.phase_band_deg / 4:      # well inside the band: no change, no transient
                 self._set_frequency(nf)
                 f = self.drive.freq_Hz
+                changed = True
         return False, f"not settled within max_blocks = {bb.max_blocks} blocks", bb.max_blocks
 
     def _record(self, step: StepSpec, block: Block | None, measured, raw, *, locked: bool, why: str,
