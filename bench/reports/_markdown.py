@@ -303,6 +303,12 @@ def _write_figures(run: RunData, out: Path) -> list[tuple[str, str]]:
                   "relative to the fundamental (noise and non-periodic motion such as an unsettled free vibration; "
                   f"steps above {100 * UNSETTLED_RESIDUAL:g} % are flagged)."))
 
+    if any("backbone" in r for r in results):
+        from ._backbone import plot_backbone
+        save(plot_backbone(results, run.rig, title), out / "backbone.png")
+        files.append(("backbone.png", "phase resonance: natural frequency and damping ratio of each level's "
+                      "locked point against its displacement amplitude, over the model's backbone from "
+                      "single-harmonic balance of the Masing loop (decision 0044)."))
     save(figures.plot_resonance(run.resonances, title), out / "resonance.png")
     files.append(("resonance.png", "frequency and compliance_pp of the largest compliance_pp per level "
                   "(the harmonic resonance) against force; the seed's result is that the frequency falls "
@@ -330,6 +336,9 @@ def _results_md(run: RunData, out: Path, files: list[tuple[str, str]]) -> list[s
            f"CSV and UFF: `bench export {run.path}`).", ""]
     md += _table(["file", "what it shows"], [[f"[{n}]({n})", d] for n, d in files])
     md += [""]
+    if any("backbone" in r for r in results):
+        from ._backbone import backbone_md
+        md += backbone_md(results)
 
     md += ["## Harmonic resonance per level", "",
            "The step of largest compliance_pp (x_max - x_min)/(2 F1) at each level, either sweep direction "

@@ -136,3 +136,40 @@ def test_the_plan_is_checked():
         (-90.0, 1.0, 20, 40.0, 160.0, 4.0)
     assert parse_plan(backbone_plan([1.0], response="accel")).backbone.phase_deg == 90.0
     assert load_plan(DEFAULTS / "backbone_plan.toml").procedure == "phase_resonance"
+
+
+def test_the_report_shows_the_backbone_over_the_model(bar_run):
+    from bench.reports import write_report
+    _, store = bar_run
+    md = write_report(store.path).read_text()
+    assert (store.path / "report" / "backbone.png").stat().st_size > 10_000
+    table = [line for line in md.splitlines() if line.startswith("| ") and line.endswith(" |") and "| yes |" in line]
+    assert len(table) == len(BAR_LEVELS)
+
+
+def test_ctrl_c_ends_with_the_output_off_and_resume_goes_on_at_the_next_level(tmp_path, mocker):
+    from bench.storage import RunStore
+    from procedures.phase_resonance import PhaseResonance
+    from tests.bench.test_exit_paths import fail_on_call
+
+    plan = parse_plan(backbone_plan(BAR_LEVELS))
+    rig = load_rig(DEFAULTS / "sim_rig.toml")
+    out = tmp_path / "run"
+    fail_on_call(mocker, PhaseResonance, "track", 3, KeyboardInterrupt())
+    with pytest.raises(KeyboardInterrupt):
+        run_plan(plan, rig, out)
+    store = RunStore(out)
+    assert store.metadata["status"] == "interrupted"
+    assert [e["confirmed"] for e in events(store) if e["event"] == "output_off"] == [True]
+    first = {p.name: p.read_bytes() for p in (out / "steps").iterdir()}
+    assert len(first) == 4 and [r["level_N"] for r in rows(store)] == ["0.1", "0.3"]
+    f_locked = float(rows(store)[-1]["frequency_Hz"])
+    mocker.stopall()
+
+    store = run_plan(plan, rig, out, resume=True)
+    assert store.metadata["status"] == "completed"
+    assert all((out / "steps" / n).read_bytes() == b for n, b in first.items())     # kept, not measured again
+    got = rows(store)
+    assert [float(r["level_N"]) for r in got] == BAR_LEVELS and all(r["locked"] == "true" for r in got)
+    probes = [e for e in events(store) if e["event"] == "backbone_probe"]
+    assert len(probes) == 2 and probes[1]["freq_Hz"] == pytest.approx(f_locked)      # from the last locked point
