@@ -35,7 +35,7 @@ LIMIT_KEYS = ("drive_V", "force_N", "disp_m", "accel_m_s2")
 KEYS = {
     "plan": ("name", "levels_N", "frequencies", "control", "limits", "infeasible", "adaptive_per_sweep",
              "procedure", "backbone"),
-    "plan.backbone": ("start_Hz", "response", "phase_deg", "gain", "slope_deg_per_Hz", "probe_step",
+    "plan.backbone": ("start_Hz", "mode", "response", "phase_deg", "gain", "slope_deg_per_Hz", "probe_step",
                       "block_periods", "phase_band_deg", "amplitude_band", "settle_periods", "max_step_Hz",
                       "min_Hz", "max_Hz", "max_blocks", "lost_phase_deg", "collapse"),
     "plan.frequencies": ("list_Hz", "start_Hz", "stop_Hz", "points", "spacing", "direction"),
@@ -178,7 +178,7 @@ def _backbone(sec: _Section) -> Backbone:
     default_phase = -90.0 if response == "disp" else 90.0
     lo, hi = (-180.0, 0.0) if response == "disp" else (0.0, 180.0)
     b = Backbone(
-        start_Hz=start, response=response,
+        start_Hz=start, mode=sec.text("mode", "feed") or "feed", response=response,
         phase_deg=sec.number("phase_deg", default_phase, lo, hi, lo_open=True,
                              note=f" (response = \"{response}\": the phase against the force, degrees)"),
         gain=sec.number("gain", 0.7, 0, 1, lo_open=True),

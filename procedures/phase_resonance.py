@@ -38,7 +38,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from sim.step_result import BackboneRecord, ControlIteration, StepResult
+from sim.step_result import BackboneRecord, ControlIteration, StepMeasurement, StepResult
 
 from .analysis import fit_harmonics
 from .instruments import Block, BlockSource, SineSource, StepMarker
@@ -166,7 +166,8 @@ class PhaseResonance(SteppedSine):
         f = self.drive.freq_Hz
         if self.slope is None:
             self.slope = self.probe(f) if bb.slope_deg_per_Hz == 0 else bb.slope_deg_per_Hz
-        count, amps_in_run = 0, []
+        count = 0
+        amps_in_run: list[float] = []
         errors: list[float] = []
         largest = 0.0
         prev_fp: tuple[float, float, float] | None = None     # (frequency, phase, drive) of the block before
@@ -239,8 +240,8 @@ class PhaseResonance(SteppedSine):
                 changed = True
         return False, f"not settled within max_blocks = {bb.max_blocks} blocks", bb.max_blocks
 
-    def _record(self, step: StepSpec, block: Block | None, measured, raw, *, locked: bool, why: str,
-                blocks: int, record: Record) -> StepResult:
+    def _record(self, step: StepSpec, measured: StepMeasurement, raw: dict[str, np.ndarray], *, locked: bool,
+                why: str, blocks: int, record: Record) -> StepResult:
         fits_F = measured["force"]
         F1 = fits_F["amplitude"][0] * np.exp(1j * fits_F["phase_rad"][0])
         d = measured["disp"]
@@ -248,12 +249,13 @@ class PhaseResonance(SteppedSine):
         f = measured["freq_Hz"]
         if self.bb.response == "disp":
             R = X1
-        else:
+        else:             # the drive point's displacement from the accelerometer (it sees a pitch, the probe not)
             a = measured["accel"]
             R = a["amplitude"][0] * np.exp(1j * a["phase_rad"][0])
+            X1 = -R / (2 * math.pi * f) ** 2
         phase = math.degrees(float(np.angle(R / F1)))
         bbrec = BackboneRecord(
-            mode="feed", response=self.bb.response, amplitude_m=float(abs(X1)), frequency_Hz=f, phase_deg=phase,
+            mode=self.bb.mode, response=self.bb.response, amplitude_m=float(abs(X1)), frequency_Hz=f, phase_deg=phase,
             phase_target_deg=self.bb.phase_deg, phase_error_deg=phase_error_deg(phase, self.bb.phase_deg),
             damping_ratio=damping_ratio(F1, X1, f, self.mass_kg), mass_kg=self.mass_kg, locked=locked,
             why=why, periods=int(round(self.periods)), blocks=blocks)
@@ -279,7 +281,7 @@ class PhaseResonance(SteppedSine):
             self.stop()
             self.slope = None             # the next level probes again
             self.on_event("lock_lost", key=step.key, level_N=step.force_N, freq_Hz=f, reason=str(e))
-            return self._record(step, block, measured, raw, locked=False, why=f"lock lost: {e}",
+            return self._record(step, measured, raw, locked=False, why=f"lock lost: {e}",
                                 blocks=len(self.history), record=record)
         f = self.drive.freq_Hz
         if not locked:
@@ -288,10 +290,10 @@ class PhaseResonance(SteppedSine):
         measured, raw = self.measure(replace(step, freq_Hz=f))
         if locked:
             self.f_locked = f
-        return self._record(step, None, measured, raw, locked=locked, why=why, blocks=blocks, record=record)
+        return self._record(step, measured, raw, locked=locked, why=why, blocks=blocks, record=record)
 
     # ------------------------------------------------------------------ the test
-    def run(self, done: set[str], record: Record,       # type: ignore[override]
+    def run(self, done: set[str], record: Record,
             progress: Callable[[int, int, str], None] | None = None, choose=None) -> None:
         steps = self.plan.schedule()
         finished = len([s for s in steps if s.key in done])

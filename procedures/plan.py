@@ -27,6 +27,7 @@ class Backbone:
     the displacement at -90 (lagging), the acceleration at +90 (leading)."""
 
     start_Hz: float                     # near the mode at the first level
+    mode: str = "feed"                  # the mode's name, in backbone.csv
     response: str = "disp"              # "disp" or "accel": whose phase is held
     phase_deg: float = -90.0            # target; default -90 for disp, +90 for accel
     gain: float = 0.7                   # fraction of the Newton step taken per block (0, 1]

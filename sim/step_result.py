@@ -77,14 +77,15 @@ class ControlIteration(TypedDict):
 class BackboneRecord(TypedDict):
     """A phase-resonance point (procedure = "phase_resonance", decision record 0044)."""
 
-    mode: str                           # "feed"
+    mode: str                           # the plan's name of the mode ("feed", "pitch", ...)
     response: str                       # "disp" or "accel": whose phase the loop held
-    amplitude_m: float                  # |X1|, displacement fundamental
+    amplitude_m: float                  # |X1|: the probe's displacement fundamental (disp), or the drive
+                                        # point's, |A1| / w^2 (accel)
     frequency_Hz: float
     phase_deg: float                    # response fundamental's phase minus the force's
     phase_target_deg: float
     phase_error_deg: float
-    damping_ratio: float                # |F1| sin(-(phi_x - phi_F)) / (2 m w^2 |X1|)
+    damping_ratio: float                # |F1| sin(-(phi_x - phi_F)) / (2 m w^2 |X1|), X1 as amplitude_m
     mass_kg: float                      # m of the energy balance: the rig file's expected mass
     locked: bool
     why: str                            # "" when locked, else why not
