@@ -173,3 +173,26 @@ def test_ctrl_c_ends_with_the_output_off_and_resume_goes_on_at_the_next_level(tm
     assert [float(r["level_N"]) for r in got] == BAR_LEVELS and all(r["locked"] == "true" for r in got)
     probes = [e for e in events(store) if e["event"] == "backbone_probe"]
     assert len(probes) == 2 and probes[1]["freq_Hz"] == pytest.approx(f_locked)      # from the last locked point
+
+
+def test_the_pitching_mode_backbone_falls_between_its_linear_bounds(tmp_path):
+    """The pitching rig's pitch mode, held at +90 degrees of the drive-point acceleration:
+    its frequency falls with amplitude (seed Fig. 17) from the linearised 2-DOF pitch
+    resonance with the friction's initial stiffness n/(n-1) F_s/x_s towards the one with
+    no feed stiffness at all (gross rolling)."""
+    from sim.rig import RigModel
+    from tests.bench.test_pitch_rig import two_dof
+
+    rig = load_rig(DEFAULTS / "sim_rig_pitch.toml")
+    plan = parse_plan({"plan": {"procedure": "phase_resonance", "levels_N": [0.3, 1.0, 3.0, 10.0],
+                                "backbone": {"start_Hz": 200.0, "response": "accel", "mode": "pitch"}}})
+    store = run_plan(plan, rig, tmp_path / "run")
+    model = RigModel.from_dict(rig.model)
+    top = two_dof(model, model.n / (model.n - 1) * model.F_s_N / model.x_s_m)[1]
+    bottom = two_dof(model, 0.0)[1]
+    got = rows(store)
+    f = [float(r["frequency_Hz"]) for r in got]
+    assert all(r["locked"] == "true" and r["mode"] == "pitch" for r in got)
+    assert all(abs(float(r["phase_deg"]) - 90.0) <= 2.0 for r in got)
+    assert all(bottom < x < top for x in f)
+    assert f == sorted(f, reverse=True) and f[0] - f[-1] > 2.0
