@@ -125,7 +125,7 @@ def _run(args, resume: bool) -> int:
     before = _event_count(out)
     watch = _start_watch(out, args)
     try:
-        store = run_plan(plan, rig, out, resume=resume, progress=Progress("stepped sine"), sim_seed=seed,
+        store = run_plan(plan, rig, out, resume=resume, progress=Progress("phase resonance" if plan.procedure == "phase_resonance" else "stepped sine"), sim_seed=seed,
                          retry_skipped=bool(getattr(args, "retry_skipped", False)))
     finally:
         if watch:
