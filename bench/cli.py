@@ -77,8 +77,14 @@ def cmd_dry_run(args) -> int:
 
     plan, rig = _load_configs(args)
     steps = plan.schedule()
-    print(f"plan '{plan.name}': {len(plan.levels_N)} levels x {len(plan.freqs_Hz)} frequencies "
-          f"({plan.direction}) = {len(steps)} steps; rig '{rig.name}'{' (simulated)' if rig.simulated else ''}")
+    if plan.backbone:
+        b = plan.backbone
+        print(f"plan '{plan.name}': phase resonance, {len(plan.levels_N)} levels from {b.start_Hz:g} Hz in the window "
+              f"{b.min_Hz:g}-{b.max_Hz:g} Hz (envelope at both ends); rig '{rig.name}'"
+              f"{' (simulated)' if rig.simulated else ''}")
+    else:
+        print(f"plan '{plan.name}': {len(plan.levels_N)} levels x {len(plan.freqs_Hz)} frequencies "
+              f"({plan.direction}) = {len(steps)} steps; rig '{rig.name}'{' (simulated)' if rig.simulated else ''}")
     print(envelope_report(envelope(plan, rig)))
     from procedures.online_id import identifiability
     try:
@@ -91,7 +97,7 @@ def cmd_dry_run(args) -> int:
               f"skipped (infeasible = \"skip\")")
     else:
         print("envelope ok: the rig's limits hold every step")
-    for w in identifiability(runnable, rig):
+    for w in identifiability(runnable, rig) if plan.procedure == "stepped_sine" else []:
         print(f"identifiability warning: {w}")
     return 0
 

@@ -196,3 +196,17 @@ def test_the_pitching_mode_backbone_falls_between_its_linear_bounds(tmp_path):
     assert all(abs(float(r["phase_deg"]) - 90.0) <= 2.0 for r in got)
     assert all(bottom < x < top for x in f)
     assert f == sorted(f, reverse=True) and f[0] - f[-1] > 2.0
+
+
+def test_the_envelope_is_checked_at_the_low_end_of_the_window():
+    """The loop may drive anywhere in min_Hz-max_Hz: 3 N at 40 Hz moves the free mass further
+    than at start_Hz 80 Hz, and a displacement limit between the two refuses the plan."""
+    from bench.session import EnvelopeError, check_envelope
+
+    rig = load_rig(DEFAULTS / "sim_rig.toml")
+    data = backbone_plan([3.0])
+    data["plan"]["limits"] = {"disp_m": 33e-6}
+    with pytest.raises(EnvelopeError, match="3 N at 40 Hz: displacement"):
+        check_envelope(parse_plan(data), rig)
+    data["plan"]["backbone"]["min_Hz"] = 70.0
+    check_envelope(parse_plan(data), rig)
