@@ -115,6 +115,10 @@ def test_a_window_below_the_mode_loses_the_lock_ramps_down_and_says_why(tmp_path
     (row,) = rows(store)
     assert row["locked"] == "false" and "lock lost" in row["why"]
     assert [e["confirmed"] for e in ev if e["event"] == "output_off"] == [True]
+    # the watch page lists it (marked bad: page.js BAD_EVENTS) with the reason
+    from bench.watch.snapshot import RunReader
+    shown = [e for e in RunReader(store.path).snapshot()["events"] if e["event"] == "lock_lost"]
+    assert len(shown) == 1 and "left the window" in shown[0]["reason"]
 
 
 def test_the_plan_is_checked():
