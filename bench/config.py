@@ -195,9 +195,11 @@ def _backbone(sec: _Section) -> Backbone:
         max_blocks=sec.number("max_blocks", 60, 3, 100000, integer=True),
         lost_phase_deg=sec.number("lost_phase_deg", 45.0, 1, 180),
         collapse=sec.number("collapse", 0.2, 0, 1, lo_open=True)).resolved()
-    if not MIN_FREQ_HZ <= b.min_Hz < b.start_Hz < b.max_Hz <= MAX_FREQ_HZ:
+    if not MIN_FREQ_HZ <= b.min_Hz < b.start_Hz * (1 - b.probe_step) < b.start_Hz * (1 + b.probe_step) < b.max_Hz \
+            <= MAX_FREQ_HZ:
         raise ConfigError(f"{sec.where('min_Hz')} / max_Hz: the window {b.min_Hz:g}-{b.max_Hz:g} Hz must hold "
-                          f"start_Hz {b.start_Hz:g} Hz inside the bench's range {MIN_FREQ_HZ:g}-{MAX_FREQ_HZ:g} Hz")
+                          f"start_Hz {b.start_Hz:g} Hz and its probe blocks (x (1 -+ probe_step {b.probe_step:g})) "
+                          f"inside the bench's range {MIN_FREQ_HZ:g}-{MAX_FREQ_HZ:g} Hz")
     if b.phase_band_deg >= b.lost_phase_deg:
         raise ConfigError(f"{sec.where('phase_band_deg')}: {b.phase_band_deg:g} deg must be below "
                           f"lost_phase_deg {b.lost_phase_deg:g} deg")

@@ -90,6 +90,7 @@ class PhaseResonance(SteppedSine):
         self.slope: float | None = None       # d phase / d f, degrees per Hz (< 0)
         self.f_locked: float | None = None    # the last locked frequency
         self.periods = 0.0                    # drive periods since the level started
+        self.last_block: Block | None = None  # the loop's latest block
 
     # ------------------------------------------------------------------ bookkeeping
     def _acquire(self, freq_Hz: float, periods: int) -> Block:
@@ -179,7 +180,7 @@ class PhaseResonance(SteppedSine):
             # before let a change's transient decay (a linear mode's time constant is
             # |d phase / d f| / 360 s; two of them) and count for the settle rule
             wait = min(math.ceil(2 * abs(self.slope) / 360.0 * f), 5 * bb.block_periods) if changed else 0
-            block = self._acquire(f, wait + bb.block_periods)
+            block = self.last_block = self._acquire(f, wait + bb.block_periods)
             phase, F1, R1, errs, amps = self._phase(block, f, bb.block_periods)
             changed = False
             err = phase_error_deg(phase, bb.phase_deg)
@@ -275,10 +276,11 @@ class PhaseResonance(SteppedSine):
             locked, why, blocks = self.track(step)
         except LockLost as e:
             log.warning("level %g N: lock lost: %s; ramping down", step.force_N, e)
+            self.stop()                   # at once: the point keeps the loop's last block
+            block = self.last_block
+            assert block is not None          # LockLost comes after a block
             f = self.drive.freq_Hz
-            block = self._acquire(f, self.bb.block_periods)
             measured, raw = self.block_result(block, self._fit_block(block, f), f)
-            self.stop()
             self.slope = None             # the next level probes again
             self.on_event("lock_lost", key=step.key, level_N=step.force_N, freq_Hz=f, reason=str(e))
             return self._record(step, measured, raw, locked=False, why=f"lock lost: {e}",

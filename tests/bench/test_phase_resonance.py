@@ -130,7 +130,7 @@ def test_the_plan_is_checked():
         parse_plan(backbone_plan([1.0], phase_deg=90.0))
     with pytest.raises(ConfigError, match="did you mean phase_band_deg"):
         parse_plan(backbone_plan([1.0], phase_band_dg=1.0))
-    with pytest.raises(ConfigError, match="window 40-30 Hz must hold start_Hz 80"):
+    with pytest.raises(ConfigError, match="window 40-30 Hz must hold start_Hz 80 Hz and its probe blocks"):
         parse_plan(backbone_plan([1.0], max_Hz=30.0))
     with pytest.raises(ConfigError, match="needs procedure"):
         parse_plan({"plan": {"levels_N": [1.0], "frequencies": {"list_Hz": [50.0]}, "backbone": {"start_Hz": 50.0}}})
