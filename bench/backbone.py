@@ -90,7 +90,8 @@ def run_backbone(plan: Plan, rig: Rig, store: RunStore, gen, daq, sensor_check, 
         store.write_step(step.key, res, raw)
         b = res["backbone"]
         store.event("backbone_point", key=step.key, level_N=step.force_N, freq_Hz=b["frequency_Hz"],
-                    amplitude_m=b["amplitude_m"], damping_ratio=b["damping_ratio"], locked=b["locked"],
+                    amplitude_m=b["amplitude_m"], phase_error_deg=b["phase_error_deg"],
+                    damping_ratio=b["damping_ratio"], locked=b["locked"],
                     periods=b["periods"])
         write_backbone_csv(store)
 
