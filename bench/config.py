@@ -34,7 +34,8 @@ LIMIT_KEYS = ("drive_V", "force_N", "disp_m", "accel_m_s2")
 # the misspelling, not as the key it was meant to be).  [rig.model]: MODEL_SCHEMA below.
 KEYS = {
     "plan": ("name", "levels_N", "frequencies", "control", "limits", "infeasible", "adaptive_per_sweep",
-             "procedure", "backbone"),
+             "procedure", "backbone", "response"),
+    "plan.response": ("quantity", "levels"),
     "plan.backbone": ("start_Hz", "mode", "response", "phase_deg", "gain", "slope_deg_per_Hz", "probe_step",
                       "block_periods", "phase_band_deg", "amplitude_band", "settle_periods", "max_step_Hz",
                       "min_Hz", "max_Hz", "max_blocks", "lost_phase_deg", "collapse"),
@@ -215,8 +216,21 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
     top = _Section(source, "", data, ("plan",))
     p = top.table("plan")
     top.done()
-    levels = p.numbers("levels_N", _REQUIRED, MIN_LEVEL_N, MAX_LEVEL_N, note=FORCE_RANGE)
-    procedure = p.choice("procedure", "stepped_sine", ("stepped_sine", "phase_resonance"))
+    procedure = p.choice("procedure", "stepped_sine", ("stepped_sine", "phase_resonance", "response_controlled"))
+    rc = p.table("response")
+    quantity = ""
+    if procedure == "response_controlled":
+        if "levels_N" in p.data:
+            raise ConfigError(f"{p.where('levels_N')}: not used with procedure = \"response_controlled\" "
+                              f"(give [plan.response] levels, response amplitudes)")
+        quantity = rc.choice("quantity", "disp", ("disp", "accel"))
+        lo, hi, unit = (1e-9, 1e-3, "m") if quantity == "disp" else (1e-4, 1e3, "m/s^2")
+        levels = rc.numbers("levels", _REQUIRED, lo, hi, note=f" ({unit}, the response fundamental's amplitude)")
+        rc.done()
+    elif rc.data:
+        raise ConfigError(f"{source}: [plan.response] needs procedure = \"response_controlled\" in [plan]")
+    else:
+        levels = p.numbers("levels_N", _REQUIRED, MIN_LEVEL_N, MAX_LEVEL_N, note=FORCE_RANGE)
     fr = p.table("frequencies")
     bb = p.table("backbone")
     backbone = None
@@ -260,7 +274,7 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
         limits=_limits(lim, required=False) if lim.data else None,
         infeasible=p.choice("infeasible", "refuse", ("refuse", "skip")),
         adaptive_per_sweep=p.number("adaptive_per_sweep", 0, 0, 10000, integer=True),
-        procedure=procedure, backbone=backbone)
+        procedure=procedure, backbone=backbone, response=quantity)
     if backbone is not None and plan.adaptive_per_sweep:
         raise ConfigError(f"{p.where('adaptive_per_sweep')}: not used with procedure = \"phase_resonance\"")
     # every fitted harmonic must stay below Nyquist at the highest frequency (the DAQ samples
@@ -401,6 +415,9 @@ def plan_toml(p: dict) -> dict:
            "adaptive_per_sweep": p.get("adaptive_per_sweep", 0),
            "frequencies": {"list_Hz": list(p["freqs_Hz"]), "direction": p["direction"]},
            "control": {k: p[k] for k in keys if k in p}}
+    if p.get("procedure", "stepped_sine") == "response_controlled":
+        out["procedure"] = "response_controlled"
+        out["response"] = {"quantity": p["response"], "levels": out.pop("levels_N")}
     if p.get("procedure", "stepped_sine") == "phase_resonance":
         del out["frequencies"], out["adaptive_per_sweep"]
         out["procedure"], out["backbone"] = "phase_resonance", dict(p["backbone"])

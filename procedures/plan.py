@@ -73,8 +73,10 @@ class Plan:
     infeasible: str = "refuse"           # steps the limits cannot hold: "refuse" the plan or "skip" them
     adaptive_per_sweep: int = 0          # > 0: measure only this many frequencies per sweep, chosen online
     skip: tuple[tuple[int, int], ...] = ()   # (level index, frequency index) left out
-    procedure: str = "stepped_sine"      # or "phase_resonance" (then freqs_Hz = (start_Hz,))
+    procedure: str = "stepped_sine"      # or "phase_resonance" (then freqs_Hz = (start_Hz,)), "response_controlled"
     backbone: Backbone | None = None     # [plan.backbone], phase_resonance only
+    response: str = ""                   # response_controlled: "disp" or "accel"; levels_N then holds
+                                         # response amplitudes (m or m/s^2), not forces
 
     def sweeps(self) -> list[tuple[str, tuple[float, ...]]]:
         up = ("up", self.freqs_Hz)

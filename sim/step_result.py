@@ -93,6 +93,15 @@ class BackboneRecord(TypedDict):
     blocks: int                         # controller blocks
 
 
+class ResponseControlRecord(TypedDict):
+    """A response-controlled step (procedure = "response_controlled", decision record 0044)."""
+
+    quantity: str                       # "disp" (m) or "accel" (m/s^2)
+    target: float                       # the level: the response fundamental's amplitude asked for
+    measured: float                     # the measured block's
+    error: float                        # measured / target - 1
+
+
 class StepResult(StepMeasurement):
     """A step's result as stored: the measurement, where it sits in the plan, and how the
     force control went."""
@@ -109,6 +118,7 @@ class StepResult(StepMeasurement):
     control_history: NotRequired[list[ControlIteration]]   # each force-control iteration (decision 0025)
     format_version: NotRequired[int]    # written by the run store; absent = 1
     backbone: NotRequired[BackboneRecord]   # phase-resonance runs only
+    response_control: NotRequired[ResponseControlRecord]   # response-controlled runs only
 
 
 def check_step_version(result: dict, where: str) -> None:
