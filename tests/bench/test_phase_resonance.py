@@ -214,3 +214,17 @@ def test_the_envelope_is_checked_at_the_low_end_of_the_window():
         check_envelope(parse_plan(data), rig)
     data["plan"]["backbone"]["min_Hz"] = 70.0
     check_envelope(parse_plan(data), rig)
+
+
+def test_bench_resume_rebuilds_the_stored_plans():
+    """`bench resume` parses the plan stored in run.json back (bench.config.plan_toml)."""
+    import json
+
+    from bench.config import plan_toml
+    from tests.bench.test_response_control import rc_plan
+
+    for data in (backbone_plan([0.1, 1.0], phase_band_deg=0.5, response="accel"),
+                 rc_plan([1e-6, 2e-6], [40.0, 50.0])):
+        plan = parse_plan(data)
+        stored = json.loads(json.dumps(plan.to_dict()))
+        assert parse_plan({"plan": plan_toml(stored)}, "run.json") == plan
