@@ -55,6 +55,7 @@ bench: setup
 	$(PY) benchmarks/bench_analysis.py --source independent --cases 60 --levels 3 --freqs 10
 	$(PY) benchmarks/bench_artefacts.py
 	$(PY) benchmarks/bench_identification.py
+	$(PY) benchmarks/bench_backbone.py
 	$(PY) benchmarks/bench_twin.py
 	$(PY) benchmarks/bench_modes.py --seeds 6
 

@@ -90,18 +90,24 @@ def cmd_dry_run(args) -> int:
 
     plan, rig = _load_configs(args)
     steps = plan.schedule()
-    n, refined, seconds = planned_steps(plan)
-    runs = (f"{n} measured (adaptive: {plan.adaptive_per_sweep} per sweep, chosen online)"
-            if plan.adaptive_per_sweep and n != len(steps) else f"{n} measured")
-    if refined:
-        runs += (f" + at most {refined} refinement steps ([plan.resonance]: {plan.refine_steps} per mode and level, "
-                 f"modes {', '.join(plan.refine_modes)}, tolerance {100 * plan.refine_tolerance:g} %)")
-    print(f"plan '{plan.name}': {len(plan.levels_N)} levels x {len(plan.freqs_Hz)} frequencies "
-          f"({plan.direction}) = {len(steps)} steps, {runs}; rig '{rig.name}'{' (simulated)' if rig.simulated else ''}")
-    print(f"expected rig time: about {_duration(seconds)}"
-          + (" with the refinement budget used up" if refined else "")
-          + " (force control, settling, measured blocks and ramps; a simulated rig runs faster or slower "
-            "than real time)")
+    if plan.backbone:
+        b = plan.backbone
+        print(f"plan '{plan.name}': phase resonance, {len(plan.levels_N)} levels from {b.start_Hz:g} Hz in the window "
+              f"{b.min_Hz:g}-{b.max_Hz:g} Hz (envelope at both ends); rig '{rig.name}'"
+              f"{' (simulated)' if rig.simulated else ''}")
+    else:
+        n, refined, seconds = planned_steps(plan)
+        runs = (f"{n} measured (adaptive: {plan.adaptive_per_sweep} per sweep, chosen online)"
+                if plan.adaptive_per_sweep and n != len(steps) else f"{n} measured")
+        if refined:
+            runs += (f" + at most {refined} refinement steps ([plan.resonance]: {plan.refine_steps} per mode and level, "
+                     f"modes {', '.join(plan.refine_modes)}, tolerance {100 * plan.refine_tolerance:g} %)")
+        print(f"plan '{plan.name}': {len(plan.levels_N)} levels x {len(plan.freqs_Hz)} frequencies "
+              f"({plan.direction}) = {len(steps)} steps, {runs}; rig '{rig.name}'{' (simulated)' if rig.simulated else ''}")
+        print(f"expected rig time: about {_duration(seconds)}"
+              + (" with the refinement budget used up" if refined else "")
+              + " (force control, settling, measured blocks and ramps; a simulated rig runs faster or slower "
+                "than real time)")
     print(envelope_report(envelope(plan, rig)))
     from procedures.online_id import identifiability
     try:
@@ -114,7 +120,7 @@ def cmd_dry_run(args) -> int:
               f"skipped (infeasible = \"skip\")")
     else:
         print("envelope ok: the rig's limits hold every step")
-    for w in identifiability(runnable, rig):
+    for w in identifiability(runnable, rig) if plan.procedure == "stepped_sine" else []:
         print(f"identifiability warning: {w}")
     return 0
 
@@ -175,8 +181,9 @@ def _session_held(args, resume: bool) -> int:
     before = _event_count(out)
     watch = _start_watch(out, args)
     try:
-        store = run_plan(plan, rig, out, resume=resume, progress=Progress("stepped sine"), sim_seed=seed,
-                         retry_skipped=bool(getattr(args, "retry_skipped", False)), labels=labels)
+        store = run_plan(plan, rig, out, resume=resume,
+                         progress=Progress("phase resonance" if plan.procedure == "phase_resonance" else "stepped sine"),
+                         sim_seed=seed, retry_skipped=bool(getattr(args, "retry_skipped", False)), labels=labels)
     finally:
         if watch:
             watch.close()

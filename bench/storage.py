@@ -614,7 +614,7 @@ def _check_npz(path: Path, key: str, integrity: dict | None) -> None:
 
 def stored_plan(meta: dict | None):
     """The run's stored plan as a :class:`procedures.plan.Plan` (None if it cannot be rebuilt)."""
-    from procedures.plan import Plan
+    from procedures.plan import Backbone, Plan
 
     p = (meta or {}).get("plan")
     if not isinstance(p, dict):
@@ -624,6 +624,8 @@ def stored_plan(meta: dict | None):
         kw.update(levels_N=tuple(p["levels_N"]), freqs_Hz=tuple(p["freqs_Hz"]),
                   skip=tuple(tuple(s) for s in p.get("skip") or ()),
                   refine_modes=tuple(p.get("refine_modes") or ("feed", "pitch")))
+        if isinstance(p.get("backbone"), dict):
+            kw["backbone"] = Backbone(**p["backbone"])
         plan = Plan(**kw)
         plan.schedule()
         return plan

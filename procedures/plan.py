@@ -20,6 +20,40 @@ class Limits:
 
 
 @dataclass(frozen=True)
+class Backbone:
+    """[plan.backbone]: the phase-resonance procedure's settings (decision record 0044).
+
+    Phase convention: the phase of the response's fundamental minus the force's, in
+    degrees, each from a fit A sin(w t + phi); a mass-spring at its natural frequency has
+    the displacement at -90 (lagging), the acceleration at +90 (leading)."""
+
+    start_Hz: float                     # near the mode at the first level
+    mode: str = "feed"                  # the mode's name, in backbone.csv
+    response: str = "disp"              # "disp" or "accel": whose phase is held
+    phase_deg: float = -90.0            # target; default -90 for disp, +90 for accel
+    gain: float = 0.7                   # fraction of the Newton step taken per block (0, 1]
+    slope_deg_per_Hz: float = 0.0       # d phase / d f at start_Hz; 0 = estimated by probe blocks
+    probe_step: float = 0.02            # relative frequency step of the probe blocks
+    block_periods: int = 10             # periods per controller block
+    phase_band_deg: float = 1.0         # settled: |phase error| within this ...
+    amplitude_band: float = 0.01        # ... and the response amplitude within this (relative) ...
+    settle_periods: int = 20            # ... for this many consecutive periods (NLtest's rule)
+    max_step_Hz: float = 0.0            # largest frequency change per block; 0 = 5 % of start_Hz
+    min_Hz: float = 0.0                 # the frequency window; 0 = start_Hz / 2 (>= 20 Hz) ...
+    max_Hz: float = 0.0                 # ... 0 = 2 x start_Hz (<= 1000 Hz)
+    max_blocks: int = 60                # controller blocks per level before the lock is given up
+    lost_phase_deg: float = 45.0        # lock lost: |phase error| above this and growing 3 blocks
+    collapse: float = 0.2               # lock lost: amplitude below this x the level's largest
+
+    def resolved(self) -> Backbone:
+        """Defaults that depend on start_Hz filled in."""
+        from dataclasses import replace
+        lo = self.min_Hz or max(20.0, self.start_Hz / 2)
+        hi = self.max_Hz or min(1000.0, self.start_Hz * 2)
+        return replace(self, max_step_Hz=self.max_step_Hz or 0.05 * self.start_Hz, min_Hz=lo, max_Hz=hi)
+
+
+@dataclass(frozen=True)
 class Plan:
     name: str
     levels_N: tuple[float, ...]
@@ -47,6 +81,10 @@ class Plan:
     refine_tolerance: float = 0.002
     refine_steps: int = 10            # per mode and level
     refine_modes: tuple[str, ...] = ("feed", "pitch")
+    procedure: str = "stepped_sine"      # or "phase_resonance" (then freqs_Hz = (start_Hz,)), "response_controlled"
+    backbone: Backbone | None = None     # [plan.backbone], phase_resonance only
+    response: str = ""                   # response_controlled: "disp" or "accel"; levels_N then holds
+                                         # response amplitudes (m or m/s^2), not forces
 
     def sweeps(self) -> list[tuple[str, tuple[float, ...]]]:
         up = ("up", self.freqs_Hz)

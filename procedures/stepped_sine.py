@@ -325,6 +325,11 @@ class SteppedSine:
         if why:
             log.warning("step %s: still unsettled after %d extra blocks (plan: max_extra_settle_blocks = %d), "
                         "recorded as it is: %s", step.key, extra, self.plan.max_extra_settle_blocks, why)
+        return self.block_result(block, fits, f, extra, why)
+
+    def block_result(self, block: Block, fits: dict[str, HarmonicFit], f: float, extra: int = 0,
+                     why: str = "") -> tuple[StepMeasurement, dict[str, np.ndarray]]:
+        """A measured block's record (the result's measurement part) and its raw arrays."""
         F1 = fits["force"].fundamental
         X1 = fits["disp"].fundamental
         A1 = fits["accel"].fundamental

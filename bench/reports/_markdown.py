@@ -309,6 +309,12 @@ def _write_figures(run: RunData, out: Path) -> list[tuple[str, str]]:
                       "peak of |A1/F1|) and damping ratio against force, from a single-mode fit around each peak "
                       "(bars: 95 % intervals; squares: half-power cross-check; triangles: no peak inside the grid, "
                       "the mode lies at or beyond that edge; lines: the rig model's prediction, simulated rigs)."))
+    if any("backbone" in r for r in results):
+        from ._backbone import plot_backbone
+        save(plot_backbone(results, run.rig, title), out / "backbone.png")
+        files.append(("backbone.png", "phase resonance: natural frequency and damping ratio of each level's "
+                      "locked point against its displacement amplitude, over the model's backbone from "
+                      "single-harmonic balance of the Masing loop (decision 0044)."))
     if run.comparison:
         save(figures.plot_model(series, colours, title, run.comparison), out / "model_vs_measurement.png")
         files.append(("model_vs_measurement.png", "simulated rig only: the sim/ engine's compliance_pp for "
@@ -384,6 +390,9 @@ def _results_md(run: RunData, out: Path, files: list[tuple[str, str]]) -> list[s
            f"CSV and UFF: `bench export {run.path}`).", ""]
     md += _table(["file", "what it shows"], [[f"[{n}]({n})", d] for n, d in files])
     md += [""]
+    if any("backbone" in r for r in results):
+        from ._backbone import backbone_md
+        md += backbone_md(results)
 
     md += modes_md(run)
     if cmp:

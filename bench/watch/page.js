@@ -12,7 +12,7 @@ const PARAMS = [
   {key: "n", label: "n", unit: "", scale: 1},
   {key: "mass_kg", label: "m", unit: "kg", scale: 1},
 ];
-const BAD_EVENTS = new Set(["abort", "error", "instrument_error", "interrupted"]);
+const BAD_EVENTS = new Set(["abort", "error", "instrument_error", "interrupted", "lock_lost", "not_locked"]);
 
 function esc(s) { return String(s ?? "").replace(/[&<>"']/g, (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;"}[c])); }
 function num(v, digits = 3) { return (v === null || v === undefined || !isFinite(v)) ? "–" : Number(v).toPrecision(digits); }
