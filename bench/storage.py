@@ -496,13 +496,17 @@ class RunStore:
         """Every problem of the run directory: damaged run.json or steps (missing, truncated,
         corrupt, checksum mismatch) and step files the plan does not know."""
         problems: list[StepProblem] = []
-        known = None
+        known, plan = None, None
         try:
-            known = planned_keys(self.metadata, self.path / "run.json")
+            plan = stored_plan(self.metadata, self.path / "run.json")
+            known = {s.key for s in plan.schedule()}
         except NewerFormat:
             raise                                # not damage: refused by name
         except RunDirError as e:
             problems.append(StepProblem("", self.path / "run.json", "corrupt", str(e).split(": ", 1)[-1]))
+        if plan is not None and plan.refine:                   # refinement steps (decision 0043)
+            known = (known or set()) | {p.stem for p in self.step_files() if plan.refined_key_ok(p.stem)}
+            known |= {p.stem for p in self.steps_dir.glob("*.npz") if plan.refined_key_ok(p.stem)}
         if self.steps_dir.is_symlink():
             problems.append(StepProblem("", self.steps_dir, "corrupt", "is a symbolic link; a run's steps are read "
                                         "only inside the run directory"))
@@ -594,6 +598,18 @@ class RunStore:
                                            f"missing: {n_sweep - present} of the {n_sweep} steps this sweep "
                                            f"measures (adaptive plan: chosen online, so not named by key)",
                                            count=n_sweep - present))
+        if plan.refine:       # refinement steps: chosen online, counted as measured (decision 0043)
+            for key in sorted(k for k in have_json | have_npz if plan.refined_key_ok(k)):
+                n_planned += 1
+                jp, zp = self.steps_dir / f"{key}.json", self.steps_dir / f"{key}.npz"
+                if key not in have_json:
+                    missing.append(StepProblem(key, jp, "missing", "missing: no .json (only the .npz)"))
+                elif bad.get(key) and bad[key].kind == "missing":
+                    missing.append(StepProblem(key, zp, "missing", "missing: no .npz (only the .json)"))
+                elif key in bad:
+                    damaged.append(bad[key])
+                else:
+                    intact.append(key)
         order = {key: i for i, key in enumerate(s.key for s in plan.schedule())}
         missing.sort(key=lambda p: order.get(p.key, -1))
         return Accounting(n_planned, intact, missing, damaged, orphan, skipped)
