@@ -700,7 +700,7 @@ def _check_npz(path: Path, key: str, integrity: dict | None) -> None:
         raise bad("checksum", "checksum mismatch: the raw block differs from what was written")
 
 
-def stored_plan(meta: dict, source: Path | str) -> Plan:
+def stored_plan(meta: dict, source: Path | str = "run.json") -> Plan:
     """The run's stored plan, checked by the validator of a plan file
     (:func:`bench.config.parse_stored_plan`: ranges, the size bounds, the format); a
     :class:`RunDirError` names ``source`` (its run.json) and the key."""
