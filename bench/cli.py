@@ -15,6 +15,7 @@ import argparse
 import logging
 import sys
 import time
+from dataclasses import replace
 from enum import IntEnum
 from pathlib import Path
 
@@ -155,7 +156,7 @@ def _session_held(args, resume: bool) -> int:
     from .storage import RunStatus, RunStore
 
     if resume:
-        from .config import parse_plan, parse_rig, plan_toml, rig_toml
+        from .config import parse_rig, parse_stored_plan, rig_toml
         store = RunStore.open(Path(args.run))
         meta, acc = store.metadata, store.account()
         retry = bool(getattr(args, "retry_skipped", False)) and bool(acc.skipped)
@@ -168,7 +169,8 @@ def _session_held(args, resume: bool) -> int:
               f"resume: every planned step is there{' or was skipped at run time' if acc.skipped else ''}; "
               f"finishing the run (it ended '{meta.get('status', '?')}')",
               flush=True)
-        plan = parse_plan({"plan": plan_toml(meta["plan"])}, f"{args.run}/run.json")
+        # validated as account() did; the envelope's skips are worked out again (limits may have changed)
+        plan = replace(parse_stored_plan(meta["plan"], f"{args.run}/run.json"), skip=())
         rig = parse_rig({"rig": rig_toml(meta["rig"])}, f"{args.run}/run.json")
         out, seed = Path(args.run), meta.get("sim_seed")
         labels = None
@@ -386,14 +388,16 @@ def cmd_check(args) -> int:
     one line, then the count; exit 1 if there is any problem.  A step skipped at run time
     (force unreachable) as the plan allows (``infeasible = "skip"``) is listed and counted,
     not a problem (exit 0 when it is the only gap) unless ``--strict`` (decision 0033)."""
-    from .storage import RunDirError, RunStore
+    from .storage import NewerFormat, RunDirError, RunStore
 
     store = RunStore(Path(args.run))
     if not store.path.is_dir():
         RunStore.open(store.path)             # raises the one-line usage error
     try:
         acc = store.account()
-    except RunDirError:                       # run.json damaged: the files alone, no plan to count against
+    except NewerFormat:
+        raise                                 # refused by name (exit 2), as report and resume do
+    except RunDirError:                       # run.json damaged or its plan not valid: the files alone
         acc = None
     problems = store.check() if acc is None else acc.missing + acc.damaged + acc.orphan
     skipped = [] if acc is None else acc.skipped
@@ -408,8 +412,9 @@ def cmd_check(args) -> int:
         print(f"{'missing':>9}  interrupted after step {last or '(none)'}; {len(tail)} not yet measured "
               f"(the plan's steps after it; bench resume {store.path} measures them)")
     if acc is None:
-        print(f"{store.path}: {len(store.step_files())} step result files; run.json unreadable, so the steps "
-              f"cannot be counted against the plan; {len(problems)} problem{'s' if len(problems) != 1 else ''}")
+        print(f"{store.path}: {len(store.step_files())} step result files; run.json unreadable or its plan not "
+              f"valid, so the steps cannot be counted against the plan; {len(problems)} "
+              f"problem{'s' if len(problems) != 1 else ''}")
         return ExitCode.FAILURE
     print(f"{store.path}: {acc.summary()}"
           + (f" (bench resume {store.path} measures missing and damaged steps again, keeping damaged "
@@ -429,10 +434,10 @@ def _not_yet_measured(store, acc) -> list:
     from .storage import RunStatus, stored_plan
     try:
         meta = store.metadata
+        plan = stored_plan(meta, store.path / "run.json")
     except Exception:  # noqa: BLE001 - no plan to judge against: list every step
         return []
-    plan = stored_plan(meta)
-    if plan is None or meta.get("status") == RunStatus.COMPLETED or plan.adaptive_per_sweep:
+    if meta.get("status") == RunStatus.COMPLETED or plan.adaptive_per_sweep:
         return []
     order = [s.key for s in plan.schedule()]
     present = {k for k in acc.intact} | {p.key for p in acc.damaged} | {p.key for p in acc.skipped}

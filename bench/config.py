@@ -10,6 +10,7 @@ import difflib
 import logging
 import math
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,8 @@ import numpy as np
 from drivers import check_daq_url, check_generator_url, check_sensor_url
 from procedures.plan import Backbone, Limits, Plan, Rig
 from sim.errors import ConfigurationError
+
+from .files import TooLarge, UnreadableFile, read_file
 
 log = logging.getLogger(__name__)
 
@@ -27,6 +30,14 @@ MIN_FREQ_HZ, MAX_FREQ_HZ = 20.0, 1000.0
 FORCE_RANGE = f" (the bench's force range, {MIN_LEVEL_N:g}-{MAX_LEVEL_N:g} N)"
 FREQ_RANGE = f" (the bench's frequency range, {MIN_FREQ_HZ:g}-{MAX_FREQ_HZ:g} Hz)"
 DEFAULTS = Path(__file__).with_name("defaults")
+
+# Bounds on a plan's size (decision record 0041; README, docs/run-format.md): checked before
+# anything is expanded, so a 10-million-step plan is refused in microseconds.  At a few
+# seconds a step, MAX_STEPS is about three days of rig time.
+MAX_LEVELS = 1000
+MAX_FREQUENCIES = 10_000
+MAX_STEPS = 50_000
+MAX_FILE_BYTES = 2**20        # a plan or rig TOML file (the demo's plan is 3 kB)
 
 LIMIT_KEYS = ("drive_V", "force_N", "disp_m", "accel_m_s2")
 # Every key each table may hold (a table's path -> its keys); an unknown key is named, with
@@ -104,10 +115,12 @@ class _Section:
             raise ConfigError(f"{self.where(key)}: must be {lo_s} and <= {hi:g}{note}, got {v!r}")
         return int(v) if integer else float(v)
 
-    def numbers(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, note=""):
+    def numbers(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, note="", most=None):
         v = self._get(key, default)
         if not isinstance(v, list) or not v:
-            raise ConfigError(f"{self.where(key)}: must be a non-empty list of numbers, got {v!r}")
+            raise ConfigError(f"{self.where(key)}: must be a non-empty list of numbers, got {_short(v)}")
+        if most is not None and len(v) > most:
+            raise ConfigError(f"{self.where(key)}: {len(v)} values; at most {most}")
         sub = _Section(self.source, self.path, {f"{key}[{i}]": x for i, x in enumerate(v)})
         return [sub.number(f"{key}[{i}]", lo=lo, hi=hi, lo_open=lo_open, note=note) for i in range(len(v))]
 
@@ -144,15 +157,48 @@ class _Section:
 _REQUIRED = object()
 
 
+def _short(v) -> str:
+    text = repr(v)
+    return text if len(text) <= 80 else f"{text[:60]}... ({type(v).__name__} of {len(v)})"
+
+
 def _load(path: Path) -> dict:
+    """A TOML file's tables.  The file is read as UTF-8 (TOML's encoding; a UTF-8 byte-order
+    mark is accepted), at most :data:`MAX_FILE_BYTES`; a file saved as UTF-16 or in a legacy
+    encoding, nested too deeply or too large is named with the problem."""
     path = Path(path)
     try:
-        with path.open("rb") as fh:
-            return tomllib.load(fh)
+        data = read_file(path, MAX_FILE_BYTES)
     except FileNotFoundError:
         raise ConfigError(f"{path}: file not found") from None
+    except TooLarge as e:
+        raise ConfigError(f"{path}: {e.size} bytes; a plan or rig file is at most {MAX_FILE_BYTES} bytes") from None
+    except UnreadableFile as e:
+        raise ConfigError(str(e)) from None
+    except IsADirectoryError:
+        raise ConfigError(f"{path}: a directory, not a TOML file") from None
+    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        raise ConfigError(f"{path}: saved as UTF-16; TOML files are UTF-8 (save it again as UTF-8)")
+    nul = data.find(b"\x00")
+    if nul >= 0:                  # never in TOML; every other byte of UTF-16 text without its mark
+        raise ConfigError(f"{path}: NUL bytes at offset {nul}: the file seems saved as UTF-16 "
+                          f"without a byte-order mark; TOML files are UTF-8 (save it again as UTF-8)")
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        line = data[:e.start].count(b"\n") + 1
+        raise ConfigError(f"{path}: not UTF-8: byte 0x{data[e.start]:02x} at line {line} "
+                          f"(offset {e.start}); the file seems saved in another encoding (Latin-1, "
+                          f"Windows-1252, ...); TOML files are UTF-8 "
+                          f"(save it again as UTF-8)") from None
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{path}: not valid TOML: {e}") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: not a plan or rig: tables or arrays nested too deeply") from None
 
 
 def read_toml(path: Path) -> dict:
@@ -226,12 +272,13 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
                               f"(give [plan.response] levels, response amplitudes)")
         quantity = rc.choice("quantity", "disp", ("disp", "accel"))
         lo, hi, unit = (1e-9, 1e-3, "m") if quantity == "disp" else (1e-4, 1e3, "m/s^2")
-        levels = rc.numbers("levels", _REQUIRED, lo, hi, note=f" ({unit}, the response fundamental's amplitude)")
+        levels = rc.numbers("levels", _REQUIRED, lo, hi, note=f" ({unit}, the response fundamental's amplitude)",
+                            most=MAX_LEVELS)
         rc.done()
     elif rc.data:
         raise ConfigError(f"{source}: [plan.response] needs procedure = \"response_controlled\" in [plan]")
     else:
-        levels = p.numbers("levels_N", _REQUIRED, MIN_LEVEL_N, MAX_LEVEL_N, note=FORCE_RANGE)
+        levels = p.numbers("levels_N", _REQUIRED, MIN_LEVEL_N, MAX_LEVEL_N, note=FORCE_RANGE, most=MAX_LEVELS)
     fr = p.table("frequencies")
     bb = p.table("backbone")
     backbone = None
@@ -244,17 +291,22 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
     elif bb.data:
         raise ConfigError(f"{source}: [plan.backbone] needs procedure = \"phase_resonance\" in [plan]")
     elif "list_Hz" in fr.data:
-        freqs = sorted(fr.numbers("list_Hz", None, MIN_FREQ_HZ, MAX_FREQ_HZ, note=FREQ_RANGE))
+        freqs = sorted(fr.numbers("list_Hz", None, MIN_FREQ_HZ, MAX_FREQ_HZ, note=FREQ_RANGE, most=MAX_FREQUENCIES))
     else:
         start = fr.number("start_Hz", _REQUIRED, MIN_FREQ_HZ, MAX_FREQ_HZ, note=FREQ_RANGE)
         stop = fr.number("stop_Hz", _REQUIRED, start, MAX_FREQ_HZ, note=FREQ_RANGE)
-        points = fr.number("points", _REQUIRED, 1, 10000, integer=True)
+        points = fr.number("points", _REQUIRED, 1, MAX_FREQUENCIES, integer=True)
         spacing = fr.choice("spacing", "log", ("log", "linear"))
         grid = np.geomspace(start, stop, points) if spacing == "log" else np.linspace(start, stop, points)
         freqs = [float(f"{f:.6g}") for f in grid]
     if len(set(freqs)) != len(freqs):
         raise ConfigError(f"{fr.where('frequencies')}: grid has repeated frequencies")
     direction = fr.choice("direction", "up", ("up", "down", "both"))
+    steps = len(levels) * len(freqs) * (2 if direction == "both" else 1)
+    if steps > MAX_STEPS:                     # before anything is expanded
+        raise ConfigError(f"{source}: [plan] {len(levels)} levels x {len(freqs)} frequencies"
+                          f"{' x 2 directions' if direction == 'both' else ''} = {steps} steps; at most {MAX_STEPS} "
+                          f"(split the test into several plans)")
     fr.done()
     c = p.table("control")
     lim = p.table("limits")
@@ -423,9 +475,11 @@ def plan_toml(p: dict) -> dict:
     """The stored plan back into the TOML layout (the stored grid is used verbatim)."""
     keys = ("settle_cycles", "min_settle_s", "measure_cycles", "min_measure_s", "control_cycles", "force_tolerance",
             "max_iterations", "harmonics", "ramp_s", "min_sample_rate_Hz", "max_extra_settle_blocks")
-    out = {"name": p["name"], "levels_N": list(p["levels_N"]), "infeasible": p.get("infeasible", "refuse"),
+    def as_list(v):              # anything else is left for the validator to name
+        return list(v) if isinstance(v, (list, tuple)) else v
+    out = {"name": p["name"], "levels_N": as_list(p["levels_N"]), "infeasible": p.get("infeasible", "refuse"),
            "adaptive_per_sweep": p.get("adaptive_per_sweep", 0),
-           "frequencies": {"list_Hz": list(p["freqs_Hz"]), "direction": p["direction"]},
+           "frequencies": {"list_Hz": as_list(p["freqs_Hz"]), "direction": p["direction"]},
            "control": {k: p[k] for k in keys if k in p}}
     if p.get("refine"):
         out["resonance"] = {"refine": True, "tolerance": p.get("refine_tolerance", 0.002),
@@ -440,6 +494,37 @@ def plan_toml(p: dict) -> dict:
     if p.get("limits"):
         out["limits"] = {k: v for k, v in p["limits"].items() if v is not None}   # None: the rig's
     return out
+
+
+def parse_stored_plan(p, source: str) -> Plan:
+    """The plan stored in a run's ``run.json`` (``Plan.to_dict()``), checked by the same
+    validator as a plan file (:func:`parse_plan`: ranges, bounds, the harmonics below
+    Nyquist), with the steps the envelope left out (``skip``).  A ConfigError names
+    ``source`` and the key: nothing is counted, reported or resumed against a plan that a
+    plan file could not hold."""
+    if not isinstance(p, dict):
+        raise ConfigError(f"{source}: no plan stored ([plan] missing or not a table: {_short(p)})")
+    for key in ("levels_N", "freqs_Hz"):
+        if key not in p:
+            raise ConfigError(f"{source}: [plan] {key}: missing (required)")
+    freqs = p["freqs_Hz"]
+    if isinstance(freqs, list) and len(freqs) > MAX_FREQUENCIES:
+        raise ConfigError(f"{source}: [plan] freqs_Hz: {len(freqs)} values; at most {MAX_FREQUENCIES}")
+    if isinstance(freqs, list) and all(isinstance(f, (int, float)) for f in freqs) and freqs != sorted(freqs):
+        raise ConfigError(f"{source}: [plan] freqs_Hz: not in ascending order (the step keys number them so)")
+    try:
+        plan = parse_plan({"plan": plan_toml(dict({"name": "stepped sine", "direction": "up"}, **p))}, source)
+    except ConfigError as e:               # name run.json's key, not the plan file's
+        raise ConfigError(str(e).replace("[plan.frequencies] list_Hz", "[plan] freqs_Hz")) from None
+    except (TypeError, AttributeError, KeyError) as e:
+        raise ConfigError(f"{source}: [plan] not a stored plan ({type(e).__name__}: {e})") from None
+    skip = p.get("skip") or []
+    if not isinstance(skip, list) or not all(
+            isinstance(s, list) and len(s) == 2 and all(isinstance(i, int) and not isinstance(i, bool) for i in s)
+            and 0 <= s[0] < len(plan.levels_N) and 0 <= s[1] < len(plan.freqs_Hz) for s in skip):
+        raise ConfigError(f"{source}: [plan] skip: must be a list of [level index, frequency index] pairs "
+                          f"within the plan, got {_short(skip)}")
+    return replace(plan, skip=tuple(tuple(s) for s in skip))
 
 
 def rig_toml(r: dict) -> dict:

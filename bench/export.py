@@ -120,6 +120,10 @@ def frf_datasets(meta: dict, results: list[dict]) -> list[dict]:
     for (li, d), steps in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1] != "up")):
         steps = sorted(steps, key=lambda s: s["freq_Hz"])
         level = levels[li] if li < len(levels) else steps[0]["target_force_N"]
+        if len(steps) < 2:        # an FRF record needs two abscissa values (pyuff, and the format)
+            log.warning("export: level %g N %s has one readable step (%s): no FRF record in frf.uff; "
+                        "it is in steps.csv", level, d, steps[0]["key"])
+            continue
         H = np.array([complex(s["compliance_m_per_N"]["re"], s["compliance_m_per_N"]["im"]) for s in steps])
         ds = _dset58(func_type=FUNC_FRF, func_id=len(out) + 1, x=[s["freq_Hz"] for s in steps], data=H,
                      id1=f"compliance X/F, {level:g} N, {d} sweep",

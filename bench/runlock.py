@@ -36,6 +36,8 @@ from pathlib import Path
 
 from sim.errors import BenchError
 
+from .files import read_file
+
 LOCK_NAME = "session.lock"          # in a run directory
 
 _held: dict[str, int] = {}           # lock file (real path) -> how many holds this process has on it
@@ -48,7 +50,7 @@ class InUse(BenchError):
 
 def _holder_text(path: Path) -> str:
     try:
-        info = json.loads(path.read_bytes()[:4096])
+        info = json.loads(read_file(path, 4096))       # regular file, bounded (bench.files)
         return (f"process {int(info['pid'])} on {info['host']} since {info['since']} "
                 f"({info.get('command', 'bench')}{', run directory ' + info['run'] if info.get('run') else ''})")
     except (OSError, ValueError, KeyError, TypeError):

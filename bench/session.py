@@ -305,6 +305,7 @@ def _open_store(plan: Plan, rig: Rig, out: Path, *, resume: bool, sim_seed: int 
     """The run directory, new or resumed (damaged steps set aside to be measured again)."""
     if resume:
         store = RunStore.open(out)
+        store.refuse_links(writing=True)    # a FIFO where the session appends would hold it
         store.set_aside_damaged()        # damaged steps are measured again, their files kept
         store.event("resume", done=len(store.done_keys()))
         store.update(status=RunStatus.RUNNING)

@@ -25,8 +25,9 @@ quality: ``bench analyze`` and the run report both show it (``Source.quality``).
 A step whose records are missing, inconsistent (lengths, sample rates), non-finite, too
 short, spoiled by an artefact, or not periodic enough after cleaning (harmonics or offset
 changing between the two halves of the record by more than DRIFT_LIMIT standard errors)
-is rejected with a reason, never silently dropped.  An unreadable file raises ValueError naming the record.  Nothing is
-written: the user's files are left as they are.
+is rejected with a reason, never silently dropped; so is a step with a record pyuff cannot
+read (the rest of the file is used).  A file that is not a universal file raises
+ValueError naming it.  Nothing is written: the user's files are left as they are.
 """
 
 from __future__ import annotations
@@ -192,14 +193,35 @@ def _read_uff(path: Path) -> list[dict]:
             continue
         try:
             ds = uff.read_sets(i)
-        except Exception as e:  # noqa: BLE001
-            raise ConfigurationError(f"{path}: record {i + 1} of the file (dataset 58) cannot be read: "
-                             f"{type(e).__name__}: {e}") from e
+            if not isinstance(ds, dict):
+                raise ValueError(f"pyuff gave a {type(ds).__name__}")
+        except Exception as e:  # noqa: BLE001 - a damaged record costs its step only
+            reason = f"record {i + 1} of the file (dataset 58) cannot be read: {type(e).__name__}: {e}"
+            log.warning("%s: %s", path, reason)
+            ds = dict(_record_header(uff, path, i), _error=reason)
         ds["_record"] = i + 1
         out.append(ds)
     if not out:
         raise ConfigurationError(f"{path}: no dataset 58 in the file (dataset types: {sorted(set(types))})")
     return out
+
+
+def _record_header(uff, path: Path, i: int) -> dict:
+    """Function type, load case and ordinate data type of ASCII record ``i`` whose data
+    pyuff could not read (records 6 and 9 of the dataset's header), so that the damaged
+    record is grouped with its step and costs that step only; {} when the header cannot be
+    read either (the record then stands alone)."""
+    try:
+        start, end = (int(v) for v in uff._block_ind[i])      # pyuff's index of the file's blocks
+        if uff._set_formats[i] != 0:                           # binary 58b: no text header to read
+            return {}
+        with open(path, "rb") as fh:
+            fh.seek(start)
+            lines = fh.read(min(end - start, 2000)).decode("ascii", "replace").splitlines()
+        rec6, rec9 = lines[7].split(), lines[10].split()
+        return dict(func_type=int(rec6[0]), load_case_id=int(rec6[3]), ordinate_spec_data_type=int(rec9[0]))
+    except Exception:  # noqa: BLE001 - best effort: the record is rejected on its own then
+        return {}
 
 
 def _group(records: list[dict]) -> list[tuple[str, list[dict]]]:
@@ -235,6 +257,9 @@ def _fs(ds: dict, tags: dict) -> float:
 
 
 def _uff_step(key: str, recs: list[dict]) -> MeasuredStep:
+    damaged = [ds["_error"] for ds in recs if "_error" in ds]
+    if damaged:
+        raise ValueError("; ".join(damaged))
     by = {}
     for ds in recs:
         sdt = int(ds.get("ordinate_spec_data_type", -1))
@@ -281,7 +306,8 @@ def _uff_step(key: str, recs: list[dict]) -> MeasuredStep:
 
 def _load_uff(path: Path) -> Source:
     records = _read_uff(path)
-    times = [ds for ds in records if int(ds.get("func_type", -1)) == FUNC_TIME]
+    times = [ds for ds in records if int(ds.get("func_type", -1)) == FUNC_TIME
+             or ("_error" in ds and "func_type" not in ds)]    # damaged beyond its header: rejected, not dropped
     if len(times) < len(records):
         log.info("%s: %d dataset-58 functions not of type 1 (time response) ignored",
                  path, len(records) - len(times))

@@ -34,6 +34,7 @@ it: ``mkstemp`` alone makes them 0o600).  See docs/decisions/0028-hardening.md.
 from __future__ import annotations
 
 import enum
+import errno
 import hashlib
 import io
 import json
@@ -44,15 +45,18 @@ import tempfile
 import threading
 import zipfile
 from contextlib import contextmanager
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
-from sim.errors import RunDirectoryError, StorageError
-from sim.step_result import STEP_FORMAT_VERSION, StepResult, check_step_version
+from procedures.plan import Plan
+from sim.errors import ConfigurationError, RunDirectoryError, StorageError
+from sim.step_result import STEP_FORMAT_VERSION, StepResult, check_step_version, step_fields_problem
 
+from .config import parse_stored_plan
+from .files import UnreadableFile, file_kind, read_file
 from .runlock import LOCK_NAME
 
 log = logging.getLogger(__name__)
@@ -125,11 +129,14 @@ def real_dir(path: Path, *, create: bool = False) -> Path:
 def open_append(path: Path):
     """``path`` opened for appending text, never through a symbolic link (``O_NOFOLLOW``)."""
     try:
-        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o666)
-    except OSError:
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC,
+                     0o666)
+    except OSError as e:
         if os.path.islink(path):
             raise RunDirError(f"{path}: is a symbolic link; a run writes nothing through links "
                               f"(remove it)") from None
+        if e.errno == errno.ENXIO:             # a FIFO nobody reads: never waited on
+            raise RunDirError(f"{path}: not a regular file (a FIFO)") from None
         raise
     if not stat.S_ISREG(os.fstat(fd).st_mode):
         os.close(fd)
@@ -194,6 +201,10 @@ def _canonical(obj) -> bytes:
 RunDirError = RunDirectoryError    # not a readable run directory (missing, or run.json damaged)
 
 
+class NewerFormat(RunDirectoryError):
+    """run.json was written by a newer guideway-bench: refused by name, never taken for damage."""
+
+
 class DamagedStep(RunDirectoryError):
     """A completed step's files are missing, truncated or fail their checksum."""
 
@@ -213,7 +224,22 @@ class StepProblem:
     count: int = 1    # steps concerned (more than one: an adaptive sweep's shortfall)
 
     def __str__(self) -> str:
-        return f"{self.path}: {self.reason}"
+        return f"{shown(self.path)}: {self.reason}"
+
+
+def _utf8(name: str) -> bool:
+    """A file name that is text (a name of bytes that are not UTF-8 is never a step's)."""
+    try:
+        name.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
+
+
+def shown(name) -> str:
+    """A file name as it can be printed: bytes that are not UTF-8 (a name made elsewhere)
+    as ``\\xff`` escapes, not an error on the terminal."""
+    return os.fsencode(str(name)).decode("utf-8", "backslashreplace")
 
 
 PROBLEM_KINDS = ("missing", "truncated", "corrupt", "checksum", "unknown", "skipped")
@@ -259,35 +285,53 @@ class RunStore:
             raise RunDirError(f"{path}: no such directory (expected a run directory made by 'bench run')")
         if not (store.path / "run.json").is_file():
             raise RunDirError(f"{path}: not a run directory (no run.json; expected a directory made by 'bench run')")
-        version = store.metadata.get("format_version", 1)   # a damaged run.json is named now, not deep inside a reader
-        if not isinstance(version, int) or isinstance(version, bool) or version > RUN_FORMAT_VERSION:
-            raise RunDirError(f"{store.path / 'run.json'}: run format version {version!r}, written by a newer "
-                              f"guideway-bench (this one reads versions up to {RUN_FORMAT_VERSION}); update to read it")
+        _ = store.metadata          # a damaged run.json or a newer format is named now, not deep inside a reader
         store.refuse_links()
         return store
 
-    def refuse_links(self) -> None:
+    def refuse_links(self, *, writing: bool = False) -> None:
         """Raise :class:`RunDirError` if anything the run writes is a symbolic link, before
-        anything is written (a link could lead the writes out of the run directory)."""
+        anything is written (a link could lead the writes out of the run directory); with
+        ``writing`` (a session about to write) also if one is not a regular file or
+        directory (a FIFO would hold the session; the readers skip it)."""
         for name in WRITTEN:
+            kind = "directory" if name in ("steps", "damaged") else "file"
             if (self.path / name).is_symlink():
                 raise RunDirError(f"{self.path / name}: is a symbolic link; a run writes nothing "
-                                  f"through links (replace it with a real "
-                                  f"{'directory' if name in ('steps', 'damaged') else 'file'})")
+                                  f"through links (replace it with a real {kind})")
+            if not writing:
+                continue
+            try:
+                mode = os.lstat(self.path / name).st_mode
+            except FileNotFoundError:
+                continue
+            if not (stat.S_ISDIR(mode) if kind == "directory" else stat.S_ISREG(mode)):
+                raise RunDirError(f"{self.path / name}: not a {'directory' if kind == 'directory' else 'regular file'} "
+                                  f"({file_kind(mode)}); a run writes only regular files (replace or remove it)")
 
     @property
     def metadata(self) -> dict:
+        """run.json's content; :class:`RunDirError` names it when it is missing, not a regular
+        file, too large, damaged, or :class:`NewerFormat` when a newer version wrote it."""
         p = self.path / "run.json"
         try:
-            meta = json.loads(p.read_bytes())
+            meta = json.loads(read_file(p))
         except FileNotFoundError:
             raise RunDirError(f"{p}: missing (not a run directory?)") from None
+        except UnreadableFile as e:
+            raise RunDirError(f"{e} (run.json holds the run's plan; nothing can be counted without it)") from None
         except json.JSONDecodeError as e:
             raise RunDirError(f"{p}: damaged ({_json_reason(e)})") from None
-        except UnicodeDecodeError:
-            raise RunDirError(f"{p}: damaged (not text)") from None
+        except UnicodeDecodeError as e:
+            raise RunDirError(f"{p}: damaged (not text: byte {e.start} is not UTF-8)") from None
+        except RecursionError:
+            raise RunDirError(f"{p}: damaged (nested too deeply to be a run's metadata)") from None
         if not isinstance(meta, dict):
             raise RunDirError(f"{p}: damaged (a JSON object was expected, found {type(meta).__name__})")
+        version = meta.get("format_version", 1)
+        if not isinstance(version, int) or isinstance(version, bool) or version > RUN_FORMAT_VERSION:
+            raise NewerFormat(f"{p}: run format version {version!r}, written by a newer guideway-bench "
+                              f"(this one reads versions up to {RUN_FORMAT_VERSION}); update to read it")
         return meta
 
     def update(self, **fields) -> None:
@@ -309,18 +353,41 @@ class RunStore:
     def events(self) -> list[dict]:
         out = []
         p = self.path / "events.jsonl"
-        if not p.exists():
+        try:
+            data = read_file(p)
+        except FileNotFoundError:
             return out
-        for n, line in enumerate(p.read_bytes().decode(errors="replace").splitlines(), 1):
+        except UnreadableFile as e:
+            log.warning("%s; its events are not used", e)
+            return out
+        for n, line in enumerate(data.decode(errors="replace").splitlines(), 1):
             try:
                 e = json.loads(line)
-            except json.JSONDecodeError:
+            except (json.JSONDecodeError, RecursionError):
                 log.warning("%s: line %d damaged (torn or not JSON); skipped", p, n)
                 continue
             if isinstance(e, dict):
                 out.append(e)
             else:
                 log.warning("%s: line %d is not an event object; skipped", p, n)
+        return out
+
+    def identification_history(self) -> list[dict]:
+        """identification.jsonl's estimates, one a step (a damaged line is skipped)."""
+        p = self.path / "identification.jsonl"
+        try:
+            data = read_file(p)
+        except FileNotFoundError:
+            return []
+        except UnreadableFile as e:
+            log.warning("%s; the identification history is not shown", e)
+            return []
+        out = []
+        for line in data.decode(errors="replace").splitlines():
+            try:
+                out.append(json.loads(line))
+            except (json.JSONDecodeError, RecursionError):
+                pass
         return out
 
     # ------------------------------------------------------------------ steps: writing
@@ -365,7 +432,11 @@ class RunStore:
     # ------------------------------------------------------------------ steps: reading
     def step_files(self) -> list[Path]:
         """The steps' JSON files present (intact or not), in key order."""
-        return sorted(self.steps_dir.glob("*.json")) if self.steps_dir.is_dir() else []
+        return sorted(p for p in self.steps_dir.glob("*.json") if _utf8(p.name)) if self._steps_here() else []
+
+    def _steps_here(self) -> bool:
+        """``steps/`` is a directory inside the run directory (not a link leading out of it)."""
+        return self.steps_dir.is_dir() and not self.steps_dir.is_symlink()
 
     def verify_step(self, key: str) -> StepResult:
         """The step's result after checking both its files (JSON content, the .npz's size
@@ -373,7 +444,8 @@ class RunStore:
         jp, zp = self.steps_dir / f"{key}.json", self.steps_dir / f"{key}.npz"
         result, integrity = _read_step_json(jp, key)
         try:
-            stamp = (zp.stat().st_mtime_ns, zp.stat().st_size, (integrity or {}).get("npz_sha256"))
+            st = os.lstat(zp)          # a link put in its place later is not the block verified
+            stamp = (st.st_mtime_ns, st.st_size, (integrity or {}).get("npz_sha256"))
         except FileNotFoundError:
             stamp = None
         if stamp is None or self._npz_ok.get(key) != stamp:   # hash each block once per store
@@ -403,8 +475,10 @@ class RunStore:
         self.verify_step(key)
         zp = self.steps_dir / f"{key}.npz"
         try:
-            with np.load(zp) as z:
+            with np.load(io.BytesIO(read_file(zp)), allow_pickle=False) as z:
                 return {k: z[k] for k in z.files}
+        except UnreadableFile as e:
+            raise DamagedStep(StepProblem(key, zp, "corrupt", str(e).split(": ", 1)[-1])) from None
         except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as e:
             raise DamagedStep(StepProblem(key, zp, "corrupt", f"unreadable ({type(e).__name__}: {e})")) from None
 
@@ -422,16 +496,21 @@ class RunStore:
         """Every problem of the run directory: damaged run.json or steps (missing, truncated,
         corrupt, checksum mismatch) and step files the plan does not know."""
         problems: list[StepProblem] = []
+        known, plan = None, None
         try:
-            meta = self.metadata
+            plan = stored_plan(self.metadata, self.path / "run.json")
+            known = {s.key for s in plan.schedule()}
+        except NewerFormat:
+            raise                                # not damage: refused by name
         except RunDirError as e:
             problems.append(StepProblem("", self.path / "run.json", "corrupt", str(e).split(": ", 1)[-1]))
-            meta = None
-        known = planned_keys(meta) if meta else None
-        plan = stored_plan(meta) if meta else None
-        if known is not None and plan is not None and plan.refine:     # refinement steps (decision 0043)
-            known |= {p.stem for p in self.step_files() if plan.refined_key_ok(p.stem)}
+        if plan is not None and plan.refine:                   # refinement steps (decision 0043)
+            known = (known or set()) | {p.stem for p in self.step_files() if plan.refined_key_ok(p.stem)}
             known |= {p.stem for p in self.steps_dir.glob("*.npz") if plan.refined_key_ok(p.stem)}
+        if self.steps_dir.is_symlink():
+            problems.append(StepProblem("", self.steps_dir, "corrupt", "is a symbolic link; a run's steps are read "
+                                        "only inside the run directory"))
+            return problems
         if not self.steps_dir.is_dir():
             problems.append(StepProblem("", self.steps_dir, "missing", "no steps/ directory"))
             return problems
@@ -450,6 +529,9 @@ class RunStore:
         for p in sorted(self.steps_dir.iterdir()):
             if p.name.startswith(".") and p.name.endswith(".tmp"):
                 continue       # a write cut short by a kill: harmless, replaced on resume
+            if not _utf8(p.name):
+                problems.append(StepProblem("", p, "unknown", "not a step file (its name is not UTF-8)"))
+                continue
             if p.suffix == ".npz" and p.stem in jsons:
                 continue
             if p.suffix == ".json":
@@ -476,16 +558,12 @@ class RunStore:
     def account(self) -> Accounting:
         """The run's steps counted against its stored plan: intact, missing (no files, or
         only one of the pair), damaged and orphan files, each named (see :class:`Accounting`)."""
-        meta = self.metadata
-        plan = stored_plan(meta)
+        plan = stored_plan(self.metadata, self.path / "run.json")     # RunDirError naming the key
         problems = self.check()
         orphan = [p for p in problems if p.kind == "unknown" or not p.key]
         bad = {p.key: p for p in problems if p.key and p.kind != "unknown"}
         have_json = {p.stem for p in self.step_files()}
-        have_npz = {p.stem for p in self.steps_dir.glob("*.npz")} if self.steps_dir.is_dir() else set()
-        if plan is None:
-            intact = sorted(have_json - set(bad))
-            return Accounting(None, intact, [], [p for p in bad.values()], orphan)
+        have_npz = {p.stem for p in self.steps_dir.glob("*.npz")} if self._steps_here() else set()
         sweeps = _sweeps(plan)
         k = plan.adaptive_per_sweep
         # a run-time skip counts only where the plan allows it (the procedure writes the event
@@ -564,9 +642,11 @@ def _read_step_json(path: Path, key: str) -> tuple[StepResult, dict | None]:
     def bad(kind, reason):
         return DamagedStep(StepProblem(key, path, kind, reason))
     try:
-        data = path.read_bytes()
+        data = read_file(path)
     except FileNotFoundError:
         raise bad("missing", "missing (the step's result file)") from None
+    except UnreadableFile as e:
+        raise bad("corrupt", str(e).split(": ", 1)[-1]) from None
     except OSError as e:
         raise bad("corrupt", f"unreadable ({e.strerror})") from None
     if not data.strip():
@@ -590,6 +670,9 @@ def _read_step_json(path: Path, key: str) -> tuple[StepResult, dict | None]:
     if obj.get("key") != key:
         raise bad("corrupt", f"the result inside is for step {obj.get('key')!r}, not {key!r}")
     check_step_version(obj, str(path))       # a newer format is refused, not taken for damage
+    problem = step_fields_problem(obj)       # a step of the format before checksums, crafted by hand
+    if problem:
+        raise bad("corrupt", problem)
     return obj, integrity
 
 
@@ -597,47 +680,39 @@ def _check_npz(path: Path, key: str, integrity: dict | None) -> None:
     def bad(kind, reason):
         return DamagedStep(StepProblem(key, path, kind, reason))
     try:
-        size = path.stat().st_size
+        data = read_file(path)
     except FileNotFoundError:
         raise bad("missing", "missing (the step's raw block; its result file is there)") from None
+    except UnreadableFile as e:
+        raise bad("corrupt", str(e).split(": ", 1)[-1]) from None
+    except OSError as e:
+        raise bad("corrupt", f"unreadable ({e.strerror})") from None
+    size = len(data)
     if integrity is None:                       # a step written before checksums existed
-        if not zipfile.is_zipfile(path):
+        if not zipfile.is_zipfile(io.BytesIO(data)):
             raise bad("corrupt", "not a readable .npz (truncated or overwritten?)")
         return
     want_bytes = integrity.get("npz_bytes")
     if isinstance(want_bytes, int) and size != want_bytes:
         kind = "truncated" if size < want_bytes else "corrupt"
         raise bad(kind, f"{'truncated: ' if size < want_bytes else ''}{size} bytes, {want_bytes} were written")
-    if _sha256(path.read_bytes()) != integrity.get("npz_sha256"):
+    if _sha256(data) != integrity.get("npz_sha256"):
         raise bad("checksum", "checksum mismatch: the raw block differs from what was written")
 
 
-def stored_plan(meta: dict | None):
-    """The run's stored plan as a :class:`procedures.plan.Plan` (None if it cannot be rebuilt)."""
-    from procedures.plan import Backbone, Plan
-
-    p = (meta or {}).get("plan")
-    if not isinstance(p, dict):
-        return None
+def stored_plan(meta: dict, source: Path | str = "run.json") -> Plan:
+    """The run's stored plan, checked by the validator of a plan file
+    (:func:`bench.config.parse_stored_plan`: ranges, the size bounds, the format); a
+    :class:`RunDirError` names ``source`` (its run.json) and the key."""
     try:
-        kw = {f.name: p[f.name] for f in fields(Plan) if f.name in p}
-        kw.update(levels_N=tuple(p["levels_N"]), freqs_Hz=tuple(p["freqs_Hz"]),
-                  skip=tuple(tuple(s) for s in p.get("skip") or ()),
-                  refine_modes=tuple(p.get("refine_modes") or ("feed", "pitch")))
-        if isinstance(p.get("backbone"), dict):
-            kw["backbone"] = Backbone(**p["backbone"])
-        plan = Plan(**kw)
-        plan.schedule()
-        return plan
-    except Exception as e:  # noqa: BLE001 - a damaged plan entry: then keys cannot be judged
-        log.warning("run.json: the stored plan cannot be rebuilt (%s); step keys not checked", e)
-        return None
+        return parse_stored_plan(meta.get("plan"), str(source))
+    except ConfigurationError as e:
+        raise RunDirError(f"{e} (the plan stored in run.json; nothing is counted against it)") from None
 
 
-def planned_keys(meta: dict | None) -> set[str] | None:
-    """Keys of every step of the run's stored plan (None if the plan cannot be rebuilt)."""
-    plan = stored_plan(meta)
-    return None if plan is None else {s.key for s in plan.schedule()}
+def planned_keys(meta: dict, source: Path | str) -> set[str]:
+    """Keys of every step of the run's stored plan (:class:`RunDirError` if it is not valid)."""
+    return {s.key for s in stored_plan(meta, source).schedule()}
 
 
 # ---------------------------------------------------------------------------- accounting
@@ -702,7 +777,7 @@ class Accounting:
         return (f"{len(self.intact)} intact / {'?' if self.planned is None else self.planned} planned; {skipped}"
                 f"missing: {_keys_text(missing) or 'none'}; "
                 f"damaged: {_keys_text([f'{p.key} ({p.kind})' for p in self.damaged]) or 'none'}; "
-                f"orphan: {_keys_text([p.path.name for p in self.orphan]) or 'none'}")
+                f"orphan: {_keys_text([shown(p.path.name) for p in self.orphan]) or 'none'}")
 
 
 def _missing_label(p: StepProblem) -> str:

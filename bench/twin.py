@@ -26,6 +26,7 @@ import hashlib
 import json
 import logging
 import math
+import os
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
@@ -49,6 +50,7 @@ from .config import (
     plan_toml,
     rig_toml,
 )
+from .files import MAX_BYTES, read_file
 from .sources import Source, load_source
 from .storage import write_json
 
@@ -366,9 +368,12 @@ def source_sha256(path: Path) -> str:
     h = hashlib.sha256()
     if path.is_dir():
         for f in sorted((path / "steps").glob("*")):
-            if f.is_file():
-                h.update(f.name.encode() + b"\0")
-                h.update(f.read_bytes())
+            try:
+                data = read_file(f)              # regular files only, bounded (bench.files)
+            except (OSError, ValueError):
+                continue
+            h.update(os.fsencode(f.name) + b"\0")
+            h.update(data)
     else:
         h.update(path.read_bytes())
     return h.hexdigest()
@@ -496,9 +501,11 @@ def load_analysis(path: Path) -> dict:
     if not f.is_file():
         raise ConfigurationError(f"{path}: no analysis.json (run `bench analyze SOURCE` or leave --analysis out)")
     try:
-        d = json.loads(f.read_text())
-    except json.JSONDecodeError as e:
+        d = json.loads(read_file(f, MAX_BYTES["analysis.json"]))
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as e:
         raise ConfigurationError(f"{f}: not valid JSON: {e}") from None
+    if not isinstance(d, dict):
+        raise ConfigurationError(f"{f}: not an analysis.json (a JSON object was expected)")
     if not str(d.get("schema", "")).startswith("guideway-bench/analysis/"):
         raise ConfigurationError(f"{f}: not an analysis.json (schema {d.get('schema')!r})")
     return d

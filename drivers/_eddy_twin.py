@@ -26,6 +26,8 @@ from ._interfaces import SensorStatus, TargetMaterial
 log = logging.getLogger(__name__)
 
 READ_CODES = (3, 4)
+MAX_CLIENTS = 16          # TCP clients at once (one more is accepted and closed), as the SCPI twin
+CLIENT_IDLE_S = 300.0     # a client silent this long is dropped (the bench asks before every sweep)
 WRITE_CODES = (6, 16)
 TEMPERATURE_WARNING_C = 70.0
 
@@ -177,13 +179,69 @@ class _ServerThread:
         self._thread.join(timeout=5.0)
 
 
+class _CappedTcpServer(ModbusTcpServer):
+    """pymodbus's TCP server with the bounds of the other twins (docs/decisions/0028,
+    0041): at most ``max_clients`` connections (one more is accepted and closed at once),
+    each dropped after ``idle_s`` without a request."""
+
+    def __init__(self, *args, max_clients: int, idle_s: float, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.max_clients, self.idle_s = max_clients, idle_s
+        self._last_heard: dict[str, float] = {}
+        self._sweeper: asyncio.Task | None = None
+
+    def callback_new_connection(self):
+        handler = super().callback_new_connection()
+        loop = asyncio.get_running_loop()
+        full = len(self.active_connections) >= self.max_clients
+        made, received = handler.connection_made, handler.data_received
+
+        def connection_made(transport) -> None:
+            if full:
+                log.warning("Modbus twin: %d clients already; refused %s", self.max_clients,
+                            transport.get_extra_info("peername"))
+                self.active_connections.pop(handler.unique_id, None)
+                transport.close()
+                return
+            self._last_heard[handler.unique_id] = loop.time()
+            made(transport)
+            if self._sweeper is None:
+                self._sweeper = loop.create_task(self._drop_silent())
+
+        def data_received(data: bytes) -> None:
+            self._last_heard[handler.unique_id] = loop.time()
+            received(data)
+        handler.connection_made = connection_made
+        handler.data_received = data_received
+        return handler
+
+    async def _drop_silent(self) -> None:
+        loop = asyncio.get_running_loop()
+        while True:
+            await asyncio.sleep(min(1.0, self.idle_s / 4))
+            for uid, conn in list(self.active_connections.items()):
+                if loop.time() - self._last_heard.get(uid, loop.time()) > self.idle_s:
+                    log.debug("Modbus twin: dropped a client silent for %.0f s", self.idle_s)
+                    conn.close()
+                    self.active_connections.pop(uid, None)
+            for uid in set(self._last_heard) - set(self.active_connections):
+                del self._last_heard[uid]
+
+    async def shutdown(self):
+        if self._sweeper is not None:
+            self._sweeper.cancel()
+        await super().shutdown()
+
+
 class EddySensorTcpTwin:
     """The sensor twin on Modbus TCP (127.0.0.1, ephemeral port by default)."""
 
-    def __init__(self, model: EddySensorModel, host: str = "127.0.0.1", port: int = 0) -> None:
+    def __init__(self, model: EddySensorModel, host: str = "127.0.0.1", port: int = 0, *,
+                 max_clients: int = MAX_CLIENTS, idle_s: float = CLIENT_IDLE_S) -> None:
         self.model = model
         self._thread = _ServerThread(
-            lambda: ModbusTcpServer(model.device, address=(host, port)), "eddy-twin-tcp")
+            lambda: _CappedTcpServer(model.device, address=(host, port), max_clients=max_clients, idle_s=idle_s),
+            "eddy-twin-tcp")
         self.host, self.port = self._thread.server.transport.sockets[0].getsockname()[:2]
         log.info("eddy-current sensor twin on %s", self.url)
 

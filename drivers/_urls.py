@@ -78,7 +78,36 @@ def check_sensor_url(url: str) -> str:
         raise ConfigurationError(f"{url!r}: expected modbus-tcp://host:port")
     if parts.scheme == "modbus-rtu" and (parts.netloc or not _is_device_path(parts.path)):
         raise ConfigurationError(f"{url!r}: expected modbus-rtu:///dev/<port> (a serial device path)")
+    _check_sensor_query(url, parts)
     return url
+
+
+# the query of a sensor URL: key -> (low, high) of its integer value, per scheme.  A Modbus
+# serial device answers at 1-247 (0 is broadcast: nothing answers); over TCP a gateway or
+# device may use any unit id 0-255.
+SENSOR_QUERY = {"modbus-tcp": {"unit": (0, 255)},
+                "modbus-rtu": {"unit": (1, 247), "baud": (50, 4_000_000)}}
+
+
+def _check_sensor_query(url: str, parts: urllib.parse.SplitResult) -> None:
+    """Each query parameter known, given once, an integer in range: checked with the rig
+    file, not found at run time."""
+    allowed = SENSOR_QUERY[parts.scheme]
+    try:
+        pairs = urllib.parse.parse_qsl(parts.query, keep_blank_values=True, strict_parsing=bool(parts.query))
+    except ValueError:
+        raise ConfigurationError(f"{url!r}: the query {parts.query!r} is not key=value pairs joined by &") from None
+    seen = set()
+    for key, value in pairs:
+        if key not in allowed:
+            raise ConfigurationError(f"{url!r}: unknown parameter {key!r} for {parts.scheme}; "
+                                     f"allowed: {', '.join(allowed)}")
+        if key in seen:
+            raise ConfigurationError(f"{url!r}: parameter {key!r} given twice")
+        seen.add(key)
+        lo, hi = allowed[key]
+        if not (value.isascii() and value.isdigit() and lo <= int(value) <= hi):
+            raise ConfigurationError(f"{url!r}: {key} must be an integer {lo}-{hi}, got {value!r}")
 
 
 def check_daq_url(url: str) -> str:

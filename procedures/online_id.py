@@ -12,6 +12,7 @@ import json
 import logging
 import math
 import os
+import stat
 import time
 
 import numpy as np
@@ -129,9 +130,16 @@ class OnlineIdentification:
         self.update_times_s.append(dt)
         rec = dict(step=result.get("key"), update_s=dt, **est.as_dict())
         # never through a symbolic link placed in the run directory (as bench.storage)
-        fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o666)
-        with os.fdopen(fd, "a") as fh:
-            fh.write(json.dumps(rec) + "\n")
+        # nor into a FIFO (O_NONBLOCK: no waiting for a reader; then not a regular file)
+        try:
+            fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK
+                         | os.O_CLOEXEC, 0o666)
+            with os.fdopen(fd, "a") as fh:
+                if not stat.S_ISREG(os.fstat(fd).st_mode):
+                    raise OSError(f"{self.path}: not a regular file")
+                fh.write(json.dumps(rec) + "\n")
+        except OSError as e:
+            log.warning("identification history not written: %s", e)
         return rec
 
     def final(self) -> dict:

@@ -95,12 +95,12 @@ class Plan:
         """Every step of the test in order; a step's key identifies it across resumes."""
         steps, index = [], 0
         skip = set(self.skip)
+        n = len(self.freqs_Hz)
         for li, level in enumerate(self.levels_N):
-            for direction, freqs in self.sweeps():
-                for f in freqs:
-                    fi = self.freqs_Hz.index(f)
+            for direction, _ in self.sweeps():
+                for fi in (range(n) if direction == "up" else range(n - 1, -1, -1)):   # linear, not index()
                     if (li, fi) not in skip:
-                        steps.append(StepSpec(index, li, fi, direction, level, f))
+                        steps.append(StepSpec(index, li, fi, direction, level, self.freqs_Hz[fi]))
                     index += 1     # keys stay the same whatever is skipped
         return steps
 

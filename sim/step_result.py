@@ -17,6 +17,8 @@ file; :func:`check_step_version` names the file and the versions instead of gues
 
 from __future__ import annotations
 
+import functools
+import typing
 from typing import NotRequired, TypedDict
 
 from .errors import RunDirectoryError
@@ -129,3 +131,56 @@ def check_step_version(result: dict, where: str) -> None:
     if version > STEP_FORMAT_VERSION:
         raise RunDirectoryError(f"{where}: step format version {version}, written by a newer guideway-bench "
                                 f"(this one reads versions up to {STEP_FORMAT_VERSION}); update to read it")
+
+
+# What every reader uses without asking first (export, report, identification): a step file
+# without one of them, or with any field of the wrong type, is not a step result.  The
+# checksum guards what this code wrote; this guards what it did not (a step of the format
+# before checksums, written or edited by hand).
+READ_FIELDS = ("key", "index", "level_index", "freq_index", "direction", "freq_Hz", "target_force_N", "force_N",
+               "force_error", "drive_Vpp", "compliance_m_per_N", "compliance_abs_m_per_N", "compliance_phase_rad",
+               "accelerance_abs_kg_inv", "accelerance_phase_rad", "force", "accel", "disp", "fs_Hz")
+
+
+def step_fields_problem(result: dict) -> str | None:
+    """Why ``result`` is not a step result by its fields (one missing that readers use, or
+    any field present of the wrong type, also inside the channel fits), or None."""
+    missing = [k for k in READ_FIELDS if k not in result]
+    if missing:
+        return f"not a step result: lacks {', '.join(missing)}"
+    if result["direction"] not in ("up", "down"):
+        return f"not a step result: direction: 'up' or 'down' expected, found {str(result['direction'])[:40]!r}"
+    problem = _typed_problem(result, StepResult, "")
+    return f"not a step result: {problem}" if problem else None
+
+
+@functools.cache
+def _hints(typed_dict) -> dict:
+    return typing.get_type_hints(typed_dict)
+
+
+def _typed_problem(value, hint, where: str) -> str | None:
+    origin = typing.get_origin(hint)
+    if origin is typing.NotRequired:
+        hint = typing.get_args(hint)[0]
+        origin = typing.get_origin(hint)
+    if isinstance(hint, type) and typing.is_typeddict(hint):
+        if not isinstance(value, dict):
+            return f"{where or 'the step'} is not an object"
+        hints = _hints(hint)
+        for key, sub in value.items():
+            if key in hints:
+                problem = _typed_problem(sub, hints[key], f"{where}.{key}" if where else key)
+                if problem:
+                    return problem
+        return None
+    if origin is list:
+        if not isinstance(value, list):
+            return f"{where}: a list was expected, found {type(value).__name__}"
+        item = typing.get_args(hint)[0]
+        return next((p for i, v in enumerate(value) if (p := _typed_problem(v, item, f"{where}[{i}]"))), None)
+    ok = {float: lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
+          int: lambda v: isinstance(v, int) and not isinstance(v, bool),
+          bool: lambda v: isinstance(v, bool),
+          str: lambda v: isinstance(v, str)}[hint](value)
+    return None if ok else f"{where}: {hint.__name__} expected, found {type(value).__name__} {str(value)[:40]!r}"

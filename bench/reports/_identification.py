@@ -49,7 +49,7 @@ def _is_estimate(d) -> bool:
 
 
 def identification_data(run_dir: Path, meta: dict) -> IdentificationData:
-    from procedures.online_id import history
+    from ..storage import RunStore
     final = meta.get("identification")
     truth = None
     rig = meta.get("rig") or {}
@@ -60,7 +60,7 @@ def identification_data(run_dir: Path, meta: dict) -> IdentificationData:
             truth = {p.key: float(getattr(model, p.key)) for p in ID_PARAMS}
         except Exception as e:          # the report must come out even with a bad model entry
             log.warning("rig model unreadable: %s", e)
-    return IdentificationData([h for h in history(Path(run_dir)) if _is_estimate(h)],
+    return IdentificationData([h for h in RunStore(Path(run_dir)).identification_history() if _is_estimate(h)],
                               final if _is_estimate(final) else None, truth,
                               list(meta.get("identifiability_warnings") or []),
                               None if final is None or _is_estimate(final) else final)

@@ -23,6 +23,7 @@ import numpy as np
 
 from sim.discrepancy.rounding import round_to_interval
 
+from ..storage import shown
 from . import _figures as figures
 from ._analysis import analysis_data
 from ._identification import ID_PARAMS, IdentificationData, determined_from, finite, steps_of
@@ -271,7 +272,7 @@ def accounting_md(run: RunData) -> list[str]:
         why.append(f"force error out of tolerance at {len(off)} step{'s' * (len(off) != 1)}")
     if acc.orphan:
         why.append(f"{len(acc.orphan)} file{'s' * (len(acc.orphan) != 1)} in steps/ that no planned step owns "
-                   f"({', '.join(p.path.name for p in acc.orphan[:5])})")
+                   f"({', '.join(shown(p.path.name) for p in acc.orphan[:5])})")
     if why:
         md += [f"Overall: **needs attention**: {'; '.join(why)}.", ""]
     else:

@@ -13,7 +13,8 @@ import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..storage import Accounting, RunDirError, RunStore
+from ..files import read_file
+from ..storage import Accounting, RunStore
 from ._identification import IdentificationData, identification_data
 from ._model import ModelComparison, model_comparison
 from ._modes import RunModes, modes_of
@@ -72,17 +73,18 @@ def _analysis(run_dir: Path) -> tuple[dict | None, str | None]:
     if not path.is_file():
         return None, None
     try:
-        d = json.loads(path.read_text())
+        d = json.loads(read_file(path))
         if not isinstance(d, dict):
             raise ValueError(f"expected a JSON object, got {type(d).__name__}")
         return d, None
-    except (OSError, ValueError) as e:      # the report must come out; say why the analysis is missing
+    except (OSError, ValueError, RecursionError) as e:   # the report must come out; say why the analysis is missing
         log.warning("cannot read %s: %s", path, e)
         return None, f"{path} cannot be read: {e}"
 
 
 def load_run(run_dir: Path) -> RunData:
     store = RunStore.open(Path(run_dir))
+    accounting = store.account()         # first: a stored plan that is not valid is named (RunDirError)
     meta, results, events = store.metadata, store.results(), store.events()
     plan, rig = meta.get("plan") or {}, meta.get("rig") or {}
     levels_N = plan.get("levels_N") or sorted({r["target_force_N"] for r in results})
@@ -97,10 +99,6 @@ def load_run(run_dir: Path) -> RunData:
             log.warning("model comparison failed: %s", e)
             cmp_error = f"{type(e).__name__}: {e}"
     analysis, analysis_error = _analysis(store.path)
-    try:
-        accounting = store.account()
-    except RunDirError:
-        accounting = None
     return RunData(store.path, meta, results, events, list(levels_N), series, identification_data(store.path, meta),
                    cmp, cmp_error, _modes(store.path, meta, results, cmp), analysis, analysis_error,
                    accounting, attention, attention_error)

@@ -16,9 +16,12 @@ token (or an earlier server's) it can say what is needed, while the run's data a
 while bound to loopback (a web page elsewhere cannot reach the server by DNS rebinding).
 
 Bounds (docs/decisions/0028-hardening.md): at most :data:`MAX_CONNECTIONS` connections are
-served at once (one more is closed unanswered) and :data:`MAX_STREAMS` of them event
-streams (503 beyond); a client silent for :data:`CLIENT_TIMEOUT_S` in the middle of a
-request, or between requests, is dropped; a request body must have a valid
+served at once, :data:`STOP_RESERVE` more for a stop request only (anything else 503;
+one more is closed unanswered), and :data:`MAX_STREAMS` of them event streams (503
+beyond); a client silent for :data:`CLIENT_TIMEOUT_S` in the middle of a request, or
+between requests, is dropped, and each whole request must arrive within
+:data:`REQUEST_DEADLINE_S` however it trickles in (decision record 0041), so slow clients
+cannot lock the stop control out; a client that goes away is not a traceback; a request body must have a valid
 ``Content-Length`` (400 otherwise) of at most :data:`MAX_BODY` bytes (413), and is read
 whole, never taken for a next request.  Every answer carries a Content-Security-Policy
 (scripts from this server only, no framing), ``X-Frame-Options: DENY`` and
@@ -35,6 +38,7 @@ import math
 import re
 import secrets
 import socket
+import sys
 import threading
 import time
 import urllib.parse
@@ -52,7 +56,10 @@ PAGE = Path(__file__).with_name("page.html")
 SCRIPT = Path(__file__).with_name("page.js")
 MAX_CONNECTIONS = 32      # handler threads at once
 MAX_STREAMS = 8           # of them, event streams
+STOP_RESERVE = 4          # connections beyond MAX_CONNECTIONS, admitted for a stop request only
 CLIENT_TIMEOUT_S = 10.0   # for each read of a request (headers, body) and between requests
+REQUEST_DEADLINE_S = 10.0  # the whole request (line, headers, body) or the wait for the next one
+STOP_DEADLINE_S = 3.0     # the same on a reserved connection
 MAX_BODY = 4096           # a stop request has no body worth more
 SECURITY_HEADERS = (
     # plotly sets inline styles; nothing else is needed from anywhere but this server
@@ -125,17 +132,29 @@ class WatchServer(ThreadingHTTPServer):
         self._plotly: bytes | None = None
         self._thread: threading.Thread | None = None
         self._slots = threading.BoundedSemaphore(MAX_CONNECTIONS)
+        self._reserve = threading.BoundedSemaphore(STOP_RESERVE)
+        self._reserved: set = set()       # connections admitted on the stop reserve
         self.connections = 0              # served now (each holds a slot)
+        self._deadlines: dict = {}        # connection -> monotonic time its request must be read by
+        self._deadlines_lock = threading.Lock()
+        self._watchdog = threading.Thread(target=self._enforce_deadlines, name="bench-watch-deadlines", daemon=True)
+        self._watchdog.start()
         super().__init__((host, port), _Handler)
         if not self.loopback:
             log.warning("the watch page is served on %s, off loopback: anyone who can reach this "
                         "address can read the run (the stop token is still needed to stop it)",
                         self.server_address[0])
 
-    # one thread per connection, at most MAX_CONNECTIONS of them
+    # one thread per connection, at most MAX_CONNECTIONS of them, and STOP_RESERVE more that
+    # serve a stop request only (so slow clients filling the others cannot lock the stop out)
     def process_request(self, request, client_address):
-        if not self._slots.acquire(blocking=False):
-            log.warning("watch: %d connections already; closed one from %s", MAX_CONNECTIONS,
+        if self._slots.acquire(blocking=False):
+            reserved = False
+        elif self._reserve.acquire(blocking=False):
+            reserved = True
+            self._reserved.add(request)
+        else:
+            log.warning("watch: %d connections already; closed one from %s", MAX_CONNECTIONS + STOP_RESERVE,
                         client_address[0])
             self.shutdown_request(request)
             return
@@ -144,19 +163,62 @@ class WatchServer(ThreadingHTTPServer):
         try:
             super().process_request(request, client_address)
         except BaseException:
-            self._release()
+            self._release(request, reserved)
             raise
 
     def process_request_thread(self, request, client_address):
+        reserved = request in self._reserved
         try:
             super().process_request_thread(request, client_address)
         finally:
-            self._release()
+            self._release(request, reserved)
 
-    def _release(self) -> None:
+    def _release(self, request, reserved: bool) -> None:
         with self._streams_lock:
             self.connections -= 1
-        self._slots.release()
+        self.disarm(request)
+        if reserved:
+            self._reserved.discard(request)
+            self._reserve.release()
+        else:
+            self._slots.release()
+
+    def is_reserved(self, request) -> bool:
+        return request in self._reserved
+
+    # a deadline for each whole request: a client trickling a header line every few seconds
+    # (each read within CLIENT_TIMEOUT_S) is cut off all the same
+    def arm(self, request, seconds: float) -> None:
+        with self._deadlines_lock:
+            self._deadlines[request] = time.monotonic() + seconds
+
+    def disarm(self, request) -> None:
+        with self._deadlines_lock:
+            self._deadlines.pop(request, None)
+
+    def _enforce_deadlines(self) -> None:
+        while not self.closing.wait(0.1):
+            now = time.monotonic()
+            with self._deadlines_lock:
+                late = [r for r, t in self._deadlines.items() if t < now]
+                for r in late:
+                    del self._deadlines[r]
+            for r in late:
+                try:
+                    r.shutdown(socket.SHUT_RDWR)       # the handler's read ends; it closes
+                except OSError:
+                    pass
+                log.debug("watch: request not complete within its deadline; connection closed")
+
+    def handle_error(self, request, client_address):
+        """A client that went away (a closed tab, a reset) is routine: no traceback on the
+        terminal; anything else is one warning line (-vv: the traceback)."""
+        exc = sys.exc_info()[1]
+        if isinstance(exc, (ConnectionError, TimeoutError)):
+            log.debug("watch: %s went away: %s", client_address[0], exc)
+            return
+        log.warning("watch: error serving %s: %s: %s", client_address[0], type(exc).__name__, exc,
+                    exc_info=log.isEnabledFor(logging.DEBUG))
 
     @property
     def loopback(self) -> bool:
@@ -205,6 +267,24 @@ class _Handler(BaseHTTPRequestHandler):
     def log_message(self, fmt, *args):
         log.debug("%s %s", self.address_string(), fmt % args)
 
+    def handle_one_request(self):
+        reserved = self.server.is_reserved(self.request)
+        self.server.arm(self.request, STOP_DEADLINE_S if reserved else REQUEST_DEADLINE_S)
+        try:
+            super().handle_one_request()
+        finally:
+            self.server.disarm(self.request)
+
+    def _only_stop(self) -> bool:
+        """On a connection of the stop reserve, anything but a stop request is refused (503)."""
+        if not self.server.is_reserved(self.request) or (
+                self.command == "POST" and self.path.split("?", 1)[0] == "/api/stop"):
+            return False
+        self.close_connection = True
+        self._send_json(HTTPStatus.SERVICE_UNAVAILABLE,
+                        {"error": f"{MAX_CONNECTIONS} connections busy; only a stop request is served now"})
+        return True
+
     # ------------------------------------------------------------------ helpers
     def _send(self, code: int, body: bytes, ctype: str, cache: bool = False) -> None:
         self.send_response(code)
@@ -228,6 +308,7 @@ class _Handler(BaseHTTPRequestHandler):
             self._send_json(HTTPStatus.NOT_IMPLEMENTED, {"error": "Transfer-Encoding is not supported"})
             return False
         if not given:
+            self.server.disarm(self.request)
             return True
         if len(set(given)) != 1 or not _DIGITS.fullmatch(given[0].strip()):
             self.close_connection = True
@@ -242,6 +323,7 @@ class _Handler(BaseHTTPRequestHandler):
         if length and len(self.rfile.read(length)) < length:
             self.close_connection = True       # the client went away mid-body
             return False
+        self.server.disarm(self.request)       # the request is read: no deadline for the answer
         return True
 
     def _send_json(self, code: int, obj) -> None:
@@ -264,7 +346,7 @@ class _Handler(BaseHTTPRequestHandler):
 
     # ------------------------------------------------------------------ routes
     def do_GET(self):  # noqa: N802 - http.server's naming
-        if not self._body_ok():
+        if not self._body_ok() or self._only_stop():
             return
         if not self._host_ok():
             return self._send_json(HTTPStatus.FORBIDDEN, {"error": "unexpected Host header"})
@@ -287,7 +369,7 @@ class _Handler(BaseHTTPRequestHandler):
             self._send_json(HTTPStatus.NOT_FOUND, {"error": f"no such page: {path}"})
 
     def do_POST(self):  # noqa: N802
-        if not self._body_ok():
+        if not self._body_ok() or self._only_stop():
             return
         if not self._host_ok():
             return self._send_json(HTTPStatus.FORBIDDEN, {"error": "unexpected Host header"})

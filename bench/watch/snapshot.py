@@ -24,15 +24,17 @@ import threading
 from datetime import datetime
 from pathlib import Path
 
-from procedures.plan import Limits, Plan
+from procedures.plan import Plan
 
-from ..storage import RunStatus
+from ..files import open_regular, read_file
+from ..storage import RunDirError, RunStatus, stored_plan
 from .stop import STOP_FILE
 
 log = logging.getLogger(__name__)
 
 LOG_LINES_KEPT = 40           # warnings and errors from bench.log shown on the page
 QUIET_EVENTS = {"sensor"}     # frequent, routine: counted, not listed
+TAIL_CHUNK = 16 * 2**20       # read of a growing log at a time (a huge file is followed in steps)
 
 
 class _Tail:
@@ -51,9 +53,14 @@ class _Tail:
         if size < self.offset:          # replaced (a new run in the same place): start over
             self.offset, self.lines = 0, []
         if size > self.offset:
-            with open(self.path, "rb") as fh:
+            try:
+                fh = os.fdopen(open_regular(self.path), "rb")
+            except (OSError, ValueError) as e:       # a link or a FIFO in its place: not read
+                log.warning("%s", e)
+                return self.lines
+            with fh:
                 fh.seek(self.offset)
-                chunk = fh.read(size - self.offset)
+                chunk = fh.read(min(size - self.offset, TAIL_CHUNK))
             end = chunk.rfind(b"\n") + 1
             self.offset += end
             new = chunk[:end].decode(errors="replace").splitlines()
@@ -68,7 +75,7 @@ def _jsonl(lines: list[str]) -> list[dict]:
     for line in lines:
         try:
             out.append(json.loads(line))
-        except json.JSONDecodeError:
+        except (json.JSONDecodeError, RecursionError):
             pass
     return out
 
@@ -81,15 +88,11 @@ def _time(s: str | None) -> float | None:
 
 
 def plan_of(meta: dict) -> Plan | None:
-    """The stored plan as a :class:`Plan` (None if run.json does not hold a usable one)."""
+    """The stored plan, validated as a plan file is (bench.storage.stored_plan); None if
+    run.json does not hold a valid one."""
     try:
-        p = dict(meta["plan"])
-        p["levels_N"] = tuple(p["levels_N"])
-        p["freqs_Hz"] = tuple(p["freqs_Hz"])
-        p["skip"] = tuple(tuple(x) for x in p.get("skip", ()))
-        p["limits"] = Limits(**p["limits"]) if p.get("limits") else None
-        return Plan(**p)
-    except (KeyError, TypeError, ValueError) as e:
+        return stored_plan(meta, "run.json")
+    except RunDirError as e:
         log.debug("no usable plan in run.json: %s", e)
         return None
 
@@ -174,9 +177,9 @@ class RunReader:
         for e in entries:
             if e.name not in self._steps:
                 try:
-                    self._steps[e.name] = json.loads(Path(e.path).read_text())
+                    self._steps[e.name] = json.loads(read_file(Path(e.path)))
                     self._step_mtime[e.name] = e.stat().st_mtime
-                except (OSError, ValueError) as exc:     # renamed into place, so only if damaged
+                except (OSError, ValueError, RecursionError) as exc:     # renamed into place: only if damaged
                     log.warning("cannot read step %s: %s", e.path, exc)
         return [self._steps[k] for k in sorted(self._steps)]
 
@@ -193,11 +196,13 @@ class RunReader:
 
     def _snapshot(self) -> dict:
         try:
-            meta = json.loads((self.path / "run.json").read_text())
+            meta = json.loads(read_file(self.path / "run.json"))
         except FileNotFoundError:
             return {"run_dir": str(self.path), "status": "waiting", "message": "no run.json yet: waiting for the run to start"}
         except ValueError as e:
             return {"run_dir": str(self.path), "status": "unreadable", "message": f"run.json: {e}"}
+        except RecursionError:
+            return {"run_dir": str(self.path), "status": "unreadable", "message": "run.json: nested too deeply"}
         results = self._read_steps()
         events = _jsonl(self._events.read())
         ident = _jsonl(self._ident.read())

@@ -16,6 +16,7 @@ import os
 import tempfile
 from pathlib import Path
 
+from ..files import read_file
 from ..storage import file_mode, now_iso
 
 log = logging.getLogger(__name__)
@@ -42,10 +43,10 @@ def request_stop(run_dir: Path, by: str) -> dict:
 def pending(run_dir: Path) -> dict | None:
     """The stop request waiting in ``run_dir``, if any."""
     try:
-        return json.loads((Path(run_dir) / STOP_FILE).read_text())
+        return json.loads(read_file(Path(run_dir) / STOP_FILE))
     except FileNotFoundError:
         return None
-    except (OSError, ValueError):       # half-written by hand: still a request
+    except (OSError, ValueError, RecursionError):    # half-written by hand, a link: still a request
         return {"time": None, "by": "unknown"}
 
 

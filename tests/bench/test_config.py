@@ -344,3 +344,65 @@ def test_bench_study_mc_names_the_file_of_a_bad_plan_or_rig(tmp_path, capsys):
     assert main(["study", "mc", "--rig", str(real), "--out", str(tmp_path / "mc")]) == 2
     assert f"{real}: a Monte-Carlo study needs a simulated rig" in capsys.readouterr().err
     assert not (tmp_path / "mc").exists()
+
+
+# --------------------------------------------------------------------------- encodings, nesting, size (issue 24)
+
+@pytest.mark.parametrize("encoding, said", [
+    ("utf-16", "saved as UTF-16; TOML files are UTF-8"),
+    ("utf-16-le", "NUL bytes at offset 1: the file seems saved as UTF-16 without a byte-order mark"),
+    ("latin-1", "not UTF-8: byte 0xb5 at line 1 (offset 8); the file seems saved in another encoding"),
+    ("cp1252", "not UTF-8: byte 0xb5 at line 1 (offset 8)"),
+])
+def test_a_plan_saved_in_another_encoding_is_named_with_the_encoding_problem(tmp_path, capsys, encoding, said):
+    path = tmp_path / "p.toml"
+    path.write_bytes(("# force \u00b5N\n" + PLAN).encode(encoding))
+    assert main(["dry-run", "--plan", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"bench dry-run: error: {path}: ") and said in err, err
+
+
+def test_a_utf8_byte_order_mark_is_accepted(tmp_path):
+    path = tmp_path / "p.toml"
+    path.write_bytes(("# force \u00b5N\n" + PLAN).encode("utf-8-sig"))
+    assert load_plan(path) == load_plan(write(tmp_path, "q.toml", PLAN))
+
+
+def test_toml_nested_thousands_deep_is_named_not_a_recursion_error(tmp_path):
+    for deep in ("x = " + "[" * 5000 + "]" * 5000, "x = " + "{a = " * 5000 + "1" + "}" * 5000):
+        path = write(tmp_path, "deep.toml", deep + "\n")
+        with pytest.raises(ConfigError, match=rf"^{path}: not a plan or rig: tables or arrays nested too deeply"):
+            load_plan(path)
+
+
+def test_a_plan_file_over_the_size_bound_is_refused_unread(tmp_path):
+    from bench.config import MAX_FILE_BYTES
+    path = write(tmp_path, "big.toml", PLAN + "#" * MAX_FILE_BYTES + "\n")
+    with pytest.raises(ConfigError, match=rf"^{path}: \d+ bytes; a plan or rig file is at most {MAX_FILE_BYTES}"):
+        load_plan(path)
+
+
+@pytest.mark.parametrize("levels, points, direction, said", [
+    ([1.0] * 1001, 10, "up", "[plan] levels_N: 1001 values; at most 1000"),
+    ([1.0], 10_001, "up", "[plan.frequencies] points: must be >= 1 and <= 10000"),
+    ([1.0, 2.0, 3.0, 4.0, 5.0, 6.0], 5000, "both",
+     "p.toml: [plan] 6 levels x 5000 frequencies x 2 directions = 60000 steps; at most 50000"),
+])
+def test_plan_bounds_are_named(levels, points, direction, said):
+    plan = {"plan": {"levels_N": levels, "frequencies": {"start_Hz": 20.0, "stop_Hz": 1000.0, "points": points,
+                                                         "direction": direction}}}
+    with pytest.raises(ConfigError) as e:
+        parse_plan(plan, "p.toml")
+    assert said in str(e.value)
+
+
+@pytest.mark.parametrize("query, said", [
+    ("unit=abc", "unit must be an integer 0-255, got 'abc'"),
+    ("unit=1&unit=2", "parameter 'unit' given twice"),
+    ("baud=9600", "unknown parameter 'baud' for modbus-tcp; allowed: unit"),
+])
+def test_a_sensor_url_query_is_checked_with_the_rig(tmp_path, query, said):
+    path = write(tmp_path, "r.toml", edit(RIG, "?unit=1", f"?{query}"))
+    with pytest.raises(ConfigError) as e:
+        load_rig(path)
+    assert f"{path}: [rig.instruments] sensor: " in str(e.value) and said in str(e.value), str(e.value)

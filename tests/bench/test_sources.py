@@ -145,20 +145,51 @@ def test_hum_on_the_probe_in_a_foreign_file_keeps_the_steps_and_is_named_as_main
                                                                   ("LC0002", "flagged"), ("LC0003", "flagged")]
 
 
-def test_an_unreadable_file_is_a_clear_error_naming_the_record(steps, tmp_path):
+def test_an_unreadable_record_costs_its_step_only_and_an_unreadable_file_is_named(steps, tmp_path):
     f, F, a, x = steps[0]
-    path = write(tmp_path / "broken.uff", [uff_set(1, 13, F), uff_set(1, 12, a), uff_set(1, 8, x)])
+    path = write(tmp_path / "broken.uff", [uff_set(1, 13, F), uff_set(1, 12, a), uff_set(1, 8, x)]
+                 + [uff_set(2, 13, F), uff_set(2, 12, a), uff_set(2, 8, x)])
     lines = path.read_text().splitlines(keepends=True)
     starts = [i for i, line in enumerate(lines) if line.strip() == "-1"]
     record2 = starts[2] + 14                                           # a data line of the second record
     lines[record2] = "  garbage that is not a number\n"
     path.write_text("".join(lines))
-    with pytest.raises(ValueError, match=r"record 2 .*cannot be read"):
-        load_source(path)
+    src = load_source(path)
+    assert [s.key for s in src.steps] == ["LC0002"]
+    assert [r.step for r in src.rejected] == ["LC0001"]
+    assert "record 2 of the file (dataset 58) cannot be read" in src.rejected[0].reason
     junk = tmp_path / "junk.uff"
     junk.write_text("not a universal file\n")
     with pytest.raises(ValueError, match="junk.uff"):
         load_source(junk)
+
+
+@pytest.mark.parametrize("sample", ["3.00000000000e+300", "3.0e+300", "NaN", "inf", "-inf"])
+def test_one_damaged_sample_costs_its_step_only_not_the_file(steps, tmp_path, capsys, sample):
+    """Issue 24, item 9: a file of 8 steps written by pyuff (as other software writes it)
+    with one sample of step 4's force record damaged: the 7 others are kept, step 4 is
+    listed with the reason (as a damaged step of a run directory is)."""
+    sets = [uff_set(case, sdt, d) for case in range(1, 9)
+            for sdt, d in ((13, steps[(case - 1) % 4][1]), (12, steps[(case - 1) % 4][2]), (8, steps[(case - 1) % 4][3]))]
+    path = write(tmp_path / "eight.uff", sets)
+    lines = path.read_text().splitlines(keepends=True)
+    starts = [i for i, line in enumerate(lines) if line.strip() == "-1"]
+    data = starts[2 * 9] + 13 + 5                        # a data line of record 10: step 4's force
+    head, first = lines[data][:3], lines[data][3:23]
+    assert float(first) == pytest.approx(steps[3][1][20], rel=1e-9)  # the 21st sample (4 per line)
+    lines[data] = head + sample.rjust(len(first)) + lines[data][23:]
+    path.write_text("".join(lines))
+    src = load_source(path)
+    assert [s.key for s in src.steps] == [f"LC{c:04d}" for c in (1, 2, 3, 5, 6, 7, 8)]
+    assert [r.step for r in src.rejected] == ["LC0004"]
+    said = src.rejected[0].reason
+    assert said.startswith(("record 10 of the file (dataset 58) cannot be read",      # pyuff cannot parse it
+                            "non-finite values in the force record")), said              # or it reads inf/NaN
+    if sample == "3.00000000000e+300":        # the command (a fit: seconds) once
+        from bench.cli import main
+        assert main(["identify", str(path)]) == 0
+        out = capsys.readouterr().out
+        assert "step LC0004 rejected: record 10 of the file" in out and "7 steps (1 rejected)" in out
 
 
 def test_a_run_directory_gives_every_step_and_rejects_a_damaged_block(small_run, tmp_path):

@@ -9,6 +9,8 @@ import logging
 import re
 import shutil
 import socket
+import struct
+import threading
 import time
 import urllib.request
 from unittest.mock import PropertyMock
@@ -105,7 +107,13 @@ def test_connections_and_streams_are_capped(small_run, monkeypatch):
         wait_until(lambda: server.connections == 2, 5, "the refused stream's connection to end")
         idle = socket.create_connection(addr, timeout=5)       # the third connection: held
         wait_until(lambda: server.connections == 3, 5, "the third connection served")
-        assert exchange(server, b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n") == b""   # a fourth: closed
+        # a fourth: on the stop reserve, which answers nothing but a stop
+        assert statuses(exchange(server, b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")) == [503]
+        reserve = [socket.create_connection(addr, timeout=5) for _ in range(watch_server.STOP_RESERVE)]
+        wait_until(lambda: server.connections == 3 + watch_server.STOP_RESERVE, 5, "the reserve full")
+        assert exchange(server, b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n") == b""   # beyond it: closed
+        for s in reserve:
+            s.close()
         idle.close()
         for s in streams:
             s.close()
@@ -188,3 +196,82 @@ def test_markup_in_the_run_s_data_is_shown_as_text_under_the_csp(small_run, tmp_
         assert browser.js("window.__pwned === undefined")
         assert browser.js("document.getElementById('compliance').data.length") >= 2    # plotly runs
         assert browser.js("window.__csp") == []                # nothing the page needs is blocked
+
+
+class Trickler:
+    """Clients that each send a request line, then one header line every ``every_s``
+    seconds, never finishing (issue 24, item 10: 32 of them kept the stop out)."""
+
+    def __init__(self, server: WatchServer, n: int, every_s: float = 0.5):
+        self.socks = []
+        for _ in range(n):
+            s = socket.create_connection(server.server_address[:2], timeout=5)
+            s.sendall(b"GET / HTTP/1.1\r\n")
+            self.socks.append(s)
+        self.stop = threading.Event()
+        self.dropped = 0
+        self.thread = threading.Thread(target=self._run, args=(every_s,), daemon=True)
+        self.thread.start()
+
+    def _run(self, every_s: float) -> None:
+        i = 0
+        while not self.stop.wait(every_s):
+            i += 1
+            for s in list(self.socks):
+                try:
+                    s.sendall(f"X-Slow-{i}: {i}\r\n".encode())
+                except OSError:
+                    self.socks.remove(s)
+                    self.dropped += 1
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join()
+        for s in self.socks:
+            s.close()
+
+
+def running_copy(small_run, tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "run.json").write_text(json.dumps(dict(small_run.metadata, status="running")))   # pid: this process
+    return run
+
+
+def test_the_stop_gets_through_while_32_clients_trickle_headers(small_run, tmp_path, monkeypatch):
+    monkeypatch.setattr(watch_server, "REQUEST_DEADLINE_S", 6.0)     # 10 s in use; longer than connecting 34
+    run = running_copy(small_run, tmp_path)
+    with serve(run) as server:
+        slow = Trickler(server, watch_server.MAX_CONNECTIONS + 2)        # every slot and two of the reserve
+        try:
+            wait_until(lambda: server.connections == watch_server.MAX_CONNECTIONS + 2, 5, "the slow clients in")
+            assert slow.dropped == 0                             # all of them still there, trickling
+            t = time.monotonic()
+            reply = exchange(server, post("/api/stop", "0").replace(
+                b"\r\n\r\n", f"\r\nX-Stop-Token: {server.token}\r\n\r\n".encode(), 1))
+            assert statuses(reply) == [202], reply[:300]
+            assert time.monotonic() - t < 2                      # at once, on the reserve
+            assert json.loads((run / STOP_FILE).read_text())["by"].startswith("the watch page")
+            # the reserve serves nothing else while the slots are full
+            page = exchange(server, b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n")
+            assert statuses(page) == [503] and b"only a stop request" in page
+            # every trickling client is cut at the whole-request deadline, though each line came in time
+            wait_until(lambda: slow.dropped == watch_server.MAX_CONNECTIONS + 2, 10, "the slow clients cut off")
+            page = exchange(server, b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n")
+            assert statuses(page) == [200]
+        finally:
+            slow.close()
+
+
+def test_a_client_that_disconnects_mid_answer_prints_no_traceback(small_run, capfd):
+    with serve(small_run.path) as server:
+        for _ in range(5):
+            s = socket.create_connection(server.server_address[:2], timeout=5)
+            s.sendall(b"GET /plotly.min.js HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+            s.recv(100)                                       # the answer has begun
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+            s.close()                                         # reset: the server's writes fail
+        time.sleep(0.5)
+        assert statuses(exchange(server, b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n")) == [200]
+    err = capfd.readouterr().err
+    assert "Traceback" not in err and "BrokenPipe" not in err and "ConnectionReset" not in err, err

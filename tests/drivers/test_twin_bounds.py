@@ -4,15 +4,21 @@ dropped, and the DAQ twin refuses blocks larger than it can hold."""
 
 from __future__ import annotations
 
+import shutil
 import socket
+import subprocess
 import time
 
 import pytest
 
 from drivers import CanTcpBridge, InstrumentError
 from drivers._daq_twin import MAX_SAMPLES
+from drivers._eddy_twin import MAX_CLIENTS as MODBUS_MAX_CLIENTS
+from drivers._eddy_twin import EddySensorModel, EddySensorTcpTwin
 from drivers._scpi_syntax import _NUMBER_RE, MAX_NUMBER_CHARS
 from drivers._scpi_twin_server import MAX_LINE_BYTES, ScpiTcpServer
+
+from .test_eddy_sensor import plant_gap_mm
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -119,3 +125,43 @@ def test_the_can_bridge_caps_its_links():
                 first.recv(100)
     finally:
         bridge.close()
+
+
+def _mbpoll_gap(port: int) -> subprocess.CompletedProcess:
+    return subprocess.run(["mbpoll", "-m", "tcp", "-p", str(port), "-a", "1", "-r", "1", "-c", "1", "-t", "3:float",
+                           "-B", "-1", "-0", "-o", "1", "127.0.0.1"], capture_output=True, text=True, timeout=10)
+
+
+@pytest.mark.skipif(shutil.which("mbpoll") is None, reason="mbpoll not installed")
+def test_the_modbus_twin_caps_its_connections_and_drops_silent_ones(rig):
+    """Issue 24, item 11: 200 idle connections were all accepted.  Now 16 are held, the
+    rest closed at once; the silent ones are dropped after the idle time and an independent
+    client (mbpoll) is served again."""
+    twin = EddySensorTcpTwin(EddySensorModel(rig), idle_s=4.0)     # longer than connecting 200 on a busy machine
+    socks = []
+    try:
+        socks = [socket.create_connection((twin.host, twin.port), timeout=5) for _ in range(200)]
+
+        def open_now(s) -> bool:
+            s.setblocking(False)
+            try:
+                return s.recv(1) != b""
+            except BlockingIOError:
+                return True                    # nothing to read: still open
+            except OSError:
+                return False
+        t = time.monotonic()
+        while (held := sum(open_now(s) for s in socks)) > MODBUS_MAX_CLIENTS and time.monotonic() - t < 3:
+            time.sleep(0.1)                    # the twin is still closing the refused ones
+        assert held == MODBUS_MAX_CLIENTS
+        assert _mbpoll_gap(twin.port).returncode != 0            # full: refused, as the 184 others
+        t = time.monotonic()
+        while (done := _mbpoll_gap(twin.port)).returncode != 0:
+            assert time.monotonic() - t < 12, done.stderr
+            time.sleep(0.2)
+        assert float(done.stdout.split("[1]:")[1].split()[0]) == pytest.approx(plant_gap_mm(rig), abs=1e-4)
+        assert sum(open_now(s) for s in socks) == 0              # the silent ones were dropped
+    finally:
+        for s in socks:
+            s.close()
+        twin.close()

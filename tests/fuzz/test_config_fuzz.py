@@ -107,3 +107,53 @@ def test_value_mutations_give_a_config_or_a_config_error_naming_the_key(case):
         assert str(e).startswith(f"fuzzed-{kind}.toml"), e
     else:
         _check(kind, result)
+
+
+@given(st.sampled_from(sorted(FILES)), st.sampled_from(["utf-8", "utf-8-sig", "utf-16", "utf-16-le", "utf-16-be",
+                                                        "latin-1", "cp1252"]),
+       st.sampled_from(["\u00e9", "\u00b5", "\u00b1", ""]), st.integers(0, 5000))
+@fuzz(60)
+def test_any_encoding_or_nesting_gives_a_config_or_an_error_naming_the_file_and_the_encoding(
+        tmp_path_factory, kind, encoding, char, depth):
+    """A file saved as UTF-16 or Latin-1 (issue 24, item 7), or nested thousands deep: a
+    Plan/Rig or a ConfigError naming the file and what is wrong, never an internal error."""
+    text = TEXT[kind].replace("\n", f"  # {char}\n", 1) + (f"deep = {'[' * depth}{']' * depth}\n" if depth else "")
+    path = tmp_path_factory.mktemp("enc") / f"{kind}.toml"
+    path.write_bytes(text.encode(encoding))
+    try:
+        result = FILES[kind][1](path)
+    except ConfigError as e:
+        assert str(e).startswith(str(path)), e
+        if encoding.startswith("utf-16"):
+            assert "UTF-16" in str(e)
+        elif encoding in ("latin-1", "cp1252") and char:
+            assert "not UTF-8" in str(e) and "another encoding" in str(e)
+        elif depth > 500:
+            assert "nested too deeply" in str(e) or "deep: unknown key" in str(e) or "unknown table" in str(e)
+    else:
+        assert encoding.startswith("utf-8") or not char, (encoding, char)
+        _check(kind, result)
+
+
+@given(value_mutations("plan"))
+@fuzz(150)
+def test_a_stored_plan_mutated_gives_a_plan_or_an_error_naming_run_json(data):
+    """The plan stored in run.json (Plan.to_dict) goes through the plan file's validator
+    (issue 24, item 6): a Plan or a ConfigError naming run.json and the key."""
+    from bench.config import parse_stored_plan
+    try:
+        stored = parse_plan(data).to_dict()
+    except ConfigError:
+        return
+    try:
+        plan = parse_stored_plan(stored, "RUN/run.json")
+    except ConfigError as e:
+        raise AssertionError(f"a valid plan's stored form refused: {e}") from e
+    assert plan == parse_plan(data)
+    for key, value in (("levels_N", "abc"), ("freqs_Hz", []), ("direction", "sideways"), ("harmonics", -1)):
+        try:
+            parse_stored_plan(dict(stored, **{key: value}), "RUN/run.json")
+        except ConfigError as e:
+            assert str(e).startswith("RUN/run.json: [plan"), e
+        else:
+            raise AssertionError(f"{key} = {value!r} passed")

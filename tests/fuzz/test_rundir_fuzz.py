@@ -34,9 +34,14 @@ def pristine(tmp_path_factory):
     rng = np.random.default_rng(3)
     for spec in plan.schedule()[:N_STEPS]:
         n = int(rng.integers(50, 400))
-        result = dict(key=spec.key, index=spec.index, freq_Hz=spec.freq_Hz, target_force_N=spec.force_N,
-                      compliance_m_per_N=complex(*rng.normal(size=2)) * 1e-7, thd=float(rng.random()),
-                      n_samples=n, flags=[True, None, "x"])
+        fit = dict(amplitude=list(rng.random(3)), phase_rad=list(rng.normal(size=3)), offset=0.0, thd=0.01,
+                   noise_rms=1e-3, peak_to_peak=2.0, raw_peak_to_peak=2.0)
+        result = dict(key=spec.key, index=spec.index, level_index=spec.level_index, freq_index=spec.freq_index,
+                      direction=spec.direction, freq_Hz=spec.freq_Hz, target_force_N=spec.force_N,
+                      force_N=spec.force_N, force_error=0.0, drive_Vpp=0.5,
+                      compliance_m_per_N=complex(*rng.normal(size=2)) * 1e-7, compliance_abs_m_per_N=1e-7,
+                      compliance_phase_rad=-0.5, accelerance_abs_kg_inv=0.1, accelerance_phase_rad=0.1,
+                      force=fit, accel=fit, disp=fit, fs_Hz=25600.0, n_samples=n, flags=[True, None, "x"])
         raw = dict(force_N=rng.normal(size=n), accel_m_s2=rng.normal(size=n), disp_m=rng.normal(size=n),
                    fs_Hz=np.array(25600.0))
         store.write_step(spec.key, result, raw)
