@@ -172,12 +172,30 @@ def _load_run(path: Path) -> Source:
     return src
 
 
+def resonances_Hz(steps: list[MeasuredStep], group: float = 1.15) -> tuple[float, ...]:
+    """The frequency of the most compliant step (|X1/P1|) of each force level (levels within
+    15 % are one), where it lies inside that level's frequencies (not at an end)."""
+    levels: list[float] = []
+    for lv in sorted(s.level_N for s in steps if s.level_N > 0):
+        if not levels or lv > group * levels[-1]:
+            levels.append(lv)
+    out = []
+    for lv in levels:
+        g = sorted((s for s in steps if s.level_N > 0 and max(x for x in levels if x <= s.level_N * (1 + 1e-9)) == lv),
+                   key=lambda s: s.freq_Hz)
+        mag = [abs(s.harmonics.disp[0] / s.harmonics.force[0]) if abs(s.harmonics.force[0]) > 0 else 0.0 for s in g]
+        k = int(np.argmax(mag)) if mag else -1
+        if 0 < k < len(g) - 1:
+            out.append(float(g[k].freq_Hz))
+    return tuple(out)
+
+
 def _attribute_lines(src: Source, order: list[str]) -> None:
     """Each step's lines attributed over the source's steps in measured ``order``
     (:func:`sim.artefacts.attribute_lines`): a step's quality is replaced where a line
     turned out to be the rig's own free vibration."""
     by = dict(src.quality())
-    new = dict(attribute_lines([(k, by[k]) for k in order if k in by]))
+    new = dict(attribute_lines([(k, by[k]) for k in order if k in by], resonances_Hz(src.steps)))
     for s in src.steps:
         s.quality = new.get(s.key, s.quality)
     for r in src.rejected:

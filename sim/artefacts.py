@@ -116,6 +116,8 @@ class Artefact:
     settle_cycles: int = 0           # transient: drive cycles from the record start until harmless
     evidence: str = ""
     snr: float = math.nan            # line: amplitude over one standard error of a harmonic of the record
+    decay_bound_per_s: float = math.nan   # line: upper bound of its decay rate (fit + 2 standard errors)
+    settle_at_least: bool = False    # settle_cycles is a least number (from that bound)
 
     @property
     def unit(self) -> str:
@@ -130,7 +132,8 @@ class Artefact:
             what = f"{self.freq_Hz:.4g} Hz " if math.isfinite(self.freq_Hz) else ""
             done = {"removed": "; removed", "trimmed": "; the first periods were dropped"}.get(self.action, "")
             if not self.decay_per_s > 0:
-                advice = f"settle about {self.settle_cycles} more cycles" if self.settle_cycles else "settle longer"
+                advice = (f"settle {'at least' if self.settle_at_least else 'about'} {self.settle_cycles} more cycles"
+                          if self.settle_cycles else "settle longer")
                 return (f"an unsettled {what}vibration of {si(self.size, self.unit)} {where} ({self.evidence}), "
                         f"not decaying measurably within the record: {advice}{done}")
             return (f"an unsettled {what}transient of {si(self.size, self.unit)} {where} at the record start, "
@@ -477,6 +480,7 @@ class _Line:
     decay: float          # sigma, 1/s (0 for a steady line)
     decay_se: float
     model: np.ndarray     # samples
+    decay_bound: float = math.nan   # a steady line: its decay rate's upper bound (fit + 2 standard errors), 1/s
 
 
 def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Line | None:
@@ -575,6 +579,8 @@ def _find_lines(q: np.ndarray, fs: float, f: float,
         is_transient = (decaying is not None and decaying.decay > DECAY_Z * decaying.decay_se
                         and math.exp(-decaying.decay * n / fs) < DECAY_FRACTION)
         ln = decaying if is_transient and decaying is not None else steady
+        if not is_transient and decaying is not None and decaying.decay_se > 0:
+            ln = replace(ln, decay_bound=max(decaying.decay, 0.0) + 2 * decaying.decay_se)
         k = round(ln.freq_Hz / f)
         if k >= 1 and abs(ln.freq_Hz - k * f) <= guard:       # moved onto a drive harmonic: not separable
             break
@@ -641,6 +647,7 @@ def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
     se = noise * math.sqrt(2.0 / n)
     for ln in lines:
         arts.append(Artefact("line_interference", ch, ln.amp, "removed", freq_Hz=ln.freq_Hz, snr=ln.amp / se,
+                             decay_bound_per_s=ln.decay_bound,
                              evidence=f"{ln.amp / se:.0f} standard errors, {ln.freq_Hz / f:.3f} x the drive frequency"))
     found: list[tuple] = [(ln.amp, ln.decay, ln.freq_Hz, f"a decaying sinusoid fitted, decay rate {ln.decay:.3g} +- "
               f"{ln.decay_se:.2g} /s", True) for ln in transients]
@@ -925,7 +932,8 @@ def _vibration_Hz(a: Artefact) -> bool:
     return a.kind == "unsettled_transient" and math.isfinite(a.freq_Hz)
 
 
-def attribute_lines(quality: list[tuple[str, StepQuality]]) -> list[tuple[str, StepQuality]]:
+def attribute_lines(quality: list[tuple[str, StepQuality]],
+                    resonances_Hz: tuple[float, ...] = ()) -> list[tuple[str, StepQuality]]:
     """Whose line is it?  The steps of one source in the order they were measured, with
     every ``line_interference`` that is not interference named what it is: the rig's own
     unsettled free vibration (decision record 0045).
@@ -934,9 +942,10 @@ def attribute_lines(quality: list[tuple[str, StepQuality]]) -> list[tuple[str, S
     0033); the source can.  A line at a mains frequency (50/60 Hz and harmonics,
     :func:`mains`) is interference.  Any other line is the rig's own motion when it is
     within ``MODE_REL`` of the frequency of a vibration of the step before (each frequency
-    change rings the same mode, whose frequency moves a little with the level) or of one
+    change rings the same mode, whose frequency moves a little with the level), of one
     that any step shows as the rig's (a decaying sinusoid fitted, or probe and accelerometer
-    seeing one motion); else it is interference from a steady source when it comes back at
+    seeing one motion), or of a resonance of the source's own response (``resonances_Hz``:
+    the most compliant frequency of each force level, where the rig rings); else it is interference from a steady source when it comes back at
     one frequency (within ``LINE_CLUSTER_REL``) in at least ``REPEAT_STEPS`` steps.  What is
     left, a line in one or two steps at frequencies no steady source explains, is the rig's
     own ringing too (pre-rolling friction damps little at small amplitude).  The rig's own
@@ -948,7 +957,9 @@ def attribute_lines(quality: list[tuple[str, StepQuality]]) -> list[tuple[str, S
                 if len({i2 for i2, b in lines if _same_line(a.freq_Hz, b.freq_Hz)}) >= REPEAT_STEPS}
     decays = [(a.freq_Hz, a.decay_per_s) for _, q in quality for a in q.artefacts
               if _vibration_Hz(a) and a.decay_per_s > 0]
-    modes = [(key, a.freq_Hz) for key, q in quality for a in q.artefacts if _vibration_Hz(a)]
+    modes = [(f"the {a.freq_Hz:.4g} Hz vibration of step {key}", a.freq_Hz)
+             for key, q in quality for a in q.artefacts if _vibration_Hz(a)]
+    modes += [(f"the {fr:.4g} Hz resonance of the measured response", float(fr)) for fr in resonances_Hz]
     vib: list[list[float]] = [[a.freq_Hz for a in q.artefacts if _vibration_Hz(a)] for _, q in quality]
     out = []
     for i, (key, q) in enumerate(quality):
@@ -964,7 +975,7 @@ def attribute_lines(quality: list[tuple[str, StepQuality]]) -> list[tuple[str, S
                 why = (f"at the frequency of the vibration of the step before ({quality[i - 1][0]}, "
                        f"{before[0]:.4g} Hz): the rig's own free vibration, not interference")
             elif mode:
-                why = (f"near the {mode[0][1]:.4g} Hz vibration of step {mode[0][0]}"
+                why = (f"near {mode[0][0]}"
                        + (f" and {len(mode) - 1} other(s)" if len(mode) > 1 else "")
                        + ", the rig's own mode: the rig's own free vibration, not interference")
             elif (i, id(a)) in repeated:
@@ -988,16 +999,24 @@ def attribute_lines(quality: list[tuple[str, StepQuality]]) -> list[tuple[str, S
 def _as_vibration(a: Artefact, q: StepQuality, why: str, decays: list[tuple[float, float]]) -> Artefact:
     """Line ``a`` of step ``q`` named an unsettled free vibration, with settle advice from
     the decay rates (frequency, rate) the source's fitted transients show."""
-    near = [r for fr, r in decays if abs(fr / a.freq_Hz - 1) <= MODE_REL] or [r for _, r in decays]
-    cycles, advice = 0, ""
-    if near and math.isfinite(a.snr) and math.isfinite(q.record_s) and math.isfinite(q.freq_Hz):
-        sigma = float(np.median(near))
+    near = [r for fr, r in decays if abs(fr / a.freq_Hz - 1) <= MODE_REL]
+    rates = near or [r for _, r in decays]
+    cycles, advice, least = 0, "", False
+    if not (math.isfinite(a.snr) and math.isfinite(q.record_s) and math.isfinite(q.freq_Hz)):
+        pass
+    elif rates:
+        sigma = float(np.median(rates))
         z = a.snr / max(1.0, sigma * q.record_s / 2)
         cycles = int(math.ceil(q.freq_Hz * math.log(z) / sigma)) if z > 1 else 0
-        advice = f"; settle advice from the decay rate {sigma:.3g} /s of the source's transients" + (
-            " near this frequency" if len(near) < len(decays) or all(abs(fr / a.freq_Hz - 1) <= MODE_REL
-                                                                     for fr, _ in decays) else "")
-    return replace(a, kind="unsettled_transient", settle_cycles=cycles,
+        advice = (f"; settle advice from the decay rate {sigma:.3g} /s of the source's transients"
+                  + (" near this frequency" if near else ""))
+    elif a.decay_bound_per_s > 0:     # no transient to learn from: the record's own bound, so at least this many
+        sigma = a.decay_bound_per_s
+        z = a.snr / max(1.0, sigma * q.record_s / 2)
+        cycles = int(math.ceil(q.freq_Hz * math.log(z) / sigma)) if z > 1 else 0
+        advice = f"; its decay rate is below {sigma:.3g} /s (fit + 2 standard errors)"
+        least = True
+    return replace(a, kind="unsettled_transient", settle_cycles=cycles, settle_at_least=least,
                    evidence=f"{a.evidence}; {why}{advice}")
 
 
@@ -1087,12 +1106,14 @@ def _other_cause(kind: str, ch: str, items, total: int) -> dict:
     where = _where(qs)
     if kind == "unsettled_transient":
         chans = sorted({a.channel for a in arts})
-        cyc = max(a.settle_cycles for a in arts)
+        worst = max(arts, key=lambda a: a.settle_cycles)
+        cyc = worst.settle_cycles
         tau = [1e3 / a.decay_per_s for a in arts if a.decay_per_s > 0]
         ft = [a.freq_Hz for a in arts if math.isfinite(a.freq_Hz)]
-        vib = f"a free vibration near {np.median(ft):.3g} Hz" if ft else "a free vibration"
+        vib = (f"the rig's own unsettled free vibration near {np.median(ft):.3g} Hz" if ft
+               else "the rig's own unsettled free vibration")
         const = f", time constant {_span(tau, 'ms')}" if tau else ""
-        advice = f"settle {cyc} more cycles" if cyc else "settle longer"
+        advice = f"settle {'at least ' if worst.settle_at_least else ''}{cyc} more cycles" if cyc else "settle longer"
         sentence = (f"steps {where} still vibrating at the record start ({vib}{const}, on the "
                     f"{' and '.join(LABEL[c] for c in chans)}) in {n} of {total} steps: {advice}; "
                     f"{fate} (transient removed or first periods dropped where the record allowed)")
