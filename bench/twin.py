@@ -300,8 +300,9 @@ def check_model(model: dict) -> None:
 def _free_vibration(cause: dict) -> str:
     """Why ``cause`` is the measured rig's own free vibration, which a twin never builds in
     (its plant rings by itself when its steps change), or '': an unsettled transient, or a
-    "line" no steady source explains (at no mains frequency and in fewer than
-    ``REPEAT_STEPS`` steps; an analysis.json written before decision 0045 named those lines)."""
+    "line" no steady source explains (in fewer than ``REPEAT_STEPS`` steps and not mains: the
+    fundamental, or a harmonic in at least 2 steps; an analysis.json written before decision
+    0045 named those lines)."""
     if cause["id"] == "unsettled_transient":
         return ("the measured rig's own free vibration, not yet settled at the record start: the twin's plant "
                 "rings by itself; settle longer rather than build it in")
@@ -309,9 +310,10 @@ def _free_vibration(cause: dict) -> str:
         return ""
     f = cause.get("parameters", {}).get("frequency", {}).get("value")
     steps = cause.get("evidence", {}).get("steps", [])
-    if f is None or mains(float(f)) or len(steps) >= REPEAT_STEPS:
+    src = mains(float(f)) if f is not None else ""
+    if f is None or len(steps) >= REPEAT_STEPS or (src and ("harmonic" not in src or len(steps) >= 2)):
         return ""
-    return (f"a {float(f):.4g} Hz line in {len(steps)} step(s) only, at no mains frequency: the measured rig's own "
+    return (f"a {float(f):.4g} Hz line in {len(steps)} step(s) only, not mains: the measured rig's own "
             f"free vibration, not interference (decision 0045); not built into the twin")
 
 

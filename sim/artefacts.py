@@ -940,7 +940,8 @@ def attribute_lines(quality: list[tuple[str, StepQuality]],
 
     One step cannot tell a weak free vibration seen by one sensor from a hum (decision
     0033); the source can.  A line at a mains frequency (50/60 Hz and harmonics,
-    :func:`mains`) is interference.  Any other line is the rig's own motion when it is
+    :func:`mains`) is interference: the fundamental, or a harmonic when the family shows in
+    at least 2 steps.  Any other line is the rig's own motion when it is
     within ``MODE_REL`` of the frequency of a vibration of the step before (each frequency
     change rings the same mode, whose frequency moves a little with the level), of one
     that any step shows as the rig's (a decaying sinusoid fitted, or probe and accelerometer
@@ -953,6 +954,18 @@ def attribute_lines(quality: list[tuple[str, StepQuality]],
     from the decay rate of the source's fitted transients near its frequency (else of all
     of them), counted as :func:`settle_cycles` counts."""
     lines = [(i, a) for i, (_, q) in enumerate(quality) for a in q.artefacts if a.kind == "line_interference"]
+    family: dict[str, set[int]] = {}             # mains base -> steps with a line of its family
+    for i, a in lines:
+        if mains(a.freq_Hz):
+            family.setdefault(mains(a.freq_Hz).split(" (")[0], set()).add(i)
+
+    def is_mains(f: float) -> bool:
+        """A mains frequency whose family the source shows: the fundamental, or a harmonic
+        (a window of 0.5 % that a stray line at a high frequency can fall into) seen with
+        its family in at least 2 steps."""
+        src = mains(f)
+        return bool(src) and ("harmonic" not in src or len(family[src.split(" (")[0]]) >= 2)
+
     repeated = {(i, id(a)) for i, a in lines
                 if len({i2 for i2, b in lines if _same_line(a.freq_Hz, b.freq_Hz)}) >= REPEAT_STEPS}
     decays = [(a.freq_Hz, a.decay_per_s) for _, q in quality for a in q.artefacts
@@ -965,7 +978,7 @@ def attribute_lines(quality: list[tuple[str, StepQuality]],
     for i, (key, q) in enumerate(quality):
         arts, changed = [], False
         for a in q.artefacts:
-            if a.kind != "line_interference" or mains(a.freq_Hz):
+            if a.kind != "line_interference" or is_mains(a.freq_Hz):
                 arts.append(a)
                 continue
             near = lambda fv: abs(fv / a.freq_Hz - 1) <= MODE_REL          # noqa: E731

@@ -205,8 +205,9 @@ def test_two_causes_for_one_plant_key_are_not_merged_silently():
 def test_the_twin_never_builds_the_rigs_own_free_vibration():
     """Issue 25: a 112.7 Hz "line" the carriage's ringing left in one step was built into a
     twin as a permanent accelerometer hum.  A line from a steady source (mains, or one
-    frequency in at least 3 steps) is built; a line in fewer steps at no mains frequency (an
-    older analysis.json) and an unsettled transient are listed as the rig's own vibration."""
+    frequency in at least 3 steps) is built; a line in fewer steps, not mains (the fundamental,
+    or a harmonic in 2 steps; an older analysis.json) and an unsettled transient are listed as
+    the rig's own vibration."""
     from bench.twin import apply_causes
     p = lambda v: dict(value=v, low=v, high=v)          # noqa: E731
     base = dict(F_s_N=10.0, x_s_m=10e-6, n=1.5, mass_kg=10.0)
@@ -217,7 +218,9 @@ def test_the_twin_never_builds_the_rigs_own_free_vibration():
                     evidence=dict(steps=[f"s{i}" for i in range(steps)]))
 
     for cause, built in ((line(112.7, 1), False), (line(112.7, 2), False), (line(112.7, 3), True),
-                         (line(150.0, 1), True),            # 50 Hz mains, harmonic 3: interference in one step too
+                         (line(50.0, 1), True),             # 50 Hz mains: interference in one step too
+                         (line(150.0, 1), False),           # harmonic 3 of mains in one step: a stray line
+                         (line(150.0, 2), True),            # ... in two: the mains family
                          (dict(id="unsettled_transient", channel="disp", parameters={}), False)):
         model, applied, missed = apply_causes(base, [cause], ctx)
         assert ("line_freq_Hz" in model) == built, cause

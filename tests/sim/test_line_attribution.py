@@ -161,3 +161,16 @@ def test_a_repeated_line_near_the_mode_another_step_shows_as_one_motion_is_that_
     assert "vibration of step s5" in vib[0][0].evidence and "the rig's own mode" in vib[0][0].evidence
     assert "the vibration of the step before (s0" in vib[1][0].evidence       # and so on down the sweep
     assert [c["id"] for c in artefact_causes(list(after.items()))] == ["unsettled_transient"]
+
+
+def test_a_stray_line_in_one_step_near_a_high_mains_harmonic_is_not_mains():
+    """Harmonic 9 of 50 Hz has a window of +-2.25 Hz (0.5 %); a clean independent case had
+    one line at 450.9 Hz in one step.  A harmonic is mains when its family shows in at least
+    two steps; a fundamental alone is mains in one step."""
+    quality = [(f"s{i}", step(f, 500 + i, sine(450.9, 12e-9) if i == 3 else None)) for i, f in enumerate(DRIVES)]
+    assert [round(a.freq_Hz) for a in kinds(quality[3][1], "line_interference")] == [451]
+    after = dict(attribute_lines(quality))
+    assert not kinds(after["s3"], "line_interference") and len(kinds(after["s3"], "unsettled_transient")) == 1
+    quality[5] = ("s5", step(DRIVES[5], 505, sine(50.0, 12e-9)))    # the fundamental in one step: mains
+    (hum,) = kinds(dict(attribute_lines(quality))["s5"], "line_interference")
+    assert hum.freq_Hz == pytest.approx(50.0, abs=0.1)
