@@ -5,7 +5,8 @@ sim/errors.py: 0 done; 1 runtime failure (an instrument error, a failed run, `be
 found problems; an unexpected exception is reported as an internal error); 2 usage or
 configuration error (a bad argument, file or value: the message names it); 3 stopped by a
 limit (a plan the rig's limits refuse, or a run aborted by the safety supervisor); 130
-interrupted (Ctrl-C, SIGTERM).  Errors are one line on stderr; `--debug` adds the traceback.
+interrupted (Ctrl-C, SIGTERM, SIGHUP, SIGQUIT).  Errors are one line on stderr; `--debug`
+adds the traceback.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from pathlib import Path
 from sim.errors import BenchError, ConfigurationError, EnvelopeError, LimitError, RunDirectoryError
 
 from . import __version__
-from .terminal import Progress, end_line, setup_logging
+from .terminal import Progress, end_line, setup_logging, tolerant_streams
 
 log = logging.getLogger(__name__)
 
@@ -30,14 +31,26 @@ class ExitCode(IntEnum):
     FAILURE = 1          # runtime failure; `bench check` found problems
     USAGE = 2            # bad argument, file or value
     LIMIT = 3            # refused or aborted by a limit
-    INTERRUPTED = 130    # Ctrl-C or SIGTERM
+    INTERRUPTED = 130    # Ctrl-C, SIGTERM, SIGHUP (terminal closed), SIGQUIT
 
 
 def cmd_paper(args) -> int:
     from sim.paper import reproduce
 
     out = Path(args.out)
-    files = reproduce(out, quick=args.quick, progress=Progress("paper figures"))
+    pitch_model, measured = None, None
+    if args.rig:
+        from .config import load_rig
+        from .rig_model import paper_model
+        pitch_model = paper_model(load_rig(Path(args.rig)), args.rig)
+    if args.runs:
+        from .reports import run_modes
+        measured = []
+        for r in args.runs:
+            rm = run_modes(Path(r), model=False)
+            measured.append({"label": rm.label, "rows": rm.rows()})
+    files = reproduce(out, quick=args.quick, progress=Progress("paper figures"), pitch_model=pitch_model,
+                      measured=measured)
     print(f"wrote {len(files)} files to {out}/ (start with {out}/README.md)")
     return 0
 
@@ -73,12 +86,28 @@ def _load_configs(args):
 
 
 def cmd_dry_run(args) -> int:
-    from .session import EnvelopeError, check_envelope, envelope, envelope_report
+    from .session import EnvelopeError, check_envelope, envelope, envelope_report, planned_steps
 
     plan, rig = _load_configs(args)
     steps = plan.schedule()
-    print(f"plan '{plan.name}': {len(plan.levels_N)} levels x {len(plan.freqs_Hz)} frequencies "
-          f"({plan.direction}) = {len(steps)} steps; rig '{rig.name}'{' (simulated)' if rig.simulated else ''}")
+    if plan.backbone:
+        b = plan.backbone
+        print(f"plan '{plan.name}': phase resonance, {len(plan.levels_N)} levels from {b.start_Hz:g} Hz in the window "
+              f"{b.min_Hz:g}-{b.max_Hz:g} Hz (envelope at both ends); rig '{rig.name}'"
+              f"{' (simulated)' if rig.simulated else ''}")
+    else:
+        n, refined, seconds = planned_steps(plan)
+        runs = (f"{n} measured (adaptive: {plan.adaptive_per_sweep} per sweep, chosen online)"
+                if plan.adaptive_per_sweep and n != len(steps) else f"{n} measured")
+        if refined:
+            runs += (f" + at most {refined} refinement steps ([plan.resonance]: {plan.refine_steps} per mode and level, "
+                     f"modes {', '.join(plan.refine_modes)}, tolerance {100 * plan.refine_tolerance:g} %)")
+        print(f"plan '{plan.name}': {len(plan.levels_N)} levels x {len(plan.freqs_Hz)} frequencies "
+              f"({plan.direction}) = {len(steps)} steps, {runs}; rig '{rig.name}'{' (simulated)' if rig.simulated else ''}")
+        print(f"expected rig time: about {_duration(seconds)}"
+              + (" with the refinement budget used up" if refined else "")
+              + " (force control, settling, measured blocks and ramps; a simulated rig runs faster or slower "
+                "than real time)")
     print(envelope_report(envelope(plan, rig)))
     from procedures.online_id import identifiability
     try:
@@ -91,12 +120,37 @@ def cmd_dry_run(args) -> int:
               f"skipped (infeasible = \"skip\")")
     else:
         print("envelope ok: the rig's limits hold every step")
-    for w in identifiability(runnable, rig):
+    for w in identifiability(runnable, rig) if plan.procedure == "stepped_sine" else []:
         print(f"identifiability warning: {w}")
     return 0
 
 
+def _duration(seconds: float) -> str:
+    m, s = divmod(int(round(seconds)), 60)
+    h, m = divmod(m, 60)
+    return f"{h} h {m:02d} min" if h else f"{m} min {s:02d} s" if m else f"{s} s"
+
+
 def _run(args, resume: bool) -> int:
+    from .signals import SignalLatch
+
+    with SignalLatch().installed():       # SIGHUP, SIGQUIT, SIGTERM as Ctrl-C from the start
+        return _session(args, resume)
+
+
+def _session(args, resume: bool) -> int:
+    from contextlib import ExitStack
+
+    with ExitStack() as held:
+        if resume:           # the run directory is ours before its steps are counted
+            from . import runlock
+            from .storage import RunStore
+            RunStore.open(Path(args.run))
+            held.enter_context(runlock.run_dir(Path(args.run)))
+        return _session_held(args, resume)
+
+
+def _session_held(args, resume: bool) -> int:
     from .session import run_plan
     from .storage import RunStatus, RunStore
 
@@ -117,16 +171,19 @@ def _run(args, resume: bool) -> int:
         plan = parse_plan({"plan": plan_toml(meta["plan"])}, f"{args.run}/run.json")
         rig = parse_rig({"rig": rig_toml(meta["rig"])}, f"{args.run}/run.json")
         out, seed = Path(args.run), meta.get("sim_seed")
+        labels = None
     else:
         plan, rig = _load_configs(args)
         out, seed = Path(args.out), args.seed
+        labels = parse_labels(getattr(args, "label", None))
     if rig.simulated:
         _warm_up()
     before = _event_count(out)
     watch = _start_watch(out, args)
     try:
-        store = run_plan(plan, rig, out, resume=resume, progress=Progress("stepped sine"), sim_seed=seed,
-                         retry_skipped=bool(getattr(args, "retry_skipped", False)))
+        store = run_plan(plan, rig, out, resume=resume,
+                         progress=Progress("phase resonance" if plan.procedure == "phase_resonance" else "stepped sine"),
+                         sim_seed=seed, retry_skipped=bool(getattr(args, "retry_skipped", False)), labels=labels)
     finally:
         if watch:
             watch.close()
@@ -209,15 +266,13 @@ def cmd_watch(args) -> int:
         print(f"waiting for {run_dir} to appear ... (Ctrl-C stops)", flush=True)
     elif not (run_dir / "run.json").is_file():
         log.warning("%s has no run.json yet: the page waits for the run to start", run_dir)
-    import signal
-
-    from .signals import handling
+    from .signals import ENDING, handling
 
     server = _watch_server(run_dir, args.host, args.port)
-    # The page serves from its own thread; Ctrl-C and SIGTERM only raise a flag (no lock
+    # The page serves from its own thread; the ending signals only raise a flag (no lock
     # the main thread might hold, no exception a finalizer could drop: bench/signals.py).
     ended = []
-    with handling(lambda signum, frame: ended.append(signum), signal.SIGINT, signal.SIGTERM):
+    with handling(lambda signum, frame: ended.append(signum), *ENDING):
         server.start()
         print(f"watch: {server.url}  (Ctrl-C ends the page, not the run)", flush=True)
         try:
@@ -248,13 +303,17 @@ def cmd_resume(args) -> int:
 
 def cmd_demo(args) -> int:
     """The main job: the default plan on the simulated rig, then its report."""
+    from . import runlock
+    from .demo import check_out_dir, clear_earlier_demo
+
     args.plan = args.rig = None
     args.seed = None
     out = Path(args.out)
-    if out.exists() and any(out.iterdir()):
-        import shutil
-        shutil.rmtree(out)   # the demo always starts afresh
-    return _run(args, resume=False)
+    if not check_out_dir(out):       # refuses (deleting nothing) unless out holds only an earlier demo's files
+        return _run(args, resume=False)
+    with runlock.run_dir(out):       # not while another session uses it
+        clear_earlier_demo(out)
+        return _run(args, resume=False)
 
 
 def cmd_report(args) -> int:
@@ -340,8 +399,14 @@ def cmd_check(args) -> int:
     skipped = [] if acc is None else acc.skipped
     for p in skipped:
         print(f"{p.kind:>9}  {p.key}: {p.reason}")
+    tail = _not_yet_measured(store, acc) if acc is not None else []
     for p in problems:
-        print(f"{p.kind:>9}  {p}")
+        if p not in tail:
+            print(f"{p.kind:>9}  {p}")
+    if tail:
+        last = max((k for k in acc.intact), default=None)
+        print(f"{'missing':>9}  interrupted after step {last or '(none)'}; {len(tail)} not yet measured "
+              f"(the plan's steps after it; bench resume {store.path} measures them)")
     if acc is None:
         print(f"{store.path}: {len(store.step_files())} step result files; run.json unreadable, so the steps "
               f"cannot be counted against the plan; {len(problems)} problem{'s' if len(problems) != 1 else ''}")
@@ -355,6 +420,26 @@ def cmd_check(args) -> int:
               + ("counted as problems (--strict)" if args.strict else
                  "not a problem (--strict counts them); bench resume --retry-skipped measures them again"))
     return ExitCode.FAILURE if problems or (skipped and args.strict) else ExitCode.OK
+
+
+def _not_yet_measured(store, acc) -> list:
+    """The missing steps of a run that was stopped (not completed) that are simply the
+    plan's steps after the last one stored, with no file at all: one line says so instead
+    of one line each.  Any other missing step is listed by key."""
+    from .storage import RunStatus, stored_plan
+    try:
+        meta = store.metadata
+    except Exception:  # noqa: BLE001 - no plan to judge against: list every step
+        return []
+    plan = stored_plan(meta)
+    if plan is None or meta.get("status") == RunStatus.COMPLETED or plan.adaptive_per_sweep:
+        return []
+    order = [s.key for s in plan.schedule()]
+    present = {k for k in acc.intact} | {p.key for p in acc.damaged} | {p.key for p in acc.skipped}
+    last = max((order.index(k) for k in present if k in order), default=-1)
+    tail = [p for p in acc.missing if p.reason.startswith("missing: neither") and p.key in order
+            and order.index(p.key) > last]
+    return tail if len(tail) > 1 else []
 
 
 def cmd_warmup(args) -> int:
@@ -410,6 +495,33 @@ def cmd_compare(args) -> int:
     return ExitCode.OK if result["overall"]["passed"] else ExitCode.FAILURE
 
 
+def cmd_modes(args) -> int:
+    """Each run's modes per force level into OUT/modes.csv, with the seed's Figs. 13 and 17."""
+    from .reports import write_modes
+    runs, files = write_modes([Path(r) for r in args.runs], Path(args.out), model=not args.no_model)
+    for r in runs:
+        for e in r.modes:
+            if e.ok:
+                print(f"{r.label}: {e.mode} at {e.level_N:g} N: {e.resonance_Hz:.5g} Hz "
+                      f"[{e.resonance_low_Hz:.5g}, {e.resonance_high_Hz:.5g}], damping ratio "
+                      f"{100 * e.damping_ratio:.3g} % [{100 * e.damping_ratio_low:.3g}, {100 * e.damping_ratio_high:.3g}]")
+            else:
+                print(f"{r.label}: {e.mode} at {e.level_N:g} N: {e.status}" + (f" ({e.note})" if e.note else ""))
+    print("wrote " + ", ".join(str(f) for f in files))
+    return ExitCode.OK
+
+
+def parse_labels(items: list[str] | None) -> dict[str, str]:
+    """``--label key=value`` (repeatable) -> {key: value}; a malformed one is a usage error."""
+    out: dict[str, str] = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigurationError(f"--label {item!r}: expected KEY=VALUE, e.g. --label lubricant=\"ISO VG 32\"")
+        out[key.strip()] = value.strip()
+    return out
+
+
 def _add_twin_parsers(sub) -> None:
     s = sub.add_parser("twin", help="write rig.toml and plan.toml of a simulated twin of the rig that measured "
                                     "SOURCE (identified friction, named causes, noise)")
@@ -446,7 +558,8 @@ EPILOG = """\
 exit codes: 0 done; 1 failure (an instrument error, a failed run, `bench check` found
 problems); 2 usage or configuration error (the message names the file, key and allowed
 values); 3 stopped by a limit (refused before the output went on, or aborted); 130
-interrupted (Ctrl-C, SIGTERM).  The output is switched off on every exit.
+interrupted (Ctrl-C, SIGTERM, SIGHUP: the terminal closed, SIGQUIT).  The output is
+switched off on every exit.
 -v, --debug and -vv may come before or after the command."""
 
 
@@ -484,10 +597,14 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("paper", help="redraw the seed paper's numerical figures (PNG + CSV)")
     s.add_argument("--out", default="out/paper", help="directory for the figures, their CSV and a README")
     s.add_argument("--quick", action="store_true", help="coarse grids (seconds instead of minutes)")
+    s.add_argument("--rig", help="rig TOML with a pitching mode in [rig.model]: Figs. 15 and 17 at its parameters "
+                                 "(default: bench/defaults/sim_rig_pitch.toml's)")
+    s.add_argument("--runs", nargs="+", metavar="RUN", help="run directories whose measured modes are drawn over "
+                                                             "Figs. 15 and 17 (legends: their --label)")
     s.set_defaults(func=cmd_paper)
 
     s = sub.add_parser("demo", help="the main job: the default plan on the simulated rig, with its report")
-    s.add_argument("--out", default="out/demo", help="run directory (emptied first: the demo starts afresh)")
+    s.add_argument("--out", default="out/demo", help="run directory (an earlier demo run there is deleted first; anything else is refused)")
     _add_watch_options(s)
     s.set_defaults(func=cmd_demo)
 
@@ -502,6 +619,9 @@ def build_parser() -> argparse.ArgumentParser:
             s.add_argument("--out", required=True, help="new run directory (bench resume continues it)")
             s.add_argument("--seed", type=int, help="noise seed of a simulated rig (default: the rig file's)")
             s.add_argument("--no-report", action="store_true", help="do not write the report at the end")
+            s.add_argument("--label", action="append", metavar="KEY=VALUE",
+                           help="a label kept in run.json (repeatable), used by the legends of `bench modes`, "
+                                "e.g. --label lubricant=\"ISO VG 32\"")
             _add_watch_options(s)
         s.set_defaults(func=func)
 
@@ -575,6 +695,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     _add_twin_parsers(sub)
 
+    s = sub.add_parser("modes", help="each mode's resonance and damping ratio per force level of one or more runs: "
+                                     "modes.csv and the seed's Figs. 13 and 17 from the measurements")
+    s.add_argument("runs", nargs="+", metavar="RUN", help="run directories (legends use each run's --label)")
+    s.add_argument("--out", required=True, help="output directory for modes.csv and the figures")
+    s.add_argument("--no-model", action="store_true", help="leave out the rig model's prediction (simulated rigs)")
+    s.set_defaults(func=cmd_modes)
+
     from .studies.cli import add_parsers as add_study_parsers
     add_study_parsers(sub, Progress)
     return _with_common(p)
@@ -642,6 +769,11 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as e:               # usage error or --help: argparse has printed it
         return int(e.code or 0)
+    with tolerant_streams():            # a terminal that is gone changes nothing the bench does
+        return _main(args)
+
+
+def _main(args) -> int:
     handler = setup_logging(args.verbose)
     try:
         return int(args.func(args))
