@@ -14,8 +14,15 @@ displacement far above resonance, an unsettled free vibration) cannot tell a dif
 of the tolerance from noise, and is reported but not gated.  The overall figure per
 quantity is the rms of the relative complex difference over the judged steps (the rms
 over all matched steps is reported beside it); ``within_tolerance`` holds when both the
-compliance's and the accelerance's are at most the tolerance (CLI exit 0, else 1; no
-judged step is exit 1).  Writes ``compare.json``
+compliance's and the accelerance's are at most the tolerance.
+
+*Coverage*: the share of the reference's usable steps that found a match.  Steps the other
+source lacks (never measured, or rejected there, which is said with its reason) cannot
+agree or disagree, so ``passed`` (CLI exit 0, else 1) also needs the coverage to reach
+``min_coverage`` (default 1: every usable step of the reference matched).  The unmatched
+ones are named, and those at the resonance (within the half-power band of their force
+level's most compliant step: where a twin that rejects its resonance steps hides its
+worst difference) are named as such.  Writes ``compare.json``
 (schema in docs/twin.md) and ``compare.html``.  Decision record 0026.
 """
 
@@ -40,6 +47,8 @@ LEVEL_TOL = 0.05       # relative force-level difference of matched steps
 FREQ_TOL = 0.005       # relative frequency difference of matched steps
 QUANTITIES = ("compliance", "accelerance")
 JUDGED_NOISE = 0.5     # a step is judged when its noise alone gives at most half the tolerance
+LEVEL_GROUP = 1.15     # reference levels within 15 % are one force level (as the comparison page)
+RESONANCE_BAND = 1 / math.sqrt(2)   # a step within the half-power band of its level's peak compliance
 
 
 @dataclass(frozen=True)
@@ -107,11 +116,57 @@ def _describe(src: Source) -> dict:
                 rejected=[dict(step=r.step, reason=r.reason) for r in src.rejected])
 
 
-def compare_sources(reference, other, tolerance: float = 0.02) -> dict:
+def resonance_keys(steps: list[MeasuredStep]) -> set[str]:
+    """Keys of the steps at the resonance: within the half-power band (|X1/P1| at least
+    1/sqrt(2) of the peak) of their force level's most compliant step."""
+    levels: list[float] = []
+    for lv in sorted(s.level_N for s in steps):
+        if not levels or lv > LEVEL_GROUP * levels[-1]:
+            levels.append(lv)
+    out: set[str] = set()
+    for lv in levels:
+        group = [s for s in steps if max(x for x in levels if x <= s.level_N * (1 + 1e-9)) == lv]
+        mag = {s.key: abs(Frf.of(s).compliance) for s in group}
+        peak = max(mag.values())
+        out |= {k for k, m in mag.items() if m >= RESONANCE_BAND * peak}
+    return out
+
+
+def _why_unmatched(r: MeasuredStep, other: Source) -> str:
+    """Why reference step ``r`` has no match: rejected in the other (with its reason) when a
+    rejected step of the other has its level, frequency and direction, else not measured there."""
+    for x in other.rejected:
+        q = x.quality
+        if q is None or not (math.isfinite(q.freq_Hz) and math.isfinite(q.level_N) and q.level_N > 0):
+            continue
+        if abs(q.freq_Hz / r.freq_Hz - 1) <= FREQ_TOL and abs(q.level_N / r.level_N - 1) <= LEVEL_TOL:
+            return f"rejected in the other ({x.step}): {x.reason}"
+    return "not in the other"
+
+
+def coverage(ref: Source, oth: Source, pairs: list[tuple[int, int]], min_coverage: float) -> dict:
+    """How much of the reference the comparison covers, and what it does not (module doc)."""
+    matched = {i for i, _ in pairs}
+    res = resonance_keys(ref.steps)
+    missing = [dict(step=s.key, level_N=float(s.level_N), freq_Hz=float(s.freq_Hz), direction=s.direction,
+                    resonance=s.key in res, why=_why_unmatched(s, oth))
+               for k, s in enumerate(ref.steps) if k not in matched]
+    frac = len(matched) / len(ref.steps)
+    return dict(reference_steps=len(ref.steps), matched=len(matched), fraction=frac, min_coverage=min_coverage,
+                covered=bool(frac >= min_coverage - 1e-12), unmatched=missing,
+                resonance_unmatched=[m["step"] for m in missing if m["resonance"]],
+                reference_rejected=len(ref.rejected))
+
+
+def compare_sources(reference, other, tolerance: float = 0.02, min_coverage: float = 1.0) -> dict:
     """The comparison as a dict (compare.json's schema).  ``reference``, ``other``: paths, or
-    sources already read by :func:`bench.sources.load_source`."""
+    sources already read by :func:`bench.sources.load_source`.  ``min_coverage``: the share
+    of the reference's usable steps that must be matched for the comparison to pass."""
     if not (math.isfinite(tolerance) and tolerance > 0):
         raise ConfigurationError(f"--tolerance must be a positive fraction (0.02 = 2 %), got {tolerance!r}")
+    if not (math.isfinite(min_coverage) and 0 < min_coverage <= 1):
+        raise ConfigurationError(f"--min-coverage must be a fraction in (0, 1] (1 = every usable step of the "
+                                 f"reference matched), got {min_coverage!r}")
     srcs = []
     for p in (reference, other):
         if isinstance(p, Source):
@@ -149,11 +204,14 @@ def compare_sources(reference, other, tolerance: float = 0.02) -> dict:
     rms = [overall[q]["rms_rel_diff"] for q in QUANTITIES]
     worst = None if None in rms else max(rms)
     matched_r, matched_o = {i for i, _ in pairs}, {j for _, j in pairs}
+    cov = coverage(ref, oth, pairs, min_coverage)
+    within = worst is not None and worst <= tolerance
     return dict(schema=SCHEMA, reference=_describe(ref), other=_describe(oth), tolerance=tolerance,
                 matching=dict(level_rel=LEVEL_TOL, freq_rel=FREQ_TOL), matched=len(pairs),
                 unmatched_reference=[s.key for k, s in enumerate(ref.steps) if k not in matched_r],
                 unmatched_other=[s.key for k, s in enumerate(oth.steps) if k not in matched_o],
-                overall=dict(overall, rms_rel_diff=worst, within_tolerance=worst is not None and worst <= tolerance),
+                coverage=cov,
+                overall=dict(overall, rms_rel_diff=worst, within_tolerance=within, passed=within and cov["covered"]),
                 steps=steps)
 
 
@@ -161,10 +219,28 @@ def _pct(x) -> str:
     return "n/a" if x is None else f"{100 * x:.3g} %"
 
 
+def coverage_text(cov: dict) -> list[str]:
+    """The coverage in words: how many of the reference's usable steps were compared, which
+    were not and why, and whether they are the resonance."""
+    lines = [f"coverage: {cov['matched']} of the reference's {cov['reference_steps']} usable steps matched "
+             f"({100 * cov['fraction']:.3g} %; needed {100 * cov['min_coverage']:.3g} %)"]
+    if cov["unmatched"]:
+        res = cov["resonance_unmatched"]
+        if res:
+            lines.append(f"{len(res)} of the unmatched steps are at the resonance (within the half-power band of "
+                         f"their level's peak compliance), where the rig differs most: {', '.join(res)}")
+        for m in cov["unmatched"]:
+            lines.append(f"  unmatched {m['step']} ({m['level_N']:.3g} N, {m['freq_Hz']:.4g} Hz"
+                         f"{', ' + m['direction'] if m['direction'] else ''}"
+                         f"{', resonance' if m['resonance'] else ''}): {m['why']}")
+    return lines
+
+
 def summary(result: dict) -> str:
     o = result["overall"]
+    cov = result["coverage"]
     lines = [f"{result['matched']} steps matched ({len(result['unmatched_reference'])} of the reference and "
-             f"{len(result['unmatched_other'])} of the other unmatched)"]
+             f"{len(result['unmatched_other'])} of the other unmatched)"] + coverage_text(cov)
     for q in QUANTITIES:
         x = o[q]
         lines.append(f"{q:>11}: rms difference {_pct(x['rms_rel_diff'])} over the {x['judged']} steps precise enough "
@@ -177,6 +253,10 @@ def summary(result: dict) -> str:
     else:
         lines.append(f"{'within' if o['within_tolerance'] else 'OUTSIDE'} the tolerance of "
                      f"{100 * result['tolerance']:g} % (larger rms {_pct(o['rms_rel_diff'])})")
+    if not cov["covered"]:
+        lines.append(f"NOT PASSED: only {100 * cov['fraction']:.3g} % of the reference's usable steps were compared "
+                     f"(--min-coverage {cov['min_coverage']:g})"
+                     + (", the resonance among the missing" if cov["resonance_unmatched"] else ""))
     return "\n".join(lines) + "\n"
 
 
@@ -185,10 +265,11 @@ def default_out_dir(other: Path) -> Path:
     return other / "compare" if other.is_dir() else other.parent / f"{other.stem}_compare"
 
 
-def write_compare(reference: Path, other: Path, out: Path | None = None, tolerance: float = 0.02) -> tuple[dict, Path]:
+def write_compare(reference: Path, other: Path, out: Path | None = None, tolerance: float = 0.02,
+                  min_coverage: float = 1.0) -> tuple[dict, Path]:
     """Compare, write compare.json and compare.html to ``out``; (result, out)."""
     from .reports import write_compare_html
-    result = compare_sources(reference, other, tolerance)
+    result = compare_sources(reference, other, tolerance, min_coverage)
     out = Path(out) if out else default_out_dir(Path(other))
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "compare.json", result)

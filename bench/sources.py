@@ -18,7 +18,10 @@ one-period averaged records (for loop plots), and a periodicity score.
 Before the harmonics, :func:`sim.artefacts.assess_step` looks at the time records for
 measurement artefacts: interference lines (fitted and removed), offset drift (removed),
 unsettled transients (the first periods dropped, or the step rejected with the settle
-cycles it needs), clipping and drop-outs (rejected).  Its :class:`~sim.artefacts.StepQuality`
+cycles it needs), clipping and drop-outs (rejected); then, over the steps in the order they
+were measured, :func:`sim.artefacts.attribute_lines` names a line that no steady source
+explains (mains, or one frequency in several steps) the rig's own unsettled free vibration.
+Its :class:`~sim.artefacts.StepQuality`
 (usable / flagged / rejected, reasons naming the channel) is the one notion of step
 quality: ``bench analyze`` and the run report both show it (``Source.quality``).
 
@@ -40,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.artefacts import StepQuality, assess_step
+from sim.artefacts import StepQuality, assess_step, attribute_lines
 from sim.errors import ConfigurationError, RunDirectoryError
 from sim.identify import StepHarmonics
 
@@ -146,8 +149,10 @@ def _load_run(path: Path) -> Source:
     except (OSError, ValueError) as e:         # json.JSONDecodeError is a ValueError
         raise RunDirectoryError(f"{path}: cannot read the run's metadata or step results: {e}") from e
     src.rejected += [Rejected(p.key or p.path.name, f"damaged: {p}") for p in store.problems]
+    order = []
     for r in results:
         key = str(r.get("key", "?"))
+        order.append(key)
         try:
             raw = store.raw(key)
         except Exception as e:  # noqa: BLE001 - a damaged block rejects its step, not the run
@@ -163,8 +168,40 @@ def _load_run(path: Path) -> Source:
                                            r.get("target_force_N"), r.get("direction", "")))
         except (ValueError, KeyError, TypeError) as e:
             src.rejected.append(Rejected(key, str(e), getattr(e, "quality", None)))
+    _attribute_lines(src, order)
     _log_rejections(src)
     return src
+
+
+def resonances_Hz(steps: list[MeasuredStep], group: float = 1.15) -> tuple[float, ...]:
+    """The frequency of the most compliant step (|X1/P1|) of each force level (levels within
+    15 % are one), where it lies inside that level's frequencies (not at an end)."""
+    levels: list[float] = []
+    for lv in sorted(s.level_N for s in steps if s.level_N > 0):
+        if not levels or lv > group * levels[-1]:
+            levels.append(lv)
+    out = []
+    for lv in levels:
+        g = sorted((s for s in steps if s.level_N > 0 and max(x for x in levels if x <= s.level_N * (1 + 1e-9)) == lv),
+                   key=lambda s: s.freq_Hz)
+        mag = [abs(s.harmonics.disp[0] / s.harmonics.force[0]) if abs(s.harmonics.force[0]) > 0 else 0.0 for s in g]
+        k = int(np.argmax(mag)) if mag else -1
+        if 0 < k < len(g) - 1:
+            out.append(float(g[k].freq_Hz))
+    return tuple(out)
+
+
+def _attribute_lines(src: Source, order: list[str]) -> None:
+    """Each step's lines attributed over the source's steps in measured ``order``
+    (:func:`sim.artefacts.attribute_lines`): a step's quality is replaced where a line
+    turned out to be the rig's own free vibration."""
+    by = dict(src.quality())
+    new = dict(attribute_lines([(k, by[k]) for k in order if k in by], resonances_Hz(src.steps)))
+    for s in src.steps:
+        s.quality = new.get(s.key, s.quality)
+    for r in src.rejected:
+        if r.quality is not None:
+            r.quality = new.get(r.step, r.quality)
 
 
 # ---------------------------------------------------------------------------- UFF58
@@ -312,11 +349,13 @@ def _load_uff(path: Path) -> Source:
         log.info("%s: %d dataset-58 functions not of type 1 (time response) ignored",
                  path, len(records) - len(times))
     src = Source(path=path, kind="uff58")
-    for key, recs in _group(times):
+    groups = _group(times)
+    for key, recs in groups:
         try:
             src.steps.append(_uff_step(key, recs))
         except ValueError as e:
             src.rejected.append(Rejected(key, str(e), getattr(e, "quality", None)))
+    _attribute_lines(src, [k for k, _ in groups])
     _log_rejections(src)
     return src
 

@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.artefacts import REPEAT_STEPS, mains
 from sim.discrepancy.analysis import level_groups
 from sim.errors import ConfigurationError
 from sim.rig import RigModel
@@ -298,6 +299,26 @@ def check_model(model: dict) -> None:
     parse_rig(rig, "twin")
 
 
+def _free_vibration(cause: dict) -> str:
+    """Why ``cause`` is the measured rig's own free vibration, which a twin never builds in
+    (its plant rings by itself when its steps change), or '': an unsettled transient, or a
+    "line" no steady source explains (in fewer than ``REPEAT_STEPS`` steps and not mains: the
+    fundamental, or a harmonic in at least 2 steps; an analysis.json written before decision
+    0045 named those lines)."""
+    if cause["id"] == "unsettled_transient":
+        return ("the measured rig's own free vibration, not yet settled at the record start: the twin's plant "
+                "rings by itself; settle longer rather than build it in")
+    if cause["id"] != "line_interference":
+        return ""
+    f = cause.get("parameters", {}).get("frequency", {}).get("value")
+    steps = cause.get("evidence", {}).get("steps", [])
+    src = mains(float(f)) if f is not None else ""
+    if f is None or len(steps) >= REPEAT_STEPS or (src and ("harmonic" not in src or len(steps) >= 2)):
+        return ""
+    return (f"a {float(f):.4g} Hz line in {len(steps)} step(s) only, not mains: the measured rig's own "
+            f"free vibration, not interference (decision 0045); not built into the twin")
+
+
 def apply_causes(model: dict, causes: list[dict], ctx: dict) -> tuple[dict, dict, list[dict]]:
     """``model`` ([rig.model] keys) with every cause of ``causes`` (analysis.json's
     ``causes``) that the plant can represent: (new model, {cause id: keys written},
@@ -307,6 +328,10 @@ def apply_causes(model: dict, causes: list[dict], ctx: dict) -> tuple[dict, dict
     applied, missed = {}, []
     for c in causes:
         cid = c["id"]
+        why_not = _free_vibration(c)
+        if why_not:
+            missed.append(dict(cause=cid, reason=why_not))
+            continue
         if cid not in CAUSE_KEYS:
             missed.append(dict(cause=cid, reason="no plant or sensor form for this cause (bench.twin.CAUSE_KEYS)"))
             continue

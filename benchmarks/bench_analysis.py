@@ -238,9 +238,12 @@ def _uff_effects(fx: dict, rig: dict) -> dict:
     return out
 
 
-def independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str | None = None):
+def independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str | None = None,
+                     settle: int | None = None):
     """(UFF58 path, kind, rig, effects as RigModel fields, f_res, generation time) of one
-    seeded independent case; simulated unless ``cache`` holds it already."""
+    seeded independent case; simulated unless ``cache`` holds it already.  ``settle``: settle
+    periods of every step, the first of a level's included (default :data:`INDEPENDENT_SETTLE`;
+    25 leaves the carriage's free vibration in the records, as a hurried real test does)."""
     import tempfile
 
     from tests.independent_masing import generate_uff
@@ -252,20 +255,22 @@ def independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str | N
     if "accel_gain_error" in fx:         # the simulator scales the probe: the same ratio, probe side
         fx = dict(disp_gain_error=1.0 / (1.0 + fx["accel_gain_error"]) - 1.0)
     kw = _uff_effects(fx, rig)
-    settle, first, measure = INDEPENDENT_SETTLE
+    settle_n, first, measure = INDEPENDENT_SETTLE
+    if settle is not None:
+        settle_n = first = settle
     if kind == "mains_line":             # 3-10 x the probe's noise, mains of either kind
         kw.update(line_Hz=float(rng.choice([50.0, 60.0])), line_m=0.002 * rig["x_s_m"] * rng.uniform(3, 10))
     if kind == "unsettled":
-        settle, first = 1, 1
+        settle_n, first = 1, 1
     levels_N, freqs_Hz = plan_grid(rig, levels, freqs, 0.3 if kind == "asymmetric_friction" else 0.85)
     d = Path(cache) if cache else Path(tempfile.mkdtemp(prefix="bench_indep_"))
     d.mkdir(parents=True, exist_ok=True)
-    path = d / f"indep_{seed:03d}_{levels}x{freqs}.uff"
+    path = d / f"indep_{seed:03d}_{levels}x{freqs}{'' if settle is None else f'_s{settle}'}.uff"
     t0 = time.perf_counter()
     if not path.exists():
         tmp = path.with_suffix(".part")
         generate_uff(tmp, rig["F_s_N"], rig["x_s_m"], rig["n"], rig["mass_kg"], list(levels_N), list(freqs_Hz),
-                     settle=settle, settle_first=first, measure=measure, seed=seed, rtol=1e-9, **kw)
+                     settle=settle_n, settle_first=first, measure=measure, seed=seed, rtol=1e-9, **kw)
         tmp.rename(path)
     return path, kind, rig, fx, friction_resonance_Hz(rig), time.perf_counter() - t0
 
@@ -277,17 +282,18 @@ def _mains_Hz(seed: int) -> float:
     return float(rng.choice([50.0, 60.0]))
 
 
-def run_independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str | None = None) -> dict:
+def run_independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str | None = None,
+                         settle: int | None = None) -> dict:
     """One independent case, analysed as ``bench analyze`` analyses a UFF58 file."""
     from types import SimpleNamespace
 
     from bench.sources import load_source
     from sim.artefacts import artefact_causes
 
-    path, kind, rig, fx, f_res, t_gen = independent_case(seed, levels, freqs, cache)
+    path, kind, rig, fx, f_res, t_gen = independent_case(seed, levels, freqs, cache, settle)
     rng = np.random.default_rng(seed)
     guess = {k: v * rng.uniform(0.7, 1.3) for k, v in rig.items()}
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     src = load_source(path)
     if not cache:                      # a temporary file (several MB of ASCII UFF58): gone once read
         path.unlink()
@@ -296,12 +302,12 @@ def run_independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str
     if DROP_TRANSIENTS:                # an experiment (decision 0035): the steps flagged unsettled left out
         steps = [s for s in steps if not any(a.kind == "unsettled_transient" for a in s.quality.artefacts)]
     artefacts = artefact_causes(src.quality(), total=len(src.steps) + len(src.rejected))
-    t_load = time.perf_counter() - t0
+    t_load, c_load = time.perf_counter() - t0, time.process_time() - c0
     detail = [dict(id=c["id"], channel=c.get("channel"), steps=len(c.get("evidence", {}).get("steps", [])),
                    freq_Hz=c.get("parameters", {}).get("frequency", {}).get("value")) for c in artefacts]
     row = dict(seed=seed, kind=kind, n=rig["n"], steps=len(steps), steps_rejected=len(src.rejected),
                artefacts=sorted({c["id"] for c in artefacts}), artefact_detail=detail,
-               t_generate_s=t_gen, t_load_s=t_load)
+               t_generate_s=t_gen, t_load_s=t_load, cpu_load_s=c_load)
     if kind == "mains_line":            # named: a line on the probe at the mains frequency
         line_Hz = _mains_Hz(seed)
         row["line_Hz"] = line_Hz
@@ -315,8 +321,13 @@ def run_independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str
             ident.add(s.harmonics)
         ident.fit(max_nfev=200)
         row["t_identify_s"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         a = analyze_steps(steps, guess, artefacts=artefacts)
+        c_an = time.process_time() - c0
+        c0 = time.process_time()
+        from bench.reports._html import render_analysis_html
+        render_analysis_html(a.to_dict())         # the page bench analyze writes (its figures)
+        c_page = time.process_time() - c0
     except Exception as e:          # a failure is a result
         return dict(row, failed=f"{type(e).__name__}: {e}", named=[], unexplained=False, detected=False,
                     wrong=[], heldout_before=np.nan, heldout_after=np.nan, base_chi2=np.nan, final_chi2=np.nan,
@@ -339,7 +350,8 @@ def run_independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str
                heldout_after=(a.selection.named[-1].heldout_error if first else a.selection.heldout_base),
                base_chi2=a.base.reduced_chi2, final_chi2=a.final.reduced_chi2,
                amplitude_over_true_x_s=float(0.5 * (x.max(axis=1) - x.min(axis=1)).max() / rig["x_s_m"]),
-               spring_separable=a.spring_separable(), t_analysis_s=t_an)
+               spring_separable=a.spring_separable(), t_analysis_s=t_an, cpu_analysis_s=c_an, cpu_page_s=c_page,
+               cpu_total_s=c_load + c_an + c_page)
     return row
 
 
@@ -406,6 +418,13 @@ def summarise(rows: list[dict]) -> str:
             out.append(f"  steps with an unsettled transient, {kind} cases: median {np.median(k) if k else 0:.0f} "
                        f"(in {len(k)} of {sum(r['kind'] == kind for r in rows)} cases)")
     out.extend(issue16_rates(rows))
+    cpu = [r for r in rows if "cpu_total_s" in r]
+    if cpu:
+        med = lambda k: np.median([r[k] for r in cpu])      # noqa: E731
+        tot = np.array([r["cpu_total_s"] for r in cpu])
+        out.append(f"CPU time per case as bench analyze FILE spends it (read and check the steps, analyse, the page): "
+                   f"median {np.median(tot):.1f} s, max {tot.max():.1f} s (steps {med('cpu_load_s'):.1f} s, analysis "
+                   f"{med('cpu_analysis_s'):.1f} s, page {med('cpu_page_s'):.1f} s; medians)   bar median <= 15 s, max <= 30 s")
     ta = np.array([r["t_analysis_s"] for r in rows])
     tr = np.array([r["t_identify_s"] for r in rows])
     tg = np.array([r["t_generate_s"] for r in rows])
@@ -562,6 +581,8 @@ def main(argv=None) -> int:
     ap.add_argument("--levels", type=int, default=5, help="independent source: force levels")
     ap.add_argument("--freqs", type=int, default=18, help="independent source: frequencies per level")
     ap.add_argument("--cache", help="independent source: keep the UFF58 files here (and reuse them)")
+    ap.add_argument("--settle", type=int, help="independent source: settle periods of every step (default 40, a "
+                                               "level's first 60; 25 leaves free vibration in the records)")
     ap.add_argument("--profile", action="store_true",
                     help="also profile-likelihood intervals of F_s, x_s, n, m (coverage, width and time)")
     ap.add_argument("--drop-transients", action="store_true",
@@ -574,7 +595,8 @@ def main(argv=None) -> int:
     seeds = [int(x) for x in args.seeds.split(",")] if args.seeds else range(args.first, args.first + args.cases)
     if args.source == "independent":
         from functools import partial
-        case_fn = partial(run_independent_case, levels=args.levels, freqs=args.freqs, cache=args.cache)
+        case_fn = partial(run_independent_case, levels=args.levels, freqs=args.freqs, cache=args.cache,
+                          settle=args.settle)
     else:
         case_fn = run_case
     t0 = time.perf_counter()

@@ -28,9 +28,10 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
-from scipy.signal import czt
+from scipy.signal import CZT
 
 log = logging.getLogger(__name__)
 
@@ -135,10 +136,11 @@ def _solve_near_diagonal(G: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     return np.linalg.solve(G, rhs)
 
 
-def _lsq_harmonics(x: np.ndarray, fs: float, f: float, K: int):
-    """Exact least-squares fit of offset + K harmonics; returns (C_k, offset, residual rms)."""
-    N = x.size
-    step = 2 * np.pi * f / fs
+@lru_cache(maxsize=32)
+def _harmonic_system(N: int, step: float, K: int) -> tuple[np.ndarray, CZT]:
+    """The Gram matrix of offset + K harmonics over N samples at ``step`` rad per sample, and
+    the chirp-z transform giving their right-hand side: the same for every channel of a
+    step and every pass over it, so built once (read only)."""
     d = np.arange(0, 2 * K + 1)
     z = np.exp(1j * d * step)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -152,7 +154,16 @@ def _lsq_harmonics(x: np.ndarray, fs: float, f: float, K: int):
     cs = 0.5 * (Sp.imag - Sm.imag)             # sum cos(a) sin(b)
     # unknowns: cos coefficients k = 0..K, sin coefficients k = 1..K
     G = np.block([[cc, cs[:, 1:]], [cs[:, 1:].T, ss[1:, 1:]]])
-    Z = czt(x, m=K + 1, w=np.exp(-1j * step), a=1.0)
+    G.flags.writeable = False
+    return G, CZT(N, m=K + 1, w=np.exp(-1j * step), a=1.0)
+
+
+def _lsq_harmonics(x: np.ndarray, fs: float, f: float, K: int):
+    """Exact least-squares fit of offset + K harmonics; returns (C_k, offset, residual rms)."""
+    N = x.size
+    step = 2 * np.pi * f / fs
+    G, transform = _harmonic_system(N, step, K)
+    Z = transform(x)
     rhs = np.concatenate([Z.real, -Z.imag[1:]])
     coef = _solve_near_diagonal(G, rhs)
     a_cos, b_sin = coef[:K + 1], coef[K + 1:]
@@ -181,9 +192,10 @@ def analyse_channel(x: np.ndarray, fs: float, f: float, periods: int, spp: int |
     N = int(round(periods * fs / f))
     K = max(1, min(max_harmonics, int(math.floor(0.5 * fs / f - 0.5))))
     C, off, noise = _lsq_harmonics(x[:N], fs, f, K)
-    M = max(8, int(round(fs / f)))
-    t = np.arange(M) / M
-    mean = off + (np.exp(2j * np.pi * np.outer(t, np.arange(1, K + 1))) @ C).imag
+    M = max(8, int(round(fs / f)))                       # > 2K: K <= fs / 2f - 1/2
+    spec = np.zeros(max(M, K + 1), complex)
+    spec[1:K + 1] = C
+    mean = off + (np.fft.ifft(spec) * spec.size).imag[:M]   # off + Im(sum_k C_k e^(2 pi i k m / M)), m = 0..M-1
     return ChannelHarmonics(C, off, noise, noise * math.sqrt(2.0 / N), mean)
 
 

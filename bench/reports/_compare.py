@@ -104,18 +104,46 @@ def _p(x) -> str:
     return "n/a" if x is None else f"{100 * x:.3g} %"
 
 
+def _coverage(result: dict) -> str:
+    cov = result.get("coverage")
+    if not cov:
+        return ""
+    head = (f"<p>Coverage: {cov['matched']} of the reference's {cov['reference_steps']} usable steps matched "
+            f"({100 * cov['fraction']:.3g} %; needed {100 * cov['min_coverage']:.3g} %).")
+    if cov["resonance_unmatched"]:
+        head += (f" <strong>{len(cov['resonance_unmatched'])} of the unmatched steps are at the resonance</strong> "
+                 f"(within the half-power band of their level's peak compliance), where the rigs differ most: "
+                 f"{escape(', '.join(cov['resonance_unmatched']))}.")
+    if not cov["covered"]:
+        head += " The comparison does not pass: steps the other source lacks can neither agree nor disagree."
+    return head + "</p>"
+
+
+def _unmatched_table(result: dict) -> str:
+    cov = result.get("coverage")
+    if not cov or not cov["unmatched"]:
+        return ""
+    rows = [[escape(m["step"]), num(m["level_N"], ".4g"), num(m["freq_Hz"], ".5g"), escape(m["direction"] or "-"),
+             "yes" if m["resonance"] else "no", escape(m["why"])] for m in cov["unmatched"]]
+    return ('<section aria-labelledby="unmatched-h"><h2 id="unmatched-h">Steps of the reference not compared</h2>'
+            + table(["reference step", "level (N)", "frequency (Hz)", "sweep", "resonance", "why"], rows, {1, 2},
+                    "Usable steps of the reference without a matching step in the other source, and why.")
+            + "</section>")
+
+
 def _verdict(result: dict) -> str:
     o = result["overall"]
-    ok = o["within_tolerance"]
+    ok = o.get("passed", o["within_tolerance"])
     tol = 100 * result["tolerance"]
     if o["rms_rel_diff"] is None:
         head = (f"<p><strong>Outside the tolerance</strong>: no matched step is precise enough to judge a difference of "
                 f"{tol:g} % (the noise of the two measurements alone gives more than half of it).</p>")
     else:
-        head = (f"<p><strong>{'Within' if ok else 'Outside'} the tolerance</strong>: the larger rms difference of "
+        head = (f"<p><strong>{'Within' if o['within_tolerance'] else 'Outside'} the tolerance</strong>: the larger "
+                f"rms difference of "
                 f"compliance and accelerance is {_p(o['rms_rel_diff'])} over the matched steps precise enough to judge "
                 f"(tolerance {tol:g} %; {result['matched']} steps matched).</p>")
-    parts = [head]
+    parts = [head, _coverage(result)]
     for q in QUANTITIES:
         x = o[q]
         parts.append(f"<p>{q.capitalize()}: rms difference {_p(x['rms_rel_diff'])} over {x['judged']} judged steps "
@@ -185,7 +213,8 @@ def render_compare_html(result: dict) -> str:
                         "accelerance (open); the dashed line is the tolerance."))
     figs.append("</section>")
     body = (f"<header><h1>{escape(title)}</h1><p class=\"meta\">{escape(meta)}</p></header><main>"
-            + _verdict(result) + _sources(result) + "".join(figs) + _steps_table(result) + "</main>")
+            + _verdict(result) + _sources(result) + "".join(figs) + _steps_table(result) + _unmatched_table(result)
+            + "</main>")
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
             f'<meta name="viewport" content="width=device-width, initial-scale=1">'
             f"<title>{escape(title)}</title><style>{CSS}</style></head>\n<body>{body}</body></html>\n")

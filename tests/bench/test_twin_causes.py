@@ -202,6 +202,32 @@ def test_two_causes_for_one_plant_key_are_not_merged_silently():
     assert math.isclose(applied["line_interference"]["line_amplitude"], 1e-8)
 
 
+def test_the_twin_never_builds_the_rigs_own_free_vibration():
+    """Issue 25: a 112.7 Hz "line" the carriage's ringing left in one step was built into a
+    twin as a permanent accelerometer hum.  A line from a steady source (mains, or one
+    frequency in at least 3 steps) is built; a line in fewer steps, not mains (the fundamental,
+    or a harmonic in 2 steps; an older analysis.json) and an unsettled transient are listed as
+    the rig's own vibration."""
+    from bench.twin import apply_causes
+    p = lambda v: dict(value=v, low=v, high=v)          # noqa: E731
+    base = dict(F_s_N=10.0, x_s_m=10e-6, n=1.5, mass_kg=10.0)
+    ctx = dict(mass_kg=10.0, drive_height_m=None)
+
+    def line(f, steps):
+        return dict(id="line_interference", channel="accel", parameters=dict(frequency=p(f), amplitude=p(1e-3)),
+                    evidence=dict(steps=[f"s{i}" for i in range(steps)]))
+
+    for cause, built in ((line(112.7, 1), False), (line(112.7, 2), False), (line(112.7, 3), True),
+                         (line(50.0, 1), True),             # 50 Hz mains: interference in one step too
+                         (line(150.0, 1), False),           # harmonic 3 of mains in one step: a stray line
+                         (line(150.0, 2), True),            # ... in two: the mains family
+                         (dict(id="unsettled_transient", channel="disp", parameters={}), False)):
+        model, applied, missed = apply_causes(base, [cause], ctx)
+        assert ("line_freq_Hz" in model) == built, cause
+        if not built:
+            assert len(missed) == 1 and "the measured rig's own free vibration" in missed[0]["reason"], missed
+
+
 def test_an_interference_line_on_a_rig_with_the_shaker_runs():
     """The plant added its line with a time base only the ideal force source set (a twin
     with a fitted shaker and a named line crashed: UnboundLocalError)."""
