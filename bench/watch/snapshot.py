@@ -272,14 +272,22 @@ class RunReader:
 
     @staticmethod
     def _identification(ident: list[dict], results: list[dict], meta: dict) -> dict:
+        """The online history and the final fit; an estimate whose numbers overflowed or are
+        absurd is shown as a failed fit with its reason, never as numbers (decision 0042)."""
+        from ..numbers import sane
         order = {r.get("key"): i + 1 for i, r in enumerate(sorted(results, key=lambda r: r.get("key", "")))}
+
+        def ok(h: dict) -> bool:
+            return all(sane(v) for v in (h.get("values") or {}).values())
         history = [dict(step=h.get("step"), steps_done=order.get(h.get("step"), h.get("steps_used")),
                         values=h.get("values"), low=h.get("low"), high=h.get("high"),
-                        reduced_chi2=h.get("reduced_chi2"))
-                   for h in ident if isinstance(h.get("values"), dict)]
+                        reduced_chi2=h.get("reduced_chi2"), misfit=bool(h.get("misfit")))
+                   for h in ident if isinstance(h.get("values"), dict) and ok(h)]
         latest_warnings = ident[-1].get("warnings", []) if ident else []
         final = meta.get("identification")
-        if not (isinstance(final, dict) and isinstance(final.get("values"), dict)):
+        if isinstance(final, dict) and isinstance(final.get("values"), dict) and not ok(final):
+            final = {"error": f"the fit's values are not finite or absurd ({final['values']!r}): the fit failed"}
+        elif not (isinstance(final, dict) and isinstance(final.get("values"), dict)):
             final = None if not isinstance(final, dict) else {"error": final.get("error", "unusable result")}
         expected = {k: meta.get("rig", {}).get(f"expected_{k}") for k in ("F_s_N", "x_s_m", "n", "mass_kg")}
         return dict(history=history, latest_warnings=latest_warnings, final=final, expected=expected)

@@ -16,7 +16,7 @@ rig file's values and fits the four parameters, bounded to a factor
 :data:`BOUND_FACTOR` of the expected values; an estimate on a bound is flagged.
 
 Misfit: when the reduced chi-square is above what the noise explains
-(:func:`misfit_text`), every estimate says so in words; the intervals are already widened
+(:func:`sim.identify.misfit_text`), every estimate says so in words; the intervals are already widened
 by sqrt(reduced chi-square) and by the empirical floor.
 """
 
@@ -29,14 +29,12 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..errors import ConfigurationError
-from ..identify import PARAMS, PRIOR_SIGMA, StepHarmonics
+from ..identify import MISFIT_CHI2, PARAMS, PRIOR_SIGMA, StepHarmonics, misfit_text
 from .analysis import base_fit, data_from_steps
-from .fit import N_BOUNDS, Z95, Fit, Weights, bounds, fit
+from .fit import N_BOUNDS, Fit, Weights, fit
 from .models import EFFECTS, Data, Model
 
 BOUND_FACTOR = 20.0        # online: F_s, x_s, m within this factor of the rig file's expected values
-MISFIT_CHI2 = 2.0          # reduced chi-square above this (and above the noise's own spread) is misfit
-MISFIT_SIGMAS = 5.0
 
 
 @dataclass(frozen=True)
@@ -98,25 +96,6 @@ def analysis_effects(analysis: dict | None) -> tuple[str, ...]:
         return ()
     return tuple(c.get("id") for c in analysis.get("causes") or []
                  if isinstance(c, dict) and c.get("id") in EFFECTS and c.get("kind") != "artefact")
-
-
-def misfit_text(reduced_chi2: float, dof: int) -> str:
-    """Words when the reduced chi-square says the model does not fit beyond what the noise
-    explains ('' when it fits): above :data:`MISFIT_CHI2` and :data:`MISFIT_SIGMAS` standard
-    deviations of the noise's own chi-square above 1."""
-    if not math.isfinite(reduced_chi2):
-        return "the fit's reduced chi-square is not a number: the fit failed"
-    if reduced_chi2 <= max(MISFIT_CHI2, 1 + MISFIT_SIGMAS * math.sqrt(2.0 / max(dof, 1))):
-        return ""
-    return (f"the model does not fit the data beyond what the noise explains (reduced chi-square {reduced_chi2:.3g}, "
-            f"about 1 when it does): something acts that the model lacks, so the values are biased by an unknown "
-            f"amount; the intervals are widened {math.sqrt(reduced_chi2):.3g}x (sqrt of the reduced chi-square) "
-            f"but may still miss the truth; `bench analyze` names what is missing")
-
-
-def _theta_values(f: Fit) -> dict:
-    v = f.model.values(f.theta)
-    return {k: v[k] for k in PARAMS}
 
 
 def estimate_dict(f: Fit, steps_used: int, source: str, extra_warnings: list[str] | None = None) -> dict:
@@ -210,18 +189,29 @@ class OnlineRigFit:
         self.theta = theta
         self.prior = theta[:4].copy()
         self.steps: list = []
+        self._weights: list[Weights] = []
         self.estimate: dict | None = None
 
     def add(self, step) -> None:
-        self.steps += as_steps([step])
+        """A step, with the noise of the model's residuals propagated through it once, at
+        the current estimate (the pitching mode feeds the probe's noise into the force
+        balance hundreds of times over: decision 0020)."""
+        s = as_steps([step])
+        d = data_from_steps(s, self.K)
+        self._weights.append(Weights.propagated(self.model, self.theta, d, tail_draws=4))
+        self.steps += s
 
     def fit(self, max_nfev: int = 25) -> dict:
         if not self.steps:
             raise ConfigurationError("no steps to identify from")
         d = data_from_steps(self.steps, self.K)
-        m = math.exp(self.theta[3])
-        W = Weights.from_data(d, m)
-        lo, hi = bounds(self.model)
+        K = d.X.shape[1]
+        ws = self._weights
+
+        def cat(name: str, axis: int) -> np.ndarray:
+            return np.concatenate([np.asarray(getattr(w, name))[(slice(None),) * axis + (slice(None), slice(0, K))]
+                                   for w in ws], axis=axis)
+        W = Weights(cat("s_F", 1), cat("c", 1), cat("s_Kc", 1), cat("bias_F", 0), cat("bias_K", 0))
         lo4 = np.array([self.prior[0] - math.log(BOUND_FACTOR), self.prior[1] - math.log(BOUND_FACTOR), N_BOUNDS[0],
                         self.prior[3] - math.log(BOUND_FACTOR)])
         hi4 = np.array([self.prior[0] + math.log(BOUND_FACTOR), self.prior[1] + math.log(BOUND_FACTOR), N_BOUNDS[1],
@@ -253,7 +243,6 @@ class OnlineRigFit:
         est = estimate_dict(f, len(self.steps), "online (the rig's declared modes held at the rig file's values)",
                             flags)
         est["at_bound"] = at_bound
-        _ = lo, hi
         self.estimate = est
         return est
 
@@ -264,5 +253,22 @@ def fixed_effects_note(rig_model: dict | None) -> str:
     return ", ".join(EFFECTS[k].label for k in e) if e else ""
 
 
+
+
+def identify_steps(steps, guess: dict, rig_model: dict | None = None, extra: tuple[str, ...] = (),
+                   harmonics: int = 9) -> dict:
+    """The one identification of stored or measured steps every output uses (``bench
+    identify``, the run's final fit, studies): the model of the rig when the rig file
+    declares effects or an analysis named causes (:func:`identify_rig`), else the Masing
+    carriage (:func:`sim.identify.identify_results`).  An estimate dict with ``source``."""
+    if rig_effects(rig_model) or extra:
+        return identify_rig(steps, guess, rig_model, extra, harmonics,
+                            source="final fit with the rig's modes" + (" and the analysis' causes" if extra else ""))
+    from ..identify import identify_results
+    hs = [s if isinstance(s, (dict, StepHarmonics)) else s.harmonics for s in steps]
+    return dict(identify_results(hs, guess, harmonics).estimate.as_dict(), source="final fit",
+                model=dict(effects=[], parameters={}))
+
+
 __all__ = ["BOUND_FACTOR", "MISFIT_CHI2", "OnlineRigFit", "analysis_effects", "as_steps", "estimate_dict",
-           "identify_rig", "misfit_text", "rig_effects", "Z95"]
+           "identify_rig", "identify_steps", "misfit_text", "rig_effects"]
