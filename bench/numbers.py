@@ -49,3 +49,8 @@ def percent(x, fmt: str = "+.2f") -> str:
     if abs(v) > 1e4:
         return "absurd (fit failed)"
     return f"{format(100 * v, fmt)} %"
+
+
+def insane(values: dict) -> list[str]:
+    """The names of the values in ``values`` that are not :func:`sane`."""
+    return [k for k, v in values.items() if not sane(v)]

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..numbers import sane
+from ..numbers import insane
 
 log = logging.getLogger(__name__)
 
@@ -47,8 +47,10 @@ class IdentificationData:
         """Why the final fit failed, when run.json records a failure (or absurd numbers)."""
         if isinstance(self.unknown, dict) and self.unknown.get("error"):
             return str(self.unknown["error"])
-        if self.final is not None and not all(sane(v) for v in (self.final.get("values") or {}).values()):
-            return f"its values are not finite or absurd ({self.final.get('values')!r})"
+        if self.final is not None:
+            bad = insane(self.final.get("values") or {})
+            if bad:
+                return f"{', '.join(bad)} came out not finite or absurd (an overflow in the fit)"
         return None
 
     @property

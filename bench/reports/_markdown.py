@@ -279,9 +279,12 @@ def accounting_md(run: RunData) -> list[str]:
     stops = [e for e in run.events if e.get("event") == "interrupted"]
     resumes = [e for e in run.events if e.get("event") == "resume"]
     if stops or resumes:
+        k = max(len(stops), len(resumes))
+        how = ", ".join(sorted({str(e.get("reason") or "?") for e in stops}))
+        if len(resumes) > len(stops):
+            how += (", " if how else "") + "ended without recording why (killed, crashed or power lost)"
         (notes if status == "completed" else why).append(
-            f"interrupted {len(stops)} time{'s' * (len(stops) != 1)} ("
-            + ", ".join(sorted({str(e.get('reason') or '?') for e in stops})) + f") and resumed {len(resumes)} "
+            f"interrupted {k} time{'s' * (k != 1)} ({how}) and resumed {len(resumes)} "
             f"time{'s' * (len(resumes) != 1)}: resumed steps restart from the step before, not from the rig's "
             "uninterrupted history (decision 0013)")
     ident = run.ident

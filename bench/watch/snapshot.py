@@ -274,7 +274,7 @@ class RunReader:
     def _identification(ident: list[dict], results: list[dict], meta: dict) -> dict:
         """The online history and the final fit; an estimate whose numbers overflowed or are
         absurd is shown as a failed fit with its reason, never as numbers (decision 0042)."""
-        from ..numbers import sane
+        from ..numbers import insane, sane
         order = {r.get("key"): i + 1 for i, r in enumerate(sorted(results, key=lambda r: r.get("key", "")))}
 
         def ok(h: dict) -> bool:
@@ -286,7 +286,8 @@ class RunReader:
         latest_warnings = ident[-1].get("warnings", []) if ident else []
         final = meta.get("identification")
         if isinstance(final, dict) and isinstance(final.get("values"), dict) and not ok(final):
-            final = {"error": f"the fit's values are not finite or absurd ({final['values']!r}): the fit failed"}
+            final = {"error": f"the final fit failed: {', '.join(insane(final['values']))} came out not finite or "
+                              "absurd (an overflow in the fit)"}
         elif not (isinstance(final, dict) and isinstance(final.get("values"), dict)):
             final = None if not isinstance(final, dict) else {"error": final.get("error", "unusable result")}
         expected = {k: meta.get("rig", {}).get(f"expected_{k}") for k in ("F_s_N", "x_s_m", "n", "mass_kg")}
