@@ -52,7 +52,7 @@ def as_steps(steps) -> list:
     out = []
     for s in steps:
         if isinstance(s, dict):
-            s = StepHarmonics.from_result(s)
+            s = StepHarmonics.from_result(s)  # type: ignore[arg-type]
         if isinstance(s, StepHarmonics):
             s = _Step(s, float(abs(s.force[0])) if s.force.size else 0.0)
         out.append(s)
@@ -94,7 +94,7 @@ def analysis_effects(analysis: dict | None) -> tuple[str, ...]:
     """The physical causes an ``analysis.json`` named (artefacts are not part of the model)."""
     if not isinstance(analysis, dict):
         return ()
-    return tuple(c.get("id") for c in analysis.get("causes") or []
+    return tuple(str(c["id"]) for c in analysis.get("causes") or []
                  if isinstance(c, dict) and c.get("id") in EFFECTS and c.get("kind") != "artefact")
 
 
@@ -266,7 +266,9 @@ def identify_steps(steps, guess: dict, rig_model: dict | None = None, extra: tup
                             source="final fit with the rig's modes" + (" and the analysis' causes" if extra else ""))
     from ..identify import identify_results
     hs = [s if isinstance(s, (dict, StepHarmonics)) else s.harmonics for s in steps]
-    return dict(identify_results(hs, guess, harmonics).estimate.as_dict(), source="final fit",
+    est = identify_results(hs, guess, harmonics).estimate
+    assert est is not None                  # fitted by identify_results
+    return dict(est.as_dict(), source="final fit",
                 model=dict(effects=[], parameters={}))
 
 
