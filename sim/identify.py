@@ -434,10 +434,12 @@ class Identifier:
         A = np.array([s.accel[:K] for s in self.steps])
         lo = [-np.inf, -np.inf, N_BOUNDS[0], -np.inf]
         hi = [np.inf, np.inf, N_BOUNDS[1], np.inf]
-        if self.bound_factor:
-            b = math.log(self.bound_factor)
-            for i in (0, 1, 3):
-                lo[i], hi[i] = self.theta_prior[i] - b, self.theta_prior[i] + b
+        # never further than e^50 from the guess: a diverging trial step must not overflow
+        # exp() (an OverflowError ended a run's final fit, issue 25); online, a factor
+        # bound_factor, and an estimate on it is flagged
+        b = math.log(self.bound_factor) if self.bound_factor else 50.0
+        for i in (0, 1, 3):
+            lo[i], hi[i] = self.theta_prior[i] - b, self.theta_prior[i] + b
         th = np.clip(self.theta, np.array(lo) + 1e-9, np.array(hi) - 1e-9)
         for rnd in range(reweight_rounds + 1):
             self._refresh_weights(th, K, force=rnd > 0, budget=reweight_budget)
@@ -474,7 +476,7 @@ class Identifier:
                 rel[name] = float(std[i])
         warnings = tuple(f"{name} is poorly determined by these steps (relative standard error "
                          f"{100 * rel[name]:.0f} %)" for name in PARAMS if not rel[name] < 0.1)
-        if self.bound_factor:
+        if self.bound_factor:   # (the e^50 reach is never an answer)
             warnings = tuple(f"{PARAMS[i]} reached the bound of the search ({self.bound_factor:g}x the expected "
                              f"value): not an estimate" for i in (0, 1, 3)
                              if min(res.x[i] - lo[i], hi[i] - res.x[i]) < 1e-3) + warnings
