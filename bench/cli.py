@@ -5,7 +5,8 @@ sim/errors.py: 0 done; 1 runtime failure (an instrument error, a failed run, `be
 found problems; an unexpected exception is reported as an internal error); 2 usage or
 configuration error (a bad argument, file or value: the message names it); 3 stopped by a
 limit (a plan the rig's limits refuse, or a run aborted by the safety supervisor); 130
-interrupted (Ctrl-C, SIGTERM).  Errors are one line on stderr; `--debug` adds the traceback.
+interrupted (Ctrl-C, SIGTERM, SIGHUP, SIGQUIT).  Errors are one line on stderr; `--debug`
+adds the traceback.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from pathlib import Path
 from sim.errors import BenchError, ConfigurationError, EnvelopeError, LimitError, RunDirectoryError
 
 from . import __version__
-from .terminal import Progress, end_line, setup_logging
+from .terminal import Progress, end_line, setup_logging, tolerant_streams
 
 log = logging.getLogger(__name__)
 
@@ -30,7 +31,7 @@ class ExitCode(IntEnum):
     FAILURE = 1          # runtime failure; `bench check` found problems
     USAGE = 2            # bad argument, file or value
     LIMIT = 3            # refused or aborted by a limit
-    INTERRUPTED = 130    # Ctrl-C or SIGTERM
+    INTERRUPTED = 130    # Ctrl-C, SIGTERM, SIGHUP (terminal closed), SIGQUIT
 
 
 def cmd_paper(args) -> int:
@@ -97,6 +98,25 @@ def cmd_dry_run(args) -> int:
 
 
 def _run(args, resume: bool) -> int:
+    from .signals import SignalLatch
+
+    with SignalLatch().installed():       # SIGHUP, SIGQUIT, SIGTERM as Ctrl-C from the start
+        return _session(args, resume)
+
+
+def _session(args, resume: bool) -> int:
+    from contextlib import ExitStack
+
+    with ExitStack() as held:
+        if resume:           # the run directory is ours before its steps are counted
+            from . import runlock
+            from .storage import RunStore
+            RunStore.open(Path(args.run))
+            held.enter_context(runlock.run_dir(Path(args.run)))
+        return _session_held(args, resume)
+
+
+def _session_held(args, resume: bool) -> int:
     from .session import run_plan
     from .storage import RunStatus, RunStore
 
@@ -209,15 +229,13 @@ def cmd_watch(args) -> int:
         print(f"waiting for {run_dir} to appear ... (Ctrl-C stops)", flush=True)
     elif not (run_dir / "run.json").is_file():
         log.warning("%s has no run.json yet: the page waits for the run to start", run_dir)
-    import signal
-
-    from .signals import handling
+    from .signals import ENDING, handling
 
     server = _watch_server(run_dir, args.host, args.port)
-    # The page serves from its own thread; Ctrl-C and SIGTERM only raise a flag (no lock
+    # The page serves from its own thread; the ending signals only raise a flag (no lock
     # the main thread might hold, no exception a finalizer could drop: bench/signals.py).
     ended = []
-    with handling(lambda signum, frame: ended.append(signum), signal.SIGINT, signal.SIGTERM):
+    with handling(lambda signum, frame: ended.append(signum), *ENDING):
         server.start()
         print(f"watch: {server.url}  (Ctrl-C ends the page, not the run)", flush=True)
         try:
@@ -248,13 +266,17 @@ def cmd_resume(args) -> int:
 
 def cmd_demo(args) -> int:
     """The main job: the default plan on the simulated rig, then its report."""
+    from . import runlock
+    from .demo import check_out_dir, clear_earlier_demo
+
     args.plan = args.rig = None
     args.seed = None
     out = Path(args.out)
-    if out.exists() and any(out.iterdir()):
-        import shutil
-        shutil.rmtree(out)   # the demo always starts afresh
-    return _run(args, resume=False)
+    if not check_out_dir(out):       # refuses (deleting nothing) unless out holds only an earlier demo's files
+        return _run(args, resume=False)
+    with runlock.run_dir(out):       # not while another session uses it
+        clear_earlier_demo(out)
+        return _run(args, resume=False)
 
 
 def cmd_report(args) -> int:
@@ -463,7 +485,8 @@ EPILOG = """\
 exit codes: 0 done; 1 failure (an instrument error, a failed run, `bench check` found
 problems); 2 usage or configuration error (the message names the file, key and allowed
 values); 3 stopped by a limit (refused before the output went on, or aborted); 130
-interrupted (Ctrl-C, SIGTERM).  The output is switched off on every exit.
+interrupted (Ctrl-C, SIGTERM, SIGHUP: the terminal closed, SIGQUIT).  The output is
+switched off on every exit.
 -v, --debug and -vv may come before or after the command."""
 
 
@@ -504,7 +527,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_paper)
 
     s = sub.add_parser("demo", help="the main job: the default plan on the simulated rig, with its report")
-    s.add_argument("--out", default="out/demo", help="run directory (emptied first: the demo starts afresh)")
+    s.add_argument("--out", default="out/demo", help="run directory (an earlier demo run there is deleted first; anything else is refused)")
     _add_watch_options(s)
     s.set_defaults(func=cmd_demo)
 
@@ -659,6 +682,11 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as e:               # usage error or --help: argparse has printed it
         return int(e.code or 0)
+    with tolerant_streams():            # a terminal that is gone changes nothing the bench does
+        return _main(args)
+
+
+def _main(args) -> int:
     handler = setup_logging(args.verbose)
     try:
         return int(args.func(args))

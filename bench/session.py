@@ -1,9 +1,10 @@
 """Run a plan on a rig: open the instruments, check the envelope, run, store, clean up.
 
 Exit paths all end with the generator's output off: normal end, exception, Ctrl-C,
-SIGTERM, instrument error, lost connection, safety limit.  (kill -9 cannot be caught:
-on the real rig the generator then keeps its last output; stored data stays intact.)
-"""
+SIGTERM, SIGHUP, SIGQUIT, instrument error, lost connection, a storage error, safety
+limit.  (kill -9 cannot be caught: on the real rig the generator then keeps its last
+output; stored data stays intact.)  One session at a time holds a run directory and a
+real rig's instruments (bench.runlock)."""
 
 from __future__ import annotations
 
@@ -34,8 +35,9 @@ from procedures.online_id import OnlineIdentification, identifiability
 from procedures.plan import StepSpec
 from procedures.safety import LimitExceeded, SupervisedDaq, SupervisedGenerator, Supervisor, check_gap, tightest
 from procedures.stepped_sine import SteppedSine, StepResult
-from sim.errors import EnvelopeError
+from sim.errors import EnvelopeError, StorageError
 
+from . import runlock
 from .config import Plan, Rig
 from .signals import SignalLatch, uninterruptible
 from .storage import RunStatus, RunStore, open_append, planned_count
@@ -205,15 +207,28 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
     warnings = identifiability(plan, rig)
     for w in warnings:
         log.warning("identifiability: %s", w)
-    store = _open_store(plan, rig, out, resume=resume, sim_seed=sim_seed, warnings=warnings)
-    log_handler = _log_to(store.path / "bench.log")
-    try:
-        _supervised(plan, rig, store, progress=progress, sim_seed=sim_seed, identify=identify,
-                    retry_skipped=retry_skipped)
-    finally:
-        if log_handler:
-            logging.getLogger().removeHandler(log_handler)
-            log_handler.close()
+    latch = SignalLatch()
+    out = Path(out)
+    if not resume:
+        RunStore.check_new(out)            # before anything, the lock file included, is written
+        out.mkdir(parents=True, exist_ok=True)
+    else:
+        RunStore.open(out)                 # a run directory (else a one-line error), before its lock
+    with ExitStack() as held, latch.installed():
+        held.enter_context(runlock.run_dir(out))          # one session at a time on a run directory ...
+        if not rig.simulated:                             # ... and on an instrument (a simulated rig's are its own)
+            for url in (rig.generator_url, rig.daq_url, rig.sensor_url):
+                held.enter_context(runlock.instrument(url, out))
+        latch.hold()          # a signal while the directory is set up acts once it says "running"
+        store = _open_store(plan, rig, out, resume=resume, sim_seed=sim_seed, warnings=warnings)
+        log_handler = _log_to(store.path / "bench.log")
+        try:
+            _supervised(plan, rig, store, latch, progress=progress, sim_seed=sim_seed, identify=identify,
+                        retry_skipped=retry_skipped)
+        finally:
+            if log_handler:
+                logging.getLogger().removeHandler(log_handler)
+                log_handler.close()
     return store
 
 
@@ -233,17 +248,20 @@ def _open_store(plan: Plan, rig: Rig, out: Path, *, resume: bool, sim_seed: int 
     return store
 
 
-def _supervised(plan: Plan, rig: Rig, store: RunStore, *, progress, sim_seed: int | None,
+def _supervised(plan: Plan, rig: Rig, store: RunStore, latch: SignalLatch, *, progress, sim_seed: int | None,
                 identify: bool, retry_skipped: bool = False) -> None:
     """The safety path: open the instruments, measure, and on every way out ramp down,
-    switch the output off (confirmed), close everything and record how the run ended."""
+    switch the output off (confirmed), close everything and record how the run ended.
+    ``latch`` is installed and held: released here, inside the path that records the end."""
     status = RunStatus.FAILED
     sup: Supervisor | None = None
-    latch = SignalLatch()
-    with ExitStack() as stack, latch.installed():
+    unrecorded: StorageError | None = None
+    with ExitStack() as stack:
         try:
+            latch.release()            # a signal latched while the directory was set up acts now
+            store.check_writable()     # a step can be stored, before the output goes on
             ins = open_instruments(rig, stack, sim_seed=sim_seed,
-                                   on_output_off=lambda ok: store.event("output_off", confirmed=ok))
+                                   on_output_off=lambda ok: _note(store, "output_off", confirmed=ok))
             store.update(identities=ins.identities)
             sup = Supervisor(tightest(rig.limits, plan.limits), ins.generator)
             _measure(plan, rig, store, ins, sup, latch, progress=progress, identify=identify,
@@ -251,11 +269,11 @@ def _supervised(plan: Plan, rig: Rig, store: RunStore, *, progress, sim_seed: in
             status = RunStatus.COMPLETED
         except LimitExceeded as e:
             status = RunStatus.ABORTED
-            store.event("abort", reason=str(e))
+            _note(store, "abort", reason=str(e))
             log.error("aborted: %s", e)
         except KeyboardInterrupt as e:
             status = RunStatus.INTERRUPTED
-            store.event("interrupted", reason=str(e) or "Ctrl-C")
+            _note(store, "interrupted", reason=str(e) or "Ctrl-C")
             if sup is not None:
                 with uninterruptible("ramping down"):
                     sup.shutdown()       # ramp down; the output is switched off below
@@ -264,16 +282,35 @@ def _supervised(plan: Plan, rig: Rig, store: RunStore, *, progress, sim_seed: in
             raise
         except InstrumentError as e:
             status = RunStatus.INSTRUMENT_ERROR
-            store.event("instrument_error", error=f"{type(e).__name__}: {e}")
+            _note(store, "instrument_error", error=f"{type(e).__name__}: {e}")
             log.error("instrument error: %s: %s", type(e).__name__, e)
+        except StorageError as e:          # named, no traceback: the output goes off below
+            _note(store, "storage_error", error=str(e))
+            log.error("storage error: %s; the output is switched off, the steps stored so far are intact", e)
+            raise
         except Exception as e:
-            store.event("error", error=f"{type(e).__name__}: {e}")
+            _note(store, "error", error=f"{type(e).__name__}: {e}")
             log.exception("run failed")
             raise
         finally:
             with uninterruptible("switching the output off"):
                 stack.close()    # output off, then close links and twins
-            store.finish(status, steps_done=len(store.done_keys()), steps_total=planned_count(plan))
+                try:
+                    store.finish(status, steps_done=len(store.done_keys()), steps_total=planned_count(plan))
+                except StorageError as e:
+                    log.error("the run's end (%s) could not be recorded: %s", status, e)
+                    unrecorded = e
+    if unrecorded is not None:          # only when nothing else is on its way out
+        raise unrecorded
+
+
+def _note(store: RunStore, kind: str, **fields) -> None:
+    """An event on an exit path: one that cannot be stored (a full disk) is logged, and
+    the path goes on (the ramp-down, the switch-off)."""
+    try:
+        store.event(kind, **fields)
+    except StorageError as e:
+        log.error("event %s not recorded: %s", kind, e)
 
 
 def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Supervisor, latch: SignalLatch,

@@ -1,4 +1,10 @@
-"""Ctrl-C and SIGTERM: one clean exit, which cannot be lost.
+"""The signals that end a session: one clean exit, which cannot be lost.
+
+Ctrl-C (SIGINT), SIGTERM, SIGHUP (the terminal closed, the SSH link lost: the most common
+way a session at a rig ends) and SIGQUIT (Ctrl-\\) all go through the same path: the
+handler raises ``KeyboardInterrupt`` ("Ctrl-C" or "signal N"), and the session ramps
+down and switches the output off.  Left at Python's defaults, SIGHUP and SIGQUIT would
+end the process on the spot with the generator's output on.
 
 Python's own SIGINT handler raises ``KeyboardInterrupt`` wherever the main thread is, and
 drops it silently when that is inside a finalizer (``Exception ignored in ... __del__``;
@@ -17,6 +23,9 @@ from contextlib import contextmanager
 
 log = logging.getLogger(__name__)
 
+# every signal whose default action ends the process and that a session can catch
+ENDING = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT)
+
 
 @contextmanager
 def handling(handler, *signums):
@@ -33,28 +42,45 @@ def handling(handler, *signums):
             signal.signal(s, h)
 
 
+def reason(signum: int) -> str:
+    return "Ctrl-C" if signum == signal.SIGINT else f"signal {signum}"
+
+
 class SignalLatch:
-    """Ctrl-C and SIGTERM raise ``KeyboardInterrupt`` ("Ctrl-C" or "signal 15") and stay
-    latched: :meth:`check` raises it again."""
+    """Ctrl-C, SIGTERM, SIGHUP and SIGQUIT raise ``KeyboardInterrupt`` ("Ctrl-C" or
+    "signal N") and stay latched: :meth:`check` raises it again.  While held (:meth:`hold`),
+    a signal is latched without raising (:meth:`release` raises it)."""
 
     def __init__(self):
         self.reason: str | None = None
+        self._hold = False
 
     def handler(self, signum, frame):
-        self.reason = "Ctrl-C" if signum == signal.SIGINT else f"signal {signum}"
-        raise KeyboardInterrupt(self.reason)
+        self.reason = reason(signum)
+        if not self._hold:
+            raise KeyboardInterrupt(self.reason)
 
     def check(self) -> None:
         if self.reason is not None:
             raise KeyboardInterrupt(self.reason)
 
     def installed(self):
-        return handling(self.handler, signal.SIGINT, signal.SIGTERM)
+        return handling(self.handler, *ENDING)
+
+    def hold(self) -> None:
+        """From now on latch a signal without raising it (a run directory being set up must
+        not be left half-written) until :meth:`release`."""
+        self._hold = True
+
+    def release(self) -> None:
+        """Raise again at once; raise now a signal latched while held."""
+        self._hold = False
+        self.check()
 
 
 def uninterruptible(what: str):
-    """Hold Ctrl-C and SIGTERM off while ``what`` runs (switching the output off must not
+    """Hold the ending signals off while ``what`` runs (switching the output off must not
     be cut short by an impatient second Ctrl-C); they are logged, not lost silently."""
     def handler(signum, frame):
         log.warning("signal %d while %s: finishing that first", signum, what)
-    return handling(handler, signal.SIGINT, signal.SIGTERM)
+    return handling(handler, *ENDING)

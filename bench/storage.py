@@ -43,14 +43,17 @@ import stat
 import tempfile
 import threading
 import zipfile
+from contextlib import contextmanager
 from dataclasses import dataclass, field, fields
 from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
-from sim.errors import RunDirectoryError
+from sim.errors import RunDirectoryError, StorageError
 from sim.step_result import STEP_FORMAT_VERSION, StepResult, check_step_version
+
+from .runlock import LOCK_NAME
 
 log = logging.getLogger(__name__)
 
@@ -153,6 +156,16 @@ def atomic_write(path: Path, write) -> None:
         raise
 
 
+@contextmanager
+def _writing(path: Path):
+    """An ``OSError`` while writing ``path`` becomes a :class:`StorageError` naming it and
+    the cause (a full disk, a directory deleted, a permission taken away)."""
+    try:
+        yield
+    except OSError as e:
+        raise StorageError(f"{path}: cannot write: {e.strerror or e}") from e
+
+
 def _json_default(o):
     if isinstance(o, np.generic):
         return o.item()
@@ -207,7 +220,7 @@ PROBLEM_KINDS = ("missing", "truncated", "corrupt", "checksum", "unknown", "skip
 
 
 # what a run writes inside its directory: none of them may be a symbolic link
-WRITTEN = ("steps", "damaged", "events.jsonl", "bench.log", "identification.jsonl", "stop.request")
+WRITTEN = ("steps", "damaged", "events.jsonl", "bench.log", "identification.jsonl", "stop.request", LOCK_NAME)
 
 
 class RunStore:
@@ -218,12 +231,19 @@ class RunStore:
         self._npz_ok: dict[str, tuple] = {}        # key -> stamp of a block already verified
 
     # ------------------------------------------------------------------ life cycle
+    @staticmethod
+    def check_new(path: Path) -> None:
+        """Raise ``FileExistsError`` unless ``path`` can become a new run directory (absent,
+        or empty but for the session lock the new session holds: bench.runlock)."""
+        path = Path(path)
+        if path.exists() and any(p.name != LOCK_NAME for p in path.iterdir()):
+            raise FileExistsError(f"run directory {path} exists and is not empty; "
+                                  f"use 'bench resume {path}' or choose another --out")
+
     @classmethod
     def create(cls, path: Path, metadata: dict) -> RunStore:
         path = Path(path)
-        if path.exists() and any(path.iterdir()):
-            raise FileExistsError(f"run directory {path} exists and is not empty; "
-                                  f"use 'bench resume {path}' or choose another --out")
+        cls.check_new(path)
         path.mkdir(parents=True, exist_ok=True)
         real_dir(path / "steps", create=True)
         store = cls(path)
@@ -271,7 +291,8 @@ class RunStore:
         return meta
 
     def update(self, **fields) -> None:
-        write_json(self.path / "run.json", dict(self.metadata, **fields))
+        with _writing(self.path / "run.json"):
+            write_json(self.path / "run.json", dict(self.metadata, **fields))
 
     def finish(self, status: RunStatus, **fields) -> None:
         self.update(status=status, ended=now_iso(), **fields)
@@ -280,7 +301,7 @@ class RunStore:
     # ------------------------------------------------------------------ events
     def event(self, kind: str, **fields) -> None:
         line = json.dumps(dict(time=now_iso(), event=kind, **fields), default=_json_default)
-        with open_append(self.path / "events.jsonl") as fh:
+        with _writing(self.path / "events.jsonl"), open_append(self.path / "events.jsonl") as fh:
             fh.write(line + "\n")
             fh.flush()
             os.fsync(fh.fileno())
@@ -304,18 +325,42 @@ class RunStore:
 
     # ------------------------------------------------------------------ steps: writing
     def write_step(self, key: str, result: StepResult, raw: dict[str, np.ndarray]) -> None:
+        """Store one step (raises :class:`StorageError` naming the file when it cannot)."""
         buf = io.BytesIO()
         np.savez(buf, **raw)
         npz = buf.getvalue()
-        atomic_write(self.steps_dir / f"{key}.npz", lambda fh: fh.write(npz))
+        self._steps_dir_there()
+        with _writing(self.steps_dir / f"{key}.npz"):
+            atomic_write(self.steps_dir / f"{key}.npz", lambda fh: fh.write(npz))
         plain = json.loads(json.dumps(result, default=_json_default))    # what a reader will see
         plain.pop("integrity", None)
         plain["format_version"] = STEP_FORMAT_VERSION
         plain["integrity"] = {"json_sha256": _sha256(_canonical(plain)), "npz_sha256": _sha256(npz),
                               "npz_bytes": len(npz)}
-        write_json(self.steps_dir / f"{key}.json", plain)
+        with _writing(self.steps_dir / f"{key}.json"):
+            write_json(self.steps_dir / f"{key}.json", plain)
         st = (self.steps_dir / f"{key}.npz").stat()
         self._npz_ok[key] = (st.st_mtime_ns, st.st_size, plain["integrity"]["npz_sha256"])   # just written
+
+    def _steps_dir_there(self) -> None:
+        if not self.steps_dir.exists() and not self.steps_dir.is_symlink():
+            raise StorageError(f"{self.steps_dir}: missing (deleted while the run was using it?); "
+                               f"no step can be stored")
+
+    def check_writable(self) -> None:
+        """Create, write, fsync and remove a probe file in ``steps/``: a run checks that it
+        can store a step before the output goes on (:class:`StorageError` naming why not)."""
+        self._steps_dir_there()
+        real_dir(self.steps_dir)
+        probe = self.steps_dir / f".probe-{os.getpid()}.tmp"
+        with _writing(probe):
+            fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600)
+            try:
+                os.write(fd, b"\0" * 65536)      # about one step's block
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+                probe.unlink(missing_ok=True)
 
     # ------------------------------------------------------------------ steps: reading
     def step_files(self) -> list[Path]:

@@ -12,6 +12,10 @@ lines that pass above it (decision record 0030).
   libraries (numba, matplotlib, pymodbus, dask, ...) reach the terminal only with a
   warning or worse, whatever the verbosity.  The root logger stays at INFO, so a run's
   ``bench.log`` keeps the INFO lines it always had.
+- :func:`tolerant_streams`: a terminal that is gone (closed window, lost SSH link, a pipe
+  whose reader ended) makes writes raise ``EIO`` or ``BrokenPipeError``; nothing the bench
+  does may depend on them (the switch-off, the ``output_off`` event, run.json's status).
+  A failed write silences that stream for the rest of the process (decision record 0040).
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ import shutil
 import sys
 import threading
 import time
+from contextlib import contextmanager
 
 PROJECT = ("bench", "procedures", "drivers", "sim")     # the loggers -v speaks for
 
@@ -140,3 +145,59 @@ def setup_logging(verbosity: int) -> TerminalHandler:
         logging.getLogger(name).setLevel(logging.DEBUG if verbosity >= 2 else logging.NOTSET)
     root.addHandler(handler)
     return handler
+
+
+class TolerantStream:
+    """A text stream whose writes never raise: the first that fails (the terminal is gone)
+    points the file descriptor at /dev/null, so that what is still buffered, and Python's
+    own flush at exit, go nowhere instead of raising again (exit status 120)."""
+
+    def __init__(self, stream):
+        self._stream, self.gone = stream, False
+
+    def write(self, text: str) -> int:
+        if not self.gone:
+            try:
+                return self._stream.write(text)
+            except (OSError, ValueError):       # EIO, EPIPE; ValueError: closed file
+                self._lost()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.gone:
+            try:
+                self._stream.flush()
+            except (OSError, ValueError):
+                self._lost()
+
+    def isatty(self) -> bool:
+        try:
+            return not self.gone and self._stream.isatty()
+        except (OSError, ValueError):
+            return False
+
+    def _lost(self) -> None:
+        self.gone = True
+        try:
+            fd = self._stream.fileno()
+            null = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(null, fd)
+            os.close(null)
+        except (OSError, ValueError, AttributeError):      # no descriptor (a test's capture)
+            pass
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
+@contextmanager
+def tolerant_streams():
+    """``sys.stdout`` and ``sys.stderr`` as :class:`TolerantStream` while the block runs."""
+    saved = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = (s if isinstance(s, TolerantStream) else TolerantStream(s) for s in saved)
+    try:
+        yield
+    finally:
+        for s in (sys.stdout, sys.stderr):      # what is still buffered: now, where a failure is caught
+            s.flush()
+        sys.stdout, sys.stderr = saved

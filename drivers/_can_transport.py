@@ -22,6 +22,7 @@ from typing import Any
 
 import can
 
+from ._errors import ConnectionLost
 from ._urls import check_daq_url
 
 log = logging.getLogger(__name__)
@@ -84,7 +85,10 @@ class TcpCanBus(can.BusABC):
             ready, _, _ = select.select([self._sock], [], [], left)
             if not ready:
                 return None, False
-            data = self._sock.recv(65536)
+            try:
+                data = self._sock.recv(65536)
+            except OSError as exc:            # reset by the peer: as python-can reports a lost bus
+                raise can.CanOperationError(f"bridge {self.channel_info}: receive failed: {exc}") from exc
             if not data:
                 raise can.CanOperationError(f"bridge {self.channel_info}: connection closed")
             self._pending.extend(self._reader.feed(data))
@@ -207,6 +211,9 @@ def open_can_bus(url: str) -> can.BusABC:
     if url.startswith("tcp://"):
         parts = urllib.parse.urlsplit(url)
         assert parts.hostname is not None and parts.port is not None     # check_daq_url made sure
-        return TcpCanBus(parts.hostname, parts.port)
+        try:
+            return TcpCanBus(parts.hostname, parts.port)
+        except OSError as exc:
+            raise ConnectionLost(f"cannot connect to the DAQ at {url}: {exc}") from exc
     interface, _, channel = url.partition(":")
     return can.Bus(interface=interface, channel=channel, fd=True)

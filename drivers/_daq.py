@@ -22,7 +22,7 @@ import can
 import numpy as np
 
 from . import _daq_codec as codec
-from ._errors import BlockIntegrityError, FrameError, InstrumentError, InstrumentTimeout
+from ._errors import BlockIntegrityError, ConnectionLost, FrameError, InstrumentError, InstrumentTimeout
 from ._interfaces import Channel, ChannelSpec, DaqBlock
 
 log = logging.getLogger(__name__)
@@ -71,29 +71,37 @@ class CanFdDaq:
         self._n_samples = 0
 
     # ----------------------------------------------------------------- bus helpers
+    @property
+    def where(self) -> str:
+        """The DAQ as an error names it: its bus (``tcp://host:port``, ``socketcan:can0``)."""
+        return f"DAQ at {getattr(self._bus, 'channel_info', None) or 'its CAN bus'}"
+
     def _send(self, frame_id: int, data: bytes) -> None:
         try:
             self._bus.send(can.Message(arbitration_id=frame_id, data=data, is_fd=True,
                                        bitrate_switch=True, is_extended_id=False),
                            timeout=self.timeout_s)
-        except can.CanError as exc:
-            raise InstrumentError(f"CAN send of frame {frame_id:#x} failed: {exc}") from exc
+        except (can.CanError, OSError) as exc:      # a lost link: the bus's error or the socket's
+            raise ConnectionLost(f"{self.where}: CAN send of frame {frame_id:#x} failed: {exc}") from exc
 
     def _recv(self, deadline: float, waiting_for: str) -> can.Message:
         while True:
             left = deadline - time.monotonic()
             if left <= 0:
-                raise InstrumentTimeout(f"DAQ: no {waiting_for} within the timeout")
+                raise InstrumentTimeout(f"{self.where}: no {waiting_for} within the timeout")
             try:
                 msg = self._bus.recv(timeout=left)
-            except can.CanError as exc:
-                raise InstrumentError(f"DAQ: CAN receive failed: {exc}") from exc
+            except (can.CanError, OSError) as exc:
+                raise ConnectionLost(f"{self.where}: CAN receive failed: {exc}") from exc
             if msg is not None and not msg.is_error_frame:
                 return msg
 
     def _drain(self) -> None:
-        while self._bus.recv(timeout=0.0) is not None:
-            pass
+        try:
+            while self._bus.recv(timeout=0.0) is not None:
+                pass
+        except (can.CanError, OSError) as exc:
+            raise ConnectionLost(f"{self.where}: CAN receive failed: {exc}") from exc
 
     def _command(self, command: codec.Command, block_id: int = 0) -> None:
         self._send(codec.ID_COMMAND, codec.encode(codec.ID_COMMAND, Command=int(command),

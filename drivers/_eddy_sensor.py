@@ -74,10 +74,10 @@ class ModbusEddySensor:
             response = func(*args, device_id=self.unit_id, **kwargs)
         except ModbusIOException as exc:
             raise InstrumentTimeout(f"{what} on {self.url}: no valid response: {exc}") from exc
-        except ConnectionException as exc:
+        except (ConnectionException, OSError) as exc:      # OSError: a reset the client did not translate
             raise ConnectionLost(f"{what} on {self.url}: connection lost: {exc}") from exc
         except ModbusException as exc:
-            raise ModbusError(what, str(exc)) from exc
+            raise ModbusError(f"{what} on {self.url}", str(exc)) from exc
         if response.isError():
             code = getattr(response, "exception_code", None)
             raise ModbusError(what, "exception response", int(code) if code is not None else None)

@@ -6,8 +6,9 @@
     +-- LimitError                a safety limit stopped a run (procedures.safety.LimitExceeded)
     +-- InstrumentError           a driver's error (drivers: ConnectionLost, ScpiError, ...)
     +-- RunDirectoryError         not a readable run directory (also a ValueError)
+    +-- StorageError              a run directory that cannot be written (full disk, steps/ deleted)
 
-``bench`` maps these to exit codes by ``isinstance`` (2, 3, 3, 1, 2); anything else that
+``bench`` maps these to exit codes by ``isinstance`` (2, 3, 3, 1, 2, 1); anything else that
 reaches the command line is a bug and is reported as an internal error (decision record
 0027).  The layers are bench -> procedures -> drivers -> sim; this module imports nothing,
 so drivers and sim raise from the same tree as the application.
@@ -39,3 +40,9 @@ class InstrumentError(BenchError):
 
 class RunDirectoryError(BenchError, ValueError):
     """The directory is not a readable run directory (missing, or run.json damaged)."""
+
+
+class StorageError(BenchError):
+    """A run directory could not be written (a full disk, ``steps/`` deleted, a permission
+    taken away); the message names the file and the cause.  A runtime failure, not a usage
+    error: the output is switched off and the steps stored so far stay intact."""

@@ -58,3 +58,24 @@ def signal_in_a_finalizer(mocker):
         Finalized(signum)                    # made and dropped: __del__ runs at once
     send.dropped = dropped
     return send
+
+
+@pytest.fixture
+def twins_of_run(mocker):
+    """The spy's ``spy_return`` is the Twins the session started (None until it starts)."""
+    import bench.session
+    return mocker.spy(bench.session, "start_twins")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def instrument_lock_dir(tmp_path_factory):
+    """The instruments' locks (bench.runlock) of this test session in a directory of its own,
+    inherited by the `bench` processes the tests start; /tmp keeps none of them."""
+    path = tmp_path_factory.mktemp("instrument_locks")
+    old = os.environ.get("GUIDEWAY_LOCK_DIR")
+    os.environ["GUIDEWAY_LOCK_DIR"] = str(path)
+    yield path
+    if old is None:
+        os.environ.pop("GUIDEWAY_LOCK_DIR", None)
+    else:
+        os.environ["GUIDEWAY_LOCK_DIR"] = old

@@ -67,12 +67,6 @@ def the(out: Path, kind: str) -> dict:
     return found[0]
 
 
-@pytest.fixture
-def twins_of_run(mocker):
-    """The spy's ``spy_return`` is the Twins the session started (None until it starts)."""
-    return mocker.spy(bench.session, "start_twins")
-
-
 def output_on(spy) -> bool:
     return spy.spy_return.generator.state.output_on
 

@@ -1,0 +1,76 @@
+"""`bench demo --out DIR` deletes only an earlier demo run (issue 24 item 3): files it did
+not write stay untouched, and the demo still starts afresh over its own earlier run."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+import pytest
+
+import bench.cli
+from bench.cli import main
+from bench.config import DEFAULTS, load_plan, load_rig, parse_plan
+
+DEMO_NAME = load_plan(DEFAULTS / "demo_plan.toml").name
+
+
+def snapshot(root: Path) -> dict[str, str]:
+    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "dir"
+            for p in sorted(root.rglob("*"))}
+
+
+@pytest.fixture
+def small_demo(mocker):
+    """The demo with a two-step plan under the demo's name (the real one takes minutes)."""
+    plan = parse_plan({"plan": {"name": DEMO_NAME, "levels_N": [1.0],
+                                "frequencies": {"list_Hz": [60.0, 80.0], "direction": "up"},
+                                "control": {"settle_cycles": 4, "min_settle_s": 0.0, "measure_cycles": 4,
+                                            "control_cycles": 2, "ramp_s": 0.0}}})
+    return mocker.patch.object(bench.cli, "_load_configs", return_value=(plan, load_rig(DEFAULTS / "sim_rig.toml")))
+
+
+def test_the_demo_refuses_a_directory_that_holds_other_files_and_deletes_nothing(tmp_path, small_run, capsys):
+    v = tmp_path / "v"
+    (v / "thesis").mkdir(parents=True)
+    (v / "thesis" / "ch1.tex").write_text("x\n")
+    import shutil
+    shutil.copytree(small_run.path, v / "unrelated-run")
+    before = snapshot(v)
+    assert main(["demo", "--out", str(v)]) == 2
+    assert snapshot(v) == before
+    assert "holds no earlier demo run" in capsys.readouterr().err
+
+
+def test_out_dot_never_wipes_the_working_directory(tmp_path, monkeypatch, capsys):
+    (tmp_path / "notes.txt").write_text("mine\n")
+    (tmp_path / "src").mkdir()
+    monkeypatch.chdir(tmp_path)
+    before = snapshot(tmp_path)
+    assert main(["demo", "--out", "."]) == 2
+    assert snapshot(tmp_path) == before
+    assert "deletes nothing else" in capsys.readouterr().err
+
+
+def test_the_demo_reruns_over_its_own_run_and_keeps_what_it_did_not_write(tmp_path, small_demo, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out)]) == 0
+    first = (out / "run.json").read_text()
+    assert (out / "report" / "report.md").is_file()
+    assert main(["demo", "--out", str(out)]) == 0                 # twice in a row: starts afresh
+    assert (out / "run.json").read_text() != first
+    assert sum('"start"' in e for e in (out / "events.jsonl").read_text().splitlines()) == 1
+    # a file the demo did not write, beside its run or inside its steps/: kept, nothing deleted
+    for foreign, named in ((out / "export" / "frf.csv", "(export/)"), (out / "steps" / "my-notes.txt",
+                                                                       "(steps/my-notes.txt)")):
+        foreign.parent.mkdir(exist_ok=True)
+        foreign.write_text("mine\n")
+        before = snapshot(out)
+        capsys.readouterr()
+        assert main(["demo", "--out", str(out)]) == 2
+        assert snapshot(out) == before
+        assert named in capsys.readouterr().err
+        os.remove(foreign)
+        if foreign.parent.name == "export":
+            foreign.parent.rmdir()
