@@ -44,6 +44,7 @@ def identification_rows(report: str) -> dict[str, list[str]]:
     return {r[0].strip(): [c.strip() for c in r] for r in rows}
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_pitching_rig_interrupted_and_resumed_identifies_the_truth_and_says_it_was_interrupted(tmp_path):
     out = tmp_path / "run"
