@@ -55,7 +55,9 @@ bench: setup
 	$(PY) benchmarks/bench_analysis.py --source independent --cases 60 --levels 3 --freqs 10
 	$(PY) benchmarks/bench_artefacts.py
 	$(PY) benchmarks/bench_identification.py
+	$(PY) benchmarks/bench_backbone.py
 	$(PY) benchmarks/bench_twin.py
+	$(PY) benchmarks/bench_modes.py --seeds 6
 
 # Soak test (by hand, not in `make test`): 2000 steps, ~3 h of rig time, twins hammered by
 # other clients; prints memory, open files, latencies. SOAK_PROFILE=short for a quick one.

@@ -38,7 +38,19 @@ def cmd_paper(args) -> int:
     from sim.paper import reproduce
 
     out = Path(args.out)
-    files = reproduce(out, quick=args.quick, progress=Progress("paper figures"))
+    pitch_model, measured = None, None
+    if args.rig:
+        from .config import load_rig
+        from .rig_model import paper_model
+        pitch_model = paper_model(load_rig(Path(args.rig)), args.rig)
+    if args.runs:
+        from .reports import run_modes
+        measured = []
+        for r in args.runs:
+            rm = run_modes(Path(r), model=False)
+            measured.append({"label": rm.label, "rows": rm.rows()})
+    files = reproduce(out, quick=args.quick, progress=Progress("paper figures"), pitch_model=pitch_model,
+                      measured=measured)
     print(f"wrote {len(files)} files to {out}/ (start with {out}/README.md)")
     return 0
 
@@ -74,12 +86,28 @@ def _load_configs(args):
 
 
 def cmd_dry_run(args) -> int:
-    from .session import EnvelopeError, check_envelope, envelope, envelope_report
+    from .session import EnvelopeError, check_envelope, envelope, envelope_report, planned_steps
 
     plan, rig = _load_configs(args)
     steps = plan.schedule()
-    print(f"plan '{plan.name}': {len(plan.levels_N)} levels x {len(plan.freqs_Hz)} frequencies "
-          f"({plan.direction}) = {len(steps)} steps; rig '{rig.name}'{' (simulated)' if rig.simulated else ''}")
+    if plan.backbone:
+        b = plan.backbone
+        print(f"plan '{plan.name}': phase resonance, {len(plan.levels_N)} levels from {b.start_Hz:g} Hz in the window "
+              f"{b.min_Hz:g}-{b.max_Hz:g} Hz (envelope at both ends); rig '{rig.name}'"
+              f"{' (simulated)' if rig.simulated else ''}")
+    else:
+        n, refined, seconds = planned_steps(plan)
+        runs = (f"{n} measured (adaptive: {plan.adaptive_per_sweep} per sweep, chosen online)"
+                if plan.adaptive_per_sweep and n != len(steps) else f"{n} measured")
+        if refined:
+            runs += (f" + at most {refined} refinement steps ([plan.resonance]: {plan.refine_steps} per mode and level, "
+                     f"modes {', '.join(plan.refine_modes)}, tolerance {100 * plan.refine_tolerance:g} %)")
+        print(f"plan '{plan.name}': {len(plan.levels_N)} levels x {len(plan.freqs_Hz)} frequencies "
+              f"({plan.direction}) = {len(steps)} steps, {runs}; rig '{rig.name}'{' (simulated)' if rig.simulated else ''}")
+        print(f"expected rig time: about {_duration(seconds)}"
+              + (" with the refinement budget used up" if refined else "")
+              + " (force control, settling, measured blocks and ramps; a simulated rig runs faster or slower "
+                "than real time)")
     print(envelope_report(envelope(plan, rig)))
     from procedures.online_id import identifiability
     try:
@@ -92,9 +120,15 @@ def cmd_dry_run(args) -> int:
               f"skipped (infeasible = \"skip\")")
     else:
         print("envelope ok: the rig's limits hold every step")
-    for w in identifiability(runnable, rig):
+    for w in identifiability(runnable, rig) if plan.procedure == "stepped_sine" else []:
         print(f"identifiability warning: {w}")
     return 0
+
+
+def _duration(seconds: float) -> str:
+    m, s = divmod(int(round(seconds)), 60)
+    h, m = divmod(m, 60)
+    return f"{h} h {m:02d} min" if h else f"{m} min {s:02d} s" if m else f"{s} s"
 
 
 def _run(args, resume: bool) -> int:
@@ -137,16 +171,19 @@ def _session_held(args, resume: bool) -> int:
         plan = parse_plan({"plan": plan_toml(meta["plan"])}, f"{args.run}/run.json")
         rig = parse_rig({"rig": rig_toml(meta["rig"])}, f"{args.run}/run.json")
         out, seed = Path(args.run), meta.get("sim_seed")
+        labels = None
     else:
         plan, rig = _load_configs(args)
         out, seed = Path(args.out), args.seed
+        labels = parse_labels(getattr(args, "label", None))
     if rig.simulated:
         _warm_up()
     before = _event_count(out)
     watch = _start_watch(out, args)
     try:
-        store = run_plan(plan, rig, out, resume=resume, progress=Progress("stepped sine"), sim_seed=seed,
-                         retry_skipped=bool(getattr(args, "retry_skipped", False)))
+        store = run_plan(plan, rig, out, resume=resume,
+                         progress=Progress("phase resonance" if plan.procedure == "phase_resonance" else "stepped sine"),
+                         sim_seed=seed, retry_skipped=bool(getattr(args, "retry_skipped", False)), labels=labels)
     finally:
         if watch:
             watch.close()
@@ -383,8 +420,14 @@ def cmd_check(args) -> int:
     skipped = [] if acc is None else acc.skipped
     for p in skipped:
         print(f"{p.kind:>9}  {p.key}: {p.reason}")
+    tail = _not_yet_measured(store, acc) if acc is not None else []
     for p in problems:
-        print(f"{p.kind:>9}  {p}")
+        if p not in tail:
+            print(f"{p.kind:>9}  {p}")
+    if tail:
+        last = max((k for k in acc.intact), default=None)
+        print(f"{'missing':>9}  interrupted after step {last or '(none)'}; {len(tail)} not yet measured "
+              f"(the plan's steps after it; bench resume {store.path} measures them)")
     if acc is None:
         print(f"{store.path}: {len(store.step_files())} step result files; run.json unreadable, so the steps "
               f"cannot be counted against the plan; {len(problems)} problem{'s' if len(problems) != 1 else ''}")
@@ -398,6 +441,26 @@ def cmd_check(args) -> int:
               + ("counted as problems (--strict)" if args.strict else
                  "not a problem (--strict counts them); bench resume --retry-skipped measures them again"))
     return ExitCode.FAILURE if problems or (skipped and args.strict) else ExitCode.OK
+
+
+def _not_yet_measured(store, acc) -> list:
+    """The missing steps of a run that was stopped (not completed) that are simply the
+    plan's steps after the last one stored, with no file at all: one line says so instead
+    of one line each.  Any other missing step is listed by key."""
+    from .storage import RunStatus, stored_plan
+    try:
+        meta = store.metadata
+    except Exception:  # noqa: BLE001 - no plan to judge against: list every step
+        return []
+    plan = stored_plan(meta)
+    if plan is None or meta.get("status") == RunStatus.COMPLETED or plan.adaptive_per_sweep:
+        return []
+    order = [s.key for s in plan.schedule()]
+    present = {k for k in acc.intact} | {p.key for p in acc.damaged} | {p.key for p in acc.skipped}
+    last = max((order.index(k) for k in present if k in order), default=-1)
+    tail = [p for p in acc.missing if p.reason.startswith("missing: neither") and p.key in order
+            and order.index(p.key) > last]
+    return tail if len(tail) > 1 else []
 
 
 def cmd_warmup(args) -> int:
@@ -451,6 +514,33 @@ def cmd_compare(args) -> int:
     print(summary(result), end="")
     print(f"written to {out}/compare.json and compare.html")
     return ExitCode.OK if result["overall"]["within_tolerance"] else ExitCode.FAILURE
+
+
+def cmd_modes(args) -> int:
+    """Each run's modes per force level into OUT/modes.csv, with the seed's Figs. 13 and 17."""
+    from .reports import write_modes
+    runs, files = write_modes([Path(r) for r in args.runs], Path(args.out), model=not args.no_model)
+    for r in runs:
+        for e in r.modes:
+            if e.ok:
+                print(f"{r.label}: {e.mode} at {e.level_N:g} N: {e.resonance_Hz:.5g} Hz "
+                      f"[{e.resonance_low_Hz:.5g}, {e.resonance_high_Hz:.5g}], damping ratio "
+                      f"{100 * e.damping_ratio:.3g} % [{100 * e.damping_ratio_low:.3g}, {100 * e.damping_ratio_high:.3g}]")
+            else:
+                print(f"{r.label}: {e.mode} at {e.level_N:g} N: {e.status}" + (f" ({e.note})" if e.note else ""))
+    print("wrote " + ", ".join(str(f) for f in files))
+    return ExitCode.OK
+
+
+def parse_labels(items: list[str] | None) -> dict[str, str]:
+    """``--label key=value`` (repeatable) -> {key: value}; a malformed one is a usage error."""
+    out: dict[str, str] = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigurationError(f"--label {item!r}: expected KEY=VALUE, e.g. --label lubricant=\"ISO VG 32\"")
+        out[key.strip()] = value.strip()
+    return out
 
 
 def _add_twin_parsers(sub) -> None:
@@ -524,6 +614,10 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("paper", help="redraw the seed paper's numerical figures (PNG + CSV)")
     s.add_argument("--out", default="out/paper", help="directory for the figures, their CSV and a README")
     s.add_argument("--quick", action="store_true", help="coarse grids (seconds instead of minutes)")
+    s.add_argument("--rig", help="rig TOML with a pitching mode in [rig.model]: Figs. 15 and 17 at its parameters "
+                                 "(default: bench/defaults/sim_rig_pitch.toml's)")
+    s.add_argument("--runs", nargs="+", metavar="RUN", help="run directories whose measured modes are drawn over "
+                                                             "Figs. 15 and 17 (legends: their --label)")
     s.set_defaults(func=cmd_paper)
 
     s = sub.add_parser("demo", help="the main job: the default plan on the simulated rig, with its report")
@@ -542,6 +636,9 @@ def build_parser() -> argparse.ArgumentParser:
             s.add_argument("--out", required=True, help="new run directory (bench resume continues it)")
             s.add_argument("--seed", type=int, help="noise seed of a simulated rig (default: the rig file's)")
             s.add_argument("--no-report", action="store_true", help="do not write the report at the end")
+            s.add_argument("--label", action="append", metavar="KEY=VALUE",
+                           help="a label kept in run.json (repeatable), used by the legends of `bench modes`, "
+                                "e.g. --label lubricant=\"ISO VG 32\"")
             _add_watch_options(s)
         s.set_defaults(func=func)
 
@@ -614,6 +711,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_check)
 
     _add_twin_parsers(sub)
+
+    s = sub.add_parser("modes", help="each mode's resonance and damping ratio per force level of one or more runs: "
+                                     "modes.csv and the seed's Figs. 13 and 17 from the measurements")
+    s.add_argument("runs", nargs="+", metavar="RUN", help="run directories (legends use each run's --label)")
+    s.add_argument("--out", required=True, help="output directory for modes.csv and the figures")
+    s.add_argument("--no-model", action="store_true", help="leave out the rig model's prediction (simulated rigs)")
+    s.set_defaults(func=cmd_modes)
 
     from .studies.cli import add_parsers as add_study_parsers
     add_study_parsers(sub, Progress)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from drivers import check_daq_url, check_generator_url, check_sensor_url
-from procedures.plan import Limits, Plan, Rig
+from procedures.plan import Backbone, Limits, Plan, Rig
 from sim.errors import ConfigurationError
 
 log = logging.getLogger(__name__)
@@ -33,7 +33,13 @@ LIMIT_KEYS = ("drive_V", "force_N", "disp_m", "accel_m_s2")
 # the close valid one, before any value is read (a misspelled required key is reported as
 # the misspelling, not as the key it was meant to be).  [rig.model]: MODEL_SCHEMA below.
 KEYS = {
-    "plan": ("name", "levels_N", "frequencies", "control", "limits", "infeasible", "adaptive_per_sweep"),
+    "plan": ("name", "levels_N", "frequencies", "control", "limits", "infeasible", "adaptive_per_sweep",
+             "resonance", "procedure", "backbone", "response"),
+    "plan.resonance": ("refine", "tolerance", "max_steps", "modes"),
+    "plan.response": ("quantity", "levels"),
+    "plan.backbone": ("start_Hz", "mode", "response", "phase_deg", "gain", "slope_deg_per_Hz", "probe_step",
+                      "block_periods", "phase_band_deg", "amplitude_band", "settle_periods", "max_step_Hz",
+                      "min_Hz", "max_Hz", "max_blocks", "lost_phase_deg", "collapse"),
     "plan.frequencies": ("list_Hz", "start_Hz", "stop_Hz", "points", "spacing", "direction"),
     "plan.control": ("settle_cycles", "min_settle_s", "measure_cycles", "min_measure_s", "control_cycles",
                      "force_tolerance", "max_iterations", "harmonics", "ramp_s", "min_sample_rate_Hz",
@@ -167,6 +173,42 @@ def _limits(sec: _Section, required: bool = True) -> Limits:
     return lim
 
 
+def _backbone(sec: _Section) -> Backbone:
+    """[plan.backbone], each key checked; cross-key rules named with both keys."""
+    start = sec.number("start_Hz", _REQUIRED, MIN_FREQ_HZ, MAX_FREQ_HZ, note=FREQ_RANGE)
+    response = sec.choice("response", "disp", ("disp", "accel"))
+    default_phase = -90.0 if response == "disp" else 90.0
+    lo, hi = (-180.0, 0.0) if response == "disp" else (0.0, 180.0)
+    b = Backbone(
+        start_Hz=start, mode=sec.text("mode", "feed") or "feed", response=response,
+        phase_deg=sec.number("phase_deg", default_phase, lo, hi, lo_open=True,
+                             note=f" (response = \"{response}\": the phase against the force, degrees)"),
+        gain=sec.number("gain", 0.7, 0, 1, lo_open=True),
+        slope_deg_per_Hz=sec.number("slope_deg_per_Hz", 0.0, -1e4, 0, note=" (0 = estimated; the phase falls "
+                                    "with frequency through a resonance)"),
+        probe_step=sec.number("probe_step", 0.02, 0.001, 0.2),
+        block_periods=sec.number("block_periods", 10, 2, 1000, integer=True),
+        phase_band_deg=sec.number("phase_band_deg", 1.0, 0, 30, lo_open=True),
+        amplitude_band=sec.number("amplitude_band", 0.01, 0, 0.5, lo_open=True),
+        settle_periods=sec.number("settle_periods", 20, 1, 10000, integer=True),
+        max_step_Hz=sec.number("max_step_Hz", 0.0, 0, MAX_FREQ_HZ, note=" (0 = 5 % of start_Hz)"),
+        min_Hz=sec.number("min_Hz", 0.0, 0, MAX_FREQ_HZ, note=" (0 = start_Hz / 2, at least 20 Hz)"),
+        max_Hz=sec.number("max_Hz", 0.0, 0, MAX_FREQ_HZ, note=" (0 = 2 x start_Hz, at most 1000 Hz)"),
+        max_blocks=sec.number("max_blocks", 60, 3, 100000, integer=True),
+        lost_phase_deg=sec.number("lost_phase_deg", 45.0, 1, 180),
+        collapse=sec.number("collapse", 0.2, 0, 1, lo_open=True)).resolved()
+    if not MIN_FREQ_HZ <= b.min_Hz < b.start_Hz * (1 - b.probe_step) < b.start_Hz * (1 + b.probe_step) < b.max_Hz \
+            <= MAX_FREQ_HZ:
+        raise ConfigError(f"{sec.where('min_Hz')} / max_Hz: the window {b.min_Hz:g}-{b.max_Hz:g} Hz must hold "
+                          f"start_Hz {b.start_Hz:g} Hz and its probe blocks (x (1 -+ probe_step {b.probe_step:g})) "
+                          f"inside the bench's range {MIN_FREQ_HZ:g}-{MAX_FREQ_HZ:g} Hz")
+    if b.phase_band_deg >= b.lost_phase_deg:
+        raise ConfigError(f"{sec.where('phase_band_deg')}: {b.phase_band_deg:g} deg must be below "
+                          f"lost_phase_deg {b.lost_phase_deg:g} deg")
+    sec.done()
+    return b
+
+
 def load_plan(path: Path) -> Plan:
     return parse_plan(_load(path), str(path))
 
@@ -175,9 +217,33 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
     top = _Section(source, "", data, ("plan",))
     p = top.table("plan")
     top.done()
-    levels = p.numbers("levels_N", _REQUIRED, MIN_LEVEL_N, MAX_LEVEL_N, note=FORCE_RANGE)
+    procedure = p.choice("procedure", "stepped_sine", ("stepped_sine", "phase_resonance", "response_controlled"))
+    rc = p.table("response")
+    quantity = ""
+    if procedure == "response_controlled":
+        if "levels_N" in p.data:
+            raise ConfigError(f"{p.where('levels_N')}: not used with procedure = \"response_controlled\" "
+                              f"(give [plan.response] levels, response amplitudes)")
+        quantity = rc.choice("quantity", "disp", ("disp", "accel"))
+        lo, hi, unit = (1e-9, 1e-3, "m") if quantity == "disp" else (1e-4, 1e3, "m/s^2")
+        levels = rc.numbers("levels", _REQUIRED, lo, hi, note=f" ({unit}, the response fundamental's amplitude)")
+        rc.done()
+    elif rc.data:
+        raise ConfigError(f"{source}: [plan.response] needs procedure = \"response_controlled\" in [plan]")
+    else:
+        levels = p.numbers("levels_N", _REQUIRED, MIN_LEVEL_N, MAX_LEVEL_N, note=FORCE_RANGE)
     fr = p.table("frequencies")
-    if "list_Hz" in fr.data:
+    bb = p.table("backbone")
+    backbone = None
+    if procedure == "phase_resonance":
+        if fr.data:
+            raise ConfigError(f"{source}: [plan.frequencies] is not used with procedure = \"phase_resonance\" "
+                              f"(the controller finds the frequency; give [plan.backbone] start_Hz)")
+        backbone = _backbone(bb)
+        freqs = [backbone.start_Hz]
+    elif bb.data:
+        raise ConfigError(f"{source}: [plan.backbone] needs procedure = \"phase_resonance\" in [plan]")
+    elif "list_Hz" in fr.data:
         freqs = sorted(fr.numbers("list_Hz", None, MIN_FREQ_HZ, MAX_FREQ_HZ, note=FREQ_RANGE))
     else:
         start = fr.number("start_Hz", _REQUIRED, MIN_FREQ_HZ, MAX_FREQ_HZ, note=FREQ_RANGE)
@@ -192,6 +258,10 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
     fr.done()
     c = p.table("control")
     lim = p.table("limits")
+    res = p.table("resonance")
+    modes = res._get("modes", ["feed", "pitch"])
+    if not isinstance(modes, list) or not modes or any(m not in ("feed", "pitch") for m in modes):
+        raise ConfigError(f"{res.where('modes')}: must be a non-empty list of \"feed\", \"pitch\", got {modes!r}")
     plan = Plan(
         name=p.text("name", "stepped sine"), levels_N=tuple(levels), freqs_Hz=tuple(freqs),
         direction=direction,
@@ -208,13 +278,25 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
         max_extra_settle_blocks=c.number("max_extra_settle_blocks", 3, 0, 100, integer=True),
         limits=_limits(lim, required=False) if lim.data else None,
         infeasible=p.choice("infeasible", "refuse", ("refuse", "skip")),
-        adaptive_per_sweep=p.number("adaptive_per_sweep", 0, 0, 10000, integer=True))
+        adaptive_per_sweep=p.number("adaptive_per_sweep", 0, 0, 10000, integer=True),
+        refine=res.flag("refine", False),
+        refine_tolerance=res.number("tolerance", 0.002, 0, 0.1, lo_open=True),
+        refine_steps=res.number("max_steps", 10, 1, 999, integer=True),
+        refine_modes=tuple(dict.fromkeys(modes)),
+        procedure=procedure, backbone=backbone, response=quantity)
+    res.done()
+    if backbone is not None and plan.adaptive_per_sweep:
+        raise ConfigError(f"{p.where('adaptive_per_sweep')}: not used with procedure = \"phase_resonance\"")
+    if backbone is not None and plan.refine:
+        raise ConfigError(f"{res.where('refine')}: not used with procedure = \"phase_resonance\" (the loop finds the resonance itself)")
     # every fitted harmonic must stay below Nyquist at the highest frequency (the DAQ samples
-    # at >= min_sample_rate_Hz); above it harmonics alias and the fit's amplitudes are wrong
-    max_harmonics = math.ceil(plan.min_sample_rate_Hz / (2 * max(plan.freqs_Hz))) - 1
+    # at >= min_sample_rate_Hz); above it harmonics alias and the fit's amplitudes are wrong;
+    # phase resonance: anywhere in its frequency window
+    top = backbone.max_Hz if backbone is not None else max(plan.freqs_Hz)
+    max_harmonics = math.ceil(plan.min_sample_rate_Hz / (2 * top)) - 1
     if plan.harmonics > max_harmonics:
         raise ConfigError(f"{c.where('harmonics')}: must be <= {max_harmonics} (below Nyquist at "
-                          f"{max(plan.freqs_Hz):g} Hz with min_sample_rate_Hz = {plan.min_sample_rate_Hz:g}), "
+                          f"{top:g} Hz with min_sample_rate_Hz = {plan.min_sample_rate_Hz:g}), "
                           f"got {plan.harmonics}")
     c.done()
     p.done()
@@ -345,6 +427,16 @@ def plan_toml(p: dict) -> dict:
            "adaptive_per_sweep": p.get("adaptive_per_sweep", 0),
            "frequencies": {"list_Hz": list(p["freqs_Hz"]), "direction": p["direction"]},
            "control": {k: p[k] for k in keys if k in p}}
+    if p.get("refine"):
+        out["resonance"] = {"refine": True, "tolerance": p.get("refine_tolerance", 0.002),
+                            "max_steps": p.get("refine_steps", 10),
+                            "modes": list(p.get("refine_modes") or ("feed", "pitch"))}
+    if p.get("procedure", "stepped_sine") == "response_controlled":
+        out["procedure"] = "response_controlled"
+        out["response"] = {"quantity": p["response"], "levels": out.pop("levels_N")}
+    if p.get("procedure", "stepped_sine") == "phase_resonance":
+        del out["frequencies"], out["adaptive_per_sweep"]
+        out["procedure"], out["backbone"] = "phase_resonance", dict(p["backbone"])
     if p.get("limits"):
         out["limits"] = {k: v for k, v in p["limits"].items() if v is not None}   # None: the rig's
     return out

@@ -18,6 +18,7 @@ from contextlib import ExitStack
 from dataclasses import dataclass, replace
 from importlib import metadata as importlib_metadata
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -69,8 +70,12 @@ def envelope(plan: Plan, rig: Rig) -> list[EnvelopePoint]:
     lim = tightest(rig.limits, plan.limits)
     m = f"x {FORCE_MARGIN:g} margin"
     out = []
+    # phase resonance: its frequency window's ends bound what the loop can drive
+    window = (plan.backbone.min_Hz, plan.backbone.max_Hz) if plan.backbone else ()
+    if plan.response:
+        return _response_envelope(plan, rig, lim)
     for F in plan.levels_N:
-        for f in plan.freqs_Hz:
+        for f in window or plan.freqs_Hz:
             Fp = F * FORCE_MARGIN
             w = 2 * math.pi * f
             drive = F / rig.amp_gain_N_per_V
@@ -85,6 +90,25 @@ def envelope(plan: Plan, rig: Rig) -> list[EnvelopePoint]:
                 (f"acceleration {acc:.3g} m/s^2 at {F:g} N {m} > accel_m_s2 {lim.accel_m_s2:g} m/s^2",
                  acc > lim.accel_m_s2)) if bad)
             out.append(EnvelopePoint(F, f, drive, disp, acc, problems))
+    return out
+
+
+def _response_envelope(plan: Plan, rig: Rig, lim) -> list[EnvelopePoint]:
+    """Response-controlled levels (decision 0044): the displacement and acceleration the
+    level sets, at FORCE_MARGIN; the force and drive it needs are found by the control
+    (given here as the free mass's, m w^2 X) and held by the supervisor's limits."""
+    out = []
+    for level in plan.levels_N:
+        for f in plan.freqs_Hz:
+            w2 = (2 * math.pi * f) ** 2
+            X = (level if plan.response == "disp" else level / w2) * FORCE_MARGIN
+            force = rig.expected_mass_kg * w2 * X / FORCE_MARGIN
+            problems = tuple(p for p, bad in (
+                (f"displacement {X * 1e3:.3g} mm at {level:g} x {FORCE_MARGIN:g} > disp_m {lim.disp_m * 1e3:g} mm",
+                 X > lim.disp_m),
+                (f"acceleration {X * w2:.3g} m/s^2 at {level:g} x {FORCE_MARGIN:g} > accel_m_s2 "
+                 f"{lim.accel_m_s2:g} m/s^2", X * w2 > lim.accel_m_s2)) if bad)
+            out.append(EnvelopePoint(level, f, force / rig.amp_gain_N_per_V, X, X * w2, problems))
     return out
 
 
@@ -106,6 +130,10 @@ def check_envelope(plan: Plan, rig: Rig) -> Plan:
     points = envelope(plan, rig)
     bad = [p for p in points if p.problems]
     if bad and plan.infeasible == "skip":
+        if plan.backbone:
+            raise EnvelopeError(f"infeasible = \"skip\" cannot skip part of a phase-resonance window: "
+                                f"{bad[0].force_N:g} N at {bad[0].freq_Hz:g} Hz: {'; '.join(bad[0].problems)}\n"
+                                + envelope_report(points))
         li = {F: i for i, F in enumerate(plan.levels_N)}
         fi = {f: i for i, f in enumerate(plan.freqs_Hz)}
         skip = tuple(sorted({(li[p.force_N], fi[p.freq_Hz]) for p in bad}))
@@ -117,6 +145,43 @@ def check_envelope(plan: Plan, rig: Rig) -> Plan:
                             f"e.g. {bad[0].force_N:g} N at {bad[0].freq_Hz:g} Hz: {'; '.join(bad[0].problems)}\n"
                             + envelope_report(points))
     return plan
+
+
+CONTROL_ITERATIONS_EXPECTED = 3    # force-control iterations a step typically takes (rig time estimate)
+
+
+def step_seconds(plan: Plan, f: float, *, from_rest: bool) -> float:
+    """Rig time of one step at ``f``: force control (CONTROL_ITERATIONS_EXPECTED iterations of
+    settle + acquire ``control_cycles``), settle, the measured block; from rest (a new sweep,
+    a refinement step) also the ramp up and down (at least 40 periods or ``ramp_s`` each).
+    Extra settle blocks are not counted (an estimate, not a bound)."""
+    t = CONTROL_ITERATIONS_EXPECTED * 2 * plan.control_cycles / f
+    t += max(plan.settle_cycles / f, plan.min_settle_s) + max(plan.measure_cycles / f, plan.min_measure_s)
+    if from_rest:
+        t += 2 * max(40 / f, plan.ramp_s)
+    return t
+
+
+def planned_steps(plan: Plan) -> tuple[int, int, float]:
+    """(steps of the grid as they will run, refinement steps at most, expected rig time in s
+    with the refinement budget used up): an adaptive plan counts its chosen number per
+    sweep (at the sweep's median frequency each), a refined plan adds at most
+    ``refine_steps`` per mode and level, each from rest, at the grid's geometric middle."""
+    from .storage import _sweeps
+    steps = plan.schedule()
+    by_key = {s.key: s for s in steps}
+    n, t = 0, 0.0
+    for keys in _sweeps(plan).values():
+        sw = [by_key[k] for k in keys]
+        k = min(len(sw), plan.adaptive_per_sweep) if plan.adaptive_per_sweep else len(sw)
+        chosen = sw if k == len(sw) else [sorted(sw, key=lambda s: s.freq_Hz)[len(sw) // 2]] * k
+        n += k
+        t += sum(step_seconds(plan, s.freq_Hz, from_rest=i == 0) for i, s in enumerate(chosen))
+    refined = plan.refine_steps * len(plan.refine_modes) * len(plan.levels_N) if plan.refine else 0
+    if refined:
+        fm = math.sqrt(min(plan.freqs_Hz) * max(plan.freqs_Hz))
+        t += refined * step_seconds(plan, fm, from_rest=True)
+    return n, refined, t
 
 
 def versions() -> dict:
@@ -196,7 +261,8 @@ def open_instruments(rig: Rig, stack: ExitStack, *, sim_seed: int | None = None,
 
 
 def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=None,
-             sim_seed: int | None = None, identify: bool = True, retry_skipped: bool = False) -> RunStore:
+             sim_seed: int | None = None, identify: bool = True, retry_skipped: bool = False,
+             labels: dict[str, str] | None = None) -> RunStore:
     """Run (or resume) ``plan`` on ``rig`` into the run directory ``out``.
 
     The plan is checked against the rig's limits before anything is opened; the run's
@@ -204,7 +270,7 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
     not measure again the steps skipped at run time (force unreachable, ``infeasible =
     "skip"``) unless ``retry_skipped`` (after raising a limit, say)."""
     plan = check_envelope(plan, rig)
-    warnings = identifiability(plan, rig)
+    warnings = identifiability(plan, rig) if plan.procedure == "stepped_sine" else []
     for w in warnings:
         log.warning("identifiability: %s", w)
     latch = SignalLatch()
@@ -221,6 +287,8 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
                 held.enter_context(runlock.instrument(url, out))
         latch.hold()          # a signal while the directory is set up acts once it says "running"
         store = _open_store(plan, rig, out, resume=resume, sim_seed=sim_seed, warnings=warnings)
+        if labels:
+            store.update(labels=labels)
         log_handler = _log_to(store.path / "bench.log")
         try:
             _supervised(plan, rig, store, latch, progress=progress, sim_seed=sim_seed, identify=identify,
@@ -296,7 +364,9 @@ def _supervised(plan: Plan, rig: Rig, store: RunStore, latch: SignalLatch, *, pr
             with uninterruptible("switching the output off"):
                 stack.close()    # output off, then close links and twins
                 try:
-                    store.finish(status, steps_done=len(store.done_keys()), steps_total=planned_count(plan))
+                    done = store.done_keys()
+                    refined = sum(1 for k in done if plan.refined_key_ok(k))   # refinement steps: counted as run
+                    store.finish(status, steps_done=len(done), steps_total=planned_count(plan) + refined)
                 except StorageError as e:
                     log.error("the run's end (%s) could not be recorded: %s", status, e)
                     unrecorded = e
@@ -330,16 +400,27 @@ def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Super
     # reference position with the output off
     rest = ins.daq.acquire_periods(100.0, 10).disp_m
     sup.x_ref_m = float(np.mean(rest))
-    proc = SteppedSine(plan, gen, daq, amp_gain_N_per_V=rig.amp_gain_N_per_V,
-                       sensor_check=sensor_check, marker=ins.generator, drive_limit_V=sup.limits.drive_V,
-                       on_skip=lambda step, why: store.event("step_skipped", key=step.key, reason=why))
+    if plan.procedure == "phase_resonance":
+        from .backbone import run_backbone
+        run_backbone(plan, rig, store, gen, daq, sensor_check, marker=ins.generator, drive_limit_V=sup.limits.drive_V,
+                     noise_floor_m=float(np.std(rest)), progress=progress)
+        return
+    kwargs: dict[str, Any] = dict(amp_gain_N_per_V=rig.amp_gain_N_per_V, sensor_check=sensor_check, marker=ins.generator,
+                  drive_limit_V=sup.limits.drive_V,
+                  on_skip=lambda step, why: store.event("step_skipped", key=step.key, reason=why))
+    if plan.response:
+        from procedures.response_control import ResponseControlled
+        proc: SteppedSine = ResponseControlled(plan, gen, daq, quantity=plan.response, mass_kg=rig.expected_mass_kg,
+                                               **kwargs)
+    else:
+        proc = SteppedSine(plan, gen, daq, **kwargs)
     proc.preload(store.results())             # a resumed run: the force per volt measured so far
     proc.disp_noise_floor_m = float(np.std(rest))
     # the probe's resolution as this run saw it (the report names steps that move less)
     store.event("probe_noise", rms_m=proc.disp_noise_floor_m)
     if progress and hasattr(progress, "restart"):
         progress.restart(len(store.done_keys()))     # the ETA counts steps from here
-    online = OnlineIdentification(store.path, rig, plan.harmonics) if identify else None
+    online = OnlineIdentification(store.path, rig, plan.harmonics) if identify and not plan.response else None
     if online:
         online.preload(store.results(), store.raw)
 
@@ -366,7 +447,16 @@ def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Super
         from procedures.online_id import choose_frequencies
         choose = lambda sweep: choose_frequencies(           # noqa: E731
             sweep, online.current() if online else None, plan.adaptive_per_sweep)
-    proc.run(store.done_keys() | skipped, record, show, choose=choose)
+    refiner = None
+    if plan.refine:
+        from procedures.resonance import Refiner
+        band = None
+        if rig.simulated and rig.model:
+            from sim.modal import pitch_band_Hz
+            from sim.rig import RigModel
+            band = pitch_band_Hz(RigModel.from_dict(rig.model))
+        refiner = Refiner(plan, lambda: store.results(warn=False), band).next_step
+    proc.run(store.done_keys() | skipped, record, show, choose=choose, refine=refiner)
     if online:
         store.update(identification=online.final())
 

@@ -428,6 +428,10 @@ class RunStore:
             problems.append(StepProblem("", self.path / "run.json", "corrupt", str(e).split(": ", 1)[-1]))
             meta = None
         known = planned_keys(meta) if meta else None
+        plan = stored_plan(meta) if meta else None
+        if known is not None and plan is not None and plan.refine:     # refinement steps (decision 0043)
+            known |= {p.stem for p in self.step_files() if plan.refined_key_ok(p.stem)}
+            known |= {p.stem for p in self.steps_dir.glob("*.npz") if plan.refined_key_ok(p.stem)}
         if not self.steps_dir.is_dir():
             problems.append(StepProblem("", self.steps_dir, "missing", "no steps/ directory"))
             return problems
@@ -516,6 +520,18 @@ class RunStore:
                                            f"missing: {n_sweep - present} of the {n_sweep} steps this sweep "
                                            f"measures (adaptive plan: chosen online, so not named by key)",
                                            count=n_sweep - present))
+        if plan.refine:       # refinement steps: chosen online, counted as measured (decision 0043)
+            for key in sorted(k for k in have_json | have_npz if plan.refined_key_ok(k)):
+                n_planned += 1
+                jp, zp = self.steps_dir / f"{key}.json", self.steps_dir / f"{key}.npz"
+                if key not in have_json:
+                    missing.append(StepProblem(key, jp, "missing", "missing: no .json (only the .npz)"))
+                elif bad.get(key) and bad[key].kind == "missing":
+                    missing.append(StepProblem(key, zp, "missing", "missing: no .npz (only the .json)"))
+                elif key in bad:
+                    damaged.append(bad[key])
+                else:
+                    intact.append(key)
         order = {key: i for i, key in enumerate(s.key for s in plan.schedule())}
         missing.sort(key=lambda p: order.get(p.key, -1))
         return Accounting(n_planned, intact, missing, damaged, orphan, skipped)
@@ -598,7 +614,7 @@ def _check_npz(path: Path, key: str, integrity: dict | None) -> None:
 
 def stored_plan(meta: dict | None):
     """The run's stored plan as a :class:`procedures.plan.Plan` (None if it cannot be rebuilt)."""
-    from procedures.plan import Plan
+    from procedures.plan import Backbone, Plan
 
     p = (meta or {}).get("plan")
     if not isinstance(p, dict):
@@ -606,7 +622,10 @@ def stored_plan(meta: dict | None):
     try:
         kw = {f.name: p[f.name] for f in fields(Plan) if f.name in p}
         kw.update(levels_N=tuple(p["levels_N"]), freqs_Hz=tuple(p["freqs_Hz"]),
-                  skip=tuple(tuple(s) for s in p.get("skip") or ()))
+                  skip=tuple(tuple(s) for s in p.get("skip") or ()),
+                  refine_modes=tuple(p.get("refine_modes") or ("feed", "pitch")))
+        if isinstance(p.get("backbone"), dict):
+            kw["backbone"] = Backbone(**p["backbone"])
         plan = Plan(**kw)
         plan.schedule()
         return plan

@@ -7,6 +7,7 @@ produce them.
 
 from __future__ import annotations
 
+import re
 from dataclasses import asdict, dataclass, field
 
 
@@ -16,6 +17,40 @@ class Limits:
     force_N: float          # peak force at the impedance head
     disp_m: float           # peak displacement about the start position
     accel_m_s2: float       # peak acceleration
+
+
+@dataclass(frozen=True)
+class Backbone:
+    """[plan.backbone]: the phase-resonance procedure's settings (decision record 0044).
+
+    Phase convention: the phase of the response's fundamental minus the force's, in
+    degrees, each from a fit A sin(w t + phi); a mass-spring at its natural frequency has
+    the displacement at -90 (lagging), the acceleration at +90 (leading)."""
+
+    start_Hz: float                     # near the mode at the first level
+    mode: str = "feed"                  # the mode's name, in backbone.csv
+    response: str = "disp"              # "disp" or "accel": whose phase is held
+    phase_deg: float = -90.0            # target; default -90 for disp, +90 for accel
+    gain: float = 0.7                   # fraction of the Newton step taken per block (0, 1]
+    slope_deg_per_Hz: float = 0.0       # d phase / d f at start_Hz; 0 = estimated by probe blocks
+    probe_step: float = 0.02            # relative frequency step of the probe blocks
+    block_periods: int = 10             # periods per controller block
+    phase_band_deg: float = 1.0         # settled: |phase error| within this ...
+    amplitude_band: float = 0.01        # ... and the response amplitude within this (relative) ...
+    settle_periods: int = 20            # ... for this many consecutive periods (NLtest's rule)
+    max_step_Hz: float = 0.0            # largest frequency change per block; 0 = 5 % of start_Hz
+    min_Hz: float = 0.0                 # the frequency window; 0 = start_Hz / 2 (>= 20 Hz) ...
+    max_Hz: float = 0.0                 # ... 0 = 2 x start_Hz (<= 1000 Hz)
+    max_blocks: int = 60                # controller blocks per level before the lock is given up
+    lost_phase_deg: float = 45.0        # lock lost: |phase error| above this and growing 3 blocks
+    collapse: float = 0.2               # lock lost: amplitude below this x the level's largest
+
+    def resolved(self) -> Backbone:
+        """Defaults that depend on start_Hz filled in."""
+        from dataclasses import replace
+        lo = self.min_Hz or max(20.0, self.start_Hz / 2)
+        hi = self.max_Hz or min(1000.0, self.start_Hz * 2)
+        return replace(self, max_step_Hz=self.max_step_Hz or 0.05 * self.start_Hz, min_Hz=lo, max_Hz=hi)
 
 
 @dataclass(frozen=True)
@@ -39,6 +74,17 @@ class Plan:
     infeasible: str = "refuse"           # steps the limits cannot hold: "refuse" the plan or "skip" them
     adaptive_per_sweep: int = 0          # > 0: measure only this many frequencies per sweep, chosen online
     skip: tuple[tuple[int, int], ...] = ()   # (level index, frequency index) left out
+    # [plan.resonance] (decision 0043): after each level's sweeps, refine each peak the data
+    # show with extra steps until its frequency is known within refine_tolerance (relative),
+    # at most refine_steps per mode and level; the modes refined ("feed", "pitch")
+    refine: bool = False
+    refine_tolerance: float = 0.002
+    refine_steps: int = 10            # per mode and level
+    refine_modes: tuple[str, ...] = ("feed", "pitch")
+    procedure: str = "stepped_sine"      # or "phase_resonance" (then freqs_Hz = (start_Hz,)), "response_controlled"
+    backbone: Backbone | None = None     # [plan.backbone], phase_resonance only
+    response: str = ""                   # response_controlled: "disp" or "accel"; levels_N then holds
+                                         # response amplitudes (m or m/s^2), not forces
 
     def sweeps(self) -> list[tuple[str, tuple[float, ...]]]:
         up = ("up", self.freqs_Hz)
@@ -61,6 +107,20 @@ class Plan:
     def to_dict(self) -> dict:
         return asdict(self)
 
+    def refined_key_ok(self, key: str) -> bool:
+        """Whether ``key`` names a refinement step this plan may add (refine on, a level of
+        the plan, its number within the budget, the level's last sweep's direction)."""
+        m = REFINED_KEY.fullmatch(key)
+        if not (self.refine and m):
+            return False
+        li, j, direction = int(m["level"]), int(m["n"]), m["dir"]
+        last = [s for s in self.schedule() if s.level_index == li]
+        return bool(last) and j < self.refine_steps and direction == last[-1].direction \
+            and int(m["index"]) == last[-1].index and {"F": "feed", "P": "pitch"}[m["mode"]] in self.refine_modes
+
+
+REFINED_KEY = re.compile(r"(?P<index>\d{5})-L(?P<level>\d{2})-R(?P<mode>[FP])(?P<n>\d{3})-(?P<dir>up|down)")
+
 
 @dataclass(frozen=True)
 class StepSpec:
@@ -70,9 +130,14 @@ class StepSpec:
     direction: str
     force_N: float
     freq_Hz: float
+    refined: int = -1        # >= 0: the level's n-th refinement step of a mode (frequency chosen online)
+    refined_mode: str = ""   # that mode: "feed" or "pitch"
 
     @property
     def key(self) -> str:
+        if self.refined >= 0:    # sorts after the level's sweep (its last step's index; R after F)
+            return (f"{self.index:05d}-L{self.level_index:02d}-R{self.refined_mode[:1].upper()}{self.refined:03d}"
+                    f"-{self.direction}")
         return f"{self.index:05d}-L{self.level_index:02d}-F{self.freq_index:03d}-{self.direction}"
 
 

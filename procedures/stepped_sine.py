@@ -160,6 +160,13 @@ class SteppedSine:
         if not new_sweep:
             return min(step.force_N / self.drive.gain_N_per_Vpp, self.max_vpp)
         gain = self.gain_at.get(step.freq_Hz, self.drive.gain_N_per_Vpp)
+        if step.freq_Hz not in self.gain_at and self.gain_at:
+            # a frequency not measured before (a refinement step): the larger force per volt
+            # of the measured frequencies either side, so the first drive errs low
+            fs = sorted(self.gain_at)
+            below = [f for f in fs if f < step.freq_Hz][-1:]
+            above = [f for f in fs if f > step.freq_Hz][:1]
+            gain = max(self.gain_at[f] for f in below + above)
         return min(FIRST_DRIVE_MARGIN * step.force_N / gain, self.max_vpp)
 
     # ------------------------------------------------------------------ primitives
@@ -318,6 +325,11 @@ class SteppedSine:
         if why:
             log.warning("step %s: still unsettled after %d extra blocks (plan: max_extra_settle_blocks = %d), "
                         "recorded as it is: %s", step.key, extra, self.plan.max_extra_settle_blocks, why)
+        return self.block_result(block, fits, f, extra, why)
+
+    def block_result(self, block: Block, fits: dict[str, HarmonicFit], f: float, extra: int = 0,
+                     why: str = "") -> tuple[StepMeasurement, dict[str, np.ndarray]]:
+        """A measured block's record (the result's measurement part) and its raw arrays."""
         F1 = fits["force"].fundamental
         X1 = fits["disp"].fundamental
         A1 = fits["accel"].fundamental
@@ -342,9 +354,13 @@ class SteppedSine:
     # ------------------------------------------------------------------ the test
     def run(self, done: set[str], record: Record,
             progress: Callable[[int, int, str], None] | None = None,
-            choose: Callable[[list[StepSpec]], list[StepSpec]] | None = None) -> None:
+            choose: Callable[[list[StepSpec]], list[StepSpec]] | None = None,
+            refine: Callable[[StepSpec], StepSpec | None] | None = None) -> None:
         """Run the schedule, skipping ``done`` keys.  ``choose`` (adaptive mode) picks,
-        at the start of each sweep, the subset of its steps to measure."""
+        at the start of each sweep, the subset of its steps to measure.  ``refine``
+        (resonance search, :class:`procedures.resonance.Refiner`) is asked after a level's
+        last sweep for one more step at a time, until it says None; each starts from rest
+        like a new sweep (ramp, force control), since it jumps in frequency."""
         sweeps: list[list[StepSpec]] = []
         for step in self.plan.schedule():
             if not sweeps or (step.level_index, step.direction) != (sweeps[-1][0].level_index,
@@ -355,7 +371,7 @@ class SteppedSine:
         total = sum(min(len(sw), per_sweep) if per_sweep else len(sw) for sw in sweeps)
         finished = len(done)
         prev: StepSpec | None = None
-        for sweep in sweeps:
+        for n_sweep, sweep in enumerate(sweeps):
             before: StepSpec | None = None          # the step measured before, in this sweep
             for step in (choose(sweep) if choose else sweep):
                 if step.key in done:
@@ -372,9 +388,22 @@ class SteppedSine:
                 finished += 1
                 if progress:
                     progress(finished, total, f"{step.force_N:g} N {step.freq_Hz:7.1f} Hz {step.direction:4s} "
-                             + (f"err {100 * res['force_error']:+.1f}% THD(x) {res['disp']['thd']:.2f}"
+                             + (f"err {100 * res['force_error']:+.1f}% THD(x) {100 * res['disp']['thd']:.1f}%"
                                 if res else "skipped: force unreachable"))
                 prev = step
+            if refine and (n_sweep == len(sweeps) - 1 or sweeps[n_sweep + 1][0].level_index != sweep[0].level_index):
+                tried: set[str] = set()
+                while (extra := refine(sweep[-1])) is not None and extra.key not in tried:
+                    tried.add(extra.key)
+                    if extra.key in done:
+                        continue
+                    res = self.step(extra, new_sweep=True, record=record)
+                    finished += 1
+                    total += 1
+                    if progress:
+                        progress(finished, total, f"{extra.force_N:g} N {extra.freq_Hz:7.2f} Hz refine "
+                                 + (f"err {100 * res['force_error']:+.1f}%" if res else "skipped: force unreachable"))
+                    prev = extra
         self.stop()
 
     def approach(self, step: StepSpec) -> None:

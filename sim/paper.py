@@ -397,20 +397,41 @@ PITCH_MODEL = dict(F_s_N=10.0, x_s_m=10e-6, n=1.5, mass_kg=10.0, friction_alpha=
 PITCH_SETTLE_PERIODS, PITCH_MEASURE_PERIODS, PITCH_SAMPLES_PER_PERIOD = 30, 10, 64
 
 
-def pitch_compliance(model, level_N: float, freqs_Hz) -> np.ndarray:
-    """|X1 / P| (m/N) of the feed displacement along a stepped sweep at force ``level_N``
-    on the RK4 plant (:class:`sim.rig.SimulatedRig`), the state carried from step to step."""
+def pitch_sweep(model, level_N: float, freqs_Hz) -> tuple[np.ndarray, np.ndarray]:
+    """Complex X1 / P (m/N, feed displacement) and A1 / P (1/kg, drive-point acceleration)
+    along a stepped sweep at force ``level_N`` on the RK4 plant (:class:`sim.rig.SimulatedRig`),
+    the state carried from step to step (ideal force: P is the drive's sine)."""
     from .rig import SimulatedRig
     rig = SimulatedRig(model)
-    out = []
+    X, A = [], []
     for i, f in enumerate(freqs_Hz):
         rig.set_generator(freq_Hz=f, amplitude_Vpp=2 * level_N / model.amp_gain_N_per_V, output_on=True)
         fs = PITCH_SAMPLES_PER_PERIOD * f
         rig.run(PITCH_SAMPLES_PER_PERIOD * PITCH_SETTLE_PERIODS * (3 if i == 0 else 1), fs)
         n = PITCH_SAMPLES_PER_PERIOD * PITCH_MEASURE_PERIODS
-        x = rig.run(n, fs).disp_V / model.disp_sens_V_per_m
-        out.append(2 * abs(np.exp(-2j * np.pi * np.arange(n) / PITCH_SAMPLES_PER_PERIOD) @ x) / n / level_N)
-    return np.array(out)
+        blk = rig.run(n, fs)
+        e = np.exp(-2j * np.pi * np.arange(n) / PITCH_SAMPLES_PER_PERIOD)
+        p1 = 2 * (e @ (blk.force_V / model.force_sens_V_per_N)) / n      # the force's fundamental (sin drive)
+        X.append(2 * (e @ (blk.disp_V / model.disp_sens_V_per_m)) / n / p1)
+        A.append(2 * (e @ (blk.accel_V / model.accel_sens_V_per_m_s2)) / n / p1)
+    return np.array(X), np.array(A)
+
+
+def pitch_compliance(model, level_N: float, freqs_Hz) -> np.ndarray:
+    """|X1 / P| (m/N) of the feed displacement along a stepped sweep (:func:`pitch_sweep`)."""
+    return np.abs(pitch_sweep(model, level_N, freqs_Hz)[0])
+
+
+PITCH_DAMPING_POINTS, PITCH_DAMPING_SPAN = 13, 0.08   # the damping fit's sweep: +-8 % of the pitch resonance
+
+
+def pitch_damping(model, level_N: float, f_r: float):
+    """The pitching mode's damping ratio at ``level_N`` (sim.modal's single-mode fit to the
+    accelerance of a sweep of PITCH_DAMPING_POINTS over f_r (1 +- PITCH_DAMPING_SPAN))."""
+    from .modal import estimate_mode
+    f = np.linspace(f_r * (1 - PITCH_DAMPING_SPAN), f_r * (1 + PITCH_DAMPING_SPAN), PITCH_DAMPING_POINTS)
+    _, A = pitch_sweep(model, level_N, f)
+    return estimate_mode(f, A, mode="pitch", kind="accelerance", level_N=level_N, guess_zeta=0.02)
 
 
 def _local_maxima(y: np.ndarray) -> list[int]:
@@ -444,17 +465,25 @@ def pitch_resonances(model, level_N: float, freqs_Hz, zoom_points: int):
     return found[0], found[1], G
 
 
-def fig15_17_pitch_resonance(rep: Report, grids: Grids):
+def fig15_17_pitch_resonance(rep: Report, grids: Grids, model_dict: dict | None = None,
+                             measured: list[dict] | None = None):
+    """Seed Figs. 15 and 17 from the pitching rig's model (``model_dict``: a rig file's
+    [rig.model], default PITCH_MODEL), with a damping panel; ``measured``: rows of
+    `bench modes` (label, mode, level_N, status, resonance_Hz, ..._low/_high,
+    damping_ratio, ..._low/_high) drawn over the model's."""
     from .rig import RigModel
-    model = RigModel.from_dict(PITCH_MODEL)
+    model = RigModel.from_dict(model_dict or PITCH_MODEL)
     freqs = grids.pitch_freqs_Hz if grids.pitch_freqs_Hz is not None else np.geomspace(40.0, 300.0, 24)
     f_s = model.omega_s / (2 * math.pi)
-    fig = Figure(figsize=(14, 4.5), layout="constrained")
-    ax_G, ax_feed, ax_pitch = (fig.add_subplot(1, 3, i) for i in (1, 2, 3))
-    rows, curves = [], []
+    fig = Figure(figsize=(18, 4.8), layout="constrained")
+    ax_G, ax_feed, ax_pitch, ax_z = (fig.add_subplot(1, 4, i) for i in (1, 2, 3, 4))
+    rows, curves, damping = [], [], []
     for level in grids.pitch_levels_N:
         feed, pitch, G = pitch_resonances(model, level, freqs, grids.pitch_zoom_points)
         rows.append((level, feed, pitch))
+        if math.isfinite(pitch):
+            est = pitch_damping(model, level, pitch)
+            damping.append((level, est.damping_ratio, est.damping_ratio_low, est.damping_ratio_high))
         curves += [(level, f, g) for f, g in zip(freqs, G)]
         ax_G.loglog(freqs, G, label=f"{level:g} N")
         for item, f_r in (("feed mode resonance", feed), ("pitching mode resonance", pitch)):
@@ -489,14 +518,50 @@ def fig15_17_pitch_resonance(rep: Report, grids: Grids):
     if gone:
         ax_feed.text(0.97, 0.5, "no feed peak at\n" + ", ".join(f"{g:g} N" for g in gone), ha="right",
                      transform=ax_feed.transAxes, fontsize=8, color="grey")
-    ax_feed.set_title("Seed Fig. 16: feed mode falls, then is gone")
+    ax_feed.set_title("Seed Fig. 15 (feed mode): falls, then is gone")
     ax_pitch.set_title("Seed Fig. 17: pitching mode falls with force")
+    if damping:
+        d = np.array(damping, dtype=float)
+        err = np.nan_to_num(np.clip(np.vstack([d[:, 1] - d[:, 2], d[:, 3] - d[:, 1]]), 0, None))
+        ax_z.errorbar(d[:, 0], 100 * d[:, 1], yerr=100 * err, fmt="s-", color="tab:orange", capsize=3,
+                      label="pitching mode (RK4 plant, single-mode fit)")
+    for k, m in enumerate(measured or []):
+        _overlay(ax_feed, ax_pitch, ax_z, m, f"C{(k + 2) % 10}")
+    ax_z.set_xscale("log")
+    ax_z.set_xlabel("force amplitude [N]")
+    ax_z.set_ylabel("pitching mode damping ratio [%]")
+    ax_z.set_title("Seed Fig. 17: pitching mode damping ratio")
+    ax_z.grid(alpha=0.3, which="both")
+    ax_z.legend(fontsize=8)
+    if measured:
+        for ax in (ax_feed, ax_pitch):
+            ax.legend(fontsize=8)
+    rep.table("fig17_pitch_damping", ["force [N]", "damping_ratio [-]", "low [-]", "high [-]"], damping)
     rep.table("fig15_17_pitch_resonance", ["force [N]", "freq [Hz]", "compliance [m/N]"], curves)
     # NaN: the mode shows no peak at that force (the feed mode above F_s, as in the seed)
     rep.table("fig15_17_pitch_resonance_peaks", ["force [N]", "feed_resonance [Hz]", "pitch_resonance [Hz]"], rows)
-    rep.figure(fig, "fig15_17_pitch_resonance", "Figs. 15-17",
-               "feed and pitching modes' resonance frequencies against force (pitching rig, RK4 plant)")
+    rep.figure(fig, "fig15_17_pitch_resonance", "Figs. 15 and 17",
+               "feed and pitching modes' resonance frequencies against force (pitching rig, RK4 plant; the seed's "
+               "Fig. 16, the mode shapes, has no counterpart here); measured modes with damping ratios: "
+               "`bench modes RUN ... --out DIR`")
     return rows
+
+
+def _overlay(ax_feed, ax_pitch, ax_z, run: dict, colour) -> None:
+    """One run's measured modes (`bench modes` rows of one label) over the model's."""
+    for mode, ax in (("feed", ax_feed), ("pitch", ax_pitch)):
+        rs = [r for r in run["rows"] if r["mode"] == mode and r["status"] == "ok"]
+        if not rs:
+            continue
+        F = [r["level_N"] for r in rs]
+        v = np.array([r["resonance_Hz"] for r in rs])
+        err = np.abs(np.array([[r["resonance_low_Hz"] for r in rs], [r["resonance_high_Hz"] for r in rs]]) - v)
+        ax.errorbar(F, v, yerr=err, fmt="o", color=colour, mfc="none", capsize=3, label=f"measured: {run['label']}")
+        if mode == "pitch":
+            z = np.array([r["damping_ratio"] for r in rs])
+            zerr = np.abs(np.array([[r["damping_ratio_low"] for r in rs], [r["damping_ratio_high"] for r in rs]]) - z)
+            ax_z.errorbar(F, 100 * z, yerr=100 * zerr, fmt="o", color=colour, mfc="none", capsize=3,
+                          label=f"measured: {run['label']}")
 
 
 # --- Index ------------------------------------------------------------------------------------
@@ -539,11 +604,14 @@ def write_index(rep: Report, checks: dict[float, str], quick: bool, seconds: flo
     rep.files += [readme, summary]
 
 
-def reproduce(out_dir: Path, *, quick: bool = False, progress=None) -> list[Path]:
+def reproduce(out_dir: Path, *, quick: bool = False, progress=None, pitch_model: dict | None = None,
+              measured: list[dict] | None = None) -> list[Path]:
     """Write the seed's numerical figures (PNG + CSV each) and an index into ``out_dir``.
 
     ``quick`` uses coarse grids (seconds instead of minutes). ``progress(done, total,
-    label)`` is called after each figure. Returns the paths written.
+    label)`` is called after each figure. ``pitch_model``: a rig's [rig.model] for Figs. 15
+    and 17 (default PITCH_MODEL); ``measured``: runs' modes to overlay there (``[{"label":
+    ..., "rows": [bench modes rows]}]``). Returns the paths written.
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -563,7 +631,7 @@ def reproduce(out_dir: Path, *, quick: bool = False, progress=None) -> list[Path
         ("fig11_time_history_B", lambda: fig10_11_time_history(rep, cycles, "B")),
         ("fig12_frf_levels", lambda: fig12_frf_levels(rep, grids)),
         ("fig13_resonance_vs_force", lambda: fig13_resonance_vs_force(rep, grids)),
-        ("fig15_17_pitch_resonance", lambda: fig15_17_pitch_resonance(rep, grids)),
+        ("fig15_17_pitch_resonance", lambda: fig15_17_pitch_resonance(rep, grids, pitch_model, measured)),
     ]
     for done, (label, step) in enumerate(steps, start=1):
         t = time.perf_counter()

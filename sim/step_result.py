@@ -74,6 +74,34 @@ class ControlIteration(TypedDict):
     force_N: float                      # force fundamental it gave
 
 
+class BackboneRecord(TypedDict):
+    """A phase-resonance point (procedure = "phase_resonance", decision record 0044)."""
+
+    mode: str                           # the plan's name of the mode ("feed", "pitch", ...)
+    response: str                       # "disp" or "accel": whose phase the loop held
+    amplitude_m: float                  # |X1|: the probe's displacement fundamental (disp), or the drive
+                                        # point's, |A1| / w^2 (accel)
+    frequency_Hz: float
+    phase_deg: float                    # response fundamental's phase minus the force's
+    phase_target_deg: float
+    phase_error_deg: float
+    damping_ratio: float                # |F1| sin(-(phi_x - phi_F)) / (2 m w^2 |X1|), X1 as amplitude_m
+    mass_kg: float                      # m of the energy balance: the rig file's expected mass
+    locked: bool
+    why: str                            # "" when locked, else why not
+    periods: int                        # drive periods the point took (ramp, probe, loop, measurement)
+    blocks: int                         # controller blocks
+
+
+class ResponseControlRecord(TypedDict):
+    """A response-controlled step (procedure = "response_controlled", decision record 0044)."""
+
+    quantity: str                       # "disp" (m) or "accel" (m/s^2)
+    target: float                       # the level: the response fundamental's amplitude asked for
+    measured: float                     # the measured block's
+    error: float                        # measured / target - 1
+
+
 class StepResult(StepMeasurement):
     """A step's result as stored: the measurement, where it sits in the plan, and how the
     force control went."""
@@ -89,6 +117,8 @@ class StepResult(StepMeasurement):
     force_error: float                  # force_N / target_force_N - 1
     control_history: NotRequired[list[ControlIteration]]   # each force-control iteration (decision 0025)
     format_version: NotRequired[int]    # written by the run store; absent = 1
+    backbone: NotRequired[BackboneRecord]   # phase-resonance runs only
+    response_control: NotRequired[ResponseControlRecord]   # response-controlled runs only
 
 
 def check_step_version(result: dict, where: str) -> None:

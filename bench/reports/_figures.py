@@ -1,6 +1,6 @@
 """Figures (matplotlib ``Figure`` objects with the Agg canvas, never pyplot's global state).
 
-Run report: compliance, accelerance, signal quality, resonance vs force, model vs
+Run report: compliance, accelerance, signal quality, modes vs force, model vs
 measurement (simulated rig), online identification.  Analysis page: measured vs base and
 final model per force level, hysteresis loops, residuals of the base model.  Each function
 takes prepared data and returns a Figure; :func:`save_png` writes one, :func:`png_bytes`
@@ -21,7 +21,6 @@ from matplotlib.patches import Patch
 from ._analysis import FRF_QUANTITIES, level_groups, relative_error
 from ._identification import ID_PARAMS, IdentificationData, finite, steps_of
 from ._model import ModelComparison
-from ._run import Resonance
 from ._steps import UNSETTLED_RESIDUAL, phase_deg, residual_ratio
 
 DIRECTION_STYLE = {"up": "-", "down": "--"}
@@ -189,30 +188,6 @@ def plot_model(series, colours, title, cmp: ModelComparison) -> Figure:
                        label=f"measured, {d} sweep") for d in ("up", "down") if d in {s.direction for s in series}]
     ax1.legend(handles=handles + extra, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     fig.suptitle(f"Model vs measurement (simulated rig): {title}")
-    return fig
-
-
-def plot_resonance(res: list[Resonance], title) -> Figure:
-    fig = Figure(figsize=(10, 5), layout="constrained")
-    ax1, ax2 = fig.subplots(1, 2)
-    F = np.array([r.level_N for r in res])
-    ax1.plot(F, [r.freq_Hz for r in res], "o-", label="measured (grid maximum)")
-    ax2.plot(F, [r.compliance_pp_m_per_N for r in res], "o-", label="measured (grid maximum)")
-    if any(math.isfinite(r.model_freq_Hz) for r in res):
-        ax1.plot(F, [r.model_freq_Hz for r in res], "s--", mfc="none", label="model (dense grid)")
-        ax2.plot(F, [r.model_compliance_pp_m_per_N for r in res], "s--", mfc="none", label="model (dense grid)")
-    edge = [r for r in res if r.at_grid_edge]
-    if edge:
-        ax1.plot([r.level_N for r in edge], [r.freq_Hz for r in edge], "rx", ms=10,
-                 label="at the edge of the grid (not a peak)")
-    ax1.set(xscale="log", yscale="log", xlabel="force amplitude (N)", ylabel="resonance frequency (Hz)",
-            title="harmonic resonance frequency")
-    ax2.set(xscale="log", yscale="log", xlabel="force amplitude (N)", ylabel="compliance_pp at resonance (m/N)",
-            title="compliance at the resonance")
-    for ax in (ax1, ax2):
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
-    fig.suptitle(f"Resonance vs force (largest compliance_pp per level): {title}")
     return fig
 
 
@@ -524,4 +499,128 @@ def plot_restoring_force(rf) -> Figure:
     ax_v.legend(handles=[Patch(color=colours[float(g) + 1.0], label=f"level {int(g) + 1}") for g in levels],
                 fontsize=8, frameon=False)
     fig.suptitle("Restoring force: P - m a - F_Masing(x) of the base model, over one period of every step")
+    return fig
+
+
+# ---------------------------------------------------------------------------- modes (bench modes)
+
+RUN_COLOURS = ("C0", "C3", "C2", "C1", "C4", "C5", "C6", "C7", "C8", "C9")
+EDGE_MARKER = {"below grid": "v", "above grid": "^"}
+
+
+def _mode_points(ax, modes: list, colour, label: str, y, lo=None, hi=None) -> None:
+    """One run's estimates of one mode against force: points with 95 % bars, lines joining
+    consecutive levels found inside the grid only; a mode at the grid's edge is an open
+    triangle at the edge frequency (y = None: not drawn), never joined."""
+    ok = [e for e in modes if e.ok and math.isfinite(y(e))]
+    F = np.array([e.level_N for e in ok])
+    v = np.array([y(e) for e in ok])
+    if ok:
+        err = None
+        if lo is not None and hi is not None:
+            low, high = np.array([lo(e) for e in ok]), np.array([hi(e) for e in ok])
+            err = np.vstack([np.clip(v - low, 0, None), np.clip(high - v, 0, None)])
+            err = np.where(np.isfinite(err), err, 0.0)
+        ax.errorbar(F, v, yerr=err, color=colour, marker="o", ms=5, capsize=3, lw=0, elinewidth=1.2, label=label)
+        levels = [e.level_N for e in modes]
+        run: list[int] = []
+        for k, e in enumerate(ok):       # join only levels that follow each other in the run
+            if run and levels.index(e.level_N) != levels.index(ok[run[-1]].level_N) + 1:
+                ax.plot(F[run], v[run], color=colour, lw=1.2)
+                run = []
+            run.append(k)
+        if run:
+            ax.plot(F[run], v[run], color=colour, lw=1.2)
+
+
+def _edge_points(ax, modes: list, colour) -> bool:
+    edge = [e for e in modes if e.status in EDGE_MARKER and math.isfinite(e.edge_Hz)]
+    for e in edge:
+        ax.plot([e.level_N], [e.edge_Hz], ls="none", marker=EDGE_MARKER[e.status], mfc="none", mec=colour, ms=9)
+    return bool(edge)
+
+
+def plot_fig13(runs: list) -> Figure:
+    """Seed Fig. 13 from measurements: the feed mode's resonance frequency (the peak of
+    compliance_pp) and the compliance at it against the force amplitude, per run."""
+    fig = Figure(figsize=(11, 4.8), layout="constrained")
+    ax1, ax2 = fig.subplots(1, 2)
+    edge = model = False
+    for r, colour in zip(runs, RUN_COLOURS * 10):
+        feed = [e for e in r.modes if e.mode == "feed"]
+        _mode_points(ax1, feed, colour, r.label, lambda e: e.resonance_Hz, lambda e: e.resonance_low_Hz,
+                     lambda e: e.resonance_high_Hz)
+        _mode_points(ax2, feed, colour, r.label, lambda e: e.peak, lambda e: e.peak_low, lambda e: e.peak_high)
+        edge |= _edge_points(ax1, feed, colour)
+        pts = sorted((lv, v) for lv, v in r.model_feed.items() if math.isfinite(v[0]))
+        if pts:
+            model = True
+            ax1.plot([p[0] for p in pts], [p[1][0] for p in pts], color=colour, ls="--", lw=1)
+            ax2.plot([p[0] for p in pts], [p[1][1] for p in pts], color=colour, ls="--", lw=1)
+    ax1.set(xscale="log", xlabel="force amplitude (N)", ylabel="resonance frequency (Hz)",
+            title="(a) feed mode: peak of compliance_pp")
+    ax2.set(xscale="log", yscale="log", xlabel="force amplitude (N)", ylabel="compliance_pp at the resonance (m/N)",
+            title="(b) compliance at the resonance")
+    extra = [Line2D([], [], color="0.3", marker="o", lw=0, label="measured, 95 % interval")]
+    if model:
+        extra.append(Line2D([], [], color="0.3", ls="--", label="rig model (shooting engine)"))
+    if edge:
+        extra.append(Line2D([], [], color="0.3", marker="v", mfc="none", ls="none",
+                            label="no peak inside the grid:\nat or beyond this edge"))
+    for ax in (ax1, ax2):
+        ax.grid(True, which="both", alpha=0.3)
+    h, _ = ax1.get_legend_handles_labels()
+    ax1.legend(handles=h + extra, fontsize=8)
+    fig.suptitle("Seed Fig. 13 from measurements: the feed mode against force")
+    return fig
+
+
+def plot_fig17(runs: list, title: str = "") -> Figure:
+    """Seed Fig. 17 (and 15) from measurements: each mode's resonance frequency and
+    damping ratio against the force amplitude, per run (one colour each)."""
+    fig = Figure(figsize=(11, 8), layout="constrained")
+    axes = fig.subplots(2, 2)
+    edge = model = band = hp = False
+    for r, colour in zip(runs, RUN_COLOURS * 10):
+        for row, mode in enumerate(("feed", "pitch")):
+            ms = [e for e in r.modes if e.mode == mode]
+            a_f, a_z = axes[row]
+            _mode_points(a_f, ms, colour, r.label, lambda e: e.resonance_Hz, lambda e: e.resonance_low_Hz,
+                         lambda e: e.resonance_high_Hz)
+            _mode_points(a_z, ms, colour, r.label, lambda e: 100 * e.damping_ratio,
+                         lambda e: 100 * e.damping_ratio_low, lambda e: 100 * e.damping_ratio_high)
+            okz = [e for e in ms if e.ok and math.isfinite(e.half_power_damping_ratio)]
+            if okz:
+                hp = True
+                a_z.plot([e.level_N for e in okz], [100 * e.half_power_damping_ratio for e in okz], ls="none",
+                         marker="s", mfc="none", mec=colour, ms=6)
+            edge |= _edge_points(a_f, ms, colour)
+        pts = sorted((lv, v[0]) for lv, v in r.model_feed.items() if math.isfinite(v[0]))
+        if pts:
+            model = True
+            axes[0][0].plot([p[0] for p in pts], [p[1] for p in pts], color=colour, ls="--", lw=1)
+        if r.pitch_band:
+            band = True
+            axes[1][0].axhline(r.pitch_band[0], color=colour, ls=":", lw=1)
+    titles = (("(a) feed mode: resonance (peak of compliance_pp)", "(b) feed mode: damping ratio"),
+              ("(c) pitching mode: resonance (peak of |A1/F1|)", "(d) pitching mode: damping ratio"))
+    for row in range(2):
+        for col in range(2):
+            ax = axes[row][col]
+            ax.set(xscale="log", xlabel="force amplitude (N)", title=titles[row][col],
+                   ylabel="resonance frequency (Hz)" if col == 0 else "damping ratio (%)")
+            ax.grid(True, which="both", alpha=0.3)
+    extra = [Line2D([], [], color="0.3", marker="o", lw=0, label="measured: single-mode fit, 95 % interval")]
+    if hp:
+        extra.append(Line2D([], [], color="0.3", marker="s", mfc="none", ls="none", label="half-power (cross-check)"))
+    if model:
+        extra.append(Line2D([], [], color="0.3", ls="--", label="rig model: feed peak (shooting engine)"))
+    if band:
+        extra.append(Line2D([], [], color="0.3", ls=":", label="rig model: pitching mode with the friction free\n(its large-force limit; friction raises it)"))
+    if edge:
+        extra.append(Line2D([], [], color="0.3", marker="v", mfc="none", ls="none",
+                            label="no peak inside the grid:\nat or beyond this edge"))
+    h, _ = axes[0][0].get_legend_handles_labels()
+    axes[0][0].legend(handles=h + extra, fontsize=7)
+    fig.suptitle(title or "Seed Fig. 17 from measurements: each mode's resonance and damping against force")
     return fig

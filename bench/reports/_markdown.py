@@ -4,7 +4,7 @@
     <run>/report/compliance.png           |X1/F1|, compliance_pp (x_max - x_min)/(2 F1) and phase vs frequency
     <run>/report/accelerance.png          |A1/F1| vs frequency
     <run>/report/quality.png              THD of displacement, force error, residual
-    <run>/report/resonance.png            harmonic resonance frequency and compliance vs force
+    <run>/report/modes.png                each mode's resonance and damping ratio vs force
     <run>/report/model_vs_measurement.png simulated rigs only: the sim/ engine's prediction
     <run>/report/identification.png       online estimates of F_s, x_s, n, m vs steps completed
 
@@ -336,10 +336,18 @@ def _write_figures(run: RunData, out: Path) -> list[tuple[str, str]]:
                   "relative to the fundamental (noise and non-periodic motion such as an unsettled free vibration; "
                   f"steps above {100 * UNSETTLED_RESIDUAL:g} % are flagged)."))
 
-    save(figures.plot_resonance(run.resonances, title), out / "resonance.png")
-    files.append(("resonance.png", "frequency and compliance_pp of the largest compliance_pp per level "
-                  "(the harmonic resonance) against force; the seed's result is that the frequency falls "
-                  "as the force rises."))
+    if run.modes is not None:
+        save(figures.plot_fig17([run.modes], f"Modes per force level: {title}"), out / "modes.png")
+        files.append(("modes.png", "each mode's resonance frequency (feed: the peak of compliance_pp; pitch: the "
+                      "peak of |A1/F1|) and damping ratio against force, from a single-mode fit around each peak "
+                      "(bars: 95 % intervals; squares: half-power cross-check; triangles: no peak inside the grid, "
+                      "the mode lies at or beyond that edge; lines: the rig model's prediction, simulated rigs)."))
+    if any("backbone" in r for r in results):
+        from ._backbone import plot_backbone
+        save(plot_backbone(results, run.rig, title), out / "backbone.png")
+        files.append(("backbone.png", "phase resonance: natural frequency and damping ratio of each level's "
+                      "locked point against its displacement amplitude, over the model's backbone from "
+                      "single-harmonic balance of the Masing loop (decision 0044)."))
     if run.comparison:
         save(figures.plot_model(series, colours, title, run.comparison), out / "model_vs_measurement.png")
         files.append(("model_vs_measurement.png", "simulated rig only: the sim/ engine's compliance_pp for "
@@ -356,38 +364,70 @@ def _write_figures(run: RunData, out: Path) -> list[tuple[str, str]]:
     return files
 
 
+def _interval(v: float, lo: float, hi: float, scale: float = 1.0) -> str:
+    if not math.isfinite(v):
+        return "-"
+    if not (math.isfinite(lo) and math.isfinite(hi)) or hi <= lo:
+        return f"{v * scale:.4g}"
+    a, b, c = round_to_interval(v * scale, lo * scale, hi * scale)     # the digits the interval supports
+    return f"{a} [{b}, {c}]"
+
+
+def modes_md(run: RunData) -> list[str]:
+    """The modes per level (sim.modal, decision 0043): each mode's resonance, damping
+    ratio and peak with 95 % intervals; a mode at the grid's edge said to be there."""
+    md = ["## Modes per level", "",
+          "Each mode's resonance at each force level: the feed mode's is the peak of compliance_pp "
+          "(x_max - x_min)/(2 F1) (the seed's Eq. 9 and Fig. 13), the pitching mode's the peak of the accelerance "
+          "|A1/F1|; both, and the damping ratio, from a single-mode fit (rational fraction with a constant "
+          "residual) to the complex FRF around the peak, with 95 % intervals from the fit's covariance; the "
+          "half-power damping ratio is the cross-check. A peak at the first or last frequency measured is not a "
+          "peak: the mode lies at or beyond it and gets no value. `bench modes` writes the same as CSV, with "
+          "other runs beside it."]
+    if run.legacy:
+        md += ["", f"compliance_pp of this run is from {pp_source(run.results)}."]
+    if run.modes is None:
+        return md + ["", "No modes: no steps, or the estimate failed (see bench.log).", ""]
+    rows = []
+    for e, row in zip(run.modes.modes, run.modes.rows()):
+        status = e.status if e.ok or e.status == "coarse" else (f"{e.status}: at or {'below' if e.status == 'below grid' else 'above'} "
+                                        f"{e.edge_Hz:.4g} Hz" if math.isfinite(e.edge_Hz) else e.status)
+        peak = (f"{_interval(e.peak, e.peak_low, e.peak_high)} {'m/N' if e.mode == 'feed' else '1/kg'}"
+                if e.ok else "-")
+        model = (f"{row['model_resonance_Hz']:.4g}" if math.isfinite(row["model_resonance_Hz"])
+                 else row["model_note"] or "-")
+        rows.append([e.mode, f"{e.level_N:g}", status, _interval(e.resonance_Hz, e.resonance_low_Hz,
+                     e.resonance_high_Hz), _interval(e.damping_ratio, e.damping_ratio_low, e.damping_ratio_high, 100),
+                     _interval(e.half_power_damping_ratio, math.nan, math.nan, 100), peak, str(e.n_points), model])
+    md += [""] + _table(["mode", "level (N)", "status", "resonance (Hz) [95 %]", "damping ratio (%) [95 %]",
+                         "half-power (%)", "peak [95 %]", "points", "model resonance (Hz)"], rows) + [""]
+    for mode in ("feed", "pitch"):
+        ms = [e for e in run.modes.modes if e.mode == mode]
+        ok = [e for e in ms if e.ok]
+        if len(ok) >= 2 and len(ok) == len(ms):
+            falls = all(b.resonance_Hz < a.resonance_Hz for a, b in zip(ok, ok[1:]))
+            md.append(f"The {mode} mode's resonance {'falls' if falls else 'does not fall monotonically'} as the "
+                      f"force rises ({ok[0].resonance_Hz:.4g} Hz at {ok[0].level_N:g} N to {ok[-1].resonance_Hz:.4g} "
+                      f"Hz at {ok[-1].level_N:g} N; the seed: it falls).")
+        elif len(ok) >= 2:
+            md.append(f"The {mode} mode lies inside the grid at {len(ok)} of {len(ms)} levels; no trend is drawn "
+                      "across the levels where it does not.")
+    md.append("")
+    return md
+
+
 def _results_md(run: RunData, out: Path, files: list[tuple[str, str]]) -> list[str]:
-    results, legacy, res, cmp = run.results, run.legacy, run.resonances, run.comparison
+    results, legacy, cmp = run.results, run.legacy, run.comparison
     md = [f"Model comparison failed: {run.comparison_error}", ""] if run.comparison_error else []
     md += ["## Files", "", f"All in `{out}/` (raw data: `{run.path}/steps/`; "
            f"CSV and UFF: `bench export {run.path}`).", ""]
     md += _table(["file", "what it shows"], [[f"[{n}]({n})", d] for n, d in files])
     md += [""]
+    if any("backbone" in r for r in results):
+        from ._backbone import backbone_md
+        md += backbone_md(results)
 
-    md += ["## Harmonic resonance per level", "",
-           "The step of largest compliance_pp (x_max - x_min)/(2 F1) at each level, either sweep direction "
-           "(grid maximum: its accuracy is the grid spacing)."]
-    if legacy:
-        md += ["", f"compliance_pp of this run is from {pp_source(results)}."]
-    rows = []
-    for r in res:
-        row = [f"{r.level_N:g}", f"{r.freq_Hz:.4g}{' (grid edge)' if r.at_grid_edge else ''}",
-               f"{r.compliance_pp_m_per_N:.4g}", r.direction]
-        if cmp:
-            row += [f"{r.model_freq_Hz:.4g}", f"{r.model_compliance_pp_m_per_N:.4g}"]
-        rows.append(row)
-    head = ["level (N)", "resonance (Hz)", "compliance_pp (m/N)", "sweep"]
-    if cmp:
-        head += ["model resonance (Hz)", "model compliance_pp (m/N)"]
-    md += [""] + _table(head, rows) + [""]
-    inner = [r for r in res if not r.at_grid_edge]
-    if len(inner) >= 2:
-        falls = all(b.freq_Hz <= a.freq_Hz for a, b in zip(inner, inner[1:]))
-        md.append(f"Resonance frequency {'falls' if falls else 'does not fall monotonically'} as the force rises "
-                  f"({inner[0].freq_Hz:.4g} Hz at {inner[0].level_N:g} N to {inner[-1].freq_Hz:.4g} Hz at "
-                  f"{inner[-1].level_N:g} N; the seed: it falls).")
-        md.append("")
-
+    md += modes_md(run)
     if cmp:
         p = cmp.params
         md += ["## Model vs measurement (simulated rig)", "",

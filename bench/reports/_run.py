@@ -17,6 +17,7 @@ from pathlib import Path
 from ..storage import Accounting, RunDirError, RunStore
 from ._identification import IdentificationData, identification_data
 from ._model import ModelComparison, model_comparison
+from ._modes import RunModes, modes_of
 from ._steps import Series, legacy_pp, series_of
 
 log = logging.getLogger(__name__)
@@ -24,32 +25,6 @@ log = logging.getLogger(__name__)
 ROUTINE_EVENTS = {"start", "end", "sensor", "output_off", "probe_noise"}
 ANALYSIS_JSON = Path("analysis") / "analysis.json"
 ANALYSIS_HTML = Path("analysis") / "analysis.html"
-
-
-@dataclass
-class Resonance:
-    level_N: float
-    freq_Hz: float
-    compliance_pp_m_per_N: float
-    direction: str
-    at_grid_edge: bool
-    model_freq_Hz: float = math.nan
-    model_compliance_pp_m_per_N: float = math.nan
-
-
-def resonances(series: list[Series], comparison: ModelComparison | None) -> list[Resonance]:
-    """Per level: the step of largest compliance_pp (either sweep direction)."""
-    out = []
-    for level in sorted({s.level_N for s in series}):
-        steps = [st for s in series if s.level_N == level for st in s.steps]
-        best = max(steps, key=lambda st: st["compliance_pp_m_per_N"])
-        fs = sorted({st["freq_Hz"] for st in steps})
-        r = Resonance(level, best["freq_Hz"], best["compliance_pp_m_per_N"], best["direction"],
-                      best["freq_Hz"] in (fs[0], fs[-1]))
-        if comparison and level in comparison.curves:
-            r.model_freq_Hz, r.model_compliance_pp_m_per_N = comparison.resonance(level)
-        out.append(r)
-    return out
 
 
 @dataclass(frozen=True)
@@ -102,7 +77,7 @@ class RunData:
     ident: IdentificationData
     comparison: ModelComparison | None        # simulated rig with a stored model only
     comparison_error: str | None              # why the comparison failed, if it did
-    resonances: list[Resonance]
+    modes: RunModes | None                    # each mode per level (sim.modal, decision 0043)
     analysis: dict | None                     # analysis/analysis.json, when `bench analyze` wrote it
     analysis_error: str | None                # why analysis.json could not be read, if so
     accounting: Accounting | None = None      # the steps counted against the plan (None: no plan stored)
@@ -172,8 +147,18 @@ def load_run(run_dir: Path) -> RunData:
         accounting = None
     return RunData(store.path, meta, results, events, list(levels_N), series,
                    identification_data(store.path, meta, analysis),
-                   cmp, cmp_error, resonances(series, cmp) if results else [], analysis, analysis_error,
+                   cmp, cmp_error, _modes(store.path, meta, results, cmp), analysis, analysis_error,
                    accounting, attention, attention_error, probe_resolution(meta, results, events))
+
+
+def _modes(path: Path, meta: dict, results: list[dict], cmp: ModelComparison | None) -> RunModes | None:
+    if not results:
+        return None
+    try:
+        return modes_of(path, meta, results, cmp)
+    except Exception as e:  # noqa: BLE001 - the report must come out; the section says why
+        log.warning("modes of %s could not be estimated: %s", path, e)
+        return None
 
 
 def step_attention(run_dir: Path) -> tuple[list[tuple[str, str, str]], str | None]:

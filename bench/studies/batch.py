@@ -100,7 +100,33 @@ def source_task(inputs: dict, seed: int = 0) -> list[dict]:
         out_dir.mkdir(parents=True, exist_ok=True)
     rig = Path(inputs["rig"]) if inputs.get("rig") else None
     result = fn(Path(inputs["source"]), out_dir, rig)
-    return [dict(source=inputs["source"], report_dir=inputs.get("out_dir"), **flatten(result))]
+    return [dict(source=inputs["source"], report_dir=inputs.get("out_dir"), **flatten(result),
+                 **mode_columns(Path(inputs["source"])))]
+
+
+MODE_COLUMNS = tuple(f"{m}_{k}" for m in ("feed", "pitch") for k in ("resonance_Hz", "damping_ratio", "status"))
+
+
+def mode_columns(source: Path) -> dict:
+    """The run's modes per level (decision 0043) as fixed text columns, one per mode and
+    quantity, ``level:value`` pairs joined by ``;`` (``feed_resonance_Hz = "0.3:74.77;1:67.98"``;
+    NaN where a level has no value, its status says why); empty for a source that is not a
+    run directory.  `bench modes` gives the same as one row per run, mode and level."""
+    out = dict.fromkeys(MODE_COLUMNS, "")
+    if not (source.is_dir() and (source / "run.json").is_file()):
+        return out
+    try:
+        from bench.reports import run_modes
+        modes = run_modes(source, model=False).modes
+    except Exception as e:  # noqa: BLE001 - the summary row comes out without the modes
+        log.warning("%s: modes could not be estimated: %s", source, e)
+        return out
+    for mode in ("feed", "pitch"):
+        ms = [e for e in modes if e.mode == mode]
+        out[f"{mode}_resonance_Hz"] = ";".join(f"{e.level_N:g}:{e.resonance_Hz:.6g}" for e in ms)
+        out[f"{mode}_damping_ratio"] = ";".join(f"{e.level_N:g}:{e.damping_ratio:.4g}" for e in ms)
+        out[f"{mode}_status"] = ";".join(f"{e.level_N:g}:{e.status}" for e in ms)
+    return out
 
 
 def identify_source(source: Path, out_dir: Path | None = None, rig: Path | None = None) -> dict:

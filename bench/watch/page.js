@@ -12,7 +12,7 @@ const PARAMS = [
   {key: "n", label: "n", unit: "", scale: 1},
   {key: "mass_kg", label: "m", unit: "kg", scale: 1},
 ];
-const BAD_EVENTS = new Set(["abort", "error", "instrument_error", "interrupted"]);
+const BAD_EVENTS = new Set(["abort", "error", "instrument_error", "interrupted", "lock_lost", "not_locked"]);
 
 function esc(s) { return String(s ?? "").replace(/[&<>"']/g, (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;"}[c])); }
 function num(v, digits = 3) {   // never an overflowed or absurd number (bench/numbers.py)
@@ -101,6 +101,21 @@ function renderIdent(s) {
   $("ident").innerHTML = html;
 }
 
+function renderModes(s) {
+  const ms = s.modes || [];
+  let html = "<tr><th>mode</th><th class='num'>level (N)</th><th>status</th><th class='num'>resonance (Hz)</th>" +
+             "<th class='num'>95 % interval</th><th class='num'>damping ratio</th><th class='num'>95 % interval</th></tr>";
+  for (const m of ms) {
+    const status = m.status === "below grid" || m.status === "above grid"
+      ? `${m.status}: at or ${m.status === "below grid" ? "below" : "above"} ${num(m.edge_Hz, 4)} Hz` : m.status;
+    html += `<tr><td>${esc(m.mode)}</td><td class="num">${num(m.level_N)}</td><td>${esc(status)}</td>` +
+            `<td class="num">${num(m.resonance_Hz, 5)}</td><td class="num">[${num(m.resonance_low_Hz, 5)}, ${num(m.resonance_high_Hz, 5)}]</td>` +
+            `<td class="num">${pct2(m.damping_ratio)}</td><td class="num">[${pct2(m.damping_ratio_low)}, ${pct2(m.damping_ratio_high)}]</td></tr>`;
+  }
+  if (!ms.length) html += "<tr><td colspan='7' class='muted'>none yet: a level needs at least 3 steps</td></tr>";
+  $("modes").innerHTML = html;
+}
+
 const FONT = {family: "system-ui, sans-serif", size: 12};
 
 function renderCompliance(s) {
@@ -128,10 +143,33 @@ function renderCompliance(s) {
     legend: {title: {text: "force level"}, font: {size: 11}},
     xaxis: {type: "log", title: {text: "frequency (Hz)"}, anchor: "y2", gridcolor: "#eee"},
     yaxis: {type: "log", title: {text: "|x/P| (m/N)"}, domain: [0.36, 1], exponentformat: "power", gridcolor: "#eee"},
-    yaxis2: {title: {text: "phase (°)"}, domain: [0, 0.28], range: [-200, 10], dtick: 45, gridcolor: "#eee"},
+    yaxis2: {title: {text: "phase (°)"}, domain: [0, 0.28], autorange: true, dtick: 45, gridcolor: "#eee"},
     annotations: points ? [] : [{text: "no step completed yet", showarrow: false, xref: "paper", yref: "paper", x: 0.5, y: 0.7}],
   };
   Plotly.react("compliance", traces, layout, {displaylogo: false, responsive: true});
+  renderAccelerance(s, nLevels);
+}
+
+function renderAccelerance(s, nLevels) {
+  // the drive-point accelerance |A1/F1|: where the pitching mode is clearest (1/m above the feed mode)
+  const traces = [];
+  let points = 0;
+  for (const c of s.compliance || []) {
+    const colour = levelColour(c.level_index, nLevels), dash = c.direction === "down" ? "dash" : "solid";
+    const name = `${num(c.level_N)} N${c.direction ? " " + esc(c.direction) : ""}`;
+    const y = c.accel_abs_per_kg || [];
+    points += y.filter((v) => v !== null && isFinite(v)).length;
+    traces.push({x: c.freq_Hz, y, name, mode: "lines+markers", line: {color: colour, dash, width: 1.5},
+                 marker: {color: colour, size: 6, symbol: c.direction === "down" ? "triangle-down" : "circle"},
+                 customdata: (c.key || []).map(esc),
+                 hovertemplate: "%{customdata}<br>%{x:.4g} Hz<br>|A/P| %{y:.3e} 1/kg<extra>" + name + "</extra>"});
+  }
+  $("accelerance").dataset.points = String(points);
+  const layout = {uirevision: "keep", font: FONT, margin: {l: 70, r: 10, t: 20, b: 45},
+    legend: {title: {text: "force level"}, font: {size: 11}},
+    xaxis: {type: "log", title: {text: "frequency (Hz)"}, gridcolor: "#eee"},
+    yaxis: {type: "log", title: {text: "|A1/F1| (1/kg)"}, exponentformat: "power", gridcolor: "#eee"}};
+  Plotly.react("accelerance", traces, layout, {displaylogo: false, responsive: true});
 }
 
 function valueAxis(y, log) {
@@ -194,6 +232,7 @@ function render(s) {
   renderCurrent(s);
   renderIdent(s);
   renderCompliance(s);
+  renderModes(s);
   renderIdentPlot(s);
   renderEvents(s);
 }

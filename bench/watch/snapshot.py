@@ -219,6 +219,7 @@ class RunReader:
             "last_step": _step_summary(results[-1]) if results else None,
             "next_step": self._next(plan, results) if status == RunStatus.RUNNING else None,
             "compliance": self._compliance(plan, results),
+            "modes": self._modes(plan, results, meta),
             "identification": self._identification(ident, results, meta, self._analysis()),
             "events": [e for e in events if e.get("event") not in QUIET_EVENTS],
             "quiet_events": sum(1 for e in events if e.get("event") in QUIET_EVENTS),
@@ -228,6 +229,8 @@ class RunReader:
     def _progress(self, plan: Plan | None, results: list[dict], events: list[dict], status: str) -> dict:
         done = len(results)
         total = steps_total(plan) if plan else None
+        if total is not None and plan is not None and plan.refine:   # refinement steps: counted as they come
+            total += sum(1 for r in results if plan.refined_key_ok(str(r.get("key", ""))))
         starts = [_time(e.get("time")) for e in events if e.get("event") in ("start", "resume")]
         t_start = starts[-1] if starts and starts[-1] else None
         since = sorted(self._step_mtime[n] for n in self._steps if t_start and self._step_mtime[n] >= t_start)
@@ -267,6 +270,7 @@ class RunReader:
                             freq_Hz=[r["freq_Hz"] for r in rs],
                             abs_m_per_N=[r["compliance_abs_m_per_N"] for r in rs],
                             phase_deg=[_phase_deg(r["compliance_phase_rad"]) for r in rs],
+                            accel_abs_per_kg=[r.get("accelerance_abs_kg_inv") for r in rs],
                             converged=[bool(r.get("force_converged", True)) for r in rs]))
         return out
 
@@ -280,6 +284,35 @@ class RunReader:
             return analysis_estimate(json.loads(path.read_text()))
         except (OSError, ValueError):
             return None
+
+    @staticmethod
+    def _modes(plan: Plan | None, results: list[dict], meta: dict) -> list[dict]:
+        """Each mode per level as found so far (sim.modal, decision 0043; no model prediction:
+        the page stays fast): a level needs at least 3 steps."""
+        from sim.modal import LevelData, pitch_band_Hz, track_modes
+        by_level: dict[int, list[dict]] = {}
+        for r in results:
+            if "compliance_m_per_N" in r and "accelerance_phase_rad" in r:
+                by_level.setdefault(r.get("level_index", 0), []).append(r)
+        try:
+            data = [LevelData.from_steps(plan.levels_N[li] if plan and li < len(plan.levels_N)
+                                         else rs[0].get("target_force_N"), rs)
+                    for li, rs in sorted(by_level.items()) if len(rs) >= 3]
+            rig = meta.get("rig") or {}
+            band = None
+            if rig.get("simulated") and rig.get("model"):
+                from sim.rig import RigModel
+                band = pitch_band_Hz(RigModel.from_dict(rig["model"]))
+            modes = track_modes(data, pitch=True, pitch_band_Hz=band)
+        except Exception as e:  # noqa: BLE001 - the page must come out; the rest of it is unaffected
+            log.warning("modes could not be estimated: %s", e)
+            return []
+        if band is None and not any(e.mode == "pitch" and e.ok for e in modes):
+            modes = [e for e in modes if e.mode != "pitch"]
+        keys = ("mode", "level_N", "status", "resonance_Hz", "resonance_low_Hz", "resonance_high_Hz", "damping_ratio",
+                "damping_ratio_low", "damping_ratio_high", "edge_Hz", "n_points")
+        return [{k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+                 for k, v in ((k, getattr(e, k)) for k in keys)} for e in modes]
 
     @staticmethod
     def _identification(ident: list[dict], results: list[dict], meta: dict, analysis: dict | None = None) -> dict:

@@ -96,7 +96,7 @@ import logging, sys, time
 from bench.terminal import Progress, end_line, setup_logging
 setup_logging(0)
 p = Progress("stepped sine")
-note = "30 N  1000.0 Hz up   err +0.0% THD(x) 0.00 | F_s 10.1 N x_s 10.2 um n 1.49 m 10 kg"
+note = "30 N  1000.0 Hz up   err +0.0% THD(x) 0.0% | F_s 10.1 N x_s 10.2 um n 1.49 m 10 kg"
 for i in range(1, 8):
     p(i, 7, note)
     time.sleep(0.02)

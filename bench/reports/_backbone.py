@@ -1,0 +1,65 @@
+"""The backbone of a phase-resonance run (decision record 0044): natural frequency and
+damping ratio against amplitude, measured points over the model's single-harmonic-balance
+backbone (sim.backbone), and its table."""
+
+from __future__ import annotations
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from ..backbone import backbone_rows, model_backbone
+from ..config import parse_rig, rig_toml
+
+
+def _model(rig: dict, amplitudes: np.ndarray):
+    try:
+        r = parse_rig({"rig": rig_toml(rig)}, "run.json")
+    except Exception:  # noqa: BLE001 - an old or damaged rig entry: no model curve, the points stay
+        return None
+    return model_backbone(r, amplitudes)
+
+
+def plot_backbone(results: list[dict], rig: dict, title: str) -> Figure:
+    rows = backbone_rows(results)
+    X = np.array([r["amplitude_m"] for r in rows])
+    f = np.array([r["frequency_Hz"] for r in rows])
+    z = np.array([r["damping_ratio"] for r in rows])
+    ok = np.array([bool(r["locked"]) for r in rows])
+    fig = Figure(figsize=(10, 4.5), layout="constrained")
+    ax1, ax2 = fig.subplots(1, 2)
+    grid = np.geomspace(X[X > 0].min() / 3, X.max() * 3, 80) if np.any(X > 0) else np.array([])
+    model = _model(rig, grid) if grid.size else None
+    if model:
+        label = "model: Masing loop, single-harmonic balance" + ("" if rig.get("simulated") else " (expected values)")
+        ax1.plot(grid, [p.frequency_Hz for p in model], "-", color="0.5", label=label)
+        ax2.plot(grid, [100 * p.damping_ratio for p in model], "-", color="0.5", label=label)
+    for ax, y in ((ax1, f), (ax2, 100 * z)):
+        ax.plot(X[ok], y[ok], "o", color="C0", label="locked")
+        if np.any(~ok):
+            ax.plot(X[~ok], y[~ok], "x", color="C3", ms=9, label="not locked")
+        for xi, yi, r in zip(X, y, rows):
+            ax.annotate(f"{r['level_N']:g} N", (xi, yi), textcoords="offset points", xytext=(4, 4), fontsize=7)
+        ax.set_xscale("log")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    ax1.set(xlabel="displacement amplitude |X1| (m)", ylabel="natural frequency (Hz)",
+            title="backbone: frequency at phase resonance")
+    ax2.set(xlabel="displacement amplitude |X1| (m)", ylabel="damping ratio (%)",
+            title="damping ratio (energy balance)")
+    fig.suptitle(f"Backbone (phase resonance): {title}")
+    return fig
+
+
+def backbone_md(results: list[dict]) -> list[str]:
+    rows = backbone_rows(results)
+    md = ["## Backbone (phase resonance)", "",
+          "One point per force level: the frequency where the response's fundamental was held at the target "
+          "phase, the displacement amplitude there and the damping ratio of the energy balance "
+          "|F1| sin(-phase) / (2 m w^2 |X1|) with m the rig file's expected mass (also in `backbone.csv`).", "",
+          "| level N | force N | amplitude m | frequency Hz | phase deg | damping % | locked | periods |",
+          "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        md.append(f"| {r['level_N']:g} | {r['force_N']:.4g} | {r['amplitude_m']:.4g} | {r['frequency_Hz']:.5g} | "
+                  f"{r['phase_deg']:.2f} | {100 * r['damping_ratio']:.3g} | "
+                  f"{'yes' if r['locked'] else 'no: ' + r['why']} | {r['periods']} |")
+    return md + [""]

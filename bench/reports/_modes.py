@@ -1,0 +1,151 @@
+"""`bench modes RUN [RUN ...] --out DIR` and the run report's modes: each run's modes per force level (sim.modal,
+decision record 0043) in one ``modes.csv`` and the seed's Figs. 13 and 17 from the
+measurements, one colour per run with its label, 95 % intervals as bars, the rig model's
+prediction as lines (simulated rigs).
+
+The rig model's prediction: for the feed mode, the peak of compliance_pp the shooting
+engine gives for the rig's F_s, x_s, n, m at each level (the engine leaves the rig's other
+effects out; a peak at the edge of the engine's grid is drawn as a marker "at or beyond",
+never joined into the line); for the pitching mode, the band the 2-DOF model allows
+(:func:`sim.modal.pitch_band_Hz`: above its frequency with the friction free).
+"""
+
+from __future__ import annotations
+
+import csv
+import logging
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from sim.modal import LevelData, ModeEstimate, pitch_band_Hz, track_modes
+
+from ..storage import RunStore
+from ._model import ModelComparison, model_comparison
+
+log = logging.getLogger(__name__)
+
+COLUMNS = ("run", "label", "mode", "level_N", "status", "curve", "resonance_Hz", "resonance_low_Hz",
+           "resonance_high_Hz", "damping_ratio", "damping_ratio_low", "damping_ratio_high",
+           "half_power_damping_ratio", "peak_compliance_m_per_N", "peak_accelerance_per_kg", "n_points",
+           "model_resonance_Hz", "model_note", "note")
+
+
+@dataclass
+class RunModes:
+    """One run's modes, with what the figures need."""
+
+    path: Path
+    label: str
+    modes: list[ModeEstimate]
+    model_feed: dict[float, tuple[float, float, str]] = field(default_factory=dict)   # level -> (Hz, m/N, note)
+    pitch_band: tuple[float, float] | None = None
+
+    def rows(self) -> list[dict]:
+        out = []
+        for e in self.modes:
+            mf = self.model_feed.get(e.level_N) if e.mode == "feed" else None
+            pk_c = e.peak if e.mode == "feed" else e.extra.get("compliance_pp", math.nan)
+            pk_a = e.peak if e.mode == "pitch" else e.extra.get("accelerance", math.nan)
+            out.append(dict(run=str(self.path), label=self.label, mode=e.mode, level_N=e.level_N, status=e.status,
+                            curve=e.curve, resonance_Hz=e.resonance_Hz, resonance_low_Hz=e.resonance_low_Hz,
+                            resonance_high_Hz=e.resonance_high_Hz, damping_ratio=e.damping_ratio,
+                            damping_ratio_low=e.damping_ratio_low, damping_ratio_high=e.damping_ratio_high,
+                            half_power_damping_ratio=e.half_power_damping_ratio, peak_compliance_m_per_N=pk_c,
+                            peak_accelerance_per_kg=pk_a, n_points=e.n_points,
+                            model_resonance_Hz=mf[0] if mf else math.nan,
+                            model_note=mf[2] if mf else (f"model: above {self.pitch_band[0]:.4g} Hz (friction free)"
+                                                         if e.mode == "pitch" and self.pitch_band else ""),
+                            note=e.note))
+        return out
+
+
+def run_label(meta: dict, path: Path) -> str:
+    """The run's label for legends: its ``labels`` (bench run --label k=v) or its directory's name."""
+    labels = meta.get("labels") or {}
+    return ", ".join(f"{k}={v}" for k, v in labels.items()) if labels else Path(path).name
+
+
+def model_feed_peaks(cmp: ModelComparison | None) -> dict[float, tuple[float, float, str]]:
+    """Level -> (frequency, compliance_pp, note) of the rig model's feed peak, from the
+    report's model comparison (simulated rigs with a stored model; empty otherwise): the
+    curve's maximum refined by a parabola in log-log; a maximum at the engine grid's edge
+    is NaN, noted."""
+    if cmp is None:
+        return {}
+    out = {}
+    for level, (f, c, _) in cmp.curves.items():
+        ok = np.isfinite(c)
+        if not ok.any():
+            out[level] = (math.nan, math.nan, "no model value")
+            continue
+        i = int(np.nanargmax(np.where(ok, c, -np.inf)))
+        if i in (0, f.size - 1) or not np.all(ok[i - 1:i + 2]):
+            out[level] = (math.nan, math.nan, f"model peak at or beyond the edge of its grid, {f[i]:.4g} Hz")
+            continue
+        x, y = np.log(f[i - 1:i + 2]), np.log(c[i - 1:i + 2])
+        a, b, cc = np.polyfit(x, y, 2)
+        xv = -b / (2 * a) if a < 0 else x[1]
+        out[level] = (float(math.exp(xv)), float(math.exp(a * xv * xv + b * xv + cc)), "")
+    return out
+
+
+def modes_of(path: Path, meta: dict, results: list[dict], cmp: ModelComparison | None) -> RunModes:
+    """The modes of a run's stored steps (every level; tracked as sim.modal.track_modes
+    does, the feed mode by the model's peak when ``cmp`` has one)."""
+    plan, rig = meta.get("plan") or {}, meta.get("rig") or {}
+    levels_N = plan.get("levels_N") or sorted({r["target_force_N"] for r in results})
+    by_level: dict[int, list[dict]] = {}
+    for r in results:
+        by_level.setdefault(r["level_index"], []).append(r)
+    data = [LevelData.from_steps(float(levels_N[li]) if li < len(levels_N) else steps[0]["target_force_N"], steps)
+            for li, steps in sorted(by_level.items()) if len(steps) >= 3]
+    feed_model = model_feed_peaks(cmp)
+    band = None
+    if rig.get("simulated") and rig.get("model"):
+        from sim.rig import RigModel
+        band = pitch_band_Hz(RigModel.from_dict(rig["model"]))
+    pred = {lv: v[0] for lv, v in feed_model.items()}
+    modes = track_modes(data, feed_predicted_Hz=pred, pitch=True, pitch_band_Hz=band)
+    if band is None and not any(e.mode == "pitch" and e.ok for e in modes):
+        modes = [e for e in modes if e.mode != "pitch"]    # no pitching mode in the data nor the model
+    return RunModes(Path(path), run_label(meta, path), modes, feed_model, band)
+
+
+def run_modes(path: Path, *, model: bool = True) -> RunModes:
+    """The modes of a run directory (with the rig model's prediction when ``model`` and
+    the rig is simulated with a stored model)."""
+    store = RunStore.open(Path(path))
+    meta, results = store.metadata, store.results()
+    cmp = None
+    if model:
+        try:
+            cmp = model_comparison(meta, results)
+        except Exception as e:  # noqa: BLE001 - the measured modes come out without the model
+            log.warning("model prediction failed: %s", e)
+    return modes_of(Path(path), meta, results, cmp)
+
+
+def write_csv(runs: list[RunModes], path: Path) -> Path:
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=COLUMNS)
+        w.writeheader()
+        for r in runs:
+            for row in r.rows():
+                w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()})
+    return path
+
+
+def write_modes(sources: list[Path], out: Path, *, model: bool = True) -> tuple[list[RunModes], list[Path]]:
+    """modes.csv, fig13_feed.png and fig17_modes.png of ``sources`` into ``out``."""
+    from . import _figures as figures
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    runs = [run_modes(p, model=model) for p in sources]
+    files = [write_csv(runs, out / "modes.csv")]
+    figures.save_png(figures.plot_fig13(runs), out / "fig13_feed.png")
+    figures.save_png(figures.plot_fig17(runs), out / "fig17_modes.png")
+    files += [out / "fig13_feed.png", out / "fig17_modes.png"]
+    return runs, files

@@ -1,0 +1,83 @@
+"""Resonance search (``[plan.resonance] refine = true``, decision record 0043): after a
+level's sweeps, each peak the data show is bracketed and refined with extra steps until
+its frequency is known within the plan's tolerance, at most ``refine_steps`` per mode and level.
+
+A refinement step is an ordinary step (:class:`procedures.plan.StepSpec` with ``refined``
+= its number in the level): controlled, supervised, settled, stored, resumable.  What the
+next one is depends only on the level's stored steps, so a resumed run chooses what an
+uninterrupted one would.  The peaks: the feed mode's compliance_pp maximum and the
+pitching mode's accelerance maximum, found and fitted by :mod:`sim.modal`; a maximum at
+the grid's edge is not a peak and is not chased.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from sim.modal import LevelData, estimate_mode, find_feed, find_pitch, next_refinement_Hz
+
+from .plan import Plan, StepSpec
+
+log = logging.getLogger(__name__)
+
+
+class Refiner:
+    """``next_step(last)``: the next refinement step of the level whose sweep ended with
+    ``last`` (a step of the schedule), or None when every peak is known within the
+    tolerance or the level's budget is spent.  ``results()`` returns the stored steps."""
+
+    def __init__(self, plan: Plan, results: Callable[[], list], pitch_band_Hz: tuple[float, float] | None = None):
+        self.plan = plan
+        self.results = results
+        self.pitch_band_Hz = pitch_band_Hz
+        self.f_min, self.f_max = min(plan.freqs_Hz), max(plan.freqs_Hz)
+
+    def next_step(self, last: StepSpec) -> StepSpec | None:
+        li = last.level_index
+        steps = [r for r in self.results() if r["level_index"] == li]
+        if len(steps) < 3:
+            return None
+        d = LevelData.from_steps(last.force_N, steps)
+        for mode in self.plan.refine_modes:
+            done = sum(1 for r in steps if f"-R{mode[0].upper()}" in r["key"])
+            if done >= self.plan.refine_steps:
+                if self._next_for(mode, d) is not None:
+                    log.warning("level %g N: the %s peak is not known within %g %% after %d refinement steps "
+                                "(plan: [plan.resonance] max_steps)", last.force_N, mode,
+                                100 * self.plan.refine_tolerance, done)
+                continue
+            f = self._next_for(mode, d)
+            if f is None:
+                continue
+            f = float(f"{f:.6g}")
+            if np.any(np.isclose(d.f_Hz, f, rtol=1e-9, atol=0)):
+                continue                 # no progress possible (a step there already)
+            log.info("level %g N: refining the %s peak: step at %.5g Hz", last.force_N, mode, f)
+            return StepSpec(last.index, li, -1, last.direction, last.force_N, f, refined=done, refined_mode=mode)
+        return None
+
+    def _next_for(self, mode: str, d: LevelData) -> float | None:
+        if mode == "feed":
+            i = find_feed(d)
+            mag, H, kind, curve = d.compliance_pp, d.compliance, "receptance", d.compliance_pp
+        else:
+            feed = find_feed(d)
+            i = find_pitch(d, None, self.pitch_band_Hz, None if feed is None else float(d.f_Hz[feed]))
+            mag, H, kind, curve = np.abs(d.accelerance), d.accelerance, "accelerance", None
+        if i is None or i in (0, d.f_Hz.size - 1):
+            return None                  # no peak inside the grid: nothing to bracket
+        est = estimate_mode(d.f_Hz, H, mode=mode, kind=kind, curve=curve, peak_index=i)
+        fr = est.resonance_Hz if est.ok else self._parabola(d.f_Hz, mag, i)
+        return next_refinement_Hz(d.f_Hz, mag, i, fr, est.damping_ratio, self.plan.refine_tolerance,
+                                  self.f_min, self.f_max)
+
+    @staticmethod
+    def _parabola(f: np.ndarray, mag: np.ndarray, i: int) -> float:
+        """Vertex of the parabola through the maximum and its neighbours (log f, log mag)."""
+        x, y = np.log(f[i - 1:i + 2]), np.log(mag[i - 1:i + 2])
+        a, b, _ = np.polyfit(x, y, 2)
+        return float(math.exp(-b / (2 * a))) if a < 0 else float(f[i])

@@ -1,0 +1,534 @@
+"""Modes per force level: each mode's resonance and damping ratio, with 95 % intervals,
+from a local single-mode fit to the complex FRF around its peak (decision record 0043).
+
+A nonlinear mode's "resonance at a fixed force" belongs to that force level and to the FRF
+its peak is taken from, so each estimate names both:
+
+- **feed**: the peak of compliance_pp = (x_max - x_min) / (2 F1), the seed's Eq. 9 and
+  Fig. 13.  The fit sees compliance_pp with the phase of X1/F1 (the magnitude the seed
+  reads, the phase the fundamental gives), as a receptance.
+- **pitch**: the peak of the drive-point accelerance |A1/F1| (where the pitching mode is
+  clearest), as an accelerance.
+
+The local model (rational fraction, one mode plus a constant residual for everything out
+of band; x = w / w0 with w0 a scale):
+
+    receptance   H(x) = R + A / (x_r^2 - x^2 + 2 i zeta x_r x)
+    accelerance  H(x) = R + A x^2 / (x_r^2 - x^2 + 2 i zeta x_r x)
+
+A and R complex: 6 real parameters, fitted by least squares to the real and imaginary
+parts of the points in a window around the peak (:func:`fit_single_mode`); the covariance
+is s^2 (J^T J)^-1 with s^2 the residual variance (so a misfit of the single-mode shape,
+the nonlinearity's skew included, widens the intervals); intervals are +-t(0.975, dof) sd.
+The resonance is the peak of the fitted |H| inside the window (numerically), its interval
+by the delta method.  Half-power bandwidth (zeta ~ (f2 - f1) / (2 f_r), from the measured
+points) is the cross-check.
+
+A peak at the first or last frequency of the data is not a peak: the mode is said to lie
+at or beyond that edge (``status`` "below grid" / "above grid"), never given a value.
+Modes are tracked by identity (:func:`track_modes`): the feed mode is the compliance_pp
+maximum nearest to its predicted frequency (the rig model's, else the previous level's,
+else the lowest prominent maximum); the pitching mode is the accelerance maximum nearest
+to its prediction (else the previous level's, else the largest one well above the feed
+mode) - never simply the largest peak.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy import optimize, stats
+
+MODES = ("feed", "pitch")
+KINDS = ("receptance", "accelerance")
+MIN_POINTS = 4              # 8 real equations for 6 parameters
+WINDOW_LEVEL = 1 / math.sqrt(2)   # the fit's window: the peak's half-power band ...
+MAX_POINTS = 15             # ... at most this many points nearest the peak
+MIN_IN_BAND = 3             # a resolved peak: at least this many measured points in its half-power band
+OTHER_MODE_GAP = 1.3        # a pitching peak lies at least this factor above the feed mode
+
+
+@dataclass(frozen=True)
+class SingleModeFit:
+    """A local single-mode fit (module docstring): ``p`` = (x_r, zeta, Re A, Im A, Re R,
+    Im R) in units of ``w0_rad_s`` and ``scale`` (H / scale is fitted)."""
+
+    kind: str
+    w0_rad_s: float
+    scale: float
+    p: np.ndarray
+    cov: np.ndarray
+    dof: int
+    f_lo_Hz: float               # the window the fit saw
+    f_hi_Hz: float
+    n_points: int
+
+    def __call__(self, f_Hz) -> np.ndarray:
+        return self.scale * _model(self.p, 2 * np.pi * np.asarray(f_Hz, float) / self.w0_rad_s, self.kind)
+
+    @property
+    def t(self) -> float:
+        return float(stats.t.ppf(0.975, max(self.dof, 1)))
+
+    def natural_Hz(self) -> tuple[float, float]:
+        """(f_r, standard deviation) of the pole's undamped natural frequency."""
+        f0 = self.w0_rad_s / (2 * np.pi)
+        return float(self.p[0] * f0), float(math.sqrt(max(self.cov[0, 0], 0.0)) * f0)
+
+    def damping(self) -> tuple[float, float]:
+        return float(self.p[1]), float(math.sqrt(max(self.cov[1, 1], 0.0)))
+
+    def peak(self, p: np.ndarray | None = None) -> tuple[float, float]:
+        """(frequency in Hz, |H|) of the fitted magnitude's maximum inside the window."""
+        p = self.p if p is None else p
+        f0 = self.w0_rad_s / (2 * np.pi)
+        lo, hi = self.f_lo_Hz / f0, self.f_hi_Hz / f0
+        grid = np.linspace(lo, hi, 401)
+        mag = np.abs(_model(p, grid, self.kind))
+        i = int(np.argmax(mag))
+        a, b = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+        r = optimize.minimize_scalar(lambda x: -abs(_model(p, np.array([x]), self.kind)[0]), bounds=(a, b),
+                                     method="bounded", options={"xatol": 1e-10 * hi})
+        return float(r.x * f0), float(-r.fun * self.scale)
+
+    def peak_sd(self) -> tuple[float, float, float, float]:
+        """(f_peak, sd, |H|_peak, sd) by the delta method (central differences)."""
+        f, h = self.peak()
+        g = np.zeros((2, self.p.size))
+        for k in range(self.p.size):
+            d = 1e-6 * max(abs(self.p[k]), 1e-3)
+            up, dn = self.p.copy(), self.p.copy()
+            up[k] += d
+            dn[k] -= d
+            (fu, hu), (fd, hd) = self.peak(up), self.peak(dn)
+            g[:, k] = ((fu - fd) / (2 * d), (hu - hd) / (2 * d))
+        var = np.einsum("ik,kl,il->i", g, self.cov, g)
+        return f, float(math.sqrt(max(var[0], 0.0))), h, float(math.sqrt(max(var[1], 0.0)))
+
+
+def _basis(p: np.ndarray, x: np.ndarray, kind: str) -> tuple[np.ndarray, np.ndarray]:
+    xr, z = p[0], p[1]
+    D = xr * xr - x * x + 2j * z * xr * x
+    num = x * x if kind == "accelerance" else np.ones_like(x)
+    return num / D, D
+
+
+def _model(p: np.ndarray, x: np.ndarray, kind: str) -> np.ndarray:
+    b, _ = _basis(p, x, kind)
+    return (p[4] + 1j * p[5]) + (p[2] + 1j * p[3]) * b
+
+
+def _linear(xr: float, z: float, x: np.ndarray, H: np.ndarray, kind: str) -> np.ndarray:
+    """A and R for fixed (x_r, zeta): linear least squares."""
+    b, _ = _basis(np.array([xr, z]), x, kind)
+    M = np.column_stack([b, np.ones_like(b)])
+    c, *_ = np.linalg.lstsq(M, H, rcond=None)
+    return np.array([xr, z, c[0].real, c[0].imag, c[1].real, c[1].imag])
+
+
+def _jacobian(p: np.ndarray, x: np.ndarray, kind: str) -> np.ndarray:
+    b, D = _basis(p, x, kind)
+    A = p[2] + 1j * p[3]
+    xr, z = p[0], p[1]
+    cols = [-A * b * (2 * xr + 2j * z * x) / D, -A * b * (2j * xr * x) / D, b, 1j * b,
+            np.ones_like(b), 1j * np.ones_like(b)]
+    J = np.column_stack(cols)
+    return np.vstack([J.real, J.imag])
+
+
+def fit_single_mode(f_Hz: ArrayLike, H: ArrayLike, kind: str = "receptance",
+                    guess_Hz: float | None = None, guess_zeta: float = 0.05) -> SingleModeFit:
+    """Fit the single-mode model (module docstring) to the complex FRF values ``H`` at
+    ``f_Hz`` (every point given is used; choose the window before).  Raises ValueError
+    with fewer than MIN_POINTS points."""
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
+    f = np.asarray(f_Hz, float)
+    Hc = np.asarray(H, complex)
+    if f.size < MIN_POINTS:
+        raise ValueError(f"a single-mode fit needs at least {MIN_POINTS} points, got {f.size}")
+    if guess_Hz is None:
+        guess_Hz = float(f[np.argmax(np.abs(Hc))])
+    w0 = 2 * np.pi * guess_Hz
+    scale = float(np.max(np.abs(Hc)))
+    x, y = 2 * np.pi * f / w0, Hc / scale
+
+    def res(p):
+        r = _model(p, x, kind) - y
+        return np.concatenate([r.real, r.imag])
+
+    best = None
+    for z0 in sorted({guess_zeta, 0.01, 0.05, 0.2}):   # a few starts: the cost is not convex in zeta
+        p0 = _linear(1.0, z0, x, y, kind)
+        r = optimize.least_squares(res, p0, jac=lambda p: _jacobian(p, x, kind), method="lm", x_scale="jac",
+                                   max_nfev=2000)
+        if best is None or r.cost < best.cost:
+            best = r
+    assert best is not None
+    p = best.x.copy()
+    if p[1] < 0:                # the sign of zeta is not identified by the magnitude alone: keep the physical one
+        p[1] = -p[1]
+        p = _linear(p[0], p[1], x, y, kind)
+    J = _jacobian(p, x, kind)
+    dof = 2 * f.size - p.size
+    s2 = float(np.sum(res(p) ** 2) / dof) if dof > 0 else math.inf
+    try:
+        cov = s2 * np.linalg.inv(J.T @ J)
+    except np.linalg.LinAlgError:
+        cov = np.full((p.size, p.size), math.inf)
+    return SingleModeFit(kind, w0, scale, p, cov, dof, float(f.min()), float(f.max()), int(f.size))
+
+
+def half_power_zeta(f_Hz: ArrayLike, mag: ArrayLike, f_peak: float, peak: float) -> float:
+    """zeta ~ (f2 - f1) / (2 f_r) from the measured points where ``mag`` crosses
+    peak / sqrt(2) either side of ``f_peak`` (linear interpolation); NaN when the data do
+    not reach the half-power level on both sides."""
+    f, m = np.asarray(f_Hz, float), np.asarray(mag, float)
+    o = np.argsort(f)
+    f, m = f[o], m[o]
+    level = peak / math.sqrt(2.0)
+    i = int(np.searchsorted(f, f_peak))
+    f1 = f2 = math.nan
+    for j in range(min(i, f.size - 1), 0, -1):          # downwards
+        if m[j - 1] <= level <= m[j] or (f[j] > f_peak and m[j] <= level):
+            if m[j - 1] <= level <= m[j]:
+                f1 = float(f[j - 1] + (level - m[j - 1]) * (f[j] - f[j - 1]) / (m[j] - m[j - 1]))
+            break
+    for j in range(max(i, 1), f.size):                  # upwards
+        if m[j] <= level <= m[j - 1]:
+            f2 = float(f[j - 1] + (m[j - 1] - level) * (f[j] - f[j - 1]) / (m[j - 1] - m[j]))
+            break
+    return (f2 - f1) / (2 * f_peak) if math.isfinite(f1) and math.isfinite(f2) else math.nan
+
+
+@dataclass
+class ModeEstimate:
+    """One mode at one force level.  ``status``: "ok", "below grid" / "above grid" (the
+    peak lies at or beyond the data's edge ``edge_Hz``: no value given), "not found" (no
+    maximum of this mode in the data) or "no fit" (too few points, or the fit's peak left
+    its window), "coarse" (fewer than MIN_IN_BAND points in the half-power band: the
+    resonance's interval is the bracket of the measured maximum, no damping ratio).  ``peak``
+    is the fitted peak of the curve the resonance is read from
+    (compliance_pp in m/N for the feed mode, |A1/F1| in 1/kg for the pitching mode)."""
+
+    mode: str
+    level_N: float
+    status: str
+    curve: str                              # which FRF the peak is taken from
+    resonance_Hz: float = math.nan
+    resonance_low_Hz: float = math.nan
+    resonance_high_Hz: float = math.nan
+    damping_ratio: float = math.nan
+    damping_ratio_low: float = math.nan
+    damping_ratio_high: float = math.nan
+    peak: float = math.nan
+    peak_low: float = math.nan
+    peak_high: float = math.nan
+    half_power_damping_ratio: float = math.nan
+    natural_Hz: float = math.nan            # the fitted pole's undamped frequency
+    n_points: int = 0
+    edge_Hz: float = math.nan
+    note: str = ""
+    window_Hz: tuple[float, float] = (math.nan, math.nan)
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def local_maxima(f: np.ndarray, mag: np.ndarray, min_prominence: float = 0.02) -> list[int]:
+    """Indices of the maxima of ``mag`` (sorted by ``f``), edges included (an edge
+    maximum means the curve rises beyond the data), that stand out by ``min_prominence``
+    (relative to themselves): the topographic prominence, the drop to the higher of the
+    lowest points between the maximum and the nearest higher point on either side (or
+    the data's end); an edge maximum counts its one side."""
+    out = []
+    n = mag.size
+    for i in range(n):
+        left = mag[i - 1] if i > 0 else -math.inf
+        right = mag[i + 1] if i < n - 1 else -math.inf
+        if not (mag[i] > left and mag[i] >= right):
+            continue
+        bases = []
+        for side in (range(i - 1, -1, -1), range(i + 1, n)):
+            low, higher = math.inf, False
+            for j in side:
+                if mag[j] > mag[i]:
+                    higher = True
+                    break
+                low = min(low, mag[j])
+            if math.isfinite(low):
+                bases.append(low if higher or i in (0, n - 1) else low)
+        base = max(bases) if i not in (0, n - 1) else (bases[0] if bases else -math.inf)
+        if mag[i] - base >= min_prominence * mag[i]:
+            out.append(i)
+    return out
+
+
+def _window(f: np.ndarray, mag: np.ndarray, ip: int) -> np.ndarray:
+    """The fit's points: the contiguous run around the peak ``ip`` above WINDOW_LEVEL of
+    it (the half-power band: there the single-mode shape holds best on a nonlinear
+    mode's skewed peak), widened to the MIN_POINTS + 1 nearest when fewer, never across
+    a point where the curve rises again (another mode), at most MAX_POINTS nearest."""
+    lo = hi = ip
+    top, level = mag[ip], WINDOW_LEVEL * mag[ip]
+    while lo > 0 and level <= mag[lo - 1] <= top:
+        lo -= 1
+    while hi < f.size - 1 and level <= mag[hi + 1] <= top:
+        hi += 1
+    while hi - lo + 1 < MIN_POINTS + 1:       # below the half-power level: while the curve keeps falling
+        can_lo = lo > 0 and mag[lo - 1] < min(mag[lo], level)
+        can_hi = hi < f.size - 1 and mag[hi + 1] < min(mag[hi], level)
+        if not (can_lo or can_hi):
+            break
+        if can_lo and (not can_hi or math.log(f[ip] / f[lo - 1]) <= math.log(f[hi + 1] / f[ip])):
+            lo -= 1
+        else:
+            hi += 1
+    sel = np.arange(lo, hi + 1)
+    if sel.size > MAX_POINTS:
+        sel = np.sort(np.array(sorted(sel, key=lambda i: abs(math.log(f[i] / f[ip])))[:MAX_POINTS]))
+    return sel
+
+
+def _nearest(f: np.ndarray, idx: list[int], target: float) -> int:
+    return min(idx, key=lambda i: abs(math.log(f[i] / target)))
+
+
+def estimate_mode(f_Hz: ArrayLike, H: ArrayLike, *, mode: str, kind: str, level_N: float = math.nan,
+                  curve: ArrayLike | None = None, curve_name: str = "", peak_index: int | None = None,
+                  guess_zeta: float = 0.05) -> ModeEstimate:
+    """The mode whose maximum of ``curve`` (default |H|) is at ``peak_index`` (default the
+    curve's largest value), from the complex FRF ``H`` at ``f_Hz`` (any order; one value
+    per frequency).  The fit sees ``curve`` with the phase of ``H`` (module docstring); a
+    peak at the first or last frequency is reported as lying beyond the edge."""
+    f = np.asarray(f_Hz, float)
+    Hc = np.asarray(H, complex)
+    mag = np.abs(Hc) if curve is None else np.asarray(curve, float)
+    o = np.argsort(f)
+    f, Hc, mag = f[o], Hc[o], mag[o]
+    name = curve_name or ("|A1/F1|" if kind == "accelerance" else "|X1/F1|")
+    est = ModeEstimate(mode, float(level_N), "ok", name)
+    if f.size == 0:
+        est.status, est.note = "not found", "no data"
+        return est
+    ip = int(np.argmax(mag)) if peak_index is None else int(np.nonzero(o == peak_index)[0][0])
+    if ip == 0 or ip == f.size - 1:
+        est.status = "below grid" if ip == 0 else "above grid"
+        est.edge_Hz = float(f[ip])
+        est.note = (f"the largest {name} is at the {'lowest' if ip == 0 else 'highest'} frequency measured, "
+                    f"{f[ip]:.4g} Hz: the resonance lies at or beyond it")
+        return est
+    Hfit = mag * np.exp(1j * np.angle(Hc))
+    fp = float(f[ip])
+    sel = _window(f, mag, ip)
+    if sel.size < MIN_POINTS:
+        est.status, est.note = "no fit", f"{sel.size} points around the peak at {fp:.4g} Hz; a fit needs {MIN_POINTS}"
+        return est
+    try:
+        fit = fit_single_mode(f[sel], Hfit[sel], kind, fp, guess_zeta)
+    except (ValueError, np.linalg.LinAlgError) as e:
+        est.status, est.note = "no fit", f"single-mode fit failed: {e}"
+        return est
+    est.n_points = int(sel.size)
+    est.window_Hz = (float(f[sel[0]]), float(f[sel[-1]]))
+    fpk, sd_f, hpk, sd_h = fit.peak_sd()
+    t = fit.t
+    if not (f[sel[0]] < fpk < f[sel[-1]]):
+        est.status = "no fit"
+        est.note = f"the fitted peak {fpk:.4g} Hz lies at the edge of its window {f[sel[0]]:.4g}-{f[sel[-1]]:.4g} Hz"
+        return est
+    z, sd_z = fit.damping()
+    in_band = int(np.sum(mag >= hpk / math.sqrt(2)))
+    if in_band < MIN_IN_BAND:
+        # the grid does not resolve the peak: the fit extrapolates from its flanks, and its
+        # covariance knows nothing of the shape it did not see.  The peak lies between the
+        # measured maximum's neighbours (a bracket that holds for any single peak); no
+        # damping ratio.
+        est.status = "coarse"
+        est.resonance_Hz = min(max(fpk, float(f[ip - 1])), float(f[ip + 1]))
+        est.resonance_low_Hz, est.resonance_high_Hz = float(f[ip - 1]), float(f[ip + 1])
+        est.peak, est.n_points, est.window_Hz = float(mag[ip]), int(sel.size), (float(f[sel[0]]), float(f[sel[-1]]))
+        est.note = (f"{in_band} measured point(s) in the peak's half-power band: the grid does not resolve it; "
+                    f"the interval is the bracket of the measured maximum (refine: [plan.resonance])")
+        return est
+    est.resonance_Hz, est.resonance_low_Hz, est.resonance_high_Hz = fpk, fpk - t * sd_f, fpk + t * sd_f
+    est.damping_ratio, est.damping_ratio_low, est.damping_ratio_high = z, max(z - t * sd_z, 0.0), z + t * sd_z
+    est.peak, est.peak_low, est.peak_high = hpk, hpk - t * sd_h, hpk + t * sd_h
+    est.natural_Hz = fit.natural_Hz()[0]
+    est.half_power_damping_ratio = half_power_zeta(f, mag, fpk, hpk)
+    if not all(map(math.isfinite, (sd_f, sd_z))):
+        est.note = "no residual degrees of freedom: no interval"
+    return est
+
+
+@dataclass(frozen=True)
+class LevelData:
+    """One force level's steps: frequency, complex compliance X1/F1 and accelerance A1/F1,
+    compliance_pp (seed Eq. 9)."""
+
+    level_N: float
+    f_Hz: np.ndarray
+    compliance: np.ndarray
+    accelerance: np.ndarray
+    compliance_pp: np.ndarray
+
+    @classmethod
+    def from_steps(cls, level_N: float, steps: Sequence[dict]) -> LevelData:
+        """From stored step results (one per frequency: a frequency measured twice, in an
+        up and a down sweep, keeps its mean)."""
+        by_f: dict[float, list[dict]] = {}
+        for s in steps:
+            by_f.setdefault(float(s["freq_Hz"]), []).append(s)
+        f = np.array(sorted(by_f))
+
+        def mean(key):
+            return np.array([np.mean([key(s) for s in by_f[x]]) for x in f])
+        X = mean(lambda s: complex(s["compliance_m_per_N"]["re"], s["compliance_m_per_N"]["im"]))
+        A = mean(lambda s: s["accelerance_abs_kg_inv"] * np.exp(1j * s["accelerance_phase_rad"]))
+        pp = mean(lambda s: s["compliance_pp_m_per_N"])
+        return cls(float(level_N), f, X, A, pp)
+
+
+def find_feed(d: LevelData, predicted_Hz: float | None = None) -> int | None:
+    """Index (into d.f_Hz) of the feed mode's compliance_pp maximum: the one nearest to
+    ``predicted_Hz``, else the lowest-frequency prominent maximum."""
+    idx = local_maxima(d.f_Hz, d.compliance_pp)
+    if not idx:
+        return None
+    if predicted_Hz and math.isfinite(predicted_Hz):
+        return _nearest(d.f_Hz, idx, predicted_Hz)
+    return min(idx)
+
+
+def find_pitch(d: LevelData, predicted_Hz: float | None = None, band_Hz: tuple[float, float] | None = None,
+               feed_Hz: float | None = None) -> int | None:
+    """Index of the pitching mode's accelerance maximum: among the maxima inside ``band_Hz``
+    (the rig model's bounds, when known) the one nearest ``predicted_Hz`` (else the
+    largest); without a band, the maxima above OTHER_MODE_GAP x the feed mode."""
+    mag = np.abs(d.accelerance)
+    idx = local_maxima(d.f_Hz, mag, 0.02 if band_Hz is not None else 0.1)
+    if band_Hz is not None:
+        lo, hi = band_Hz
+        idx = [i for i in idx if lo / 1.1 <= d.f_Hz[i] <= hi * 1.1]
+    elif feed_Hz and math.isfinite(feed_Hz):
+        idx = [i for i in idx if d.f_Hz[i] >= OTHER_MODE_GAP * feed_Hz]
+    else:
+        idx = [i for i in idx if i > 0]       # the lowest frequency is the feed mode's side
+    if not idx:
+        return None
+    if predicted_Hz and math.isfinite(predicted_Hz):
+        return _nearest(d.f_Hz, idx, predicted_Hz)
+    return max(idx, key=lambda i: mag[i])
+
+
+def level_modes(d: LevelData, *, feed_predicted_Hz: float | None = None, pitch: bool = False,
+                pitch_predicted_Hz: float | None = None, pitch_band_Hz: tuple[float, float] | None = None
+                ) -> list[ModeEstimate]:
+    """The feed mode (and the pitching mode when ``pitch``) of one level."""
+    out = []
+    i = find_feed(d, feed_predicted_Hz)
+    if i is None:
+        feed = ModeEstimate("feed", d.level_N, "not found", "compliance_pp", note="no compliance_pp maximum")
+    else:
+        feed = estimate_mode(d.f_Hz, d.compliance, mode="feed", kind="receptance", level_N=d.level_N,
+                             curve=d.compliance_pp, curve_name="compliance_pp", peak_index=i)
+    out.append(feed)
+    if pitch:
+        fh = feed.resonance_Hz if feed.ok else (feed.edge_Hz if math.isfinite(feed.edge_Hz) else None)
+        j = find_pitch(d, pitch_predicted_Hz, pitch_band_Hz, fh)
+        if j is None:
+            out.append(ModeEstimate("pitch", d.level_N, "not found", "|A1/F1|",
+                                    note="no accelerance maximum where the pitching mode can be"))
+        else:
+            est = estimate_mode(d.f_Hz, d.accelerance, mode="pitch", kind="accelerance", level_N=d.level_N,
+                                peak_index=j, guess_zeta=0.02)
+            if est.ok:
+                est.extra["compliance_pp"] = float(np.interp(est.resonance_Hz, d.f_Hz, d.compliance_pp))
+            out.append(est)
+    if feed.ok:
+        feed.extra["accelerance"] = float(np.interp(feed.resonance_Hz, d.f_Hz, np.abs(d.accelerance)))
+    return out
+
+
+def track_modes(levels: Sequence[LevelData], *, feed_predicted_Hz: dict[float, float] | None = None,
+                pitch: bool = False, pitch_band_Hz: tuple[float, float] | None = None) -> list[ModeEstimate]:
+    """Every level's modes, in the order of ``levels``, tracked by identity: the feed
+    prediction is the rig model's at that level (``feed_predicted_Hz``: level -> Hz) or
+    the previous level's estimate; the pitching mode's is the previous level's estimate
+    inside the model's band (or above the feed mode)."""
+    out: list[ModeEstimate] = []
+    prev_feed = prev_pitch = None
+    for d in sorted(levels, key=lambda d: d.level_N):
+        fp = (feed_predicted_Hz or {}).get(d.level_N)
+        if fp is None or not math.isfinite(fp):
+            fp = prev_feed
+        ests = level_modes(d, feed_predicted_Hz=fp, pitch=pitch, pitch_predicted_Hz=prev_pitch,
+                           pitch_band_Hz=pitch_band_Hz)
+        for e in ests:
+            if e.ok and e.mode == "feed":
+                prev_feed = e.resonance_Hz
+            if e.ok and e.mode == "pitch":
+                prev_pitch = e.resonance_Hz
+        out += ests
+    return out
+
+
+def pitch_band_Hz(model) -> tuple[float, float] | None:
+    """Where a rig model's pitching mode can be (its ``pitch_*`` fields; None when off):
+    above the 2-DOF's upper undamped frequency with the friction free (k_x = the rig's
+    linear spring only), the large-force limit; friction stiffens the feed direction and
+    acts on the pitching mode as an additional spring (seed, section 4), which raises it
+    without a bound the model can state (the upper end is inf)."""
+    if not getattr(model, "pitch_inertia_kg_m2", 0):
+        return None
+    m, e, J, kth = model.mass_kg, model.cg_height_m, model.pitch_inertia_kg_m2, model.pitch_stiffness_N_m_per_rad
+    M = np.array([[m, m * e], [m * e, J]])
+    w2 = np.linalg.eigvals(np.linalg.solve(M, np.diag([model.spring_N_per_m, kth]))).real
+    return float(math.sqrt(max(w2)) / (2 * math.pi)), math.inf
+
+
+def next_refinement_Hz(f_Hz: ArrayLike, mag: ArrayLike, peak_index: int, estimate_Hz: float,
+                       zeta: float, tolerance: float, f_min: float, f_max: float) -> float | None:
+    """The next frequency to measure to know a peak within ``tolerance`` (relative), or
+    None when it is known: the measured maximum has measured neighbours within
+    ``tolerance`` on both sides (the peak lies between them), and the points below are
+    there.  In order: the estimate (``estimate_Hz``: the fit's, else a parabola's), when no
+    point lies within tolerance/2 of it; the half-power points (estimate x (1 -+ zeta),
+    the fit's window) when none lies within zeta/3; the estimate x (1 -+ tolerance); then
+    the wider gap beside the measured maximum, halved (a bracket that shrinks whatever the
+    estimate says)."""
+    f = np.asarray(f_Hz, float)
+    m = np.asarray(mag, float)
+    o = np.argsort(f)
+    f, m = f[o], m[o]
+    ip = int(np.nonzero(o == peak_index)[0][0])
+    fp = f[ip]
+
+    def missing(x, tol):
+        return f_min <= x <= f_max and not np.any(np.abs(f / x - 1) <= tol)
+    centre = estimate_Hz if math.isfinite(estimate_Hz) and f[max(ip - 1, 0)] < estimate_Hz < f[min(ip + 1, f.size - 1)] \
+        else fp
+    z = zeta if math.isfinite(zeta) and 2 * tolerance < zeta < 0.3 else None
+    todo = [(centre, tolerance / 2)]
+    if z is not None:
+        todo += [(centre * (1 - z), z / 3), (centre * (1 + z), z / 3)]
+    todo += [(centre * (1 - tolerance), tolerance / 2), (centre * (1 + tolerance), tolerance / 2)]
+    for x, tol in todo:
+        if missing(x, tol):
+            return float(x)
+    gaps = []
+    if ip > 0:
+        gaps.append((fp / f[ip - 1] - 1, math.sqrt(f[ip - 1] * fp)))
+    if ip < f.size - 1:
+        gaps.append((f[ip + 1] / fp - 1, math.sqrt(f[ip + 1] * fp)))
+    gap, mid = max(gaps) if gaps else (0.0, fp)
+    return float(mid) if gap > 1.01 * tolerance else None

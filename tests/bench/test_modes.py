@@ -1,0 +1,229 @@
+"""Resonance search and `bench modes` end to end on the simulated rigs, against independent
+references: the feed mode against the peak of the shooting engine's compliance_pp computed
+densely (sim.frf.find_peaks); the pitching mode against a brute-force dense window of steps
+(0.5 Hz apart) of the same rig.  benchmarks/bench_modes.py runs the full bars (3 levels,
+wider dense runs, half-power damping)."""
+
+from __future__ import annotations
+
+import csv
+import math
+
+import numpy as np
+import pytest
+
+from bench.cli import main
+from bench.config import DEFAULTS, load_rig, parse_plan
+from bench.reports import run_modes
+from bench.session import run_plan
+from bench.storage import RunStore
+from sim.frf import find_peaks
+from sim.shooting import frf_shooting
+
+
+def _plan(name, levels, freqs, resonance=None):
+    p = {"name": name, "levels_N": levels, "frequencies": freqs, "control": {"harmonics": 5}}
+    if resonance:
+        p["resonance"] = resonance
+    return parse_plan({"plan": p})
+
+
+@pytest.fixture(scope="module")
+def feed_run(tmp_path_factory):
+    """1 N on the plain rig, 12 log points 30-300 Hz, the feed peak refined."""
+    plan = _plan("coarse refined", [1.0], {"start_Hz": 30.0, "stop_Hz": 300.0, "points": 12},
+                 {"refine": True, "modes": ["feed"]})
+    store = run_plan(plan, load_rig(DEFAULTS / "sim_rig.toml"), tmp_path_factory.mktemp("feed") / "run",
+                     identify=False, labels={"rig": "plain"})
+    assert store.metadata["status"] == "completed"
+    return store
+
+
+@pytest.fixture(scope="module")
+def pitch_run(tmp_path_factory):
+    """1 N on the pitching rig, 8 log points 120-300 Hz (the feed mode below the grid),
+    the pitching peak refined."""
+    plan = _plan("pitch refined", [1.0], {"start_Hz": 120.0, "stop_Hz": 300.0, "points": 8},
+                 {"refine": True, "modes": ["pitch"]})
+    store = run_plan(plan, load_rig(DEFAULTS / "sim_rig_pitch.toml"), tmp_path_factory.mktemp("pitch") / "run",
+                     identify=False, labels={"lubricant": "ISO VG 32"})
+    assert store.metadata["status"] == "completed"
+    return store
+
+
+def test_refined_feed_resonance_matches_the_engines_dense_peak(feed_run):
+    keys = [r["key"] for r in feed_run.results()]
+    refined = [k for k in keys if "-RF" in k]
+    assert 3 <= len(refined) <= 10                       # the budget holds; the steps are ordinary steps
+    assert feed_run.account().complete and not feed_run.check()
+    assert feed_run.metadata["steps_total"] == len(keys)
+    ws = math.sqrt(10.0 / (10e-6 * 10.0))                 # the rig file's F_s, x_s, m
+    f = np.linspace(60, 75, 61)
+    fr, _ = frf_shooting(2 * np.pi * f / ws, 0.1, 1.5)
+    ref = find_peaks(fr)[0].beta * ws / (2 * math.pi)
+    (feed,) = run_modes(feed_run.path, model=False).modes
+    assert feed.ok and feed.resonance_Hz == pytest.approx(ref, rel=0.01)
+    assert abs(feed.resonance_Hz / ref - 1) < 0.003       # measured: 0.06 %
+    assert 0 < feed.damping_ratio_low < feed.damping_ratio < feed.damping_ratio_high < 0.3
+
+
+def test_refined_pitch_resonance_matches_a_dense_window_and_the_feed_is_below_the_grid(pitch_run, tmp_path):
+    modes = {e.mode: e for e in run_modes(pitch_run.path, model=False).modes}
+    assert modes["feed"].status == "below grid" and math.isnan(modes["feed"].resonance_Hz)
+    pitch = modes["pitch"]
+    assert pitch.ok and pitch.damping_ratio_low < pitch.damping_ratio < pitch.damping_ratio_high
+    # brute force: 0.5 Hz steps around the estimate, the peak of their parabola
+    centre = round(pitch.resonance_Hz * 2) / 2
+    dense = [centre + 0.5 * k for k in range(-2, 3)]
+    store = run_plan(_plan("dense", [1.0], {"list_Hz": dense}), load_rig(DEFAULTS / "sim_rig_pitch.toml"),
+                     tmp_path / "dense", identify=False)
+    res = sorted(store.results(), key=lambda r: r["freq_Hz"])
+    acc = np.array([r["accelerance_abs_kg_inv"] for r in res])
+    i = int(np.argmax(acc))
+    assert 0 < i < len(dense) - 1                         # the dense window holds the peak
+    a, b, _ = np.polyfit(dense[i - 1:i + 2], acc[i - 1:i + 2], 2)
+    assert pitch.resonance_Hz == pytest.approx(-b / (2 * a), rel=0.005)
+    assert abs(pitch.resonance_Hz / (-b / (2 * a)) - 1) < 0.001
+
+
+def test_bench_modes_writes_two_runs_with_their_labels(feed_run, pitch_run, tmp_path, capsys):
+    assert main(["modes", str(feed_run.path), str(pitch_run.path), "--out", str(tmp_path / "m"), "--no-model"]) == 0
+    rows = list(csv.DictReader(open(tmp_path / "m" / "modes.csv")))
+    need = {"run", "mode", "level_N", "resonance_Hz", "resonance_low_Hz", "resonance_high_Hz", "damping_ratio",
+            "damping_ratio_low", "damping_ratio_high", "peak_compliance_m_per_N"}
+    assert need <= set(rows[0])
+    assert {(r["label"], r["mode"], r["status"]) for r in rows} == {
+        ("rig=plain", "feed", "ok"), ("lubricant=ISO VG 32", "feed", "below grid"),
+        ("lubricant=ISO VG 32", "pitch", "ok")}
+    below = next(r for r in rows if r["status"] == "below grid")
+    assert below["resonance_Hz"] == "nan"                 # said to be there, never given a value
+    assert (tmp_path / "m" / "fig13_feed.png").stat().st_size > 10_000
+    assert (tmp_path / "m" / "fig17_modes.png").stat().st_size > 10_000
+    assert "below grid" in capsys.readouterr().out
+
+
+def test_resume_continues_the_refinement_where_it_stopped(feed_run, tmp_path):
+    """A run cut after its first refinement steps, resumed, ends with the same refined
+    frequencies as the uninterrupted run (the choice depends on the stored steps only)."""
+    import shutil
+    cut = tmp_path / "cut"
+    shutil.copytree(feed_run.path, cut)
+    refined = sorted(p for p in (cut / "steps").glob("*-RF*"))
+    keep = {p.stem for p in refined[:4]}                  # R000, R001 (json + npz)
+    for p in refined:
+        if p.stem not in keep:
+            p.unlink()
+    RunStore.open(cut).update(status="interrupted")
+    assert main(["resume", str(cut), "--no-report"]) == 0
+    want = sorted(round(r["freq_Hz"], 4) for r in feed_run.results() if "-RF" in r["key"])
+    got = sorted(round(r["freq_Hz"], 4) for r in RunStore.open(cut).results() if "-RF" in r["key"])
+    assert got == pytest.approx(want, rel=2e-3), (got, want)
+
+
+def test_a_misspelled_resonance_key_is_named():
+    from bench.config import ConfigError
+    with pytest.raises(ConfigError, match=r"\[plan.resonance\] tolerence: unknown key; did you mean tolerance"):
+        parse_plan({"plan": {"levels_N": [1.0], "frequencies": {"list_Hz": [50.0, 60.0]},
+                             "resonance": {"refine": True, "tolerence": 0.01}}})
+    with pytest.raises(ConfigError, match="modes"):
+        parse_plan({"plan": {"levels_N": [1.0], "frequencies": {"list_Hz": [50.0, 60.0]},
+                             "resonance": {"modes": ["roll"]}}})
+
+
+def test_dry_run_counts_the_refinement_and_its_rig_time_is_the_runs(feed_run, tmp_path, capsys):
+    """dry-run names the refinement budget and an expected rig time; with the refinement
+    steps the run took, the estimate is within a factor 1.5 of the simulated rig's clock."""
+    import math as _m
+
+    from bench.session import planned_steps, step_seconds
+    from bench.storage import stored_plan
+    plan_file = tmp_path / "p.toml"
+    plan_file.write_text('[plan]\nlevels_N = [1.0]\n[plan.frequencies]\nstart_Hz = 30.0\nstop_Hz = 300.0\n'
+                         'points = 12\n[plan.resonance]\nrefine = true\nmodes = ["feed"]\n')
+    assert main(["dry-run", "--plan", str(plan_file)]) == 0
+    out = capsys.readouterr().out
+    assert "12 measured + at most 10 refinement steps" in out and "expected rig time: about" in out
+    plan = stored_plan(feed_run.metadata)
+    res = feed_run.results()
+    n, budget, t = planned_steps(plan)
+    used = sum("-RF" in r["key"] for r in res)
+    est = t - (budget - used) * step_seconds(plan, _m.sqrt(30 * 300), from_rest=True)
+    last = max(res, key=lambda r: r["t0_s"])
+    actual = last["t0_s"] + last["n_samples"] / last["fs_Hz"]
+    assert 1 / 1.5 < est / actual < 1.5, (est, actual)
+
+
+def test_the_watch_state_and_page_show_the_modes_as_found(pitch_run):
+    """The live page's state holds each mode per level (the grid-edge feed mode said to lie
+    below the grid, the pitching mode near the report's value) and the page shows them."""
+    from bench.watch import serve
+    from bench.watch.snapshot import RunReader
+
+    from .chromium import CHROMIUM, Browser
+    state = RunReader(pitch_run.path).snapshot()
+    modes = {m["mode"]: m for m in state["modes"]}
+    assert modes["feed"]["status"] == "below grid" and modes["feed"]["resonance_Hz"] is None
+    report = {e.mode: e for e in run_modes(pitch_run.path, model=False).modes}
+    assert modes["pitch"]["resonance_Hz"] == pytest.approx(report["pitch"].resonance_Hz, rel=1e-9)
+    assert state["progress"]["total"] == state["progress"]["done"] == len(pitch_run.results())
+    if CHROMIUM is None:
+        pytest.skip("chromium not installed (make setup)")
+    with serve(pitch_run.path) as server, Browser() as browser:
+        browser.goto(server.url)
+        text = browser.wait_for("document.getElementById('modes').textContent.includes('pitch') && "
+                                "document.getElementById('modes').textContent", 30, "the modes table")
+        assert "below grid: at or below 120.0 Hz" in text
+        assert f"{report['pitch'].resonance_Hz:.5g}" in text
+        n = len(pitch_run.results())
+        browser.wait_for(f"document.getElementById('accelerance').dataset.points === '{n}'", 30, "the accelerance")
+        # the phase axis is not clipped to [-180, 0]: past the pitching mode the phase goes below -180
+        lowest = min(p for c in state["compliance"] for p in c["phase_deg"])
+        assert lowest < -200
+        assert browser.js("document.getElementById('compliance').layout.yaxis2.range[0]") < lowest
+
+
+def test_the_batch_summary_gets_mode_columns(pitch_run, tmp_path):
+    from bench.studies.batch import MODE_COLUMNS, mode_columns
+    cols = mode_columns(pitch_run.path)
+    assert set(cols) == set(MODE_COLUMNS)
+    assert cols["feed_status"] == "1:below grid" and cols["feed_resonance_Hz"] == "1:nan"
+    pitch = next(e for e in run_modes(pitch_run.path, model=False).modes if e.mode == "pitch")
+    assert cols["pitch_resonance_Hz"] == f"1:{pitch.resonance_Hz:.6g}" and cols["pitch_status"] == "1:ok"
+    assert set(mode_columns(tmp_path).values()) == {""}          # not a run directory: empty, not an error
+
+
+def test_check_of_an_interrupted_run_says_so_in_one_line(small_run, tmp_path, capsys):
+    """An interrupted run's unmeasured tail is one line ('interrupted after step K; 8 not
+    yet measured'), not one line per step; a step missing inside the measured part is
+    still named."""
+    import shutil
+
+    from bench.cli import ExitCode
+    run = tmp_path / "run"
+    shutil.copytree(small_run.path, run, ignore=shutil.ignore_patterns("report", "export", "analysis"))
+    keys = sorted(p.stem for p in (run / "steps").glob("*.json"))
+    for key in keys[12:] + [keys[3]]:
+        for ext in (".json", ".npz"):
+            (run / "steps" / f"{key}{ext}").unlink()
+    RunStore.open(run).update(status="interrupted")
+    assert main(["check", str(run)]) == ExitCode.FAILURE
+    lines = capsys.readouterr().out.splitlines()
+    assert any(f"interrupted after step {keys[11]}; 8 not yet measured" in ln for ln in lines), lines
+    assert any(ln.strip().startswith("missing") and keys[3] in ln for ln in lines)
+    assert not any(ln.strip().startswith("missing") and keys[15] in ln and "interrupted" not in ln for ln in lines[:-1])
+
+
+def test_bench_paper_rig_needs_a_pitching_model(capsys):
+    from bench.cli import ExitCode
+    assert main(["paper", "--quick", "--out", "/nonexistent/never", "--rig", str(DEFAULTS / "sim_rig.toml")]) \
+        == ExitCode.USAGE
+    assert "no pitching mode" in capsys.readouterr().err
+
+
+def test_paper_model_is_the_rig_files_without_noise_line_or_shaker():
+    from bench.rig_model import LEFT_OUT, paper_model
+    rig = load_rig(DEFAULTS / "sim_rig_pitch.toml")
+    model = paper_model(rig, "sim_rig_pitch.toml")
+    assert model["pitch_inertia_kg_m2"] == rig.model["pitch_inertia_kg_m2"] and model["friction_alpha"] == 0.5
+    assert not any(k in model for k in LEFT_OUT if not k.endswith("noise_N") and "noise" not in k)
+    assert model["disp_noise_m"] == model["force_noise_N"] == model["accel_noise_m_s2"] == 0.0
