@@ -334,11 +334,17 @@ def cmd_export(args) -> int:
 
 def cmd_identify(args) -> int:
     """Offline identification of a stored run (result written into its run.json) or of
-    UFF58 time records (guesses from --rig, default: the simulated rig's file)."""
-    from procedures.online_id import MAX_HARMONICS
-    from sim.identify import identify_results
+    UFF58 time records (guesses from --rig, default: the simulated rig's file), with the
+    model of the rig: the modes its file declares and, once `bench analyze` has run, the
+    causes it named (decision 0042)."""
+    import json
 
+    from procedures.online_id import MAX_HARMONICS, check_finite
+    from sim.discrepancy.rigfit import analysis_effects, identify_steps
+
+    from .analyze import default_out_dir
     from .config import DEFAULTS, load_rig, parse_rig, rig_toml
+    from .numbers import number
     from .sources import load_source
     from .storage import RunStore
 
@@ -356,14 +362,29 @@ def cmd_identify(args) -> int:
         raise ConfigurationError(f"{source}: no steps with force, acceleration and displacement to identify from")
     guess = dict(F_s_N=rig.expected_F_s_N, x_s_m=rig.expected_x_s_m, n=rig.expected_n,
                  mass_kg=rig.expected_mass_kg)
-    est = identify_results([s.harmonics for s in src.steps], guess, MAX_HARMONICS).estimate
+    analysis_json = default_out_dir(source) / "analysis.json"
+    extra: tuple[str, ...] = ()
+    if analysis_json.is_file():
+        try:
+            extra = analysis_effects(json.loads(analysis_json.read_text()))
+        except (OSError, ValueError) as e:
+            print(f"warning: {analysis_json} cannot be read ({e}); the analysis' causes are not in the model")
+    est = identify_steps(src.steps, guess, rig.model, extra, MAX_HARMONICS)
+    check_finite(est)
     if src.kind == "run":
-        RunStore.open(source).update(identification=est.as_dict())
+        RunStore.open(source).update(identification=est)
+    effects = est.get("model", {}).get("effects") or []
+    print(f"model: Masing friction and the moving mass{' with ' + ', '.join(effects) if effects else ''} "
+          f"({est.get('source', 'final fit')})")
     print(f"{'parameter':>10} {'estimate':>12} {'95 % interval':>28}")
-    for k, v in est.values.items():
-        print(f"{k:>10} {v:12.5g} [{est.low[k]:12.5g}, {est.high[k]:12.5g}]")
-    print(f"{len(src.steps)} steps ({len(src.rejected)} rejected), reduced chi^2 {est.cost:.3g}")
-    for w in est.warnings:
+    for k, v in est["values"].items():
+        print(f"{k:>10} {number(v, fmt='.6g'):>12} [{number(est['low'][k], fmt='.6g'):>12}, "
+              f"{number(est['high'][k], fmt='.6g'):>12}]")
+    for k, p in (est.get("model", {}).get("parameters") or {}).items():
+        print(f"{k:>10} {number(p['value'], fmt='.6g'):>12} [{number(p['low'], fmt='.6g'):>12}, "
+              f"{number(p['high'], fmt='.6g'):>12}]")
+    print(f"{len(src.steps)} steps ({len(src.rejected)} rejected), reduced chi^2 {number(est['reduced_chi2'], fmt='.3g')}")
+    for w in est["warnings"]:
         print(f"warning: {w}")
     return 0
 

@@ -417,6 +417,8 @@ def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Super
         proc = SteppedSine(plan, gen, daq, **kwargs)
     proc.preload(store.results())             # a resumed run: the force per volt measured so far
     proc.disp_noise_floor_m = float(np.std(rest))
+    # the probe's resolution as this run saw it (the report names steps that move less)
+    store.event("probe_noise", rms_m=proc.disp_noise_floor_m)
     if progress and hasattr(progress, "restart"):
         progress.restart(len(store.done_keys()))     # the ETA counts steps from here
     online = OnlineIdentification(store.path, rig, plan.harmonics) if identify and not plan.response else None
@@ -431,8 +433,11 @@ def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Super
             est = online.update(res, raw)
             if est:
                 v = est["values"]
+                bound = [w.split()[0] for w in est.get("warnings", []) if "reached the bound" in w]
                 progress_note[0] = (f"F_s {v['F_s_N']:.3g} N x_s {v['x_s_m'] * 1e6:.3g} um "
-                                    f"n {v['n']:.3g} m {v['mass_kg']:.3g} kg")
+                                    f"n {v['n']:.3g} m {v['mass_kg']:.3g} kg"
+                                    + (f" ({', '.join(bound)} at the search bound: not estimates)" if bound else "")
+                                    + (" (the model does not fit: see the report)" if est.get("misfit") else ""))
 
     def show(done: int, total: int, note: str) -> None:
         if progress:

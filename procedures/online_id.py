@@ -4,6 +4,12 @@ After every step the identifier (sim.identify) is refitted, warm-started from th
 estimate with a small evaluation budget; each estimate, with its 95 % intervals and the
 update's time, is appended to <run>/identification.jsonl.  At the end a full fit over
 all steps is stored in run.json.
+
+When the rig file declares modes or effects beyond the Masing carriage (``[rig.model]``: a
+pitching mode, viscous damping, ...), both fit the analysis' model of the rig with them
+(:mod:`sim.discrepancy.rigfit`, decision 0042): online with the declared effects held at
+the rig file's values, at the end with them refitted.  F_s, x_s and m stay within
+BOUND_FACTOR of the rig file's expected values online; an estimate on a bound says so.
 """
 
 from __future__ import annotations
@@ -17,6 +23,7 @@ import time
 
 import numpy as np
 
+from sim.discrepancy.rigfit import BOUND_FACTOR, OnlineRigFit, identify_steps, rig_effects
 from sim.identify import Identifier, StepHarmonics
 from sim.records import analyse_records
 from sim.step_result import StepResult
@@ -98,37 +105,55 @@ def step_harmonics(result: StepResult, raw: dict | None = None) -> StepHarmonics
 class OnlineIdentification:
     def __init__(self, run_dir, rig: Rig, harmonics: int = 5, budget: int = 25):
         self.path = run_dir / "identification.jsonl"
-        self.ident = Identifier(dict(F_s_N=rig.expected_F_s_N, x_s_m=rig.expected_x_s_m,
-                                     n=rig.expected_n, mass_kg=rig.expected_mass_kg),
-                                harmonics=min(harmonics, MAX_HARMONICS))
+        self.guess = dict(F_s_N=rig.expected_F_s_N, x_s_m=rig.expected_x_s_m, n=rig.expected_n,
+                          mass_kg=rig.expected_mass_kg)
+        self.rig_model = dict(rig.model or {})
+        K = min(harmonics, MAX_HARMONICS)
+        # the rig's declared modes: the analysis' model with them (else the Masing carriage)
+        self.rigfit = OnlineRigFit(self.guess, self.rig_model, K) if rig_effects(self.rig_model) else None
+        self.ident = Identifier(self.guess, harmonics=K, bound_factor=BOUND_FACTOR)
+        self.steps: list[StepHarmonics] = []
         self.budget = budget
         self.update_times_s: list[float] = []
 
     def current(self) -> dict | None:
         """The latest estimate's values (None before the first fit)."""
+        if self.rigfit is not None:
+            return self.rigfit.estimate["values"] if self.rigfit.estimate else None
         return self.ident.estimate.values if self.ident.estimate else None
+
+    def _add(self, h: StepHarmonics) -> None:
+        self.steps.append(h)
+        (self.rigfit or self.ident).add(h)
 
     def preload(self, results: list[StepResult], raw_of=None) -> None:
         """Steps already measured (resume): fitted once before new steps arrive.
         ``raw_of(key)`` gives a step's raw block (for every harmonic it holds)."""
         for r in results:
-            self.ident.add(step_harmonics(r, raw_of(r["key"]) if raw_of else None))
+            self._add(step_harmonics(r, raw_of(r["key"]) if raw_of else None))
         if results:
-            self.ident.fit(max_nfev=200)
+            if self.rigfit is not None:
+                self.rigfit.fit(max_nfev=200)
+            else:
+                self.ident.fit(max_nfev=200)
 
     def update(self, result: StepResult, raw: dict | None = None) -> dict | None:
         """Add a step (with its raw block when there is one) and refit."""
         t = time.perf_counter()
         try:
-            self.ident.add(step_harmonics(result, raw))
-            est = self.ident.fit(max_nfev=self.budget, reweight_rounds=0, reweight_budget=REWEIGHT_BUDGET,
-                                     tol=1e-5)
+            self._add(step_harmonics(result, raw))
+            if self.rigfit is not None:
+                est = self.rigfit.fit(max_nfev=self.budget)
+            else:
+                est = self.ident.fit(max_nfev=self.budget, reweight_rounds=0, reweight_budget=REWEIGHT_BUDGET,
+                                     tol=1e-5).as_dict()
+                est["source"] = "online"
         except Exception as e:  # noqa: BLE001 - identification must never stop a test
             log.warning("identification update failed after step %s: %s", result.get("key"), e)
             return None
         dt = time.perf_counter() - t
         self.update_times_s.append(dt)
-        rec = dict(step=result.get("key"), update_s=dt, **est.as_dict())
+        rec = dict(step=result.get("key"), update_s=dt, **est)
         # never through a symbolic link placed in the run directory (as bench.storage)
         # nor into a FIFO (O_NONBLOCK: no waiting for a reader; then not a regular file)
         try:
@@ -146,15 +171,30 @@ class OnlineIdentification:
         """The full fit over all steps; a failure is reported, never raised (the test's
         data are complete and safe whatever happens here)."""
         try:
-            est = self.ident.fit(max_nfev=300)
+            if self.rigfit is not None:
+                est = identify_steps(self.steps, self.guess, self.rig_model, harmonics=MAX_HARMONICS)
+            else:
+                est = dict(self.ident.fit(max_nfev=300).as_dict(), source="final fit")
+            check_finite(est)
         except Exception as e:  # noqa: BLE001
             log.error("final identification failed: %s", e)
-            return {"error": f"{type(e).__name__}: {e}"}
-        for w in est.warnings:
+            return {"error": f"{type(e).__name__}: {e}", "source": "final fit"}
+        for w in est["warnings"]:
             log.warning("identification: %s", w)
         times = np.array(self.update_times_s) if self.update_times_s else np.array([np.nan])
-        return dict(est.as_dict(), update_ms_median=float(np.median(times) * 1e3),
+        return dict(est, update_ms_median=float(np.median(times) * 1e3),
                     update_ms_max=float(np.max(times) * 1e3))
+
+
+def check_finite(est: dict) -> None:
+    """An estimate whose values or intervals overflowed is a failed fit, not a result."""
+    for part in ("values", "low", "high"):
+        for k, v in (est.get(part) or {}).items():
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and (part == "values" or v >= 0 or k == "n")):
+                raise ArithmeticError(f"{part} of {k} is not a finite number ({v!r})")
+        vals = est.get("values") or {}
+        if any(k != "n" and not (1e-30 < abs(v) < 1e30) for k, v in vals.items()):
+            raise ArithmeticError(f"absurd value: {vals}")
 
 
 def history(run_dir) -> list[dict]:

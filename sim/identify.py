@@ -60,6 +60,22 @@ N_BOUNDS = (0.1, 6.0)
 # few, uninformative steps from sending the estimate astray and gives an undetermined
 # parameter an honest interval.  With a full plan its weight is negligible.
 PRIOR_SIGMA = np.array([math.log(4.0), math.log(4.0), 1.5, math.log(4.0)])
+MISFIT_CHI2 = 2.0          # reduced chi-square above this (and the noise's own spread) is misfit
+MISFIT_SIGMAS = 5.0
+
+
+def misfit_text(reduced_chi2: float, dof: int) -> str:
+    """Words when the reduced chi-square says the model does not fit beyond what the noise
+    explains ('' when it fits): above :data:`MISFIT_CHI2` and :data:`MISFIT_SIGMAS` standard
+    deviations of the noise's own chi-square (sqrt(2 / dof)) above 1 (decision 0042)."""
+    if not math.isfinite(reduced_chi2):
+        return "the fit's reduced chi-square is not a number: the fit failed"
+    if reduced_chi2 <= max(MISFIT_CHI2, 1 + MISFIT_SIGMAS * math.sqrt(2.0 / max(dof, 1))):
+        return ""
+    return (f"the model does not fit the data beyond what the noise explains (reduced chi-square {reduced_chi2:.3g}, "
+            f"about 1 when it does): something acts that the model lacks, so the values are biased by an unknown "
+            f"amount; the intervals are widened {math.sqrt(reduced_chi2):.3g}x (sqrt of the reduced chi-square) "
+            f"but may still miss the truth; `bench analyze` names what is missing")
 
 
 @dataclass(frozen=True)
@@ -102,10 +118,13 @@ class Estimate:
     steps_used: int
     cost: float                        # reduced chi-square
     warnings: tuple[str, ...] = field(default=())
+    misfit: bool = False               # reduced chi-square beyond what the noise explains (misfit_text)
+    source: str = ""                   # where the estimate came from (online, final fit, ...)
 
     def as_dict(self) -> dict:
         return dict(values=self.values, low=self.low, high=self.high, rel_std=self.rel_std,
-                    steps_used=self.steps_used, reduced_chi2=self.cost, warnings=list(self.warnings))
+                    steps_used=self.steps_used, reduced_chi2=self.cost, warnings=list(self.warnings),
+                    misfit=self.misfit, **({"source": self.source} if self.source else {}))
 
 
 @njit(cache=True)
@@ -247,7 +266,7 @@ class Identifier:
     """Accumulates steps and fits (F_s, x_s, n, m); warm-started from the last fit."""
 
     def __init__(self, guess: dict, harmonics: int = 5, lam: float = LAMBDA_MASING,
-                 points_per_period: int = POINTS_PER_PERIOD):
+                 points_per_period: int = POINTS_PER_PERIOD, bound_factor: float | None = None):
         self.K = harmonics
         self.lam = lam
         self.M = points_per_period
@@ -257,6 +276,9 @@ class Identifier:
         self.theta = np.log([guess["F_s_N"], guess["x_s_m"], 1.0, guess["mass_kg"]])
         self.theta[2] = guess["n"]
         self.theta_prior = self.theta.copy()
+        # F_s, x_s, m kept within this factor of the guess (online: an estimate on the bound
+        # is flagged, never reported as one; None: unbounded)
+        self.bound_factor = bound_factor
         self.estimate: Estimate | None = None
         self.history: list[dict] = []
 
@@ -412,6 +434,12 @@ class Identifier:
         A = np.array([s.accel[:K] for s in self.steps])
         lo = [-np.inf, -np.inf, N_BOUNDS[0], -np.inf]
         hi = [np.inf, np.inf, N_BOUNDS[1], np.inf]
+        # never further than e^50 from the guess: a diverging trial step must not overflow
+        # exp() (an OverflowError ended a run's final fit, issue 25); online, a factor
+        # bound_factor, and an estimate on it is flagged
+        b = math.log(self.bound_factor) if self.bound_factor else 50.0
+        for i in (0, 1, 3):
+            lo[i], hi[i] = self.theta_prior[i] - b, self.theta_prior[i] + b
         th = np.clip(self.theta, np.array(lo) + 1e-9, np.array(hi) - 1e-9)
         for rnd in range(reweight_rounds + 1):
             self._refresh_weights(th, K, force=rnd > 0, budget=reweight_budget)
@@ -448,7 +476,14 @@ class Identifier:
                 rel[name] = float(std[i])
         warnings = tuple(f"{name} is poorly determined by these steps (relative standard error "
                          f"{100 * rel[name]:.0f} %)" for name in PARAMS if not rel[name] < 0.1)
-        self.estimate = Estimate(vals, low, high, rel, len(self.steps), chi2, warnings)
+        if self.bound_factor:   # (the e^50 reach is never an answer)
+            warnings = tuple(f"{PARAMS[i]} reached the bound of the search ({self.bound_factor:g}x the expected "
+                             f"value): not an estimate" for i in (0, 1, 3)
+                             if min(res.x[i] - lo[i], hi[i] - res.x[i]) < 1e-3) + warnings
+        mis = misfit_text(chi2, dof)
+        if mis:
+            warnings = (mis,) + warnings
+        self.estimate = Estimate(vals, low, high, rel, len(self.steps), chi2, warnings, bool(mis))
         self.history.append(dict(steps=len(self.steps), **self.estimate.as_dict()))
         return self.estimate
 

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..numbers import insane
+
 log = logging.getLogger(__name__)
 
 
@@ -37,18 +39,76 @@ class IdentificationData:
     truth: dict | None             # simulated rig: the RigModel's parameters (SI)
     identifiability: list[str]     # run.json "identifiability_warnings" (judged before the run)
     unknown: object = None         # a run.json "identification" entry that is not an estimate
+    analysis: dict | None = None   # analysis.json's parameters as an estimate (bench analyze ran)
+    status: str = ""               # the run's status (run.json)
+
+    @property
+    def failed(self) -> str | None:
+        """Why the final fit failed, when run.json records a failure (or absurd numbers)."""
+        if isinstance(self.unknown, dict) and self.unknown.get("error"):
+            return str(self.unknown["error"])
+        if self.final is not None:
+            bad = insane(self.final.get("values") or {})
+            if bad:
+                return f"{', '.join(bad)} came out not finite or absurd (an overflow in the fit)"
+        return None
 
     @property
     def latest(self) -> dict | None:
-        """The estimate to report: the final fit, else the last online one."""
-        return self.final if self.final is not None else (self.history[-1] if self.history else None)
+        """The one parameter set to report: the analysis' once `bench analyze` has run, else
+        the final fit (unless it failed), else the last online estimate."""
+        if self.analysis is not None:
+            return self.analysis
+        if self.final is not None and self.failed is None:
+            return self.final
+        return self.history[-1] if self.history else None
+
+    def source_of(self, est: dict) -> str:
+        """Where ``est`` came from, in words."""
+        if est is self.analysis:
+            return est.get("source", "analysis")
+        if est is self.final:
+            return f"{est.get('source') or 'final fit'} over {est.get('steps_used', '?')} steps (run.json)"
+        why = (f"the final fit failed: {self.failed}" if self.failed else
+               "there is no final fit (the run did not complete)" if self.status != "completed" else
+               "there is no final fit in run.json")
+        return (f"last online estimate, after step {est.get('step', '?')} ({est.get('steps_used', '?')} steps); "
+                f"{why}")
+
+
+def analysis_estimate(analysis: dict | None) -> dict | None:
+    """analysis.json's final-model parameters in the estimate layout (None when absent or unusable)."""
+    if not isinstance(analysis, dict) or not isinstance(analysis.get("parameters"), dict):
+        return None
+    keys = dict(F_s_N="F_s_N", x_s_m="x_s_m", n="n", mass_kg="m_kg")
+    values, low, high, rel = {}, {}, {}, {}
+    for k, a in keys.items():
+        p = analysis["parameters"].get(a)
+        if not isinstance(p, dict):
+            return None
+        values[k], low[k], high[k] = (finite(p.get(x)) for x in ("value", "low", "high"))
+        half = (high[k] - low[k]) / (2 * 1.959964) if k == "n" else math.log(max(high[k], 1e-300) / max(low[k], 1e-300)) / (2 * 1.959964)
+        rel[k] = half / abs(values[k]) if k == "n" and values[k] else half
+    final = analysis.get("final") or {}
+    causes = [c.get("id") for c in analysis.get("causes") or [] if isinstance(c, dict) and c.get("kind") != "artefact"]
+    chi2 = finite(final.get("reduced_chi2"))
+    from sim.identify import misfit_text
+    mis = misfit_text(chi2, 10 ** 6) if math.isfinite(chi2) else ""
+    warn = [mis] if mis else []
+    if analysis.get("unexplained"):
+        warn.append("the analysis found structure its model does not explain (see the analysis section)")
+    return dict(values=values, low=low, high=high, rel_std=rel, reduced_chi2=chi2, warnings=warn, misfit=bool(mis),
+                steps_used=len(analysis.get("steps_used") or []),
+                model=dict(effects=list(final.get("effects") or []), parameters={}),
+                source=("the analysis (bench analyze, analysis/analysis.json): Masing friction and the moving mass"
+                        + (f" with {', '.join(causes)}" if causes else "") + ", fitted with its named causes"))
 
 
 def _is_estimate(d) -> bool:
     return isinstance(d, dict) and isinstance(d.get("values"), dict)
 
 
-def identification_data(run_dir: Path, meta: dict) -> IdentificationData:
+def identification_data(run_dir: Path, meta: dict, analysis: dict | None = None) -> IdentificationData:
     from ..storage import RunStore
     final = meta.get("identification")
     truth = None
@@ -63,7 +123,8 @@ def identification_data(run_dir: Path, meta: dict) -> IdentificationData:
     return IdentificationData([h for h in RunStore(Path(run_dir)).identification_history() if _is_estimate(h)],
                               final if _is_estimate(final) else None, truth,
                               list(meta.get("identifiability_warnings") or []),
-                              None if final is None or _is_estimate(final) else final)
+                              None if final is None or _is_estimate(final) else final,
+                              analysis_estimate(analysis), str(meta.get("status", "")))
 
 
 def finite(v) -> float:

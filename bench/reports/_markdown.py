@@ -23,6 +23,7 @@ import numpy as np
 
 from sim.discrepancy.rounding import round_to_interval
 
+from ..numbers import number, percent
 from ..storage import shown
 from . import _figures as figures
 from ._analysis import analysis_data
@@ -34,17 +35,16 @@ log = logging.getLogger(__name__)
 
 
 def _num(v, scale: float = 1.0) -> str:
-    v = finite(v)
-    if math.isnan(v):
-        return "n/a"
-    v *= scale
-    return "unbounded" if abs(v) > 1e100 else f"{v:.4g}"
+    """The one number formatter (bench.numbers): never an overflowed or absurd number."""
+    return number(v, scale)
 
 
 def identification_md(ident: IdentificationData, plotted: bool) -> list[str]:
     md = ["## Identification of F_s, x_s, n and m", ""]
     est = ident.latest
-    if ident.unknown is not None:
+    if ident.failed:
+        md += [f"**The final fit failed**: {ident.failed}. No number of it is shown.", ""]
+    elif ident.unknown is not None:
         md += [f"run.json holds an identification entry this report cannot read: `{ident.unknown!r}`", ""]
     if est is None:
         md += ["No identification data: this run has no `identification.jsonl` and no `identification` in "
@@ -52,27 +52,30 @@ def identification_md(ident: IdentificationData, plotted: bool) -> list[str]:
                "`bench identify <run>` fits the stored steps offline.", ""]
     else:
         md += ["After every step the friction (Masing, F_s, x_s, n) and the moving mass m are refitted to the "
-               "harmonics of all steps so far (procedures.online_id, warm-started); at the end a full fit over "
-               "all steps is stored in run.json."
-               + (" identification.png shows the estimates." if plotted else ""), ""]
-        if est is ident.final:
-            src = f"final fit over {est.get('steps_used', '?')} steps (run.json)"
-        else:
-            src = (f"last online estimate, after step {est.get('step', '?')} ({est.get('steps_used', '?')} steps); "
-                   "there is no final fit (the run did not complete)")
-        md += [f"Estimate: {src}.", ""]
+               "harmonics of all steps so far (procedures.online_id, warm-started), with the modes the rig file "
+               "declares; at the end a full fit over all steps is stored in run.json; once `bench analyze` has "
+               "run, its fit (with the causes it named) is the run's parameter set. One set is shown: the latest "
+               "of these." + (" identification.png shows the online estimates." if plotted else ""), ""]
+        md += [f"Estimate: {ident.source_of(est)}.", ""]
+        effects = (est.get("model") or {}).get("effects") or []
+        if effects:
+            md += [f"Model: Masing friction and the moving mass with {', '.join(effects)}.", ""]
+        if est.get("misfit"):
+            md += ["**The model does not fit the data beyond what the noise explains** (reduced chi^2 "
+                   f"{_num(est.get('reduced_chi2'))}): the values below are biased by something the model lacks; "
+                   "their intervals are widened by sqrt(reduced chi^2) but may miss the truth.", ""]
         head = ["parameter", "unit", "estimate", "95 % low", "95 % high", "rel. std. error"]
         if ident.truth:
             head += ["truth (rig model)", "error", "truth in interval"]
         rows = []
         for p in ID_PARAMS:
             get = {k: (est.get(k) or {}).get(p.key) for k in ("values", "low", "high", "rel_std")}
-            row = [p.label, p.unit or "-", _num(get["values"], p.scale), _num(get["low"], p.scale),
-                   _num(get["high"], p.scale), _pct(finite(get["rel_std"])).lstrip("+")]
+            row = [p.label, p.unit or "-", number(get["values"], p.scale, ".6g"), number(get["low"], p.scale, ".6g"),
+                   number(get["high"], p.scale, ".6g"), _pct(finite(get["rel_std"])).lstrip("+")]
             if ident.truth:
                 t, v = ident.truth[p.key], finite(get["values"])
                 lo, hi = finite(get["low"]), finite(get["high"])
-                row += [_num(t, p.scale), _pct(v / t - 1.0),
+                row += [number(t, p.scale, ".6g"), _pct(v / t - 1.0),
                         "n/a" if math.isnan(lo) or math.isnan(hi) else ("yes" if lo <= t <= hi else "**no**")]
             rows.append(row)
         md += _table(head, rows) + [""]
@@ -147,7 +150,7 @@ def _pct_abs(x: float) -> str:
 
 
 def _pct(x: float) -> str:
-    return "n/a" if not math.isfinite(x) else f"{100 * x:+.2f} %"
+    return percent(x)
 
 
 def _table(header: list[str], rows: list[list]) -> list[str]:
@@ -273,14 +276,44 @@ def accounting_md(run: RunData) -> list[str]:
     if acc.orphan:
         why.append(f"{len(acc.orphan)} file{'s' * (len(acc.orphan) != 1)} in steps/ that no planned step owns "
                    f"({', '.join(shown(p.path.name) for p in acc.orphan[:5])})")
+    notes = []
+    stops = [e for e in run.events if e.get("event") == "interrupted"]
+    resumes = [e for e in run.events if e.get("event") == "resume"]
+    if stops or resumes:
+        k = max(len(stops), len(resumes))
+        how = ", ".join(sorted({str(e.get("reason") or "?") for e in stops}))
+        if len(resumes) > len(stops):
+            how += (", " if how else "") + "ended without recording why (killed, crashed or power lost)"
+        (notes if status == "completed" else why).append(
+            f"interrupted {k} time{'s' * (k != 1)} ({how}) and resumed {len(resumes)} "
+            f"time{'s' * (len(resumes) != 1)}: resumed steps restart from the step before, not from the rig's "
+            "uninterrupted history (decision 0013)")
+    ident = run.ident
+    if ident.failed:
+        why.append(f"the final identification failed ({ident.failed})")
+    est = ident.latest
+    if est is not None and est.get("misfit"):
+        why.append(f"the identified model does not fit the data beyond the noise (reduced chi^2 "
+                   f"{number(est.get('reduced_chi2'), fmt='.3g')}): its parameters are biased"
+                   + ("" if run.analysis is not None else "; `bench analyze` names what is missing"))
+    below = run.below_resolution
+    if below and run.probe:
+        notes.append(f"{len(below)} step{'s' * (len(below) != 1)} move{'s' * (len(below) == 1)} less than the "
+                     f"probe resolves ({1e9 * run.probe.rms_m:.3g} nm rms, {run.probe.source}): their displacement "
+                     "is noise; their force and acceleration are still good (accelerance, mass)")
     if why:
-        md += [f"Overall: **needs attention**: {'; '.join(why)}.", ""]
+        md += [f"Overall: **needs attention**: {'; '.join(why)}."
+               + (f" Also: {'; '.join(notes)}." if notes else ""), ""]
     else:
         n = len(acc.skipped)
         but = (f" but {n} skipped at run time as the plan allows (infeasible = \"skip\": force unreachable "
                "within the drive limit)" if n else "")
-        md += [f"Overall: **went well**: every planned step measured, intact and usable{but}, the force within "
-               "tolerance at every step, no limit trip, error or interruption.", ""]
+        if notes:
+            md += [f"Overall: **went well, with notes**: every planned step measured, intact and usable{but}, the "
+                   f"force within tolerance at every step, no limit trip or error; but {'; '.join(notes)}.", ""]
+        else:
+            md += [f"Overall: **went well**: every planned step measured, intact and usable{but}, the force within "
+                   "tolerance at every step, no limit trip, error or interruption, the identified model fits.", ""]
     return md
 
 
@@ -432,7 +465,9 @@ def _results_md(run: RunData, out: Path, files: list[tuple[str, str]]) -> list[s
     if run.attention_error:
         md.append(f"The step quality could not be computed: {run.attention_error}")
     elif run.attention:
-        md += _table(["step", "status", "why"], [[k, status, why] for k, status, why in run.attention])
+        md += _table(["step", "status", "why"],
+                     [[k, status, why + (f"; {run.probe.sentence(k)}" if run.probe and k in run.below_resolution
+                                         else "")] for k, status, why in run.attention])
     else:
         md.append("Every step is usable: no artefact found and no step flagged.")
     if legacy:

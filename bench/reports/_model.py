@@ -87,7 +87,14 @@ def model_comparison(meta: dict, results: list[dict], flagged: set[str] | None =
     engine_notes = [f"omega_s = sqrt(F_s/(x_s m)) = {ws:.4g} rad/s ({ws / (2 * math.pi):.4g} Hz); "
                     f"compliance = G x_s/F_s with G from sim.shooting.frf_shooting (n = {model.n:g})"]
     effects = _model_effects(model)
-    if effects:
+    rig_ratio = _rig_model_ratio(rig["model"], model, results)
+    if rig_ratio:
+        engine_notes.append("differences: from the model of the rig with the modes and effects its file declares ("
+                            + ", ".join(rig_ratio["effects"]) + ", at the rig file's values; decision 0042): "
+                            "the force that model needs to make the measured motion against the force measured, "
+                            "so model compliance_pp = measured compliance_pp x |P1 measured| / |P1 model|; the lines "
+                            "are the one-mode engine's and leave out: " + ", ".join(effects))
+    elif effects:
         engine_notes.append("the rig model has effects the engine leaves out, so differences are expected: "
                             + ", ".join(effects))
 
@@ -124,14 +131,38 @@ def model_comparison(meta: dict, results: list[dict], flagged: set[str] | None =
         diff = []
         for s in steps:
             i = int(np.argmin(np.abs(f_model - s["freq_Hz"])))
-            at_steps[s["key"]] = float(C[i])
-            diff.append(s["compliance_pp_m_per_N"] / C[i] - 1.0)
+            c_model = float(C[i])
+            if rig_ratio and s["key"] in rig_ratio["ratio"]:
+                c_model = s["compliance_pp_m_per_N"] / rig_ratio["ratio"][s["key"]]
+            at_steps[s["key"]] = c_model
+            diff.append(s["compliance_pp_m_per_N"] / c_model - 1.0)
         bad = np.array([s["key"] in flagged if flagged is not None else residual_ratio(s) > UNSETTLED_RESIDUAL
                         for s in steps])
         diff = np.array(diff)
         levels.append(LevelComparison(level, gamma0, len(steps), int(bad.sum()), _median(diff), _signed_max(diff),
                                       _signed_max(diff[~bad]), notes))
     return ModelComparison(model.__dict__.copy(), ws, curves, at_steps, levels, engine_notes)
+
+
+def _rig_model_ratio(model_dict: dict, model, results: list[dict]) -> dict | None:
+    """For a rig file that declares modes or effects (:func:`sim.discrepancy.rigfit.rig_effects`):
+    per step, |P1 measured| / |P1| of the force the rig's model (true parameters, declared
+    effects at the file's values) needs to make the measured motion; None otherwise."""
+    from sim.discrepancy.analysis import data_from_steps
+    from sim.discrepancy.models import Model
+    from sim.discrepancy.rigfit import as_steps, rig_effects
+    declared = rig_effects(model_dict)
+    usable = [r for r in results if all(k in r for k in ("force", "accel", "disp"))]
+    if not declared or not usable:
+        return None
+    d = data_from_steps(as_steps(usable), 9)
+    m = Model((), d.X.shape[1])
+    theta = np.array([math.log(model.F_s_N), math.log(model.x_s_m), model.n, math.log(model.mass_kg)])
+    for e, init in declared.items():
+        m, theta = m.extend(theta, e, init)
+    P, _ = m.predict(theta, d)
+    ratio = np.abs(d.P[:, 0]) / np.maximum(np.abs(P[:, 0]), 1e-300)
+    return dict(effects=list(declared), ratio={r["key"]: float(x) for r, x in zip(usable, ratio)})
 
 
 def _median(x: np.ndarray) -> float:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -22,9 +23,46 @@ from ._steps import Series, legacy_pp, series_of
 
 log = logging.getLogger(__name__)
 
-ROUTINE_EVENTS = {"start", "end", "sensor", "output_off"}
+ROUTINE_EVENTS = {"start", "end", "sensor", "output_off", "probe_noise"}
 ANALYSIS_JSON = Path("analysis") / "analysis.json"
 ANALYSIS_HTML = Path("analysis") / "analysis.html"
+
+
+@dataclass(frozen=True)
+class ProbeResolution:
+    """The displacement probe's resolution (its rms noise at rest) and where it comes from."""
+
+    rms_m: float
+    source: str
+    below: dict[str, float]          # step key -> displacement fundamental amplitude (m), below rms_m
+
+    def sentence(self, key: str) -> str:
+        return (f"below the probe's resolution: the displacement fundamental {1e9 * self.below[key]:.3g} nm is less "
+                f"than the probe's noise {1e9 * self.rms_m:.3g} nm rms ({self.source}); the step still measures "
+                f"force and acceleration (accelerance, mass), its displacement carries little weight in the fit")
+
+
+def probe_resolution(meta: dict, results: list[dict], events: list[dict]) -> ProbeResolution | None:
+    """The probe's rms noise at rest as the run measured it (event ``probe_noise``), else the
+    simulated rig model's ``disp_noise_m``; None when neither is known."""
+    rms, source = math.nan, ""
+    for e in events:
+        if e.get("event") == "probe_noise":
+            rms, source = float(e.get("rms_m") or math.nan), "measured at rest before the run"
+    model = (meta.get("rig") or {}).get("model") or {}
+    if not (math.isfinite(rms) and rms > 0) and (meta.get("rig") or {}).get("simulated"):
+        rms, source = float(model.get("disp_noise_m", 2e-9)), "the simulated rig model's disp_noise_m"
+    if not (math.isfinite(rms) and rms > 0):
+        return None
+    below = {}
+    for r in results:
+        try:
+            a1 = float(r["disp"]["amplitude"][0])
+        except (KeyError, IndexError, TypeError, ValueError):
+            continue
+        if a1 < rms:
+            below[r["key"]] = a1
+    return ProbeResolution(rms, source, below)
 
 
 @dataclass
@@ -46,6 +84,12 @@ class RunData:
     accounting: Accounting | None = None      # the steps counted against the plan (None: no plan stored)
     attention: list[tuple[str, str, str]] = field(default_factory=list)   # (step, rejected|flagged, why)
     attention_error: str | None = None        # why the step quality could not be computed, if so
+    probe: ProbeResolution | None = None      # the probe's resolution and the steps that move less
+
+    @property
+    def below_resolution(self) -> dict[str, float]:
+        """Step key -> displacement fundamental (m) of the steps that move less than the probe resolves."""
+        return self.probe.below if self.probe else {}
 
     @property
     def plan(self) -> dict:
@@ -99,9 +143,10 @@ def load_run(run_dir: Path) -> RunData:
             log.warning("model comparison failed: %s", e)
             cmp_error = f"{type(e).__name__}: {e}"
     analysis, analysis_error = _analysis(store.path)
-    return RunData(store.path, meta, results, events, list(levels_N), series, identification_data(store.path, meta),
+    return RunData(store.path, meta, results, events, list(levels_N), series,
+                   identification_data(store.path, meta, analysis),
                    cmp, cmp_error, _modes(store.path, meta, results, cmp), analysis, analysis_error,
-                   accounting, attention, attention_error)
+                   accounting, attention, attention_error, probe_resolution(meta, results, events))
 
 
 def _modes(path: Path, meta: dict, results: list[dict], cmp: ModelComparison | None) -> RunModes | None:

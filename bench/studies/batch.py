@@ -139,24 +139,28 @@ def identify_source(source: Path, out_dir: Path | None = None, rig: Path | None 
     from bench.sources import load_source
     from bench.storage import write_json
     from procedures.online_id import MAX_HARMONICS
-    from sim.identify import identify_results
+    from sim.discrepancy.rigfit import identify_steps
 
     src = load_source(source)
     if src.kind == "run":
         r = src.metadata["rig"]
         guess = {k: r[f"expected_{k}"] for k in ("F_s_N", "x_s_m", "n", "mass_kg")}
+        rig_model = r.get("model") or {}
     else:
         rr = load_rig(rig or DEFAULTS / "sim_rig.toml")
         guess = dict(F_s_N=rr.expected_F_s_N, x_s_m=rr.expected_x_s_m, n=rr.expected_n,
                      mass_kg=rr.expected_mass_kg)
+        rig_model = rr.model or {}
     if not src.steps:
         raise ConfigurationError(f"{source}: no steps with force, acceleration and displacement to identify from")
-    est = identify_results([s.harmonics for s in src.steps], guess, MAX_HARMONICS).estimate
+    est = identify_steps(src.steps, guess, rig_model, harmonics=MAX_HARMONICS)
     out = dict(schema="guideway-bench/identification/1", source=str(source), kind=src.kind,
-               parameters={k: dict(value=est.values[k], low=est.low[k], high=est.high[k]) for k in est.values},
-               reduced_chi2=est.cost, steps_used=[s.key for s in src.steps],
+               parameters={k: dict(value=est["values"][k], low=est["low"][k], high=est["high"][k])
+                           for k in est["values"]},
+               reduced_chi2=est["reduced_chi2"], steps_used=[s.key for s in src.steps],
                steps_rejected=[dict(step=r.step, reason=r.reason) for r in src.rejected],
-               warnings=list(est.warnings))
+               warnings=list(est["warnings"]), misfit=bool(est.get("misfit")), estimate_source=est.get("source"),
+               model=est.get("model"))
     if out_dir is not None:
         write_json(Path(out_dir) / "identification.json", out)
     return out

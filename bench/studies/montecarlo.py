@@ -159,7 +159,7 @@ def simulate_plan(plan, rig, model: dict) -> list[dict]:
 
 def identification_sample(inputs: dict, seed: int) -> list[dict]:
     """One Monte-Carlo sample (a task): rows per parameter."""
-    from sim.identify import identify_results
+    from sim.discrepancy.rigfit import identify_steps
 
     plan, rig = _configs(inputs["plan"], inputs["rig"])
     rng = np.random.default_rng(seed)
@@ -172,14 +172,17 @@ def identification_sample(inputs: dict, seed: int) -> list[dict]:
         model[name] = k * model.get(name, default)
     model.update(truth, seed=int(rng.integers(2 ** 31)))
     results = simulate_plan(plan, rig, model)
-    est = identify_results(results, expected).estimate
+    # the model of the rig: the effects its file declares (decision 0042)
+    est = identify_steps(results, expected, model)
     rows = []
     for p in PARAMS:
-        v, t = est.values[p], truth[p]
+        v, t = est["values"][p], truth[p]
+        lo, hi = est["low"][p], est["high"][p]
         rows.append(dict(sample=int(inputs["sample"]), plan=plan.name, parameter=p, truth=t, guess=expected[p],
-                         estimate=float(v), low=float(est.low[p]), high=float(est.high[p]), rel_error=float(v / t - 1.0),
-                         covered=bool(est.low[p] <= t <= est.high[p]), rel_std=float(est.rel_std[p]),
-                         steps=len(results), reduced_chi2=float(est.cost), noise_seed=model["seed"]))
+                         estimate=float(v), low=float(lo), high=float(hi), rel_error=float(v / t - 1.0),
+                         covered=bool(lo <= t <= hi), rel_std=float(est["rel_std"][p]),
+                         steps=len(results), reduced_chi2=float(est["reduced_chi2"]), noise_seed=model["seed"],
+                         misfit=bool(est.get("misfit"))))
     return rows
 
 

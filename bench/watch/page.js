@@ -15,7 +15,11 @@ const PARAMS = [
 const BAD_EVENTS = new Set(["abort", "error", "instrument_error", "interrupted", "lock_lost", "not_locked"]);
 
 function esc(s) { return String(s ?? "").replace(/[&<>"']/g, (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;"}[c])); }
-function num(v, digits = 3) { return (v === null || v === undefined || !isFinite(v)) ? "–" : Number(v).toPrecision(digits); }
+function num(v, digits = 3) {   // never an overflowed or absurd number (bench/numbers.py)
+  if (v === null || v === undefined || !isFinite(v)) return "–";
+  const a = Math.abs(Number(v));
+  return (a >= 1e30 || (a !== 0 && a <= 1e-30)) ? "absurd" : Number(v).toPrecision(digits);
+}
 function dur(s) {
   if (s === null || s === undefined || !isFinite(s)) return "–";
   s = Math.round(s);
@@ -80,8 +84,9 @@ function renderCurrent(s) {
 function renderIdent(s) {
   const id = s.identification || {history: []};
   const est = id.final && id.final.values ? id.final : id.history[id.history.length - 1];
-  $("ident-note").textContent = id.final && id.final.values ? "(final fit over all steps)"
-    : est ? `(after ${est.steps_done} steps)` : "(no estimate yet)";
+  $("ident-note").textContent = id.final && id.final.values
+    ? `(${id.final.source || "final fit"} over all steps${id.final.misfit ? "; the model does not fit" : ""})`
+    : est ? `(online, after ${est.steps_done} steps${est.misfit ? "; the model does not fit" : ""})` : "(no estimate yet)";
   let html = "<tr><th>parameter</th><th class='num'>estimate</th><th class='num'>95 % interval</th><th class='num'>start guess</th></tr>";
   for (const p of PARAMS) {
     const v = est ? est.values[p.key] * p.scale : null;

@@ -225,7 +225,7 @@ class RunReader:
             "next_step": self._next(plan, results) if status == RunStatus.RUNNING else None,
             "compliance": self._compliance(plan, results),
             "modes": self._modes(plan, results, meta),
-            "identification": self._identification(ident, results, meta),
+            "identification": self._identification(ident, results, meta, self._analysis()),
             "events": [e for e in events if e.get("event") not in QUIET_EVENTS],
             "quiet_events": sum(1 for e in events if e.get("event") in QUIET_EVENTS),
             "warnings": self._warnings(meta, results),
@@ -279,6 +279,17 @@ class RunReader:
                             converged=[bool(r.get("force_converged", True)) for r in rs]))
         return out
 
+    def _analysis(self) -> dict | None:
+        """analysis/analysis.json's parameters as an estimate, once `bench analyze` has run."""
+        path = self.path / "analysis" / "analysis.json"
+        if not path.is_file():
+            return None
+        from ..reports import analysis_estimate  # (matplotlib: only when there is one)
+        try:
+            return analysis_estimate(json.loads(path.read_text()))
+        except (OSError, ValueError):
+            return None
+
     @staticmethod
     def _modes(plan: Plan | None, results: list[dict], meta: dict) -> list[dict]:
         """Each mode per level as found so far (sim.modal, decision 0043; no model prediction:
@@ -309,16 +320,29 @@ class RunReader:
                  for k, v in ((k, getattr(e, k)) for k in keys)} for e in modes]
 
     @staticmethod
-    def _identification(ident: list[dict], results: list[dict], meta: dict) -> dict:
+    def _identification(ident: list[dict], results: list[dict], meta: dict, analysis: dict | None = None) -> dict:
+        """The online history and the final fit (the analysis' parameters once `bench analyze`
+        has run: one parameter set per run, with its source); an estimate whose numbers
+        overflowed or are absurd is shown as a failed fit with its reason, never as numbers
+        (decision 0042)."""
+        from ..numbers import insane, sane
         order = {r.get("key"): i + 1 for i, r in enumerate(sorted(results, key=lambda r: r.get("key", "")))}
+
+        def ok(h: dict) -> bool:
+            return all(sane(v) for v in (h.get("values") or {}).values())
         history = [dict(step=h.get("step"), steps_done=order.get(h.get("step"), h.get("steps_used")),
                         values=h.get("values"), low=h.get("low"), high=h.get("high"),
-                        reduced_chi2=h.get("reduced_chi2"))
-                   for h in ident if isinstance(h.get("values"), dict)]
+                        reduced_chi2=h.get("reduced_chi2"), misfit=bool(h.get("misfit")))
+                   for h in ident if isinstance(h.get("values"), dict) and ok(h)]
         latest_warnings = ident[-1].get("warnings", []) if ident else []
         final = meta.get("identification")
-        if not (isinstance(final, dict) and isinstance(final.get("values"), dict)):
+        if isinstance(final, dict) and isinstance(final.get("values"), dict) and not ok(final):
+            final = {"error": f"the final fit failed: {', '.join(insane(final['values']))} came out not finite or "
+                              "absurd (an overflow in the fit)"}
+        elif not (isinstance(final, dict) and isinstance(final.get("values"), dict)):
             final = None if not isinstance(final, dict) else {"error": final.get("error", "unusable result")}
+        if analysis is not None and ok(analysis):
+            final = analysis
         expected = {k: meta.get("rig", {}).get(f"expected_{k}") for k in ("F_s_N", "x_s_m", "n", "mass_kg")}
         return dict(history=history, latest_warnings=latest_warnings, final=final, expected=expected)
 

@@ -252,8 +252,15 @@ def bounds(model: Model) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
+LOG_REACH = 50.0        # log F_s, log x_s, log m stay within e^50 of the start (decision 0042)
+
+
 def fit(model: Model, theta0: np.ndarray, d: Data, W: Weights, max_nfev: int = 100) -> Fit:
     lo, hi = bounds(model)
+    # a trial step of a diverging fit must not overflow exp() (OverflowError: math range
+    # error ended a run's final fit, issue 25); e^50 is far beyond any physical answer
+    for i in (0, 1, 3):
+        lo[i], hi[i] = max(lo[i], theta0[i] - LOG_REACH), min(hi[i], theta0[i] + LOG_REACH)
     th0 = np.clip(theta0, lo + 1e-9, hi - 1e-9)
     res = least_squares(whitened, th0, args=(model, d, W), bounds=(lo, hi), x_scale="jac",
                         max_nfev=max_nfev, method="trf")
