@@ -46,7 +46,7 @@ LIMIT_KEYS = ("drive_V", "force_N", "disp_m", "accel_m_s2")
 KEYS = {
     "plan": ("name", "levels_N", "frequencies", "control", "limits", "infeasible", "adaptive_per_sweep",
              "resonance", "procedure", "backbone", "response"),
-    "plan.resonance": ("refine", "tolerance", "max_steps", "modes"),
+    "plan.resonance": ("refine", "tolerance", "max_steps", "modes", "dwell_cycles"),
     "plan.response": ("quantity", "levels"),
     "plan.backbone": ("start_Hz", "mode", "response", "phase_deg", "gain", "slope_deg_per_Hz", "probe_step",
                       "block_periods", "phase_band_deg", "amplitude_band", "settle_periods", "max_step_Hz",
@@ -335,8 +335,11 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
         refine_tolerance=res.number("tolerance", 0.002, 0, 0.1, lo_open=True),
         refine_steps=res.number("max_steps", 10, 1, 999, integer=True),
         refine_modes=tuple(dict.fromkeys(modes)),
+        dwell_cycles=res.number("dwell_cycles", 0, 0, 1e6, integer=True),
         procedure=procedure, backbone=backbone, response=quantity)
     res.done()
+    if plan.dwell_cycles and not plan.refine:
+        raise ConfigError(f"{res.where('dwell_cycles')}: needs refine = true (the dwell is at the refined resonance)")
     if backbone is not None and plan.adaptive_per_sweep:
         raise ConfigError(f"{p.where('adaptive_per_sweep')}: not used with procedure = \"phase_resonance\"")
     if backbone is not None and plan.refine:
@@ -484,7 +487,8 @@ def plan_toml(p: dict) -> dict:
     if p.get("refine"):
         out["resonance"] = {"refine": True, "tolerance": p.get("refine_tolerance", 0.002),
                             "max_steps": p.get("refine_steps", 10),
-                            "modes": list(p.get("refine_modes") or ("feed", "pitch"))}
+                            "modes": list(p.get("refine_modes") or ("feed", "pitch")),
+                            "dwell_cycles": p.get("dwell_cycles", 0)}
     if p.get("procedure", "stepped_sine") == "response_controlled":
         out["procedure"] = "response_controlled"
         out["response"] = {"quantity": p["response"], "levels": out.pop("levels_N")}
