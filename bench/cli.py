@@ -787,6 +787,8 @@ def _one_line(e: BaseException) -> str:
     named = f"{type(e).__name__}: {first}" if first else type(e).__name__
     if _internal(e):
         return f"internal error ({named})"
+    if isinstance(e, ConfigurationError) and len(text) > 1:    # a file's problems, one line each
+        return f"{len(text)} problems:\n" + "\n".join(f"  {line}" for line in text)
     if _exit_code(e) in (ExitCode.USAGE, ExitCode.LIMIT) and first:
         return first
     return named
