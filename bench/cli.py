@@ -102,7 +102,9 @@ def cmd_dry_run(args) -> int:
                 if plan.adaptive_per_sweep and n != len(steps) else f"{n} measured")
         if refined:
             runs += (f" + at most {refined} refinement steps ([plan.resonance]: {plan.refine_steps} per mode and level, "
-                     f"modes {', '.join(plan.refine_modes)}, tolerance {100 * plan.refine_tolerance:g} %)")
+                     f"modes {', '.join(plan.refine_modes)}, tolerance {100 * plan.refine_tolerance:g} %"
+                     + (f"; with a dwell of {plan.dwell_cycles} cycles at each mode's resonance per level"
+                        if plan.dwell_cycles else "") + ")")
         print(f"plan '{plan.name}': {len(plan.levels_N)} levels x {len(plan.freqs_Hz)} frequencies "
               f"({plan.direction}) = {len(steps)} steps, {runs}; rig '{rig.name}'{' (simulated)' if rig.simulated else ''}")
         print(f"expected rig time: about {_duration(seconds)}"
@@ -785,6 +787,8 @@ def _one_line(e: BaseException) -> str:
     named = f"{type(e).__name__}: {first}" if first else type(e).__name__
     if _internal(e):
         return f"internal error ({named})"
+    if isinstance(e, ConfigurationError) and len(text) > 1:    # a file's problems, one line each
+        return f"{len(text)} problems:\n" + "\n".join(f"  {line}" for line in text)
     if _exit_code(e) in (ExitCode.USAGE, ExitCode.LIMIT) and first:
         return first
     return named

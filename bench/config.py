@@ -46,7 +46,7 @@ LIMIT_KEYS = ("drive_V", "force_N", "disp_m", "accel_m_s2")
 KEYS = {
     "plan": ("name", "levels_N", "frequencies", "control", "limits", "infeasible", "adaptive_per_sweep",
              "resonance", "procedure", "backbone", "response"),
-    "plan.resonance": ("refine", "tolerance", "max_steps", "modes"),
+    "plan.resonance": ("refine", "tolerance", "max_steps", "modes", "dwell_cycles"),
     "plan.response": ("quantity", "levels"),
     "plan.backbone": ("start_Hz", "mode", "response", "phase_deg", "gain", "slope_deg_per_Hz", "probe_step",
                       "block_periods", "phase_band_deg", "amplitude_band", "settle_periods", "max_step_Hz",
@@ -70,16 +70,39 @@ ConfigError = ConfigurationError     # a configuration value is missing, unknown
 class _Section:
     """Typed access to one TOML table that remembers where it came from."""
 
-    def __init__(self, source: str, path: str, data: dict, keys=None):
+    def __init__(self, source: str, path: str, data: dict, keys=None, errors: list[str] | None = None):
+        # errors: the file's problems so far (collected: one ConfigError for them all at the
+        # end, see _collecting); None: each problem raises at once
+        self.source, self.path, self.used, self.errors = source, path, set(), errors
+        self.named: set[str] = set()
         if not isinstance(data, dict):
-            raise ConfigError(f"{source}: [{path}] must be a table")
-        self.source, self.path, self.data, self.used = source, path, data, set()
+            self.problem(f"{source}: [{path}] must be a table")
+            data = {}
+        self.data = data
         if keys is not None:
             self.unknown(keys)
+
+    def problem(self, message: str) -> None:
+        """A problem of this file: collected, or raised when nothing collects."""
+        if self.errors is None:
+            raise ConfigError(message)
+        self.errors.append(message)
+
+    def _or(self, get, fallback, suffix=""):
+        """``get()``, or, if it finds a problem, the problem collected and ``fallback`` (a
+        value of the right type the rest of the file's checks can go on with)."""
+        try:
+            return get()
+        except ConfigError as e:
+            if self.errors is None:
+                raise ConfigError(f"{e}{suffix}") from None
+            self.errors.append(f"{e}{suffix}")
+            return fallback
 
     def unknown(self, keys) -> None:
         """Name every key outside ``keys``, with the close valid one when there is one."""
         problems = []
+        self.named = {k for k in self.data if k not in keys}      # named here, not again by done()
         for key in [k for k in self.data if k not in keys]:
             table = isinstance(self.data[key], dict)
             near = difflib.get_close_matches(key, list(keys), n=1, cutoff=0.6)
@@ -90,8 +113,8 @@ class _Section:
             else:
                 hint = f"did you mean {near[0]}?" if near else f"allowed: {sorted(keys)}"
                 problems.append(f"{'[' + self.path + '] ' if self.path else ''}{key}: unknown key; {hint}")
-        if problems:
-            raise ConfigError(f"{self.source}: " + "; ".join(problems))
+        for problem in problems:
+            self.problem(f"{self.source}: {problem}")
 
     def where(self, key: str) -> str:
         return f"{self.source}: [{self.path}] {key}"
@@ -104,7 +127,7 @@ class _Section:
             return default
         return self.data[key]
 
-    def number(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, integer=False, note=""):
+    def _number(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, integer=False, note=""):
         v = self._get(key, default)
         kind = "an integer" if integer else "a number"
         if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not float(v).is_integer()):
@@ -115,46 +138,92 @@ class _Section:
             raise ConfigError(f"{self.where(key)}: must be {lo_s} and <= {hi:g}{note}, got {v!r}")
         return int(v) if integer else float(v)
 
-    def numbers(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, note="", most=None):
+    def _numbers(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, note="", most=None):
         v = self._get(key, default)
         if not isinstance(v, list) or not v:
             raise ConfigError(f"{self.where(key)}: must be a non-empty list of numbers, got {_short(v)}")
         if most is not None and len(v) > most:
             raise ConfigError(f"{self.where(key)}: {len(v)} values; at most {most}")
-        sub = _Section(self.source, self.path, {f"{key}[{i}]": x for i, x in enumerate(v)})
+        sub = _Section(self.source, self.path, {f"{key}[{i}]": x for i, x in enumerate(v)})   # raises at once
         return [sub.number(f"{key}[{i}]", lo=lo, hi=hi, lo_open=lo_open, note=note) for i in range(len(v))]
 
-    def choice(self, key, default, allowed):
+    def _choice(self, key, default, allowed):
         v = self._get(key, default)
         if v not in allowed:
             raise ConfigError(f"{self.where(key)}: must be one of {list(allowed)}, got {v!r}")
         return v
 
-    def text(self, key, default=""):
+    def _text(self, key, default=""):
         v = self._get(key, default)
         if not isinstance(v, str):
             raise ConfigError(f"{self.where(key)}: must be a string, got {v!r}")
         return v
 
-    def flag(self, key, default=False):
+    def _flag(self, key, default=False):
         v = self._get(key, default)
         if not isinstance(v, bool):
             raise ConfigError(f"{self.where(key)}: must be true or false, got {v!r}")
         return v
 
+    # the accessors: a bad value is a problem of the file (collected), the rest goes on
+    def number(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, integer=False, note="",
+               suffix=""):
+        ok_default = isinstance(default, (int, float)) and not isinstance(default, bool)
+        fallback = default if ok_default else _inside(lo, hi, lo_open)
+        return self._or(lambda: self._number(key, default, lo, hi, lo_open=lo_open, integer=integer, note=note),
+                        int(fallback) if integer else float(fallback), suffix)
+
+    def numbers(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, note="", most=None):
+        return self._or(lambda: self._numbers(key, default, lo, hi, lo_open=lo_open, note=note, most=most),
+                        [_inside(lo, hi, lo_open)])
+
+    def choice(self, key, default, allowed):
+        return self._or(lambda: self._choice(key, default, allowed), default if default in allowed else allowed[0])
+
+    def text(self, key, default=""):
+        return self._or(lambda: self._text(key, default), default if isinstance(default, str) else "")
+
+    def flag(self, key, default=False):
+        return self._or(lambda: self._flag(key, default), default if isinstance(default, bool) else False)
+
     def table(self, key) -> _Section:
         self.used.add(key)
         path = f"{self.path}.{key}" if self.path else key
-        return _Section(self.source, path, self.data.get(key, {}), KEYS.get(path))
+        return _Section(self.source, path, self.data.get(key, {}), KEYS.get(path), self.errors)
 
     def done(self) -> None:
-        unknown = sorted(set(self.data) - self.used)
+        unknown = sorted(set(self.data) - self.used - self.named)
         if unknown:
-            raise ConfigError(f"{self.source}: [{self.path}] unknown key(s) {unknown}; "
-                              f"allowed: {sorted(self.used)}")
+            self.problem(f"{self.source}: [{self.path}] unknown key(s) {unknown}; allowed: {sorted(self.used)}")
 
 
 _REQUIRED = object()
+
+
+def _inside(lo: float, hi: float, lo_open: bool) -> float:
+    """A value within the bounds, for the checks after a bad one to go on with."""
+    if math.isfinite(lo) and not lo_open:
+        return float(lo)
+    if math.isfinite(lo) and math.isfinite(hi):
+        return (lo + hi) / 2
+    return float(hi) if math.isfinite(hi) else 1.0
+
+
+def _collecting(parse, data: dict, source: str):
+    """``parse(data, source, errors)`` with the file's independent problems (unknown keys,
+    bad values) collected: one ConfigError naming each, one line per problem.  A check
+    that comes after a collected problem and fails (a rule across keys, which may have
+    seen a stand-in for a bad value) is left for the next run, once those are fixed."""
+    errors: list[str] = []
+    try:
+        out = parse(data, source, errors)
+    except Exception:
+        if not errors:
+            raise
+        out = None
+    if errors:
+        raise ConfigError("\n".join(dict.fromkeys(errors)))
+    return out
 
 
 def _short(v) -> str:
@@ -260,7 +329,12 @@ def load_plan(path: Path) -> Plan:
 
 
 def parse_plan(data: dict, source: str = "plan") -> Plan:
-    top = _Section(source, "", data, ("plan",))
+    """The plan in ``data``; every independent problem of it named in one ConfigError."""
+    return _collecting(_parse_plan, data, source)
+
+
+def _parse_plan(data: dict, source: str, errors: list[str]) -> Plan:
+    top = _Section(source, "", data, ("plan",), errors)
     p = top.table("plan")
     top.done()
     procedure = p.choice("procedure", "stepped_sine", ("stepped_sine", "phase_resonance", "response_controlled"))
@@ -313,7 +387,8 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
     res = p.table("resonance")
     modes = res._get("modes", ["feed", "pitch"])
     if not isinstance(modes, list) or not modes or any(m not in ("feed", "pitch") for m in modes):
-        raise ConfigError(f"{res.where('modes')}: must be a non-empty list of \"feed\", \"pitch\", got {modes!r}")
+        res.problem(f"{res.where('modes')}: must be a non-empty list of \"feed\", \"pitch\", got {modes!r}")
+        modes = ["feed", "pitch"]
     plan = Plan(
         name=p.text("name", "stepped sine"), levels_N=tuple(levels), freqs_Hz=tuple(freqs),
         direction=direction,
@@ -335,8 +410,11 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
         refine_tolerance=res.number("tolerance", 0.002, 0, 0.1, lo_open=True),
         refine_steps=res.number("max_steps", 10, 1, 999, integer=True),
         refine_modes=tuple(dict.fromkeys(modes)),
+        dwell_cycles=res.number("dwell_cycles", 0, 0, 1e6, integer=True),
         procedure=procedure, backbone=backbone, response=quantity)
     res.done()
+    if plan.dwell_cycles and not plan.refine:
+        raise ConfigError(f"{res.where('dwell_cycles')}: needs refine = true (the dwell is at the refined resonance)")
     if backbone is not None and plan.adaptive_per_sweep:
         raise ConfigError(f"{p.where('adaptive_per_sweep')}: not used with procedure = \"phase_resonance\"")
     if backbone is not None and plan.refine:
@@ -416,10 +494,9 @@ def _check_model(sec: _Section) -> None:
             sec.choice(key, None, MODEL_CHOICES[key])
             continue
         unit, lo, hi, lo_open, integer = MODEL_SCHEMA[key]
-        try:
-            sec.number(key, None, lo, hi, lo_open=lo_open, integer=integer)
-        except ConfigError as e:
-            raise ConfigError(f"{e} (unit: {unit})" if unit else str(e)) from None
+        sec.number(key, None, lo, hi, lo_open=lo_open, integer=integer, suffix=f" (unit: {unit})" if unit else "")
+    if sec.errors:
+        return                   # the model's own rules once its values are right
     try:
         RigModel.from_dict(sec.data)
     except (TypeError, ValueError) as e:
@@ -431,7 +508,12 @@ def load_rig(path: Path) -> Rig:
 
 
 def parse_rig(data: dict, source: str = "rig") -> Rig:
-    top = _Section(source, "", data, ("rig",))
+    """The rig in ``data``; every independent problem of it named in one ConfigError."""
+    return _collecting(_parse_rig, data, source)
+
+
+def _parse_rig(data: dict, source: str, errors: list[str]) -> Rig:
+    top = _Section(source, "", data, ("rig",), errors)
     r = top.table("rig")
     top.done()
     simulated = r.flag("simulated", False)
@@ -443,7 +525,7 @@ def parse_rig(data: dict, source: str = "rig") -> Rig:
             try:
                 check(urls[key])
             except ValueError as e:
-                raise ConfigError(f"{ins.where(key)}: {e}") from None
+                ins.problem(f"{ins.where(key)}: {e}")
     ins.done()
     cal = r.table("calibration")
     exp = r.table("expected")
@@ -484,7 +566,8 @@ def plan_toml(p: dict) -> dict:
     if p.get("refine"):
         out["resonance"] = {"refine": True, "tolerance": p.get("refine_tolerance", 0.002),
                             "max_steps": p.get("refine_steps", 10),
-                            "modes": list(p.get("refine_modes") or ("feed", "pitch"))}
+                            "modes": list(p.get("refine_modes") or ("feed", "pitch")),
+                            "dwell_cycles": p.get("dwell_cycles", 0)}
     if p.get("procedure", "stepped_sine") == "response_controlled":
         out["procedure"] = "response_controlled"
         out["response"] = {"quantity": p["response"], "levels": out.pop("levels_N")}

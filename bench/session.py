@@ -166,7 +166,8 @@ def planned_steps(plan: Plan) -> tuple[int, int, float]:
     """(steps of the grid as they will run, refinement steps at most, expected rig time in s
     with the refinement budget used up): an adaptive plan counts its chosen number per
     sweep (at the sweep's median frequency each), a refined plan adds at most
-    ``refine_steps`` per mode and level, each from rest, at the grid's geometric middle."""
+    ``refine_steps`` per mode and level, each from rest, at the grid's geometric middle, and
+    with ``dwell_cycles`` one dwell step per mode and level (counted with the refinement steps)."""
     from .storage import _sweeps
     steps = plan.schedule()
     by_key = {s.key: s for s in steps}
@@ -181,6 +182,11 @@ def planned_steps(plan: Plan) -> tuple[int, int, float]:
     if refined:
         fm = math.sqrt(min(plan.freqs_Hz) * max(plan.freqs_Hz))
         t += refined * step_seconds(plan, fm, from_rest=True)
+        if plan.dwell_cycles:
+            dwells = len(plan.refine_modes) * len(plan.levels_N)
+            refined += dwells
+            t += dwells * step_seconds(replace(plan, measure_cycles=max(plan.measure_cycles, plan.dwell_cycles)), fm,
+                                       from_rest=True)
     return n, refined, t
 
 

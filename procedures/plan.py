@@ -81,6 +81,7 @@ class Plan:
     refine_tolerance: float = 0.002
     refine_steps: int = 10            # per mode and level
     refine_modes: tuple[str, ...] = ("feed", "pitch")
+    dwell_cycles: int = 0             # > 0: after the refinement, one block this long at each refined resonance
     procedure: str = "stepped_sine"      # or "phase_resonance" (then freqs_Hz = (start_Hz,)), "response_controlled"
     backbone: Backbone | None = None     # [plan.backbone], phase_resonance only
     response: str = ""                   # response_controlled: "disp" or "accel"; levels_N then holds
@@ -109,17 +110,21 @@ class Plan:
 
     def refined_key_ok(self, key: str) -> bool:
         """Whether ``key`` names a refinement step this plan may add (refine on, a level of
-        the plan, its number within the budget, the level's last sweep's direction)."""
+        the plan, its number within the budget, the level's last sweep's direction), or
+        the dwell at a refined resonance (``dwell_cycles`` > 0: number 000)."""
         m = REFINED_KEY.fullmatch(key)
         if not (self.refine and m):
             return False
         li, j, direction = int(m["level"]), int(m["n"]), m["dir"]
+        if m["kind"] == "W" and not (self.dwell_cycles > 0 and j == 0):
+            return False
         last = [s for s in self.schedule() if s.level_index == li]
         return bool(last) and j < self.refine_steps and direction == last[-1].direction \
             and int(m["index"]) == last[-1].index and {"F": "feed", "P": "pitch"}[m["mode"]] in self.refine_modes
 
 
-REFINED_KEY = re.compile(r"(?P<index>\d{5})-L(?P<level>\d{2})-R(?P<mode>[FP])(?P<n>\d{3})-(?P<dir>up|down)")
+# R: a refinement step, W: the dwell at the refined resonance (both after the level's sweep)
+REFINED_KEY = re.compile(r"(?P<index>\d{5})-L(?P<level>\d{2})-(?P<kind>[RW])(?P<mode>[FP])(?P<n>\d{3})-(?P<dir>up|down)")
 
 
 @dataclass(frozen=True)
@@ -132,12 +137,13 @@ class StepSpec:
     freq_Hz: float
     refined: int = -1        # >= 0: the level's n-th refinement step of a mode (frequency chosen online)
     refined_mode: str = ""   # that mode: "feed" or "pitch"
+    dwell_cycles: int = 0    # > 0: the dwell at the mode's refined resonance (refined = 0), a block this long
 
     @property
     def key(self) -> str:
-        if self.refined >= 0:    # sorts after the level's sweep (its last step's index; R after F)
-            return (f"{self.index:05d}-L{self.level_index:02d}-R{self.refined_mode[:1].upper()}{self.refined:03d}"
-                    f"-{self.direction}")
+        if self.refined >= 0:    # sorts after the level's sweep (its last step's index; R, W after F)
+            return (f"{self.index:05d}-L{self.level_index:02d}-{'W' if self.dwell_cycles else 'R'}"
+                    f"{self.refined_mode[:1].upper()}{self.refined:03d}-{self.direction}")
         return f"{self.index:05d}-L{self.level_index:02d}-F{self.freq_index:03d}-{self.direction}"
 
 

@@ -8,6 +8,11 @@ next one is depends only on the level's stored steps, so a resumed run chooses w
 uninterrupted one would.  The peaks: the feed mode's compliance_pp maximum and the
 pitching mode's accelerance maximum, found and fitted by :mod:`sim.modal`; a maximum at
 the grid's edge is not a peak and is not chased.
+
+The dwell (``[plan.resonance] dwell_cycles`` > 0): once a level's refinement is over, one
+more step at each refined resonance (the estimate from the level's sweep and refinement
+steps) whose measured block is ``dwell_cycles`` periods long, keyed with ``W`` where a
+refinement step has ``R``.  Dwell steps do not enter the estimates that choose steps.
 """
 
 from __future__ import annotations
@@ -38,7 +43,8 @@ class Refiner:
 
     def next_step(self, last: StepSpec) -> StepSpec | None:
         li = last.level_index
-        steps = [r for r in self.results() if r["level_index"] == li]
+        level = [r for r in self.results() if r["level_index"] == li]
+        steps = [r for r in level if "-W" not in r["key"]]    # dwells do not choose steps
         if len(steps) < 3:
             return None
         d = LevelData.from_steps(last.force_N, steps)
@@ -58,9 +64,24 @@ class Refiner:
                 continue                 # no progress possible (a step there already)
             log.info("level %g N: refining the %s peak: step at %.5g Hz", last.force_N, mode, f)
             return StepSpec(last.index, li, -1, last.direction, last.force_N, f, refined=done, refined_mode=mode)
+        if self.plan.dwell_cycles > 0:
+            for mode in self.plan.refine_modes:
+                if any(f"-W{mode[0].upper()}" in r["key"] for r in level):
+                    continue
+                found = self._resonance(mode, d)
+                if found is None:
+                    log.info("level %g N: no %s peak inside the grid: no dwell", last.force_N, mode)
+                    continue
+                f = float(f"{min(max(found[0], self.f_min), self.f_max):.6g}")   # inside the checked grid
+                log.info("level %g N: dwell of %d cycles at the %s resonance, %.5g Hz", last.force_N,
+                         self.plan.dwell_cycles, mode, f)
+                return StepSpec(last.index, li, -1, last.direction, last.force_N, f, refined=0, refined_mode=mode,
+                                dwell_cycles=self.plan.dwell_cycles)
         return None
 
-    def _next_for(self, mode: str, d: LevelData) -> float | None:
+    def _resonance(self, mode: str, d: LevelData) -> tuple[float, float, int, np.ndarray] | None:
+        """(resonance estimate in Hz, damping ratio, index of the measured maximum, the
+        peak's magnitudes) of ``mode`` in ``d``, or None without a peak inside the grid."""
         if mode == "feed":
             i = find_feed(d)
             mag, H, kind, curve = d.compliance_pp, d.compliance, "receptance", d.compliance_pp
@@ -72,8 +93,14 @@ class Refiner:
             return None                  # no peak inside the grid: nothing to bracket
         est = estimate_mode(d.f_Hz, H, mode=mode, kind=kind, curve=curve, peak_index=i)
         fr = est.resonance_Hz if est.ok else self._parabola(d.f_Hz, mag, i)
-        return next_refinement_Hz(d.f_Hz, mag, i, fr, est.damping_ratio, self.plan.refine_tolerance,
-                                  self.f_min, self.f_max)
+        return fr, est.damping_ratio, i, mag
+
+    def _next_for(self, mode: str, d: LevelData) -> float | None:
+        found = self._resonance(mode, d)
+        if found is None:
+            return None
+        fr, zeta, i, mag = found
+        return next_refinement_Hz(d.f_Hz, mag, i, fr, zeta, self.plan.refine_tolerance, self.f_min, self.f_max)
 
     @staticmethod
     def _parabola(f: np.ndarray, mag: np.ndarray, i: int) -> float:

@@ -293,9 +293,10 @@ class SteppedSine:
         the displacement residual is above 3x the sensor noise at rest and still falling
         by more than 10 % from block to block (a weakly damped mode, small-amplitude
         pre-rolling, can ring for hundreds of periods).  What the check still finds after
-        the limit is logged as a warning and kept in the result (``unsettled``)."""
+        the limit is logged as a warning and kept in the result (``unsettled``).  A dwell
+        step's block is its ``dwell_cycles`` long."""
         f = step.freq_Hz
-        periods = max(self.plan.measure_cycles, math.ceil(self.plan.min_measure_s * f))
+        periods = max(self.plan.measure_cycles, math.ceil(self.plan.min_measure_s * f), step.dwell_cycles)
         self._wait(f, self.plan.min_settle_s, min_periods=self.plan.settle_cycles)
         if self.marker is not None:   # a simulated rig reseeds its noise here (decision 0013)
             self.marker.mark_step(step.key)
@@ -401,7 +402,8 @@ class SteppedSine:
                     finished += 1
                     total += 1
                     if progress:
-                        progress(finished, total, f"{extra.force_N:g} N {extra.freq_Hz:7.2f} Hz refine "
+                        progress(finished, total, f"{extra.force_N:g} N {extra.freq_Hz:7.2f} Hz "
+                                 + (f"dwell {extra.dwell_cycles} cycles " if extra.dwell_cycles else "refine ")
                                  + (f"err {100 * res['force_error']:+.1f}%" if res else "skipped: force unreachable"))
                     prev = extra
         self.stop()

@@ -60,27 +60,63 @@ def _plot_series(ax, series, colours, y, *, marker=True, **kw):
 
 
 def _plain_log_ticks(fig: Figure) -> None:
-    """Log x axes (frequency, force) get plain numbers (30, 50, 100), not 3x10^1; minor
-    ones too when the axis spans less than two decades."""
-    from matplotlib.ticker import FuncFormatter, NullFormatter
-    plain = FuncFormatter(lambda v, _: f"{v:g}")
-    sparse = FuncFormatter(lambda v, _: f"{v:g}" if f"{v:e}"[0] in "235" else "")
+    """Log axes (frequency, force, compliance) get plain numbers (30, 50, 100; 2e-06), never
+    mathtext such as 3x10^1; minor ones too (2, 3, 5 of each decade) when the axis spans
+    less than two decades.  Major ticks at powers of ten outside 1e-3..1e5 keep 10^n."""
+    from matplotlib.ticker import FuncFormatter, LogFormatterSciNotation, NullFormatter
     for ax in fig.axes:
-        lim = ax.get_xlim()
-        if ax.xaxis.get_scale() != "log" or min(lim) <= 0:
-            continue
-        ax.xaxis.set_major_formatter(plain)
-        ax.xaxis.set_minor_formatter(sparse if math.log10(max(lim) / min(lim)) < 2 else NullFormatter())
+        for axis, lim in ((ax.xaxis, ax.get_xlim()), (ax.yaxis, ax.get_ylim())):
+            if axis.get_scale() != "log" or min(lim) <= 0:
+                continue
+            tiny = min(lim) < 1e-3 or max(lim) > 1e5
+            axis.set_major_formatter(LogFormatterSciNotation() if tiny and max(lim) / min(lim) >= 100
+                                     else FuncFormatter(plain_tick))
+            axis.set_minor_formatter(FuncFormatter(sparse_tick) if math.log10(max(lim) / min(lim)) < 2
+                                     else NullFormatter())
+
+
+def plain_tick(v: float, _pos=None) -> str:
+    """A log axis' tick label as a plain number: 60, 0.3, 2e-06."""
+    return f"{v:g}"
+
+
+def sparse_tick(v: float, _pos=None) -> str:
+    """A minor tick's label on a short log axis: only 2, 3 and 5 of each decade."""
+    return f"{v:g}" if f"{v:e}"[0] in "235" else ""
+
+
+def _fit_titles(fig: Figure) -> None:
+    """Wrap the figure's title to the figure's width and each axes' title to its axes'
+    width (a long title is otherwise cut at the figure's edges or runs into its neighbour):
+    measured after a draw, rewrapped until it fits."""
+    import textwrap
+    fig.draw_without_rendering()
+    texts = [(fig._suptitle, fig.bbox)] if fig._suptitle is not None else []
+    texts += [(t, ax.bbox) for ax in fig.axes for t in (ax.title, ax._left_title, ax._right_title)]
+    for text, box in texts:
+        for _ in range(4):
+            s = text.get_text()
+            width = text.get_window_extent().width
+            if not s or width <= 0.98 * box.width:
+                break
+            per_line = max(len(line) for line in s.splitlines())
+            text.set_text(textwrap.fill(" ".join(s.split()), max(10, int(per_line * 0.95 * box.width / width))))
+        fig.draw_without_rendering()
+
+
+def _finish(fig: Figure) -> None:
+    _plain_log_ticks(fig)
+    _fit_titles(fig)
 
 
 def save_png(fig: Figure, path: Path) -> Path:
-    _plain_log_ticks(fig)
+    _finish(fig)
     fig.savefig(path, dpi=110)
     return path
 
 
 def png_bytes(fig: Figure, dpi: int = 96) -> bytes:
-    _plain_log_ticks(fig)
+    _finish(fig)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi)
     return buf.getvalue()

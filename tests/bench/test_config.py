@@ -4,6 +4,7 @@ what is allowed; the schedule is the documented one."""
 from __future__ import annotations
 
 import math
+import re
 import textwrap
 import tomllib
 from pathlib import Path
@@ -262,6 +263,32 @@ def test_the_cli_reports_a_config_error_without_a_traceback(tmp_path, capsys):
     err = capsys.readouterr().err
     assert str(path) in err and "direction" in err
     assert "Traceback" not in err
+
+
+def test_three_mistakes_of_a_plan_file_are_named_in_one_run(tmp_path, capsys):
+    """Independent key/value errors come together, one line each, with their usual words;
+    a rule across keys waits until they are fixed (it may have seen a stand-in value)."""
+    text = edit(PLAN, 'direction = "up"', 'direction = "sideways"')
+    text = edit(text, "settle_cycles = 4", "settle_cycles = 4\nsettel_s = 1.0")
+    text = edit(text, "levels_N = [1.0, 3.0]", "levels_N = [1.0, 300.0]")
+    path = write(tmp_path, "three.toml", text)
+    assert main(["dry-run", "--plan", str(path)]) == 2
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert lines[0] == "bench dry-run: error: 3 problems:" and len(lines) == 4, lines
+    wanted = [r"\[plan.frequencies\] direction: must be one of \['up', 'down', 'both'\], got 'sideways'",
+              r"\[plan.control\] settel_s: unknown key; did you mean min_settle_s\?",
+              r"\[plan\] levels_N\[1\]: must be >= 0.1 and <= 100 .*got 300.0"]
+    for want in wanted:
+        assert sum(bool(re.search(want, ln)) and str(path) in ln for ln in lines) == 1, (want, lines)
+    with pytest.raises(ConfigError) as e:       # the same, as one error, for a rig file
+        load_rig(write(tmp_path, "rig.toml", edit(edit(RIG, "drive_V = 7.0", "drive_V = -7.0"),
+                                                  "disp_V_per_m = 8000.0", 'disp_V_per_m = "8000"')))
+    assert len(str(e.value).splitlines()) == 2
+    assert "[rig.limits] drive_V: must be > 0" in str(e.value) and "[rig.calibration] disp_V_per_m: must be a number" \
+        in str(e.value)
+    with pytest.raises(ConfigError) as e:       # one mistake: the message as it always was
+        load_plan(write(tmp_path, "one.toml", edit(PLAN, 'direction = "up"', 'direction = "sideways"')))
+    assert "\n" not in str(e.value) and str(e.value).endswith("got 'sideways'")
 
 
 # --------------------------------------------------------------------------- schedule

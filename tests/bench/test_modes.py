@@ -227,3 +227,50 @@ def test_paper_model_is_the_rig_files_without_noise_line_or_shaker():
     assert model["pitch_inertia_kg_m2"] == rig.model["pitch_inertia_kg_m2"] and model["friction_alpha"] == 0.5
     assert not any(k in model for k in LEFT_OUT if not k.endswith("noise_N") and "noise" not in k)
     assert model["disp_noise_m"] == model["force_noise_N"] == model["accel_noise_m_s2"] == 0.0
+
+
+def test_the_dwell_records_one_long_block_at_the_refined_resonance(tmp_path, capsys):
+    """[plan.resonance] dwell_cycles: after the refinement, one step at the refined feed
+    resonance whose block is dwell_cycles periods long; an ordinary step (checked, counted,
+    re-measured on resume at the same frequency) that dry-run counts with its rig time."""
+    import shutil
+
+    from bench.session import planned_steps
+    res = {"refine": True, "modes": ["feed"], "max_steps": 4}
+    plan = _plan("dwell", [1.0], {"start_Hz": 30.0, "stop_Hz": 300.0, "points": 12}, res | {"dwell_cycles": 300})
+    store = run_plan(plan, load_rig(DEFAULTS / "sim_rig.toml"), tmp_path / "run", identify=False)
+    assert store.metadata["status"] == "completed"
+    results = store.results()
+    (dwell,) = [r for r in results if "-W" in r["key"]]
+    assert dwell["key"].endswith("-WF000-up") and dwell["key"] > max(r["key"] for r in results if "-RF" in r["key"])
+    assert dwell["n_samples"] / dwell["fs_Hz"] * dwell["freq_Hz"] == pytest.approx(300, abs=0.5)
+    assert abs(dwell["force_error"]) <= plan.force_tolerance           # under the force control
+    (feed,) = run_modes(store.path, model=False).modes
+    assert dwell["freq_Hz"] == pytest.approx(feed.resonance_Hz, rel=plan.refine_tolerance)
+    assert store.account().complete and not store.check()
+    assert store.metadata["steps_total"] == len(results)
+    # resumed without its dwell: measured again, at the same frequency
+    cut = tmp_path / "cut"
+    shutil.copytree(store.path, cut)
+    for p in (cut / "steps").glob("*-W*"):
+        p.unlink()
+    RunStore.open(cut).update(status="interrupted")
+    assert main(["resume", str(cut), "--no-report"]) == 0
+    (again,) = [r for r in RunStore.open(cut).results() if "-W" in r["key"]]
+    assert again["key"] == dwell["key"] and again["freq_Hz"] == dwell["freq_Hz"]
+    # dry-run: one dwell per mode and level, with its long block in the rig time
+    n, refined, t = planned_steps(plan)
+    n0, refined0, t0 = planned_steps(_plan("no dwell", [1.0], {"start_Hz": 30.0, "stop_Hz": 300.0, "points": 12}, res))
+    assert (n, refined) == (n0, refined0 + 1) and t - t0 > 300 / 300.0
+    plan_file = tmp_path / "p.toml"
+    plan_file.write_text('[plan]\nlevels_N = [1.0, 3.0]\n[plan.frequencies]\nstart_Hz = 30.0\nstop_Hz = 300.0\n'
+                         'points = 12\n[plan.resonance]\nrefine = true\nmodes = ["feed"]\ndwell_cycles = 500\n')
+    assert main(["dry-run", "--plan", str(plan_file)]) == 0
+    assert "at most 22 refinement steps" in capsys.readouterr().out    # 2 x 10 + 2 dwells
+
+
+def test_a_dwell_without_the_refinement_is_refused():
+    from bench.config import ConfigError
+    with pytest.raises(ConfigError, match=r"\[plan.resonance\] dwell_cycles: needs refine = true"):
+        parse_plan({"plan": {"levels_N": [1.0], "frequencies": {"list_Hz": [50.0, 60.0]},
+                             "resonance": {"dwell_cycles": 100}}})
