@@ -227,3 +227,41 @@ def test_paper_model_is_the_rig_files_without_noise_line_or_shaker():
     assert model["pitch_inertia_kg_m2"] == rig.model["pitch_inertia_kg_m2"] and model["friction_alpha"] == 0.5
     assert not any(k in model for k in LEFT_OUT if not k.endswith("noise_N") and "noise" not in k)
     assert model["disp_noise_m"] == model["force_noise_N"] == model["accel_noise_m_s2"] == 0.0
+
+
+@pytest.fixture(scope="module")
+def backbone_run(tmp_path_factory):
+    """Phase resonance of the plain rig's feed mode at 0.3 and 1 N (decision 0044)."""
+    plan = parse_plan({"plan": {"name": "backbone", "procedure": "phase_resonance", "levels_N": [0.3, 1.0],
+                                "backbone": {"start_Hz": 80.0},
+                                "control": {"settle_cycles": 10, "measure_cycles": 10}}})
+    store = run_plan(plan, load_rig(DEFAULTS / "sim_rig.toml"), tmp_path_factory.mktemp("bb") / "run",
+                     labels={"test": "phase resonance"})
+    assert store.metadata["status"] == "completed"
+    return store
+
+
+def test_bench_modes_reads_a_backbone_run_beside_a_stepped_sine(feed_run, backbone_run, tmp_path):
+    """Each locked point is a row (its mode, level, the locked frequency, the energy
+    balance's damping ratio, no interval) and is drawn in Figs. 13 and 17 with its run's
+    colour as a diamond, beside the stepped sine's circles (decision 0046)."""
+    from bench.reports._figures import RUN_COLOURS, plot_fig13, plot_fig17
+    assert main(["modes", str(feed_run.path), str(backbone_run.path), "--out", str(tmp_path / "m"),
+                 "--no-model"]) == 0
+    rows = [r for r in csv.DictReader(open(tmp_path / "m" / "modes.csv")) if r["label"] == "test=phase resonance"]
+    points = list(csv.DictReader(open(backbone_run.path / "backbone.csv")))
+    assert [(r["mode"], float(r["level_N"]), r["status"]) for r in rows] == [("feed", 0.3, "ok"), ("feed", 1.0, "ok")]
+    for r, p in zip(rows, points):
+        assert float(r["resonance_Hz"]) == pytest.approx(float(p["frequency_Hz"]), rel=1e-5)
+        assert float(r["damping_ratio"]) == pytest.approx(float(p["damping_ratio"]), rel=1e-5)
+        assert r["resonance_low_Hz"] == r["damping_ratio_high"] == "nan"
+        assert "phase resonance" in r["note"]
+    # the feed mode softens with the level: the backbone's frequency falls (seed Fig. 13)
+    assert float(rows[1]["resonance_Hz"]) < float(rows[0]["resonance_Hz"])
+    runs = [run_modes(feed_run.path, model=False), run_modes(backbone_run.path, model=False)]
+    f = [float(p["frequency_Hz"]) for p in points]
+    for fig, ax_of in ((plot_fig13(runs), lambda fig: fig.axes[0]), (plot_fig17(runs), lambda fig: fig.axes[0])):
+        drawn = [ln for ln in ax_of(fig).get_lines() if ln.get_marker() == "D" and ln.get_color() == RUN_COLOURS[1]
+                 and list(ln.get_ydata()) == pytest.approx(f)]
+        assert drawn, "the backbone run's points are not drawn as diamonds in its colour"
+        assert any(ln.get_marker() == "o" and ln.get_color() == RUN_COLOURS[0] for ln in ax_of(fig).get_lines())
