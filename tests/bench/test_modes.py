@@ -265,3 +265,37 @@ def test_bench_modes_reads_a_backbone_run_beside_a_stepped_sine(feed_run, backbo
                  and list(ln.get_ydata()) == pytest.approx(f)]
         assert drawn, "the backbone run's points are not drawn as diamonds in its colour"
         assert any(ln.get_marker() == "o" and ln.get_color() == RUN_COLOURS[0] for ln in ax_of(fig).get_lines())
+
+
+def test_the_watch_page_shows_the_lock_of_a_phase_resonance_run(backbone_run):
+    """The live page's lock panel: the latest block (its frequency, phase error, amplitude
+    from the procedure's lock_block events) and each stored point; the blocks are not
+    listed among the events."""
+    import json
+
+    from bench.watch import serve
+    from bench.watch.snapshot import RunReader
+
+    from .chromium import CHROMIUM, Browser
+    events = [json.loads(ln) for ln in (backbone_run.path / "events.jsonl").read_text().splitlines()]
+    blocks = [e for e in events if e["event"] == "lock_block"]
+    points = list(csv.DictReader(open(backbone_run.path / "backbone.csv")))
+    state = RunReader(backbone_run.path).snapshot()
+    lock = state["lock"]
+    assert lock["blocks"] == len(blocks) > 2 and lock["latest"]["freq_Hz"] == blocks[-1]["freq_Hz"]
+    # the last block of a locked level is in the band, at the point's frequency
+    assert abs(lock["latest"]["phase_error_deg"]) <= 1.0
+    assert lock["latest"]["freq_Hz"] == pytest.approx(float(points[-1]["frequency_Hz"]), rel=1e-3)
+    assert [p["frequency_Hz"] for p in lock["points"]] == pytest.approx([float(p["frequency_Hz"]) for p in points])
+    assert not any(e["event"] == "lock_block" for e in state["events"])
+    if CHROMIUM is None:
+        pytest.skip("chromium not installed (make setup)")
+    with serve(backbone_run.path) as server, Browser() as browser:
+        browser.goto(server.url)
+        text = browser.wait_for("!document.getElementById('lockcard').hidden && "
+                                "document.getElementById('lockcard').textContent", 30, "the lock panel")
+        assert f"{blocks[-1]['freq_Hz']:.5g} Hz" in text
+        assert f"phase error {blocks[-1]['phase_error_deg']:.3g} deg" in text
+        for p in points:
+            assert f"{float(p['frequency_Hz']):.5g}" in text
+        assert text.count("yes") == len(points)
