@@ -534,7 +534,7 @@ def _mode_points(ax, modes: list, colour, label: str, y, lo=None, hi=None, marke
 
 
 def _run_marker(run) -> str:
-    """A phase-resonance run's points (bench modes, decision 0046) are diamonds, a stepped sine's circles."""
+    """A phase-resonance run's points (bench modes, decision 0044) are diamonds, a stepped sine's circles."""
     return "D" if getattr(run, "kind", "") == "phase_resonance" else "o"
 
 

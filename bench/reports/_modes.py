@@ -98,7 +98,7 @@ BACKBONE_NOTE = ("phase resonance: one locked point, no interval (the frequency 
 
 
 def backbone_modes(results: list[dict]) -> list[ModeEstimate]:
-    """One estimate per point of a phase-resonance run (decision records 0044, 0046): its
+    """One estimate per point of a phase-resonance run (decision record 0044): its
     mode, the locked frequency as the resonance and the energy balance's damping ratio; a
     point that did not lock is "not locked" (no value). No intervals: one point at one
     frequency has no fit whose spread would give them."""
