@@ -301,4 +301,6 @@ def test_the_watch_page_shows_the_lock_of_a_phase_resonance_run(backbone_run):
         assert float(shown[2]) == pytest.approx(blocks[-1]["phase_error_deg"], rel=5e-3, abs=1e-3)
         cells = browser.js("Array.from(document.querySelectorAll('#lockpoints td:nth-child(2)')).map(t => t.textContent)")
         assert [float(c) for c in cells] == pytest.approx([float(p["frequency_Hz"]) for p in points], rel=1e-4)
+        cells = browser.js("Array.from(document.querySelectorAll('#lockpoints td:nth-child(3)')).map(t => t.textContent)")
+        assert [float(c) for c in cells] == pytest.approx([1e6 * float(p["amplitude_m"]) for p in points], rel=1e-3)
         assert text.count("yes") == len(points)
