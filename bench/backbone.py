@@ -73,6 +73,10 @@ def run_backbone(plan: Plan, rig: Rig, store: RunStore, gen, daq, sensor_check, 
     total = len(plan.schedule())
 
     def on_block(state: dict) -> None:
+        store.event("lock_block", level_N=state["level_N"], freq_Hz=state["freq_Hz"],   # the watch page's lock panel
+                    phase_error_deg=state["phase_error_deg"], amplitude=state["amplitude"],
+                    response=plan.backbone.response, force_N=state["force_N"],
+                    settled_periods=state["settled_periods"])
         if progress:
             progress(len(store.done_keys()), total,
                      f"locking {state['level_N']:g} N: {state['freq_Hz']:.3f} Hz, phase error "

@@ -1,10 +1,12 @@
 """Phase resonance (decision 0044) on the plain simulated rig: issue 27's bar (each locked
 point against the Masing backbone by single-harmonic balance at its measured amplitude),
 periods per point, and the rig time to know the feed resonance at four levels against a
-dense stepped sine whose grid (1 % log spacing over 50-90 Hz: the grid maximum within
-0.5 %) covers the same resonances.  Figures, no pass/fail.
+stepped sine with resonance refinement (9 log points over 50-90 Hz, `[plan.resonance]
+refine = true`, tolerance 0.5 %) and a dense stepped sine whose grid (1 % log spacing over
+50-90 Hz: the grid maximum within 0.5 %) covers the same resonances, as ratios.  Figures,
+no pass/fail.
 
-    python benchmarks/bench_backbone.py [--out /tmp/bench_backbone] [--no-dense]
+    python benchmarks/bench_backbone.py [--out /tmp/bench_backbone] [--no-refined] [--no-dense]
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from pathlib import Path
 
 from bench.backbone import backbone_rows
 from bench.config import DEFAULTS, load_rig, parse_plan
+from bench.reports import run_modes
 from bench.session import run_plan
 from sim.backbone import backbone_point
 
@@ -31,6 +34,7 @@ def rig_time(store) -> float:
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", default="/tmp/bench_backbone")
+    ap.add_argument("--no-refined", action="store_true")
     ap.add_argument("--no-dense", action="store_true")
     a = ap.parse_args()
     rig = load_rig(DEFAULTS / "sim_rig.toml")
@@ -52,6 +56,23 @@ def main():
               f"{100 * r['damping_ratio']:7.3f} {100 * (r['frequency_Hz'] / hb.frequency_Hz - 1):+6.2f} "
               f"{100 * (r['force_N'] / hb.force_N - 1):+6.2f} {100 * (r['damping_ratio'] / hb.damping_ratio - 1):+7.2f} "
               f"{r['phase_error_deg']:+9.2f} {r['periods']:7d} {r['locked']}")
+    if not a.no_refined:
+        refined = parse_plan({"plan": {"levels_N": LEVELS, "frequencies": {"start_Hz": 50.0, "stop_Hz": 90.0,
+                                                                            "points": 9},
+                                       "resonance": {"refine": True, "tolerance": 0.005, "modes": ["feed"]}}})
+        out = Path(a.out) / "refined"
+        shutil.rmtree(out, ignore_errors=True)
+        t = time.perf_counter()
+        store = run_plan(refined, rig, out, identify=False)
+        wall = time.perf_counter() - t
+        t_rf = rig_time(store)
+        n = len(store.results())
+        feed = [e for e in run_modes(out, model=False).modes if e.mode == "feed"]
+        print(f"stepped sine with refinement (9 points over 50-90 Hz + {n - 9 * len(LEVELS)} refinement steps): "
+              f"{t_rf:.1f} s rig time, {wall:.1f} s wall; phase resonance is {t_rf / t_pr:.1f}x faster in rig time")
+        for e in feed:
+            print(f"  {e.level_N:g} N: {e.status} {e.resonance_Hz:.3f} Hz [{e.resonance_low_Hz:.3f}, "
+                  f"{e.resonance_high_Hz:.3f}] ({100 * (e.resonance_high_Hz - e.resonance_low_Hz) / 2 / e.resonance_Hz:.2f} %)")
     if a.no_dense:
         return
     points = math.ceil(math.log(90 / 50) / math.log(1.01)) + 1
@@ -64,7 +85,8 @@ def main():
     wall = time.perf_counter() - t
     t_ss = rig_time(store)
     print(f"dense stepped sine, {len(LEVELS)} levels x {points} frequencies (1 % spacing): {t_ss:.1f} s rig time, "
-          f"{wall:.1f} s wall; phase resonance is {t_ss / t_pr:.1f}x faster in rig time")
+          f"{wall:.1f} s wall; phase resonance is {t_ss / t_pr:.1f}x faster in rig time"
+          + ("" if a.no_refined else f", the refined stepped sine {t_ss / t_rf:.1f}x"))
 
 
 if __name__ == "__main__":

@@ -544,7 +544,7 @@ RUN_COLOURS = ("C0", "C3", "C2", "C1", "C4", "C5", "C6", "C7", "C8", "C9")
 EDGE_MARKER = {"below grid": "v", "above grid": "^"}
 
 
-def _mode_points(ax, modes: list, colour, label: str, y, lo=None, hi=None) -> None:
+def _mode_points(ax, modes: list, colour, label: str, y, lo=None, hi=None, marker: str = "o") -> None:
     """One run's estimates of one mode against force: points with 95 % bars, lines joining
     consecutive levels found inside the grid only; a mode at the grid's edge is an open
     triangle at the edge frequency (y = None: not drawn), never joined."""
@@ -557,7 +557,7 @@ def _mode_points(ax, modes: list, colour, label: str, y, lo=None, hi=None) -> No
             low, high = np.array([lo(e) for e in ok]), np.array([hi(e) for e in ok])
             err = np.vstack([np.clip(v - low, 0, None), np.clip(high - v, 0, None)])
             err = np.where(np.isfinite(err), err, 0.0)
-        ax.errorbar(F, v, yerr=err, color=colour, marker="o", ms=5, capsize=3, lw=0, elinewidth=1.2, label=label)
+        ax.errorbar(F, v, yerr=err, color=colour, marker=marker, ms=5, capsize=3, lw=0, elinewidth=1.2, label=label)
         levels = [e.level_N for e in modes]
         run: list[int] = []
         for k, e in enumerate(ok):       # join only levels that follow each other in the run
@@ -567,6 +567,15 @@ def _mode_points(ax, modes: list, colour, label: str, y, lo=None, hi=None) -> No
             run.append(k)
         if run:
             ax.plot(F[run], v[run], color=colour, lw=1.2)
+
+
+def _run_marker(run) -> str:
+    """A phase-resonance run's points (bench modes, decision 0044) are diamonds, a stepped sine's circles."""
+    return "D" if getattr(run, "kind", "") == "phase_resonance" else "o"
+
+
+def _pr_handle() -> Line2D:
+    return Line2D([], [], color="0.3", marker="D", lw=0, label="phase resonance: locked point (no interval)")
 
 
 def _edge_points(ax, modes: list, colour) -> bool:
@@ -581,12 +590,15 @@ def plot_fig13(runs: list) -> Figure:
     compliance_pp) and the compliance at it against the force amplitude, per run."""
     fig = Figure(figsize=(11, 4.8), layout="constrained")
     ax1, ax2 = fig.subplots(1, 2)
-    edge = model = False
+    edge = model = pr = False
     for r, colour in zip(runs, RUN_COLOURS * 10):
         feed = [e for e in r.modes if e.mode == "feed"]
+        mk = _run_marker(r)
+        pr |= mk != "o"
         _mode_points(ax1, feed, colour, r.label, lambda e: e.resonance_Hz, lambda e: e.resonance_low_Hz,
-                     lambda e: e.resonance_high_Hz)
-        _mode_points(ax2, feed, colour, r.label, lambda e: e.peak, lambda e: e.peak_low, lambda e: e.peak_high)
+                     lambda e: e.resonance_high_Hz, marker=mk)
+        _mode_points(ax2, feed, colour, r.label, lambda e: e.peak, lambda e: e.peak_low, lambda e: e.peak_high,
+                     marker=mk)
         edge |= _edge_points(ax1, feed, colour)
         pts = sorted((lv, v) for lv, v in r.model_feed.items() if math.isfinite(v[0]))
         if pts:
@@ -598,6 +610,8 @@ def plot_fig13(runs: list) -> Figure:
     ax2.set(xscale="log", yscale="log", xlabel="force amplitude (N)", ylabel="compliance_pp at the resonance (m/N)",
             title="(b) compliance at the resonance")
     extra = [Line2D([], [], color="0.3", marker="o", lw=0, label="measured, 95 % interval")]
+    if pr:
+        extra.append(_pr_handle())
     if model:
         extra.append(Line2D([], [], color="0.3", ls="--", label="rig model (shooting engine)"))
     if edge:
@@ -616,15 +630,17 @@ def plot_fig17(runs: list, title: str = "") -> Figure:
     damping ratio against the force amplitude, per run (one colour each)."""
     fig = Figure(figsize=(11, 8), layout="constrained")
     axes = fig.subplots(2, 2)
-    edge = model = band = hp = False
+    edge = model = band = hp = pr = False
     for r, colour in zip(runs, RUN_COLOURS * 10):
+        mk = _run_marker(r)
+        pr |= mk != "o"
         for row, mode in enumerate(("feed", "pitch")):
             ms = [e for e in r.modes if e.mode == mode]
             a_f, a_z = axes[row]
             _mode_points(a_f, ms, colour, r.label, lambda e: e.resonance_Hz, lambda e: e.resonance_low_Hz,
-                         lambda e: e.resonance_high_Hz)
+                         lambda e: e.resonance_high_Hz, marker=mk)
             _mode_points(a_z, ms, colour, r.label, lambda e: 100 * e.damping_ratio,
-                         lambda e: 100 * e.damping_ratio_low, lambda e: 100 * e.damping_ratio_high)
+                         lambda e: 100 * e.damping_ratio_low, lambda e: 100 * e.damping_ratio_high, marker=mk)
             okz = [e for e in ms if e.ok and math.isfinite(e.half_power_damping_ratio)]
             if okz:
                 hp = True
@@ -647,6 +663,8 @@ def plot_fig17(runs: list, title: str = "") -> Figure:
                    ylabel="resonance frequency (Hz)" if col == 0 else "damping ratio (%)")
             ax.grid(True, which="both", alpha=0.3)
     extra = [Line2D([], [], color="0.3", marker="o", lw=0, label="measured: single-mode fit, 95 % interval")]
+    if pr:
+        extra.append(_pr_handle())
     if hp:
         extra.append(Line2D([], [], color="0.3", marker="s", mfc="none", ls="none", label="half-power (cross-check)"))
     if model:

@@ -339,10 +339,15 @@ def _write_figures(run: RunData, out: Path) -> list[tuple[str, str]]:
 
     if run.modes is not None:
         save(figures.plot_fig17([run.modes], f"Modes per force level: {title}"), out / "modes.png")
-        files.append(("modes.png", "each mode's resonance frequency (feed: the peak of compliance_pp; pitch: the "
-                      "peak of |A1/F1|) and damping ratio against force, from a single-mode fit around each peak "
-                      "(bars: 95 % intervals; squares: half-power cross-check; triangles: no peak inside the grid, "
-                      "the mode lies at or beyond that edge; lines: the rig model's prediction, simulated rigs)."))
+        if run.modes.kind == "phase_resonance":
+            files.append(("modes.png", "each level's locked point (diamonds): frequency and damping ratio against "
+                          "force, no interval."))
+        else:
+            files.append(("modes.png", "each mode's resonance frequency (feed: the peak of compliance_pp; pitch: the "
+                          "peak of |A1/F1|) and damping ratio against force, from a single-mode fit around each peak "
+                          "(bars: 95 % intervals; squares: half-power cross-check; triangles: no peak inside the "
+                          "grid, the mode lies at or beyond that edge; lines: the rig model's prediction, simulated "
+                          "rigs)."))
     if any("backbone" in r for r in results):
         from ._backbone import plot_backbone
         save(plot_backbone(results, run.rig, title), out / "backbone.png")
@@ -385,6 +390,11 @@ def modes_md(run: RunData) -> list[str]:
           "half-power damping ratio is the cross-check. A peak at the first or last frequency measured is not a "
           "peak: the mode lies at or beyond it and gets no value. `bench modes` writes the same as CSV, with "
           "other runs beside it."]
+    if run.modes is not None and run.modes.kind == "phase_resonance":
+        md = ["## Modes per level", "",
+              "Phase resonance: each level's point (the backbone section above), the locked frequency as the "
+              "resonance and the energy balance's damping ratio; no interval (one point held at one frequency has "
+              "no fit whose spread would give one). `bench modes` draws them beside stepped-sine runs."]
     if run.legacy:
         md += ["", f"compliance_pp of this run is from {pp_source(run.results)}."]
     if run.modes is None:

@@ -42,6 +42,7 @@ class RunModes:
     modes: list[ModeEstimate]
     model_feed: dict[float, tuple[float, float, str]] = field(default_factory=dict)   # level -> (Hz, m/N, note)
     pitch_band: tuple[float, float] | None = None
+    kind: str = "stepped_sine"      # or "phase_resonance": one point per level, drawn with its own marker
 
     def rows(self) -> list[dict]:
         out = []
@@ -92,9 +93,37 @@ def model_feed_peaks(cmp: ModelComparison | None) -> dict[float, tuple[float, fl
     return out
 
 
+BACKBONE_NOTE = ("phase resonance: one locked point, no interval (the frequency is where the loop held the "
+                 "phase, the damping ratio the energy balance of one block)")
+
+
+def backbone_modes(results: list[dict]) -> list[ModeEstimate]:
+    """One estimate per point of a phase-resonance run (decision record 0044): its
+    mode, the locked frequency as the resonance and the energy balance's damping ratio; a
+    point that did not lock is "not locked" (no value). No intervals: one point at one
+    frequency has no fit whose spread would give them."""
+    out = []
+    for r in sorted(results, key=lambda r: r["index"]):
+        b = r.get("backbone")
+        if not b:
+            continue
+        level = float(r["target_force_N"])
+        if b["locked"]:
+            out.append(ModeEstimate(b["mode"], level, "ok", f"phase resonance ({b['response']})",
+                                    resonance_Hz=float(b["frequency_Hz"]), damping_ratio=float(b["damping_ratio"]),
+                                    n_points=1, note=BACKBONE_NOTE))
+        else:
+            out.append(ModeEstimate(b["mode"], level, "not locked", f"phase resonance ({b['response']})",
+                                    n_points=1, note=f"phase resonance: not locked ({b['why']})"))
+    return out
+
+
 def modes_of(path: Path, meta: dict, results: list[dict], cmp: ModelComparison | None) -> RunModes:
     """The modes of a run's stored steps (every level; tracked as sim.modal.track_modes
-    does, the feed mode by the model's peak when ``cmp`` has one)."""
+    does, the feed mode by the model's peak when ``cmp`` has one); a phase-resonance run's
+    are its locked points (:func:`backbone_modes`)."""
+    if any(r.get("backbone") for r in results):
+        return RunModes(Path(path), run_label(meta, path), backbone_modes(results), kind="phase_resonance")
     plan, rig = meta.get("plan") or {}, meta.get("rig") or {}
     levels_N = plan.get("levels_N") or sorted({r["target_force_N"] for r in results})
     by_level: dict[int, list[dict]] = {}
@@ -120,7 +149,7 @@ def run_modes(path: Path, *, model: bool = True) -> RunModes:
     store = RunStore.open(Path(path))
     meta, results = store.metadata, store.results()
     cmp = None
-    if model:
+    if model and not any(r.get("backbone") for r in results):
         try:
             cmp = model_comparison(meta, results)
         except Exception as e:  # noqa: BLE001 - the measured modes come out without the model

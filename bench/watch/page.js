@@ -116,6 +116,27 @@ function renderModes(s) {
   $("modes").innerHTML = html;
 }
 
+function renderLock(s) {
+  const k = s.lock;
+  $("lockcard").hidden = !k;
+  if (!k) return;
+  const amp = (v) => k.response === "accel" ? `${num(v, 4)} m/s²` : `${num(1e6 * v, 4)} µm`;
+  const b = k.latest;
+  $("lockstate").innerHTML = b
+    ? `latest block at ${num(b.level_N)} N: <b>${num(b.freq_Hz, 5)} Hz</b>, phase error <b>${num(b.phase_error_deg, 3)} deg</b> ` +
+      `(target ${num(k.phase_target_deg)} deg, band ±${num(k.phase_band_deg)}), amplitude ${amp(b.amplitude)}, ` +
+      `force ${num(b.force_N, 4)} N, ${esc(b.settled_periods)} periods in band (${esc(k.settle_periods)} needed)`
+    : "<span class='muted'>no block yet</span>";
+  let html = "<tr><th class='num'>level (N)</th><th class='num'>frequency (Hz)</th><th class='num'>amplitude (µm)</th>" +
+             "<th class='num'>phase error (deg)</th><th class='num'>damping ratio</th><th>locked</th><th class='num'>periods</th></tr>";
+  for (const p of k.points)
+    html += `<tr><td class="num">${num(p.level_N)}</td><td class="num">${num(p.frequency_Hz, 5)}</td><td class="num">${num(1e6 * p.amplitude_m, 4)}</td>` +
+            `<td class="num">${num(p.phase_error_deg, 3)}</td><td class="num">${pct2(p.damping_ratio)}</td>` +
+            `<td class="${p.locked ? "" : "sev-bad"}">${p.locked ? "yes" : "no: " + esc(p.why)}</td><td class="num">${esc(p.periods)}</td></tr>`;
+  if (!k.points.length) html += "<tr><td colspan='7' class='muted'>no point yet</td></tr>";
+  $("lockpoints").innerHTML = html;
+}
+
 const FONT = {family: "system-ui, sans-serif", size: 12};
 
 function renderCompliance(s) {
@@ -233,6 +254,7 @@ function render(s) {
   renderIdent(s);
   renderCompliance(s);
   renderModes(s);
+  renderLock(s);
   renderIdentPlot(s);
   renderEvents(s);
 }

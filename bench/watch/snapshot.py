@@ -34,6 +34,7 @@ log = logging.getLogger(__name__)
 
 LOG_LINES_KEPT = 40           # warnings and errors from bench.log shown on the page
 QUIET_EVENTS = {"sensor"}     # frequent, routine: counted, not listed
+LOCK_EVENT = "lock_block"     # a phase-resonance block (bench/backbone.py): shown in the lock panel, not listed
 TAIL_CHUNK = 16 * 2**20       # read of a growing log at a time (a huge file is followed in steps)
 
 
@@ -226,7 +227,8 @@ class RunReader:
             "compliance": self._compliance(plan, results),
             "modes": self._modes(plan, results, meta),
             "identification": self._identification(ident, results, meta, self._analysis()),
-            "events": [e for e in events if e.get("event") not in QUIET_EVENTS],
+            "lock": self._lock_state(plan, results, events),
+            "events": [e for e in events if e.get("event") not in QUIET_EVENTS and e.get("event") != LOCK_EVENT],
             "quiet_events": sum(1 for e in events if e.get("event") in QUIET_EVENTS),
             "warnings": self._warnings(meta, results),
         }
@@ -289,6 +291,21 @@ class RunReader:
             return analysis_estimate(json.loads(path.read_text()))
         except (OSError, ValueError):
             return None
+
+    @staticmethod
+    def _lock_state(plan: Plan | None, results: list[dict], events: list[dict]) -> dict | None:
+        """A phase-resonance run's lock (decision records 0044, 0046): the latest block's
+        frequency, phase error and response amplitude (its ``lock_block`` event) and each
+        stored point; None for other procedures."""
+        if plan is None or plan.procedure != "phase_resonance":
+            return None
+        blocks = [e for e in events if e.get("event") == LOCK_EVENT]
+        points = [dict(level_N=r.get("target_force_N"), **{k: r["backbone"].get(k) for k in (
+            "frequency_Hz", "amplitude_m", "phase_error_deg", "damping_ratio", "locked", "why", "periods")})
+            for r in sorted(results, key=lambda r: r.get("index", 0)) if isinstance(r.get("backbone"), dict)]
+        return {"response": plan.backbone.response, "phase_target_deg": plan.backbone.phase_deg,
+                "phase_band_deg": plan.backbone.phase_band_deg, "settle_periods": plan.backbone.settle_periods,
+                "latest": blocks[-1] if blocks else None, "blocks": len(blocks), "points": points}
 
     @staticmethod
     def _modes(plan: Plan | None, results: list[dict], meta: dict) -> list[dict]:

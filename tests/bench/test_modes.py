@@ -274,3 +274,80 @@ def test_a_dwell_without_the_refinement_is_refused():
     with pytest.raises(ConfigError, match=r"\[plan.resonance\] dwell_cycles: needs refine = true"):
         parse_plan({"plan": {"levels_N": [1.0], "frequencies": {"list_Hz": [50.0, 60.0]},
                              "resonance": {"dwell_cycles": 100}}})
+
+
+@pytest.fixture(scope="module")
+def backbone_run(tmp_path_factory):
+    """Phase resonance of the plain rig's feed mode at 0.3 and 1 N (decision 0044)."""
+    plan = parse_plan({"plan": {"name": "backbone", "procedure": "phase_resonance", "levels_N": [0.3, 1.0],
+                                "backbone": {"start_Hz": 80.0},
+                                "control": {"settle_cycles": 10, "measure_cycles": 10}}})
+    store = run_plan(plan, load_rig(DEFAULTS / "sim_rig.toml"), tmp_path_factory.mktemp("bb") / "run",
+                     labels={"test": "phase resonance"})
+    assert store.metadata["status"] == "completed"
+    return store
+
+
+def test_bench_modes_reads_a_backbone_run_beside_a_stepped_sine(feed_run, backbone_run, tmp_path):
+    """Each locked point is a row (its mode, level, the locked frequency, the energy
+    balance's damping ratio, no interval) and is drawn in Figs. 13 and 17 with its run's
+    colour as a diamond, beside the stepped sine's circles (decision 0044)."""
+    from bench.reports._figures import RUN_COLOURS, plot_fig13, plot_fig17
+    assert main(["modes", str(feed_run.path), str(backbone_run.path), "--out", str(tmp_path / "m"),
+                 "--no-model"]) == 0
+    rows = [r for r in csv.DictReader(open(tmp_path / "m" / "modes.csv")) if r["label"] == "test=phase resonance"]
+    points = list(csv.DictReader(open(backbone_run.path / "backbone.csv")))
+    assert [(r["mode"], float(r["level_N"]), r["status"]) for r in rows] == [("feed", 0.3, "ok"), ("feed", 1.0, "ok")]
+    for r, p in zip(rows, points):
+        assert float(r["resonance_Hz"]) == pytest.approx(float(p["frequency_Hz"]), rel=1e-5)
+        assert float(r["damping_ratio"]) == pytest.approx(float(p["damping_ratio"]), rel=1e-5)
+        assert r["resonance_low_Hz"] == r["damping_ratio_high"] == "nan"
+        assert "phase resonance" in r["note"]
+    # the feed mode softens with the level: the backbone's frequency falls (seed Fig. 13)
+    assert float(rows[1]["resonance_Hz"]) < float(rows[0]["resonance_Hz"])
+    runs = [run_modes(feed_run.path, model=False), run_modes(backbone_run.path, model=False)]
+    f = [float(p["frequency_Hz"]) for p in points]
+    for fig, ax_of in ((plot_fig13(runs), lambda fig: fig.axes[0]), (plot_fig17(runs), lambda fig: fig.axes[0])):
+        drawn = [ln for ln in ax_of(fig).get_lines() if ln.get_marker() == "D" and ln.get_color() == RUN_COLOURS[1]
+                 and list(ln.get_ydata()) == pytest.approx(f)]
+        assert drawn, "the backbone run's points are not drawn as diamonds in its colour"
+        assert any(ln.get_marker() == "o" and ln.get_color() == RUN_COLOURS[0] for ln in ax_of(fig).get_lines())
+
+
+def test_the_watch_page_shows_the_lock_of_a_phase_resonance_run(backbone_run):
+    """The live page's lock panel: the latest block (its frequency, phase error, amplitude
+    from the procedure's lock_block events) and each stored point; the blocks are not
+    listed among the events."""
+    import json
+
+    from bench.watch import serve
+    from bench.watch.snapshot import RunReader
+
+    from .chromium import CHROMIUM, Browser
+    events = [json.loads(ln) for ln in (backbone_run.path / "events.jsonl").read_text().splitlines()]
+    blocks = [e for e in events if e["event"] == "lock_block"]
+    points = list(csv.DictReader(open(backbone_run.path / "backbone.csv")))
+    state = RunReader(backbone_run.path).snapshot()
+    lock = state["lock"]
+    assert lock["blocks"] == len(blocks) > 2 and lock["latest"]["freq_Hz"] == blocks[-1]["freq_Hz"]
+    # the last block of a locked level is in the band, at the point's frequency
+    assert abs(lock["latest"]["phase_error_deg"]) <= 1.0
+    assert lock["latest"]["freq_Hz"] == pytest.approx(float(points[-1]["frequency_Hz"]), rel=1e-3)
+    assert [p["frequency_Hz"] for p in lock["points"]] == pytest.approx([float(p["frequency_Hz"]) for p in points])
+    assert not any(e["event"] == "lock_block" for e in state["events"])
+    if CHROMIUM is None:
+        pytest.skip("chromium not installed (make setup)")
+    with serve(backbone_run.path) as server, Browser() as browser:
+        browser.goto(server.url)
+        text = browser.wait_for("!document.getElementById('lockcard').hidden && "
+                                "document.getElementById('lockcard').textContent", 30, "the lock panel")
+        import re
+        shown = re.search(r"latest block at .*?: ([-\d.e+]+) Hz, phase error ([-\d.e+]+) deg", text)
+        assert shown, text
+        assert float(shown[1]) == pytest.approx(blocks[-1]["freq_Hz"], rel=1e-4)
+        assert float(shown[2]) == pytest.approx(blocks[-1]["phase_error_deg"], rel=5e-3, abs=1e-3)
+        cells = browser.js("Array.from(document.querySelectorAll('#lockpoints td:nth-child(2)')).map(t => t.textContent)")
+        assert [float(c) for c in cells] == pytest.approx([float(p["frequency_Hz"]) for p in points], rel=1e-4)
+        cells = browser.js("Array.from(document.querySelectorAll('#lockpoints td:nth-child(3)')).map(t => t.textContent)")
+        assert [float(c) for c in cells] == pytest.approx([1e6 * float(p["amplitude_m"]) for p in points], rel=1e-3)
+        assert text.count("yes") == len(points)

@@ -149,6 +149,11 @@ def test_the_report_shows_the_backbone_over_the_model(bar_run):
     assert (store.path / "report" / "backbone.png").stat().st_size > 10_000
     table = [line for line in md.splitlines() if line.startswith("| ") and line.endswith(" |") and "| yes |" in line]
     assert len(table) == len(BAR_LEVELS)
+    # the modes section: each locked point as the feed mode's resonance at its level (decision 0044)
+    modes = md[md.index("## Modes per level"):]
+    assert "Phase resonance: each level's point" in modes
+    for r in rows(store):
+        assert f"| feed | {float(r['level_N']):g} | ok | {float(r['frequency_Hz']):.4g} |" in modes
 
 
 def test_ctrl_c_ends_with_the_output_off_and_resume_goes_on_at_the_next_level(tmp_path, mocker):
