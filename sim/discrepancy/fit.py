@@ -252,18 +252,26 @@ def bounds(model: Model) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-LOG_REACH = 50.0        # log F_s, log x_s, log m stay within e^50 of the start (decision 0042)
-
-
 def fit(model: Model, theta0: np.ndarray, d: Data, W: Weights, max_nfev: int = 100) -> Fit:
     lo, hi = bounds(model)
-    # a trial step of a diverging fit must not overflow exp() (OverflowError: math range
-    # error ended a run's final fit, issue 25); e^50 is far beyond any physical answer
-    for i in (0, 1, 3):
-        lo[i], hi[i] = max(lo[i], theta0[i] - LOG_REACH), min(hi[i], theta0[i] + LOG_REACH)
     th0 = np.clip(theta0, lo + 1e-9, hi - 1e-9)
-    res = least_squares(whitened, th0, args=(model, d, W), bounds=(lo, hi), x_scale="jac",
-                        max_nfev=max_nfev, method="trf")
+    size: list[int] = []
+
+    def residuals(theta: np.ndarray) -> np.ndarray:
+        # a trial step of a diverging fit that overflows exp() (OverflowError: math range
+        # error ended a run's final fit, issue 25) has an infinite cost: the trust region
+        # shrinks and the fit goes on.  (Bounds on the log parameters would do it too, but
+        # change the path of every fit, converged ones included: decision 0042.)
+        try:
+            r = whitened(theta, model, d, W)
+        except OverflowError:
+            if not size:
+                raise
+            return np.full(size[0], np.inf)
+        size[:] = [r.size]
+        return r
+
+    res = least_squares(residuals, th0, bounds=(lo, hi), x_scale="jac", max_nfev=max_nfev, method="trf")
     chi2 = float(res.fun @ res.fun)
     _, sv, Vt = np.linalg.svd(res.jac, full_matrices=False)
     sv = np.maximum(sv, sv.max() * 1e-12)
