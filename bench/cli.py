@@ -322,7 +322,7 @@ def cmd_demo(args) -> int:
 
 def cmd_report(args) -> int:
     from .reports import write_report
-    print(f"report: {write_report(Path(args.run))}")
+    print(f"report: {write_report(Path(args.run), [Path(p) for p in args.with_runs or ()])}")
     return 0
 
 
@@ -670,6 +670,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("report", help="(re)write the report of a run directory")
     s.add_argument("run", help="run directory (the report goes to RUN/report/)")
+    s.add_argument("--with", dest="with_runs", action="append", metavar="OTHER",
+                   help="a stepped-sine run of the same rig whose modes the backbone figure of a phase-resonance "
+                        "run overlays at their peaks' amplitudes (repeatable)")
     s.set_defaults(func=cmd_report)
 
     s = sub.add_parser("export", help="write a run's steps as CSV and UFF 58 (FRFs and time records)")

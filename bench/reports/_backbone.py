@@ -19,7 +19,29 @@ def _model(rig: dict, amplitudes: np.ndarray):
     return model_backbone(r, amplitudes)
 
 
-def plot_backbone(results: list[dict], rig: dict, title: str) -> Figure:
+def stepped_points(others, mode: str = "feed") -> list[dict]:
+    """The modes of stepped-sine runs (``bench.reports._modes.RunModes``) as points of a
+    backbone: each level's resonance with its 95 % interval and its damping ratio, at the
+    amplitude of the fitted peak, |X1| = peak compliance x level for the feed mode (the
+    compliance_pp of seed Eq. 9) and peak accelerance x level / w^2 for the pitching mode."""
+    out = []
+    for run in others:
+        if run.kind != "stepped_sine":
+            continue
+        for e in run.modes:
+            if e.mode != mode or e.status != "ok" or not np.isfinite(e.peak):
+                continue
+            amp = e.peak * e.level_N if mode == "feed" else e.peak * e.level_N / (2 * np.pi * e.resonance_Hz) ** 2
+            out.append(dict(label=run.label, level_N=e.level_N, amplitude_m=amp, frequency_Hz=e.resonance_Hz,
+                            frequency_low_Hz=e.resonance_low_Hz, frequency_high_Hz=e.resonance_high_Hz,
+                            damping_ratio=e.damping_ratio, damping_ratio_low=e.damping_ratio_low,
+                            damping_ratio_high=e.damping_ratio_high))
+    return out
+
+
+def plot_backbone(results: list[dict], rig: dict, title: str, others=()) -> Figure:
+    """``others``: the modes of stepped-sine runs of the same rig (``bench report RUN --with
+    OTHER``), drawn at their peaks' amplitudes with their 95 % intervals."""
     rows = backbone_rows(results)
     X = np.array([r["amplitude_m"] for r in rows])
     f = np.array([r["frequency_Hz"] for r in rows])
@@ -39,6 +61,19 @@ def plot_backbone(results: list[dict], rig: dict, title: str) -> Figure:
             ax.plot(X[~ok], y[~ok], "x", color="C3", ms=9, label="not locked")
         for xi, yi, r in zip(X, y, rows):
             ax.annotate(f"{r['level_N']:g} N", (xi, yi), textcoords="offset points", xytext=(4, 4), fontsize=7)
+    mode = rows[0].get("mode", "feed") if rows else "feed"
+    pts = stepped_points(others, "pitch" if mode == "pitch" else "feed")
+    for i, label in enumerate(dict.fromkeys(p["label"] for p in pts)):
+        mine = [p for p in pts if p["label"] == label]
+        a = np.array([p["amplitude_m"] for p in mine])
+        for ax, key, k in ((ax1, "frequency", 1.0), (ax2, "damping_ratio", 100.0)):
+            v = np.array([p[f"{key}_Hz" if key == "frequency" else key] for p in mine]) * k
+            lo = np.array([p[f"{key}_low_Hz" if key == "frequency" else f"{key}_low"] for p in mine]) * k
+            hi = np.array([p[f"{key}_high_Hz" if key == "frequency" else f"{key}_high"] for p in mine]) * k
+            err = np.nan_to_num(np.vstack([v - lo, hi - v]), nan=0.0)
+            ax.errorbar(a, v, yerr=err, fmt="s", color=f"C{i + 1}", ms=5, capsize=3,
+                        label=f"stepped sine, {label} (peak per level, 95 %)")
+    for ax in (ax1, ax2):
         ax.set_xscale("log")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)

@@ -171,9 +171,15 @@ def _level_starts(history: list[dict], results: list[dict]) -> list[tuple[float,
     return out
 
 
-def write_report(run_dir: Path) -> Path:
-    """Write ``<run>/report/`` (plots and report.md); returns the path of report.md."""
+def write_report(run_dir: Path, with_runs=()) -> Path:
+    """Write ``<run>/report/`` (plots and report.md); returns the path of report.md.
+    ``with_runs``: stepped-sine runs of the same rig whose modes a phase-resonance run's
+    backbone figure overlays (``bench report RUN --with OTHER``)."""
     run = load_run(Path(run_dir))
+    others = []
+    if with_runs:
+        from ._modes import run_modes
+        others = [run_modes(Path(p), model=False) for p in with_runs]
     out = run.path / "report"
     out.mkdir(exist_ok=True)
     md = _header_md(run)
@@ -182,7 +188,7 @@ def write_report(run_dir: Path) -> Path:
         md += analysis_md(run)
         md += identification_md(run.ident, plotted=False)
     else:
-        files = _write_figures(run, out)
+        files = _write_figures(run, out, others)
         md += _results_md(run, out, files)
     path = out / "report.md"
     path.write_text("\n".join(md) + "\n")
@@ -317,7 +323,7 @@ def accounting_md(run: RunData) -> list[str]:
     return md
 
 
-def _write_figures(run: RunData, out: Path) -> list[tuple[str, str]]:
+def _write_figures(run: RunData, out: Path, others=()) -> list[tuple[str, str]]:
     """Save the run's PNG plots into ``out``; returns (file name, what it shows) for each."""
     results, series, title = run.results, run.series, run.title
     colours = figures.level_colours(sorted({s.level_N for s in series}) or [1.0])
@@ -350,10 +356,12 @@ def _write_figures(run: RunData, out: Path) -> list[tuple[str, str]]:
                           "rigs)."))
     if any("backbone" in r for r in results):
         from ._backbone import plot_backbone
-        save(plot_backbone(results, run.rig, title), out / "backbone.png")
+        save(plot_backbone(results, run.rig, title, others), out / "backbone.png")
         files.append(("backbone.png", "phase resonance: natural frequency and damping ratio of each level's "
                       "locked point against its displacement amplitude, over the model's backbone from "
-                      "single-harmonic balance of the Masing loop (decision 0044)."))
+                      "single-harmonic balance of the Masing loop (decision 0044)"
+                      + (f"; squares: the modes of {len(others)} stepped-sine run{'s' * (len(others) != 1)} "
+                         "(`--with`) at their peaks' amplitudes, with 95 % intervals." if others else ".")))
     if run.comparison:
         save(figures.plot_model(series, colours, title, run.comparison), out / "model_vs_measurement.png")
         files.append(("model_vs_measurement.png", "simulated rig only: the sim/ engine's compliance_pp for "

@@ -351,3 +351,30 @@ def test_the_watch_page_shows_the_lock_of_a_phase_resonance_run(backbone_run):
         cells = browser.js("Array.from(document.querySelectorAll('#lockpoints td:nth-child(3)')).map(t => t.textContent)")
         assert [float(c) for c in cells] == pytest.approx([1e6 * float(p["amplitude_m"]) for p in points], rel=1e-3)
         assert text.count("yes") == len(points)
+
+
+def test_the_backbone_figure_overlays_a_stepped_sines_modes_at_their_amplitudes(feed_run, backbone_run, tmp_path):
+    """`bench report BACKBONE --with STEPPED`: the stepped sine's feed resonance per level is
+    drawn at the amplitude of its peak (compliance_pp x level); there it lies on the Masing
+    backbone of single-harmonic balance (an independent fact: sim.backbone), as the locked
+    points do, within the stepped sine's skew of a friction peak (2 %)."""
+    from bench.backbone import model_backbone
+    from bench.reports._backbone import stepped_points
+    from bench.reports._modes import run_modes
+
+    pts = stepped_points([run_modes(feed_run.path, model=False)])
+    assert [p["level_N"] for p in pts] == [1.0]
+    rig = load_rig(DEFAULTS / "sim_rig.toml")
+    (hb,) = model_backbone(rig, np.array([pts[0]["amplitude_m"]]))
+    assert pts[0]["frequency_Hz"] == pytest.approx(hb.frequency_Hz, rel=0.02), (pts[0], hb)
+    assert pts[0]["frequency_low_Hz"] <= pts[0]["frequency_Hz"] <= pts[0]["frequency_high_Hz"]
+    # the amplitude is the one measured at the peak: the largest |X1| of the refined steps
+    measured = max(r["compliance_abs_m_per_N"] * r["force_N"] for r in feed_run.results())
+    assert pts[0]["amplitude_m"] == pytest.approx(measured, rel=0.03)
+    import shutil
+    bb = tmp_path / "bb"
+    shutil.copytree(backbone_run.path, bb)          # the module's run stays as it was
+    assert main(["report", str(bb), "--with", str(feed_run.path)]) == 0
+    md = (bb / "report" / "report.md").read_text()
+    assert "squares: the modes of 1 stepped-sine run (`--with`)" in md
+    assert (bb / "report" / "backbone.png").stat().st_size > 10_000
