@@ -18,6 +18,7 @@ def pytest_configure(config):
 SPLIT = {"tests/sim/test_discrepancy.py"}
 
 
+@pytest.hookimpl(tryfirst=True)       # before pytest-xdist reads the groups (it registers later, so it runs first)
 def pytest_collection_modifyitems(config, items):
     for item in items:
         path = item.nodeid.split("::")[0]
