@@ -570,12 +570,25 @@ class RunStore:
         # only then; a plan edited to "refuse" afterwards makes those steps missing again)
         allowed = self.skipped_at_run_time() if plan.infeasible == "skip" else {}
         intact, missing, damaged, skipped, n_planned = [], [], [], [], 0
+
+        def present_step(key: str) -> None:      # a step with at least one of its files
+            if key not in have_json:
+                missing.append(StepProblem(key, self.steps_dir / f"{key}.json", "missing",
+                                           "missing: no .json (only the .npz)"))
+            elif bad.get(key) and bad[key].kind == "missing":
+                missing.append(StepProblem(key, self.steps_dir / f"{key}.npz", "missing",
+                                           "missing: no .npz (only the .json)"))
+            elif key in bad:
+                damaged.append(bad[key])
+            else:
+                intact.append(key)
+
         for (li, direction), keys in sweeps.items():
             n_sweep = min(len(keys), k) if k else len(keys)
             n_planned += n_sweep
             present = 0
             for key in keys:
-                jp, zp = self.steps_dir / f"{key}.json", self.steps_dir / f"{key}.npz"
+                jp = self.steps_dir / f"{key}.json"
                 if key not in have_json and key not in have_npz:
                     if key in allowed:
                         present += 1
@@ -584,14 +597,7 @@ class RunStore:
                         missing.append(StepProblem(key, jp, "missing", "missing: neither .json nor .npz"))
                     continue
                 present += 1
-                if key not in have_json:
-                    missing.append(StepProblem(key, jp, "missing", "missing: no .json (only the .npz)"))
-                elif bad.get(key) and bad[key].kind == "missing":
-                    missing.append(StepProblem(key, zp, "missing", "missing: no .npz (only the .json)"))
-                elif key in bad:
-                    damaged.append(bad[key])
-                else:
-                    intact.append(key)
+                present_step(key)
             if k and present < n_sweep:
                 label = f"L{li:02d}-{direction}"
                 missing.append(StepProblem(label, self.steps_dir, "missing",
@@ -601,15 +607,7 @@ class RunStore:
         if plan.refine:       # refinement steps: chosen online, counted as measured (decision 0043)
             for key in sorted(k for k in have_json | have_npz if plan.refined_key_ok(k)):
                 n_planned += 1
-                jp, zp = self.steps_dir / f"{key}.json", self.steps_dir / f"{key}.npz"
-                if key not in have_json:
-                    missing.append(StepProblem(key, jp, "missing", "missing: no .json (only the .npz)"))
-                elif bad.get(key) and bad[key].kind == "missing":
-                    missing.append(StepProblem(key, zp, "missing", "missing: no .npz (only the .json)"))
-                elif key in bad:
-                    damaged.append(bad[key])
-                else:
-                    intact.append(key)
+                present_step(key)
         order = {key: i for i, key in enumerate(s.key for s in plan.schedule())}
         missing.sort(key=lambda p: order.get(p.key, -1))
         return Accounting(n_planned, intact, missing, damaged, orphan, skipped)
