@@ -37,7 +37,7 @@ paper: setup
 # Two workers (the machines have 2 cores); --dist loadgroup keeps a module's tests, and so its
 # module-scoped fixtures (a run made once and read by many tests), on one worker (tests/conftest.py).
 test: setup
-	$(PY) -m pytest -q -n 2 --dist loadgroup --durations=15
+	$(PY) -m pytest -q -n 2 --dist loadscope --durations=15
 
 # Static checks (CI runs them before the tests): lint and import order, the layer
 # contract bench -> procedures -> drivers -> sim, types of sim/, drivers/, procedures/.
