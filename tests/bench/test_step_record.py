@@ -109,3 +109,28 @@ def test_a_version_2_step_without_its_analysis_is_named_not_guessed(small_run, t
     reason = {r.step: r.reason for r in src.rejected}[step.stem]
     assert step.name in reason and "not a version-2 step result: lacks harmonics" in reason, reason
     assert len(src.steps) + len(src.rejected) == len(small_run.results())
+
+
+def test_the_record_is_of_the_cleaned_block_not_the_raw_one():
+    """A hum on the probe (53.7 Hz beside a 40 Hz drive) is removed by the quality check; the
+    step's compliance is that of the cleaned records: within its noise of the true X/F that
+    made the block, where a fit of the raw block is pulled off by the hum."""
+    from procedures.analysis import fit_harmonics
+    from sim.step_record import measure_block
+
+    fs, f, n = 10_000.0, 40.0, 2500
+    t = np.arange(n) / fs
+    rng = np.random.default_rng(3)
+    X_true = 2e-6 * np.exp(-0.6j)
+    force = 3.0 * np.sin(2 * np.pi * f * t) + 1e-4 * rng.standard_normal(n)
+    disp = (abs(X_true) * 3.0 * np.sin(2 * np.pi * f * t + np.angle(X_true)) + 2e-6 * np.sin(2 * np.pi * 53.7 * t + 1.0)
+            + 1e-9 * rng.standard_normal(n))
+    accel = -(2 * np.pi * f) ** 2 * abs(X_true) * 3.0 * np.sin(2 * np.pi * f * t + np.angle(X_true)) \
+        + 1e-4 * rng.standard_normal(n)
+    m = measure_block(force, accel, disp, fs, f)
+    assert [a.kind for a in m.quality.artefacts] == ["line_interference"] and m.quality.status == "flagged"
+    C = complex(m.fields["compliance_m_per_N"]["re"], m.fields["compliance_m_per_N"]["im"])
+    assert abs(C - X_true) < 1e-3 * abs(X_true)
+    raw = fit_harmonics(disp, fs, f, 5).fundamental / fit_harmonics(force, fs, f, 5).fundamental
+    assert abs(raw - X_true) > 1e-2 * abs(X_true)            # what the second estimator stored before
+    assert m.fields["harmonics"]["disp"]["sigma"] == m.fields["disp"]["sigma"] < 1e-10
