@@ -110,8 +110,7 @@ def step_harmonics(result: StepResult, raw: dict | None = None) -> StepHarmonics
 class OnlineIdentification:
     def __init__(self, run_dir, rig: Rig, harmonics: int = 5, budget: int = 25):
         self.path = run_dir / "identification.jsonl"
-        self.guess = dict(F_s_N=rig.expected_F_s_N, x_s_m=rig.expected_x_s_m, n=rig.expected_n,
-                          mass_kg=rig.expected_mass_kg)
+        self.guess = rig.guess()
         self.rig_model = dict(rig.model or {})
         K = min(harmonics, MAX_HARMONICS)
         # the rig's declared modes: the analysis' model with them (else the Masing carriage)
