@@ -88,19 +88,29 @@ def sparse_tick(v: float, _pos=None) -> str:
 def _fit_titles(fig: Figure) -> None:
     """Wrap the figure's title to the figure's width and each axes' title to its axes'
     width (a long title is otherwise cut at the figure's edges or runs into its neighbour):
-    measured after a draw, rewrapped until it fits."""
+    measured after a draw, rewrapped until it fits.  One draw, and one more after each pass
+    that rewrapped a title (its layout moves the axes): a draw of a figure of ten log axes
+    costs about a second, so never one per title (decision 0048)."""
     import textwrap
-    fig.draw_without_rendering()
     texts = [(fig._suptitle, fig.bbox)] if fig._suptitle is not None else []
     texts += [(t, ax.bbox) for ax in fig.axes for t in (ax.title, ax._left_title, ax._right_title)]
-    for text, box in texts:
-        for _ in range(4):
-            s = text.get_text()
-            width = text.get_window_extent().width
-            if not s or width <= 0.98 * box.width:
-                break
-            per_line = max(len(line) for line in s.splitlines())
-            text.set_text(textwrap.fill(" ".join(s.split()), max(10, int(per_line * 0.95 * box.width / width))))
+    texts = [(text, box) for text, box in texts if text.get_text()]
+    if not texts:
+        return
+    fig.draw_without_rendering()
+    for _ in range(3):
+        changed = False
+        for text, box in texts:
+            for _ in range(4):
+                s = text.get_text()
+                width = text.get_window_extent().width
+                if width <= 0.98 * box.width:
+                    break
+                per_line = max(len(line) for line in s.splitlines())
+                text.set_text(textwrap.fill(" ".join(s.split()), max(10, int(per_line * 0.95 * box.width / width))))
+                changed = True
+        if not changed:
+            break
         fig.draw_without_rendering()
 
 
