@@ -213,15 +213,36 @@ def period_paths(X: np.ndarray, M: int) -> tuple[np.ndarray, np.ndarray]:
     spec[:, 1:K + 1] = -1j * X[:, :K] * (M / 2)
     x = np.fft.irfft(spec, M, axis=1)
     starts = np.argmax(x, axis=1)
-    x = x[np.arange(x.shape[0])[:, None], (starts[:, None] + np.arange(M)[None, :]) % M]
-    prev, nxt = np.roll(x, 1, axis=1), np.roll(x, -1, axis=1)
-    turn = ((x - prev) * (nxt - x) <= 0) & (x != prev)
-    den = prev - 2 * x + nxt
-    with np.errstate(divide="ignore", invalid="ignore"):
-        vertex = x - 0.125 * (nxt - prev) ** 2 / den
-    x = np.where(turn & (den != 0), vertex, x)
-    x -= 0.5 * (x.max(axis=1) + x.min(axis=1))[:, None]
-    return x, starts
+    out = np.empty_like(x)
+    _rotate_lift_centre(x, starts, out)
+    return out, starts
+
+
+@njit(cache=True)
+def _rotate_lift_centre(x, starts, out):
+    """:func:`period_paths` after the inverse FFT, one row at a time: rotate the row to
+    start at ``starts[i]``; lift every turning point (a sample not beyond both neighbours,
+    cyclically, and not equal to the one before) to the vertex of the parabola through the
+    three, x - (x+ - x-)^2 / (8 (x- - 2 x + x+)), unless that is flat; centre the row
+    between its extremes.  The arithmetic of the array expressions it replaced, in the same
+    order (equal to the last bit), five times faster: no index arrays, rolls or masks
+    (decision 0048)."""
+    R, M = x.shape
+    r = np.empty(M)
+    for i in range(R):
+        s = starts[i]
+        for j in range(M):
+            r[j] = x[i, (s + j) % M]
+        for j in range(M):
+            prev = r[j - 1] if j > 0 else r[M - 1]
+            nxt = r[j + 1] if j < M - 1 else r[0]
+            v = r[j]
+            if (v - prev) * (nxt - v) <= 0.0 and v != prev:
+                den = prev - 2 * v + nxt
+                if den != 0.0:
+                    v = v - 0.125 * (nxt - prev) ** 2 / den
+            out[i, j] = v
+        out[i] -= 0.5 * (out[i].max() + out[i].min())
 
 
 def path_friction(paths: np.ndarray, x_s: float, n: float, lam: float = LAMBDA_MASING) -> np.ndarray:
