@@ -1,0 +1,181 @@
+"""Cleaning one channel of a step (:mod:`sim.artefacts`): offset drift and steady lines
+removed, transients found; their settle cycles; a free vibration told from interference."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .detectors import (
+    DECAY_FRACTION,
+    DECAY_Z,
+    _aliases,
+    _find_lines,
+    _fit_sinusoid,
+    _periodic_fit,
+    _periodic_part,
+    _quantum,
+    _robust_noise,
+    _trend,
+    quantisation_line_bound,
+)
+from .quality import Artefact
+from .sentences import si
+
+TREND_Z = 6.0                 # offset drift: sqrt(chi-square, 2 dof) of the trend coefficients
+ENVELOPE_Z = 10.0             # first block's residual power above the noise, in standard errors
+
+
+def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
+    """Remove offset drift and steady lines; find transients.  Returns (cleaned samples,
+    artefacts removed, transients found as (A_0, sigma, freq or nan, evidence), noise rms).
+    A second pass refits the drive harmonics without what the first pass found."""
+    n = x.size
+    zero = np.zeros(n)
+    removed = zero
+    # a quantiser adds at least q^2/12 of noise (Sheppard), which neighbour differences do not
+    # see on a slow signal with little noise (they are mostly zero), and folds its error's
+    # harmonics back as tiny steady lines: neither is the rig's (decision 0039)
+    q = _quantum(x)
+    floor = q / math.sqrt(12.0)
+    for _pass in range(4):        # a trend converges more slowly than lines: more passes only for it
+        periodic, C = _periodic_fit(x - removed, fs, f)
+        r = x - periodic
+        seen = _robust_noise(r)
+        noise = max(seen, floor)
+        below = quantisation_line_bound(q, math.sqrt(max(seen * seen - floor * floor, 0.0)))
+        aliases = _aliases(C, noise * math.sqrt(2.0 / n), f, fs)
+        lines, transients = _find_lines(r, fs, f, aliases)
+        lines = [ln for ln in lines if ln.amp > below]
+        removed_part = sum((ln.model for ln in lines + transients), zero)
+        trend, change, z = _trend(r - removed_part, noise)
+        if not z > TREND_Z:
+            trend, change, z = zero, 0.0, 0.0
+        elif lines or transients:     # what the trend's low-frequency leakage made look like a line goes
+            lines, transients = _find_lines(r - trend, fs, f, aliases)
+            lines = [ln for ln in lines if ln.amp > below]
+            removed_part = sum((ln.model for ln in lines + transients), zero)
+            trend, change, z = _trend(r - removed_part, noise)
+            if not z > TREND_Z:
+                trend, change, z = zero, 0.0, 0.0
+        new = trend + sum((ln.model for ln in lines + transients), zero)
+        if (_pass == 0 and not lines and not transients and z == 0.0) or (_pass == 1 and z == 0.0):
+            break
+        removed = new
+    cleaned = x - new
+    rest = (r - new)[n // 2:]          # what is left, in the second half (after any transient): the noise
+    noise = max(min(float(1.4826 * np.median(np.abs(rest - np.median(rest)))) or noise, noise), floor)
+    arts = []
+    if z > 0:
+        arts.append(Artefact("offset_drift", ch, change, "removed",
+                             evidence=f"linear + quadratic trend {z:.0f} standard errors from zero"))
+    se = noise * math.sqrt(2.0 / n)
+    for ln in lines:
+        arts.append(Artefact("line_interference", ch, ln.amp, "removed", freq_Hz=ln.freq_Hz, snr=ln.amp / se,
+                             decay_bound_per_s=ln.decay_bound,
+                             evidence=f"{ln.amp / se:.0f} standard errors, {ln.freq_Hz / f:.3f} x the drive frequency"))
+    found: list[tuple] = [(ln.amp, ln.decay, ln.freq_Hz, f"a decaying sinusoid fitted, decay rate {ln.decay:.3g} +- "
+              f"{ln.decay_se:.2g} /s", True) for ln in transients]
+    if not found:
+        # the periodic part of the second half (the most settled), extrapolated to the whole
+        # record: what is left in the first half and not in the second is still settling
+        base = x - sum((ln.model for ln in lines), zero)
+        env = _envelope_transient(base, fs, f, max(_robust_noise(r), floor))
+        if env is not None:
+            found.append(env + (False,))
+            if z > 0:                  # the trend was the transient seen over the whole record
+                cleaned = base
+                arts = [a for a in arts if a.kind != "offset_drift"]
+    return cleaned, arts, found, noise
+
+
+def _envelope_transient(x: np.ndarray, fs: float, f: float, noise: float):
+    """A response still settling: the difference between consecutive drive periods,
+    x(t + T) - x(t), holds no periodic part and only noise once settled; its mean square
+    per period falling over the record gives the decay; ``noise`` (rms per sample, from
+    sample-to-sample differences, which a slow transient barely moves) sets the settled
+    level 2 noise^2.  (A_0, sigma, nan, evidence) or None."""
+    n = x.size
+    T = fs / f                                   # samples per period (not necessarily whole)
+    P = int(math.floor(n / T + 1e-9)) - 1
+    B = int(math.floor(T))
+    if P < 4 or B < 8:
+        return None
+    j = np.arange(n - int(math.ceil(T)))
+    d = np.interp(j + T, np.arange(n), x) - x[j]
+    starts = (np.arange(P) * T).astype(int)
+    D = np.array([np.mean(d[s:s + B] ** 2) for s in starts if s + B <= d.size])
+    P = D.size
+    floor = min(2 * noise ** 2, float(np.median(D[P // 2:]))) if noise > 0 else float(np.median(D[P // 2:]))
+    if not floor > 0:
+        return None
+    sd = floor * math.sqrt(2.0 / B)
+    z = (D - floor) / sd
+    if z[0] < ENVELOPE_Z:
+        return None
+    m = 0
+    while m < P and z[m] > 3:
+        m += 1
+    tc = (np.arange(P) + 0.5) / f
+    if m >= 2:
+        slope, icpt = np.polyfit(tc[:m], np.log(D[:m] - floor), 1)
+        sigma = -slope / 2
+        e0 = math.exp(icpt)
+    else:                                        # gone after one period: a lower bound of the rate
+        sigma = math.log((D[0] - floor) / (3 * sd)) / 2 * f
+        e0 = (D[0] - floor) * math.exp(2 * sigma * tc[0])
+    if not (sigma > 0 and math.isfinite(e0)) or math.exp(-sigma * n / fs) > DECAY_FRACTION:
+        return None                              # not falling over the record: a drift or a line, not a transient
+    # a transient of amplitude A e^(-sigma t) at the drive frequency differs between periods by A (1 - e^(-sigma T))
+    A0 = math.sqrt(2 * e0) / max(1 - math.exp(-sigma / f), 1e-12)
+    return (A0, float(sigma), math.nan, f"the difference between consecutive periods falls over the first {m} "
+                                        f"of {P} periods (first by {z[0]:.0f} standard errors above the noise)")
+
+
+def settle_cycles(A0: float, sigma: float, noise: float, n: int, fs: float, f: float) -> int:
+    """Drive cycles from the record start until the transient is harmless (module doc)."""
+    T = n / fs
+    tol = noise * math.sqrt(2.0 / n) * max(1.0, sigma * T / 2)
+    if not (A0 > tol and sigma > 0):
+        return 0
+    return int(math.ceil(f * math.log(A0 / tol) / sigma))
+
+
+MOTION_Z = 4.0                # a free vibration: each motion channel's component above its noise, standard errors
+MOTION_TOL = 0.3              # ... and the accelerometer's within 30 % (+ 3 standard errors) of -(2 pi f)^2 x
+
+
+def _motion_evidence(sig: dict, cleaned: dict, noise: dict, fs: float, f: float, fl: float) -> str:
+    """Evidence that a component at ``fl`` Hz is motion of the structure, seen by the probe
+    and the accelerometer as one: both show it above MOTION_Z standard errors and the
+    accelerometer's complex amplitude is -(2 pi fl)^2 times the probe's within MOTION_TOL
+    (and 3 combined standard errors).  A line on one sensor (mains on a cable), or on both
+    in phase (crosstalk), fails.  '' when the records do not show that."""
+    n = sig["disp"].size
+    t = np.arange(n) / fs
+    w = 2 * np.pi * fl
+    M = np.column_stack([np.sin(w * t), np.cos(w * t), np.ones(n), t - t.mean()])
+    amp, se = {}, {}
+    for ch in ("disp", "accel"):
+        r = sig[ch] - _periodic_part(cleaned[ch], fs, f)     # the removed components + noise
+        c, *_ = np.linalg.lstsq(M, r, rcond=None)
+        amp[ch], se[ch] = complex(c[0], c[1]), noise[ch] * math.sqrt(2.0 / n)
+        if not abs(amp[ch]) > MOTION_Z * se[ch]:
+            return ""
+    pred = -w * w * amp["disp"]
+    tol = MOTION_TOL * abs(pred) + 3 * math.hypot(se["accel"], w * w * se["disp"])
+    if not abs(amp["accel"] - pred) <= tol:
+        return ""
+    ratio = amp["accel"] / pred
+    line = max(("disp", "accel"), key=lambda ch: abs(amp[ch]) / se[ch])
+    decay = _fit_sinusoid(sig[line] - _periodic_part(cleaned[line], fs, f), fs, fl, with_decay=True)
+    rate = ""
+    if decay is not None and decay.decay_se > 0:
+        rate = (f"; decay rate {decay.decay:.2g} +- {decay.decay_se:.2g} /s"
+                + (", not significant" if not decay.decay > DECAY_Z * decay.decay_se else "")
+                + f" in a {1e3 * n / fs:.3g} ms record")
+    return (f"a free vibration of the carriage, not interference: the accelerometer's {si(abs(amp['accel']), 'm/s^2')} "
+            f"at {fl:.4g} Hz is -(2 pi f)^2 times the probe's {si(abs(amp['disp']), 'm')} (ratio {abs(ratio):.2f}, "
+            f"phase {math.degrees(math.atan2(ratio.imag, ratio.real)):+.0f} deg; "
+            f"{abs(amp['accel']) / se['accel']:.0f} and {abs(amp['disp']) / se['disp']:.0f} standard errors){rate}")

@@ -1,0 +1,100 @@
+"""What the artefact check says of one step: each :class:`Artefact`, the step's
+:class:`StepQuality` and the :class:`Assessment` (:mod:`sim.artefacts`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from ..records import PeriodicRecords
+from .sentences import LABEL, UNIT, si
+
+KINDS = ("line_interference", "unsettled_transient", "clipping", "dropout", "offset_drift")
+
+
+@dataclass(frozen=True)
+class Artefact:
+    """One artefact on one channel of one step.  ``size`` is in the channel's SI unit:
+    a line's or a transient's amplitude (at the record start), a drift's change over the
+    record, the clipping level, a drop-out's held value."""
+
+    kind: str                        # one of KINDS
+    channel: str                     # force | accel | disp
+    size: float
+    action: str                      # "removed" | "trimmed" | "rejected"
+    freq_Hz: float = math.nan        # line / transient frequency
+    time_s: float = math.nan         # clipping / drop-out: first sample, from the record start
+    duration_s: float = math.nan     # drop-out length; clipping: time spent at the limit
+    decay_per_s: float = math.nan    # transient: amplitude decay rate sigma (A = A_0 exp(-sigma t))
+    settle_cycles: int = 0           # transient: drive cycles from the record start until harmless
+    evidence: str = ""
+    snr: float = math.nan            # line: amplitude over one standard error of a harmonic of the record
+    decay_bound_per_s: float = math.nan   # line: upper bound of its decay rate (fit + 2 standard errors)
+    settle_at_least: bool = False    # settle_cycles is a least number (from that bound)
+
+    @property
+    def unit(self) -> str:
+        return UNIT[self.channel]
+
+    def describe(self) -> str:
+        where = f"on the {LABEL[self.channel]} ({self.channel})"
+        if self.kind == "line_interference":
+            return (f"a {self.freq_Hz:.4g} Hz line of {si(self.size, self.unit)} {where}, not locked to the drive "
+                    f"({self.evidence}); removed")
+        if self.kind == "unsettled_transient":
+            what = f"{self.freq_Hz:.4g} Hz " if math.isfinite(self.freq_Hz) else ""
+            done = {"removed": "; removed", "trimmed": "; the first periods were dropped"}.get(self.action, "")
+            if not self.decay_per_s > 0:
+                advice = (f"settle {'at least' if self.settle_at_least else 'about'} {self.settle_cycles} more cycles"
+                          if self.settle_cycles else "settle longer")
+                return (f"an unsettled {what}vibration of {si(self.size, self.unit)} {where} ({self.evidence}), "
+                        f"not decaying measurably within the record: {advice}{done}")
+            return (f"an unsettled {what}transient of {si(self.size, self.unit)} {where} at the record start, "
+                    f"decaying at {self.decay_per_s:.3g} /s (time constant {1e3 / self.decay_per_s:.3g} ms; "
+                    f"{self.evidence}): settle {self.settle_cycles} more cycles{done}")
+        if self.kind == "clipping":
+            return (f"clipping {where}: flat at {si(self.size, self.unit)} for {1e3 * self.duration_s:.3g} ms "
+                    f"from t = {self.time_s:.4g} s ({self.evidence})")
+        if self.kind == "dropout":
+            return (f"a drop-out {where}: the value {si(self.size, self.unit)} held for {1e3 * self.duration_s:.3g} ms "
+                    f"from t = {self.time_s:.4g} s ({self.evidence})")
+        if self.kind == "offset_drift":
+            return f"an offset drift {where} of {si(self.size, self.unit)} over the record ({self.evidence}); removed"
+        return f"{self.kind} {where}"
+
+    def as_dict(self) -> dict:
+        f = lambda v: None if not math.isfinite(v) else float(v)      # noqa: E731
+        return dict(kind=self.kind, channel=self.channel, size=float(self.size), unit=self.unit,
+                    action=self.action, freq_Hz=f(self.freq_Hz), time_s=f(self.time_s),
+                    duration_s=f(self.duration_s), decay_per_s=f(self.decay_per_s),
+                    settle_cycles=int(self.settle_cycles), evidence=self.evidence, text=self.describe())
+
+
+@dataclass
+class StepQuality:
+    """What a step is worth: ``usable``, ``flagged`` (used, ``notes`` say why) or
+    ``rejected`` (``reason`` says why, naming the channel)."""
+
+    status: str = "usable"
+    artefacts: list[Artefact] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    reason: str = ""
+    freq_Hz: float = math.nan
+    level_N: float = math.nan        # force fundamental amplitude, when it could be measured
+    record_s: float = math.nan       # length of the record
+
+    @property
+    def text(self) -> str:
+        return self.reason if self.status == "rejected" else "; ".join(self.notes)
+
+    def as_dict(self) -> dict:
+        return dict(status=self.status, reason=self.reason, notes=list(self.notes),
+                    artefacts=[a.as_dict() for a in self.artefacts])
+
+
+@dataclass
+class Assessment:
+    quality: StepQuality
+    records: PeriodicRecords | None      # of the cleaned (and possibly trimmed) records; None if rejected
+    cleaned: dict | None = None          # channel -> cleaned samples
+    start: int = 0                       # first sample kept
