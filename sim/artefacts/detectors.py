@@ -333,11 +333,17 @@ def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Lin
     w0 = 2 * np.pi * f0
     nd = 2 if with_decay else 1                # nonlinear parameters: (w - w0) T [, sigma T]
 
+    last: list = [None, None]              # MINPACK asks for the Jacobian where it has just
+    #                                        evaluated the residual: the sines are reused
+
     def parts(p):
-        w = w0 + p[0] / T
-        sig = p[1] / T if with_decay else 0.0
-        e = np.exp(-sig * t)
-        return w, sig, e * np.sin(w * t), e * np.cos(w * t)
+        key = p.tobytes()
+        if last[0] != key:
+            w = w0 + p[0] / T
+            sig = p[1] / T if with_decay else 0.0
+            e = np.exp(-sig * t)
+            last[:] = key, (w, sig, e * np.sin(w * t), e * np.cos(w * t))
+        return last[1]
 
     def resid(p):
         _, _, s, c = parts(p)
