@@ -352,10 +352,12 @@ def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Lin
     def jac(p):
         _, _, s, c = parts(p)
         a, b = p[nd], p[nd + 1]
-        cols = [tt * (a * c - b * s)]
+        J = np.empty((n, nd + 3))
+        J[:, 0] = tt * (a * c - b * s)
         if with_decay:
-            cols.append(-tt * (a * s + b * c))
-        return np.column_stack(cols + [s, c, np.ones(n)])
+            J[:, 1] = -tt * (a * s + b * c)
+        J[:, nd], J[:, nd + 1], J[:, nd + 2] = s, c, 1.0
+        return J
 
     ab, *_ = np.linalg.lstsq(np.column_stack([np.sin(w0 * t), np.cos(w0 * t), np.ones(n)]), r, rcond=None)
     p0 = np.concatenate([np.zeros(nd), ab])
