@@ -575,8 +575,12 @@ def issue16_rates(rows: list[dict]) -> list[str]:
                          f"truth {sum(bool(r.get('interval_covers_truth')) for r in rs)}/{len(rs)} (Jacobian only: "
                          f"{sum(bool(r.get('interval_covers_truth_jacobian')) for r in rs)}/{len(rs)})")
     ta = np.array([r["t_analysis_s"] for r in rows])
-    lines.append(f"{'time per case (analysis)':45s} median {np.median(ta):.1f} s, max {ta.max():.1f} s   "
-                 f"bar median <= 15 s, max <= 30 s (90 steps, one core)")
+    if any("cpu_total_s" in r for r in rows):        # independent source: the bar is on the CPU time (phase_lines)
+        lines.append(f"{'wall time per case (fits and page)':45s} median {np.median(ta):.1f} s, max {ta.max():.1f} s   "
+                     f"(the machine shared; the bar: CPU time below)")
+    else:
+        lines.append(f"{'time per case (analysis)':45s} median {np.median(ta):.1f} s, max {ta.max():.1f} s   "
+                     f"bar median <= 15 s, max <= 30 s (90 steps, one core)")
     return lines
 
 
