@@ -34,10 +34,11 @@ demo: setup
 paper: setup
 	$(VENV)/bin/bench paper --out out/paper
 
-# Two workers (the machines have 2 cores); --dist loadgroup keeps a module's tests, and so its
-# module-scoped fixtures (a run made once and read by many tests), on one worker (tests/conftest.py).
+# Two workers (the machines have 2 cores); the scheduler of tests/conftest.py keeps a module's
+# tests, and so its module-scoped fixtures (a run made once and read by many tests), on one
+# worker and starts the longest modules first (decision 0046).
 test: setup
-	$(PY) -m pytest -q -n 2 --dist loadgroup --durations=15
+	$(PY) -m pytest -q -n 2 --dist loadscope --durations=15
 
 # Static checks (CI runs them before the tests): lint and import order, the layer
 # contract bench -> procedures -> drivers -> sim, types of sim/, drivers/, procedures/.

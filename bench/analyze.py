@@ -42,8 +42,7 @@ def _guess(source: Path, rig: Path | None) -> tuple[dict | None, float | None]:
     else:
         return None, None     # a foreign file: start from the data themselves
     v_ref = (r.model or {}).get("friction_v_ref_m_per_s")
-    return (dict(F_s_N=r.expected_F_s_N, x_s_m=r.expected_x_s_m, n=r.expected_n, mass_kg=r.expected_mass_kg),
-            float(v_ref) if v_ref else None)
+    return r.guess(), float(v_ref) if v_ref else None
 
 
 def analyze_source(source: Path, out_dir: Path | None = None, rig: Path | None = None, *, src=None) -> dict:

@@ -362,8 +362,7 @@ def cmd_identify(args) -> int:
         print(f"step {r.step} rejected: {r.reason}")
     if not src.steps:
         raise ConfigurationError(f"{source}: no steps with force, acceleration and displacement to identify from")
-    guess = dict(F_s_N=rig.expected_F_s_N, x_s_m=rig.expected_x_s_m, n=rig.expected_n,
-                 mass_kg=rig.expected_mass_kg)
+    guess = rig.guess()
     analysis_json = default_out_dir(source) / "analysis.json"
     extra: tuple[str, ...] = ()
     if analysis_json.is_file():

@@ -220,23 +220,11 @@ def _frf_steps(ds: dict, n_fn: int) -> list[dict]:
 
 
 def step_from_signals(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float, harmonics: int = 5) -> dict:
-    """The measured fields of a step result, computed as procedures.stepped_sine does."""
-    from procedures.analysis import fit_harmonics
+    """The measured fields of a step result, made as procedures.stepped_sine makes them: by
+    the one analysis of the block (:func:`sim.step_record.measure_block`, decision 0047)."""
+    from sim.step_record import measure_block
 
-    fits = {"force": fit_harmonics(force_N, fs_Hz, freq_Hz, harmonics),
-            "accel": fit_harmonics(accel_m_s2, fs_Hz, freq_Hz, harmonics),
-            "disp": fit_harmonics(disp_m, fs_Hz, freq_Hz, harmonics)}
-    F1, A1, X1 = fits["force"].fundamental, fits["accel"].fundamental, fits["disp"].fundamental
-    C, Acc = X1 / F1, A1 / F1
-    summary = {k: dict(amplitude=v.amplitude.tolist(), phase_rad=v.phase_rad.tolist(), offset=v.offset,
-                       thd=v.thd, noise_rms=v.noise_rms, peak_to_peak=v.peak_to_peak,
-                       raw_peak_to_peak=v.raw_peak_to_peak) for k, v in fits.items()}
-    return dict(freq_Hz=float(freq_Hz), force_N=abs(F1),
-                compliance_m_per_N={"re": C.real, "im": C.imag}, compliance_abs_m_per_N=abs(C),
-                compliance_phase_rad=float(np.angle(C)),
-                accelerance_abs_kg_inv=abs(Acc), accelerance_phase_rad=float(np.angle(Acc)),
-                compliance_pp_m_per_N=0.5 * fits["disp"].peak_to_peak / abs(F1),
-                fs_Hz=float(fs_Hz), n_samples=int(np.size(force_N)), **summary)
+    return dict(measure_block(force_N, accel_m_s2, disp_m, fs_Hz, freq_Hz, harmonics).fields)
 
 
 def _time_step(tags: dict, chans: dict) -> tuple[float, dict, float, dict]:

@@ -25,6 +25,11 @@ Its :class:`~sim.artefacts.StepQuality`
 (usable / flagged / rejected, reasons naming the channel) is the one notion of step
 quality: ``bench analyze`` and the run report both show it (``Source.quality``).
 
+A run directory's step of format version 2 (decision record 0047) holds that analysis,
+made once when its block was measured (:func:`sim.step_record.measure_block`): it is
+read, not made again; the raw block is assessed here only for a version-1 step and for a
+UFF58 file.
+
 A step whose records are missing, inconsistent (lengths, sample rates), non-finite, too
 short, spoiled by an artefact, or not periodic enough after cleaning (harmonics or offset
 changing between the two halves of the record by more than DRIFT_LIMIT standard errors)
@@ -46,6 +51,8 @@ import numpy as np
 from sim.artefacts import StepQuality, assess_step, attribute_lines
 from sim.errors import ConfigurationError, RunDirectoryError
 from sim.identify import StepHarmonics
+from sim.records import PeriodicRecords
+from sim.step_record import quality_of, records_of
 
 from .storage import RunStore
 
@@ -128,14 +135,29 @@ def measured_step(key: str, force, accel, disp, fs_Hz: float, freq_Hz: float | N
     a = assess_step(force, accel, disp, fs_Hz, freq_Hz)
     if a.records is None:
         raise StepRejected(a.quality)
-    rec = a.records
+    return _step(key, a.records, a.quality, level_N, direction)
+
+
+def recorded_step(key: str, result: dict) -> MeasuredStep | None:
+    """One step from the analysis its step result keeps (format version 2), not made again;
+    None for a version-1 step (no analysis kept).  :class:`StepRejected` when its quality
+    check rejected it."""
+    rec, quality = records_of(result), quality_of(result)
+    if rec is None or quality is None:
+        return None
+    if quality.status == "rejected":
+        raise StepRejected(quality)
+    return _step(key, rec, quality, result.get("target_force_N"), result.get("direction", ""))
+
+
+def _step(key: str, rec: PeriodicRecords, quality: StepQuality, level_N: float | None, direction: str) -> MeasuredStep:
     h = StepHarmonics.from_records(rec)
     c = rec.channels
     level = float(abs(h.force[0])) if level_N is None or not math.isfinite(level_N) else float(level_N)
     return MeasuredStep(key=key, level_N=level, freq_Hz=rec.freq_Hz, harmonics=h, fs_Hz=rec.fs_Hz,
                         force_N=c["force"].mean_period, accel_m_s2=c["accel"].mean_period,
                         disp_m=c["disp"].mean_period, direction=direction, periods=rec.periods,
-                        drift_sigma=rec.drift_sigma, quality=a.quality)
+                        drift_sigma=rec.drift_sigma, quality=quality)
 
 
 # ---------------------------------------------------------------------------- run directories
@@ -153,6 +175,14 @@ def _load_run(path: Path) -> Source:
     for r in results:
         key = str(r.get("key", "?"))
         order.append(key)
+        try:
+            kept = recorded_step(key, dict(r))
+        except (StepRejected, ValueError, KeyError, TypeError) as e:
+            src.rejected.append(Rejected(key, str(e), getattr(e, "quality", None)))
+            continue
+        if kept is not None:
+            src.steps.append(kept)
+            continue
         try:
             raw = store.raw(key)
         except Exception as e:  # noqa: BLE001 - a damaged block rejects its step, not the run

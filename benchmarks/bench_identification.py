@@ -7,7 +7,11 @@ data come from the RK4 plant on the issue's grid (5 levels 0.1-0.85 F_s x 18 fre
 UFF58 file (3 levels x 8 frequencies, slower).  Prints per rig and in total: coverage of the
 95 % intervals, worst error per parameter, range of the reduced chi-square, time.
 
-    python benchmarks/bench_identification.py [--rigs 40] [--uff 6] [--workers 2]
+``--procedure-rigs`` rigs more run the whole default plan on the simulated rig through the
+real protocols and the run's final identification (tests/procedures/test_identification.py
+holds two of them): errors against the 3 % / 5 % tolerance and the coverage of the intervals.
+
+    python benchmarks/bench_identification.py [--rigs 40] [--uff 6] [--procedure-rigs 6] [--workers 2]
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from tests.procedures.test_identification import TOLERANCE, run_rigs  # noqa: E402
 from tests.sim.test_identify_clean import KEYS, plant_case, uff_case  # noqa: E402
 
 
@@ -38,6 +43,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rigs", type=int, default=40, help="rigs through the RK4 plant")
     ap.add_argument("--uff", type=int, default=6, help="rigs from the independent simulator via UFF58")
+    ap.add_argument("--procedure-rigs", type=int, default=6, help="rigs through the default plan and the run's identification")
     ap.add_argument("--workers", type=int, default=2)
     a = ap.parse_args()
     out = tempfile.mkdtemp(prefix="bench_ident_")
@@ -65,6 +71,25 @@ def main() -> None:
               f"reduced chi2 {min(chi):.2f}-{max(chi):.2f}; worst error "
               + ", ".join(f"{k} {100 * v:.3f} %" for k, v in worst.items()))
     print(f"wall time {time.perf_counter() - t0:.0f} s with {a.workers} workers")
+    if a.procedure_rigs:
+        procedure(a.procedure_rigs, out, a.workers)
+
+
+def procedure(n_rigs: int, out: str, workers: int) -> None:
+    """The default plan through the twins and the run's identification on generated rigs."""
+    t0 = time.perf_counter()
+    seeds = list(range(n_rigs))
+    outcomes = run_rigs(seeds, [Path(out) / f"procedure{s}" for s in seeds], workers)
+    inside, misses = [], 0
+    for seed, truth, est in outcomes:
+        err = {k: est.values[k] / truth[k] - 1 for k in KEYS}
+        ok = {k: est.low[k] <= truth[k] <= est.high[k] for k in KEYS}
+        inside += ok.values()
+        misses += sum(abs(err[k]) > TOLERANCE[k] for k in KEYS)
+        print(f"rig {seed} n={truth['n']:.2f} " + " ".join(
+            f"{k} {100 * err[k]:+.3f}%{'' if ok[k] else '!'}" for k in KEYS), flush=True)
+    print(f"default plan: {n_rigs} rigs: coverage {100 * np.mean(inside):.1f} % of parameters; "
+          f"{misses} estimates outside the tolerance; wall time {time.perf_counter() - t0:.0f} s")
 
 
 if __name__ == "__main__":

@@ -26,6 +26,7 @@ import numpy as np
 from sim.discrepancy.rigfit import BOUND_FACTOR, OnlineRigFit, identify_steps, rig_effects
 from sim.identify import Identifier, StepHarmonics
 from sim.records import analyse_records
+from sim.step_record import records_of
 from sim.step_result import StepResult
 
 from .plan import Plan, Rig
@@ -93,8 +94,12 @@ def choose_frequencies(sweep: list, values: dict | None, per_sweep: int) -> list
 
 
 def step_harmonics(result: StepResult, raw: dict | None = None) -> StepHarmonics:
-    """A step for the identifier: from its raw block when there is one (every harmonic the
-    block holds, noise from the scatter of its periods), else from the stored fits."""
+    """A step for the identifier: from the analysis its record keeps (format version 2:
+    every harmonic the block holds, noise from the scatter of its periods, decision 0047);
+    a version-1 step from its raw block when there is one, else from the stored fits."""
+    rec = records_of(result)
+    if rec is not None:
+        return StepHarmonics.from_records(rec)
     if raw is None:
         return StepHarmonics.from_result(result)
     rec = analyse_records(raw["force_N"], raw["accel_m_s2"], raw["disp_m"], float(raw["fs_Hz"]),
@@ -105,8 +110,7 @@ def step_harmonics(result: StepResult, raw: dict | None = None) -> StepHarmonics
 class OnlineIdentification:
     def __init__(self, run_dir, rig: Rig, harmonics: int = 5, budget: int = 25):
         self.path = run_dir / "identification.jsonl"
-        self.guess = dict(F_s_N=rig.expected_F_s_N, x_s_m=rig.expected_x_s_m, n=rig.expected_n,
-                          mass_kg=rig.expected_mass_kg)
+        self.guess = rig.guess()
         self.rig_model = dict(rig.model or {})
         K = min(harmonics, MAX_HARMONICS)
         # the rig's declared modes: the analysis' model with them (else the Masing carriage)

@@ -280,7 +280,7 @@ class PhaseResonance(SteppedSine):
             block = self.last_block
             assert block is not None          # LockLost comes after a block
             f = self.drive.freq_Hz
-            measured, raw = self.block_result(block, self._fit_block(block, f), f)
+            measured, raw = self.block_result(block, self._measure_block(block, f))
             self.slope = None             # the next level probes again
             self.on_event("lock_lost", key=step.key, level_N=step.force_N, freq_Hz=f, reason=str(e))
             return self._record(step, measured, raw, locked=False, why=f"lock lost: {e}",

@@ -10,6 +10,9 @@ from __future__ import annotations
 import re
 from dataclasses import asdict, dataclass, field
 
+# the rig file's [rig.expected] values, as every identification names its starting guess
+GUESS_KEYS = ("F_s_N", "x_s_m", "n", "mass_kg")
+
 
 @dataclass(frozen=True)
 class Limits:
@@ -165,6 +168,10 @@ class Rig:
     expected_F_s_N: float
     expected_n: float
     model: dict = field(default_factory=dict)   # sim.rig.RigModel keys (simulated rigs)
+
+    def guess(self) -> dict[str, float]:
+        """The expected F_s, x_s, n and m: every identification's starting point."""
+        return {k: getattr(self, f"expected_{k}") for k in GUESS_KEYS}
 
     def to_dict(self) -> dict:
         return asdict(self)

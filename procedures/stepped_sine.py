@@ -16,10 +16,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers import plan_block
-from sim.artefacts import HARMONIC_GUARD, assess_step, si
-from sim.step_result import ControlIteration, FitSummary, StepMeasurement, StepResult
+from sim.artefacts import HARMONIC_GUARD, StepQuality, assess_step, si
+from sim.step_record import BlockRecord, measure_block
+from sim.step_result import ControlIteration, StepMeasurement, StepResult
 
-from .analysis import HarmonicFit, fit_harmonics
+from .analysis import fit_harmonics
 from .instruments import Block, BlockSource, SineSource, StepMarker
 from .plan import Plan, StepSpec
 from .safety import LimitExceeded
@@ -89,7 +90,12 @@ def unsettled(block: Block, freq_Hz: float, ringing_at: tuple[float, ...] = ()) 
         q = assess_step(block.force_N, block.accel_m_s2, block.disp_m, block.fs_Hz, freq_Hz).quality
     except ValueError:
         return Unsettled()  # too short to assess: the offline check says so; waiting does not change it
-    guard = HARMONIC_GUARD * block.fs_Hz / max(block.n_samples, 1)
+    return unsettled_in(q, block.fs_Hz, block.n_samples, ringing_at)
+
+
+def unsettled_in(q: StepQuality, fs_Hz: float, n_samples: int, ringing_at: tuple[float, ...] = ()) -> Unsettled:
+    """:func:`unsettled` from the block's quality already assessed (``n_samples`` long at ``fs_Hz``)."""
+    guard = HARMONIC_GUARD * fs_Hz / max(n_samples, 1)
     arts = [a for a in q.artefacts if a.kind in SETTLE_KINDS]
     still = [a for a in q.artefacts if a.kind == "line_interference"
              and any(abs(a.freq_Hz - fr) <= guard for fr in ringing_at)]
@@ -113,12 +119,6 @@ class DriveState:
     gain_N_per_Vpp: float = 0.0       # latest measured force amplitude per Vpp
     phase_rad: float | None = None    # drive phase now (from the last force fit)
     next_quarter: int = 1             # changes alternate between phase pi/2 and 3 pi/2
-
-
-def _fit_summary(fit: HarmonicFit) -> FitSummary:
-    return FitSummary(amplitude=fit.amplitude.tolist(), phase_rad=fit.phase_rad.tolist(),
-                offset=fit.offset, thd=fit.thd, noise_rms=fit.noise_rms, peak_to_peak=fit.peak_to_peak,
-                raw_peak_to_peak=fit.raw_peak_to_peak)
 
 
 class SteppedSine:
@@ -279,9 +279,9 @@ class SteppedSine:
             self._change(vpp=nxt)
         return err, it, False, f"not within {100 * self.plan.force_tolerance:g} % after {it} iterations"
 
-    def _fit_block(self, block: Block, f: float) -> dict[str, HarmonicFit]:
-        return {name: fit_harmonics(x, block.fs_Hz, f, self.plan.harmonics)
-                for name, x in (("force", block.force_N), ("accel", block.accel_m_s2), ("disp", block.disp_m))}
+    def _measure_block(self, block: Block, f: float) -> BlockRecord:
+        """The block's one analysis, from which its step record is made (decision 0047)."""
+        return measure_block(block.force_N, block.accel_m_s2, block.disp_m, block.fs_Hz, f, self.plan.harmonics)
 
     def measure(self, step: StepSpec) -> tuple[StepMeasurement, dict[str, np.ndarray]]:
         """Settle, then measure; re-measure while the block is not settled (decision 0037).
@@ -301,12 +301,12 @@ class SteppedSine:
         if self.marker is not None:   # a simulated rig reseeds its noise here (decision 0013)
             self.marker.mark_step(step.key)
         block = self._acquire(f, periods)
-        fits = self._fit_block(block, f)
+        m = self._measure_block(block, f)
         extra, before, found = 0, math.inf, Unsettled()
         settle = max(self.plan.settle_cycles, math.ceil(self.plan.min_settle_s * f))
         while True:
-            found = unsettled(block, f, found.vibrations_Hz)
-            noise = fits["disp"].noise_rms
+            found = unsettled_in(m.quality, block.fs_Hz, block.n_samples, found.vibrations_Hz)
+            noise = m.disp_noise_rms
             ringing = noise > 3 * self.disp_noise_floor_m and noise < 0.9 * before
             if not (found.why or ringing) or extra >= self.plan.max_extra_settle_blocks:
                 break
@@ -320,34 +320,21 @@ class SteppedSine:
                 self._wait(f, 0.0, min_periods=max(settle, need))
             before = noise
             block = self._acquire(f, periods)
-            fits = self._fit_block(block, f)
+            m = self._measure_block(block, f)
             extra += 1
         why = found.why
         if why:
             log.warning("step %s: still unsettled after %d extra blocks (plan: max_extra_settle_blocks = %d), "
                         "recorded as it is: %s", step.key, extra, self.plan.max_extra_settle_blocks, why)
-        return self.block_result(block, fits, f, extra, why)
+        return self.block_result(block, m, extra, why)
 
-    def block_result(self, block: Block, fits: dict[str, HarmonicFit], f: float, extra: int = 0,
+    def block_result(self, block: Block, m: BlockRecord, extra: int = 0,
                      why: str = "") -> tuple[StepMeasurement, dict[str, np.ndarray]]:
-        """A measured block's record (the result's measurement part) and its raw arrays."""
-        F1 = fits["force"].fundamental
-        X1 = fits["disp"].fundamental
-        A1 = fits["accel"].fundamental
-        compliance = X1 / F1
-        accelerance = A1 / F1
+        """A measured block's record (the result's measurement part: the block's one
+        analysis ``m``, the drive and the block's identity) and its raw arrays."""
         result = StepMeasurement(
-            freq_Hz=f, force_N=abs(F1), drive_Vpp=self.drive.amplitude_Vpp,
-            compliance_m_per_N={"re": float(compliance.real), "im": float(compliance.imag)},
-            compliance_abs_m_per_N=abs(compliance), compliance_phase_rad=float(np.angle(compliance)),
-            accelerance_abs_kg_inv=abs(accelerance), accelerance_phase_rad=float(np.angle(accelerance)),
-            # seed Eq. 9 in SI: half the peak-to-peak of the steady (fitted periodic)
-            # displacement per force amplitude
-            compliance_pp_m_per_N=0.5 * fits["disp"].peak_to_peak / abs(F1),
-            force=_fit_summary(fits["force"]), accel=_fit_summary(fits["accel"]),
-            disp=_fit_summary(fits["disp"]),
-            fs_Hz=block.fs_Hz, n_samples=block.n_samples, t0_s=block.t0_s, block_id=block.block_id,
-            resends=block.resends, settle_extra_blocks=extra, unsettled=why)
+            **m.fields, drive_Vpp=self.drive.amplitude_Vpp,
+            t0_s=block.t0_s, block_id=block.block_id, resends=block.resends, settle_extra_blocks=extra, unsettled=why)
         raw = dict(force_N=block.force_N, accel_m_s2=block.accel_m_s2, disp_m=block.disp_m,
                    fs_Hz=np.array(block.fs_Hz), t0_s=np.array(block.t0_s))
         return result, raw

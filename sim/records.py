@@ -192,11 +192,17 @@ def analyse_channel(x: np.ndarray, fs: float, f: float, periods: int, spp: int |
     N = int(round(periods * fs / f))
     K = max(1, min(max_harmonics, int(math.floor(0.5 * fs / f - 0.5))))
     C, off, noise = _lsq_harmonics(x[:N], fs, f, K)
+    return ChannelHarmonics(C, off, noise, noise * math.sqrt(2.0 / N), synthesized_period(C, off, fs, f))
+
+
+def synthesized_period(C: np.ndarray, offset: float, fs: float, f: float) -> np.ndarray:
+    """One period of offset + sum_k Im(C_k e^(i k w t)) at the record's rate (at least 8
+    samples): the mean period a record's harmonics describe."""
+    K = C.size
     M = max(8, int(round(fs / f)))                       # > 2K: K <= fs / 2f - 1/2
     spec = np.zeros(max(M, K + 1), complex)
     spec[1:K + 1] = C
-    mean = off + (np.fft.ifft(spec) * spec.size).imag[:M]   # off + Im(sum_k C_k e^(2 pi i k m / M)), m = 0..M-1
-    return ChannelHarmonics(C, off, noise, noise * math.sqrt(2.0 / N), mean)
+    return offset + (np.fft.ifft(spec) * spec.size).imag[:M]   # off + Im(sum_k C_k e^(2 pi i k m / M)), m = 0..M-1
 
 
 def checked_records(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None = None) -> tuple[dict, float]:

@@ -8,8 +8,14 @@ checker sees every field and its type.
 
 Format versions (``format_version`` in each step file; decision record 0027):
 
-- 1: the fields below.  Files written before the field existed have the same content and
-  no ``format_version``: they are read as version 1.
+- 1: the fields below without ``quality`` and ``harmonics``.  Files written before the
+  field existed have the same content and no ``format_version``: they are read as version 1.
+- 2 (decision record 0047): the measured fields come from the block's one analysis
+  (:func:`sim.step_record.measure_block`: the step-quality check and the harmonics of its
+  cleaned records), which the step keeps whole: ``harmonics`` (every harmonic of each
+  channel with its standard error, the noise, the periodicity score) and ``quality`` (the
+  verdict with its reasons and artefacts); each channel summary has its ``sigma``.  Readers
+  take the measured numbers from there and re-assess the raw block of a version-1 step only.
 
 A reader meets a newer version than it knows only when a newer guideway-bench wrote the
 file; :func:`check_step_version` names the file and the versions instead of guessing.
@@ -18,12 +24,13 @@ file; :func:`check_step_version` names the file and the versions instead of gues
 from __future__ import annotations
 
 import functools
+import types
 import typing
 from typing import NotRequired, TypedDict
 
 from .errors import RunDirectoryError
 
-STEP_FORMAT_VERSION = 1
+STEP_FORMAT_VERSION = 2
 
 
 class ComplexValue(TypedDict):
@@ -43,14 +50,54 @@ class FitSummary(TypedDict):
     noise_rms: float
     peak_to_peak: float
     raw_peak_to_peak: float
+    sigma: NotRequired[float]           # version 2: standard error of one harmonic's real or imaginary part
 
 
-class StepMeasurement(TypedDict):
-    """What one measured block gives (:meth:`procedures.stepped_sine.SteppedSine.measure`)."""
+class ChannelRecord(TypedDict):
+    """Version 2: every harmonic of one channel, C_k = re_k + i im_k of A_k sin(k w t + phi_k)
+    (k = 1..K, all below Nyquist, at most 200), the offset, the noise rms per sample and
+    one harmonic's standard error (of its real or imaginary part)."""
+
+    re: list[float]
+    im: list[float]
+    offset: float
+    noise_rms: float
+    sigma: float
+
+
+class BlockHarmonics(TypedDict):
+    """Version 2: the block's one analysis (:class:`sim.records.PeriodicRecords` of the
+    cleaned records; of the raw ones when clipping or a drop-out rejected the block)."""
+
+    freq_Hz: float
+    fs_Hz: float
+    periods: int                        # whole periods analysed
+    samples: int
+    start: int                          # first sample kept (periods dropped for a transient)
+    drift_sigma: float                  # periodicity score: halves of the record, standard errors
+    drift_detail: str                   # its channel and harmonic
+    force: ChannelRecord
+    accel: ChannelRecord
+    disp: ChannelRecord
+
+
+class QualityRecord(TypedDict):
+    """Version 2: the step-quality verdict (:class:`sim.artefacts.StepQuality`, every field)."""
+
+    status: str                         # usable | flagged | rejected
+    reason: str                         # why rejected
+    notes: list[str]                    # why flagged
+    freq_Hz: float | None
+    level_N: float | None
+    record_s: float | None
+    artefacts: list[dict]               # sim.artefacts.Artefact fields (NaN as null)
+
+
+class BlockMeasurement(TypedDict):
+    """What the one analysis of a block gives (:func:`sim.step_record.measure_block`)."""
 
     freq_Hz: float
     force_N: float                      # measured force amplitude (fundamental)
-    drive_Vpp: float
     compliance_m_per_N: ComplexValue    # X1 / F1
     compliance_abs_m_per_N: float
     compliance_phase_rad: float
@@ -62,6 +109,14 @@ class StepMeasurement(TypedDict):
     disp: FitSummary
     fs_Hz: float
     n_samples: int
+    quality: NotRequired[QualityRecord]      # version 2
+    harmonics: NotRequired[BlockHarmonics]   # version 2
+
+
+class StepMeasurement(BlockMeasurement):
+    """What one measured block gives (:meth:`procedures.stepped_sine.SteppedSine.measure`)."""
+
+    drive_Vpp: float
     t0_s: float
     block_id: int
     resends: int
@@ -150,6 +205,11 @@ def step_fields_problem(result: dict) -> str | None:
         return f"not a step result: lacks {', '.join(missing)}"
     if result["direction"] not in ("up", "down"):
         return f"not a step result: direction: 'up' or 'down' expected, found {str(result['direction'])[:40]!r}"
+    version = result.get("format_version", 1)
+    if isinstance(version, int) and version >= 2:
+        lacking = [k for k in ("quality", "harmonics") if k not in result]
+        if lacking:
+            return f"not a version-2 step result: lacks {', '.join(lacking)}"
     problem = _typed_problem(result, StepResult, "")
     return f"not a step result: {problem}" if problem else None
 
@@ -174,6 +234,10 @@ def _typed_problem(value, hint, where: str) -> str | None:
                 if problem:
                     return problem
         return None
+    if origin is types.UnionType:       # X | None
+        if value is None and type(None) in typing.get_args(hint):
+            return None
+        hint = next(h for h in typing.get_args(hint) if h is not type(None))
     if origin is list:
         if not isinstance(value, list):
             return f"{where}: a list was expected, found {type(value).__name__}"
@@ -182,5 +246,6 @@ def _typed_problem(value, hint, where: str) -> str | None:
     ok = {float: lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
           int: lambda v: isinstance(v, int) and not isinstance(v, bool),
           bool: lambda v: isinstance(v, bool),
-          str: lambda v: isinstance(v, str)}[hint](value)
+          str: lambda v: isinstance(v, str),
+          dict: lambda v: isinstance(v, dict)}[hint](value)
     return None if ok else f"{where}: {hint.__name__} expected, found {type(value).__name__} {str(value)[:40]!r}"

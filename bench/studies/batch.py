@@ -25,6 +25,7 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 
+from procedures.plan import GUESS_KEYS
 from sim.errors import ConfigurationError
 
 from .engine import Engine, Outcome, Study
@@ -144,12 +145,11 @@ def identify_source(source: Path, out_dir: Path | None = None, rig: Path | None 
     src = load_source(source)
     if src.kind == "run":
         r = src.metadata["rig"]
-        guess = {k: r[f"expected_{k}"] for k in ("F_s_N", "x_s_m", "n", "mass_kg")}
+        guess = {k: r[f"expected_{k}"] for k in GUESS_KEYS}
         rig_model = r.get("model") or {}
     else:
         rr = load_rig(rig or DEFAULTS / "sim_rig.toml")
-        guess = dict(F_s_N=rr.expected_F_s_N, x_s_m=rr.expected_x_s_m, n=rr.expected_n,
-                     mass_kg=rr.expected_mass_kg)
+        guess = rr.guess()
         rig_model = rr.model or {}
     if not src.steps:
         raise ConfigurationError(f"{source}: no steps with force, acceleration and displacement to identify from")

@@ -163,8 +163,7 @@ def identification_sample(inputs: dict, seed: int) -> list[dict]:
 
     plan, rig = _configs(inputs["plan"], inputs["rig"])
     rng = np.random.default_rng(seed)
-    expected = dict(F_s_N=rig.expected_F_s_N, x_s_m=rig.expected_x_s_m, n=rig.expected_n,
-                    mass_kg=rig.expected_mass_kg)
+    expected = rig.guess()
     truth = draw_rig(expected, inputs["spread"], inputs["n_spread"], rng)
     model = dict(rig.model)
     k = inputs["noise_scale"]

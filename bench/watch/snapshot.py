@@ -24,7 +24,7 @@ import threading
 from datetime import datetime
 from pathlib import Path
 
-from procedures.plan import Plan
+from procedures.plan import GUESS_KEYS, Plan
 
 from ..files import open_regular, read_file
 from ..storage import RunDirError, RunStatus, stored_plan
@@ -360,7 +360,7 @@ class RunReader:
             final = None if not isinstance(final, dict) else {"error": final.get("error", "unusable result")}
         if analysis is not None and ok(analysis):
             final = analysis
-        expected = {k: meta.get("rig", {}).get(f"expected_{k}") for k in ("F_s_N", "x_s_m", "n", "mass_kg")}
+        expected = {k: meta.get("rig", {}).get(f"expected_{k}") for k in GUESS_KEYS}
         return dict(history=history, latest_warnings=latest_warnings, final=final, expected=expected)
 
     def _warnings(self, meta: dict, results: list[dict]) -> list[dict]:

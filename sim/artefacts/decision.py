@@ -126,7 +126,7 @@ def assess_step(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None
             q.reason += f"; {worst.describe()}"
             q.artefacts = [replace(a, action="rejected") if a.kind == "unsettled_transient" else a
                            for a in q.artefacts]
-        return Assessment(q, None)
+        return Assessment(q, None, analysed=rec)
     q.notes = [a.describe() for a in q.artefacts] + q.notes
     d = rec.channels["disp"]
     a1 = abs(d.harmonics[0]) if d.harmonics.size else 0.0
@@ -135,4 +135,4 @@ def assess_step(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None
         q.notes.append(f"noisy: displacement residual {100 * ratio:.3g} % of the fundamental "
                        f"(limit {100 * NOISY_RESIDUAL:g} %; used with its noise as weight)")
     q.status = "flagged" if q.notes else "usable"
-    return Assessment(q, rec, cleaned, start)
+    return Assessment(q, rec, cleaned, start, rec)

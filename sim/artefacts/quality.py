@@ -4,7 +4,8 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
+from typing import Any
 
 from ..records import PeriodicRecords
 from .sentences import LABEL, UNIT, si
@@ -91,6 +92,21 @@ class StepQuality:
         return dict(status=self.status, reason=self.reason, notes=list(self.notes),
                     artefacts=[a.as_dict() for a in self.artefacts])
 
+    def to_record(self) -> dict:
+        """Everything of the quality, for a step file (NaN as null); :meth:`from_record` reads it back."""
+        f = lambda v: None if isinstance(v, float) and not math.isfinite(v) else v      # noqa: E731
+        return dict(status=self.status, reason=self.reason, notes=list(self.notes), freq_Hz=f(self.freq_Hz),
+                    level_N=f(self.level_N), record_s=f(self.record_s),
+                    artefacts=[{k: f(v) for k, v in asdict(a).items()} for a in self.artefacts])
+
+    @classmethod
+    def from_record(cls, d: dict) -> StepQuality:
+        def g(v: Any) -> Any:
+            return math.nan if v is None else v
+        return cls(status=d["status"], reason=d["reason"], notes=list(d["notes"]), freq_Hz=g(d["freq_Hz"]),
+                   level_N=g(d["level_N"]), record_s=g(d["record_s"]),
+                   artefacts=[Artefact(**{k: g(v) for k, v in a.items()}) for a in d["artefacts"]])
+
 
 @dataclass
 class Assessment:
@@ -98,3 +114,6 @@ class Assessment:
     records: PeriodicRecords | None      # of the cleaned (and possibly trimmed) records; None if rejected
     cleaned: dict | None = None          # channel -> cleaned samples
     start: int = 0                       # first sample kept
+    # the harmonics of the cleaned records also when the periodicity gate rejected them (the
+    # step's record keeps them, decision 0047); None when a raw-sample fault stopped the check first
+    analysed: PeriodicRecords | None = None

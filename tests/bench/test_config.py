@@ -433,3 +433,10 @@ def test_a_sensor_url_query_is_checked_with_the_rig(tmp_path, query, said):
     with pytest.raises(ConfigError) as e:
         load_rig(path)
     assert f"{path}: [rig.instruments] sensor: " in str(e.value) and said in str(e.value), str(e.value)
+
+
+@pytest.mark.parametrize("name", ["sim_rig.toml", "sim_rig_pitch.toml"])
+def test_the_identifications_starting_guess_is_the_rig_files_expected_table(name):
+    # one guess for every identification (cli, analyze, studies, online): the file's values, by name
+    table = tomllib.loads((DEFAULTS / name).read_text())["rig"]["expected"]
+    assert load_rig(DEFAULTS / name).guess() == {k: float(table[k]) for k in ("F_s_N", "x_s_m", "n", "mass_kg")}

@@ -399,6 +399,7 @@ def test_the_report_lists_the_same_rejected_and_flagged_steps_as_bench_analyze(r
     with hum on the probe is kept with the hum removed, in the report exactly as in the
     source that `bench analyze` reads."""
     from bench.sources import load_source
+    from sim.step_record import measure_block
     run = _copy(run_dir, tmp_path)
     store = RunStore.open(run)
     results = store.results()
@@ -413,6 +414,9 @@ def test_the_report_lists_the_same_rejected_and_flagged_steps_as_bench_analyze(r
         else:
             t = np.arange(raw["disp_m"].size) / float(raw["fs_Hz"])
             raw["disp_m"] = raw["disp_m"] + 40e-9 * np.sin(2 * np.pi * 50.0 * t + 0.3)
+        # the block as if measured so: its record made from it, as the procedure makes it (decision 0047)
+        r = {**r, **measure_block(raw["force_N"], raw["accel_m_s2"], raw["disp_m"], float(raw["fs_Hz"]),
+                                  r["freq_Hz"], len(r["force"]["amplitude"])).fields}
         store.write_step(key, r, raw)
     src = load_source(run)
     assert [x.step for x in src.rejected] == [clipped] and "force sensor (force)" in src.rejected[0].reason

@@ -46,7 +46,7 @@ def test_a_run_says_its_format_versions_and_every_step_has_the_typed_fields(smal
     assert small_run.metadata["format_version"] == RUN_FORMAT_VERSION == 1
     fields = set(typing.get_type_hints(StepResult)) - {"format_version", "backbone", "response_control"}   # other procedures only
     for r in small_run.results():
-        assert r["format_version"] == STEP_FORMAT_VERSION == 1
+        assert r["format_version"] == STEP_FORMAT_VERSION == 2
         assert set(r) == fields | {"format_version"}, set(r) ^ (fields | {"format_version"})
     assert len(small_run.results()) == len(small_run.step_files()) > 0
 

@@ -41,7 +41,13 @@ def pristine(tmp_path_factory):
                       force_N=spec.force_N, force_error=0.0, drive_Vpp=0.5,
                       compliance_m_per_N=complex(*rng.normal(size=2)) * 1e-7, compliance_abs_m_per_N=1e-7,
                       compliance_phase_rad=-0.5, accelerance_abs_kg_inv=0.1, accelerance_phase_rad=0.1,
-                      force=fit, accel=fit, disp=fit, fs_Hz=25600.0, n_samples=n, flags=[True, None, "x"])
+                      force=fit, accel=fit, disp=fit, fs_Hz=25600.0, n_samples=n, flags=[True, None, "x"],
+                      quality=dict(status="usable", reason="", notes=[], freq_Hz=spec.freq_Hz, level_N=None,
+                                   record_s=None, artefacts=[]),
+                      harmonics=dict(freq_Hz=spec.freq_Hz, fs_Hz=25600.0, periods=2, samples=n, start=0,
+                                     drift_sigma=0.0, drift_detail="", **{ch: dict(re=list(rng.random(3)),
+                                     im=list(rng.random(3)), offset=0.0, noise_rms=1e-3, sigma=1e-4)
+                                     for ch in ("force", "accel", "disp")}))
         raw = dict(force_N=rng.normal(size=n), accel_m_s2=rng.normal(size=n), disp_m=rng.normal(size=n),
                    fs_Hz=np.array(25600.0))
         store.write_step(spec.key, result, raw)

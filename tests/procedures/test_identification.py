@@ -20,8 +20,12 @@ from bench.sources import load_source
 from procedures.online_id import identifiability
 from sim.identify import identify_results
 
-N_RIGS = 6          # a seeded sample (six full default plans); the base fit over many rigs: benchmarks/bench_identification.py
+# A seeded sample of two rigs (n 1.57 and 0.67): two full default plans.  The campaign over
+# more rigs through the same function: benchmarks/bench_identification.py --procedure-rigs
+# (make bench runs six, the sample this test held until issue 25 moved it there).
+SEEDS = (0, 4)
 TRUTH_KEYS = ("F_s_N", "x_s_m", "n", "mass_kg")
+TOLERANCE = dict(F_s_N=0.03, mass_kg=0.03, x_s_m=0.05, n=0.05)   # the issue's
 
 
 def random_rig(seed):
@@ -57,28 +61,31 @@ def run_rig(seed, out):
 
 @pytest.fixture(scope="module")
 def outcomes(tmp_path_factory):
-    # each rig runs its own twins on ephemeral ports: one process per core
-    outs = [tmp_path_factory.mktemp(f"rig{seed}") for seed in range(N_RIGS)]
-    with ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1),
+    return run_rigs(SEEDS, [tmp_path_factory.mktemp(f"rig{seed}") for seed in SEEDS])
+
+
+def run_rigs(seeds, outs, workers: int = 2):
+    """``run_rig`` over ``seeds``, one process per core (each rig runs its own twins on
+    ephemeral ports)."""
+    with ProcessPoolExecutor(max_workers=min(workers, os.cpu_count() or 1),
                              mp_context=multiprocessing.get_context("spawn")) as ex:
-        return list(ex.map(run_rig, range(N_RIGS), outs))
+        return list(ex.map(run_rig, seeds, outs))
 
 
 @pytest.mark.slow
-@pytest.mark.timeout(1800)   # the fixture runs six full default plans
+@pytest.mark.timeout(1200)   # the fixture runs two full default plans
 def test_final_estimates_within_tolerance_on_random_rigs(outcomes):
-    tol = dict(F_s_N=0.03, mass_kg=0.03, x_s_m=0.05, n=0.05)
     misses = []
     for seed, truth, est in outcomes:
         for k in TRUTH_KEYS:
             err = est.values[k] / truth[k] - 1
-            if abs(err) > tol[k]:
+            if abs(err) > TOLERANCE[k]:
                 misses.append(f"rig {seed}: {k} {est.values[k]:.4g} vs {truth[k]:.4g} ({100 * err:+.1f} %)")
     assert not misses, "\n".join(misses)
 
 
 @pytest.mark.slow
-@pytest.mark.timeout(1800)
+@pytest.mark.timeout(1200)
 def test_truth_inside_the_95_percent_interval_in_most_cases(outcomes):
     inside = [est.low[k] <= truth[k] <= est.high[k] for _, truth, est in outcomes for k in TRUTH_KEYS]
     assert np.mean(inside) >= 0.75, f"coverage {np.mean(inside):.2f}"

@@ -39,19 +39,13 @@ def test_each_hidden_cause_is_named_with_its_size(effect):
         # the 95 % interval covers the plant's value, or the estimate is within 2 % of it
         assert p["low"] <= truth <= p["high"] or p["value"] == pytest.approx(truth, rel=0.02), (p, truth)
     assert d["causes"][0]["gain"]["heldout_error_after"] < d["causes"][0]["gain"]["heldout_error_before"]
-
-
-@pytest.mark.timeout(300)
-def test_viscous_damping_named_with_interval_and_out_of_sample_gain():
-    case = make_case(SEEDS["viscous_damping"], ("viscous_damping",))
-    d = analyse(case, 5).to_dict()
-    assert [c["id"] for c in d["causes"]] == ["viscous_damping"] and not d["unexplained"]
-    c = d["causes"][0]
-    truth = case.effects["viscous_damping"]["viscous_N_s_per_m"]
-    assert c["parameters"]["c"]["value"] == pytest.approx(truth, rel=0.02)
-    assert c["gain"]["heldout_error_after"] < 0.5 * c["gain"]["heldout_error_before"]
-    assert c["gain"]["delta_bic"] < -10
-    assert "viscous damping c =" in d["verdict"] and "N s/m" in d["verdict"]
+    if effect == "viscous_damping":     # the cause alone, its size, its gain and the verdict's words
+        assert [c["id"] for c in d["causes"]] == ["viscous_damping"]
+        c = d["causes"][0]
+        assert c["parameters"]["c"]["value"] == pytest.approx(truth, rel=0.02)
+        assert c["gain"]["heldout_error_after"] < 0.5 * c["gain"]["heldout_error_before"]
+        assert c["gain"]["delta_bic"] < -10
+        assert "viscous damping c =" in d["verdict"] and "N s/m" in d["verdict"]
 
 
 @pytest.mark.timeout(300)
