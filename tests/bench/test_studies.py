@@ -373,3 +373,25 @@ def test_identification_mc_on_the_pitching_rig_fits_to_the_noise():
         rows = identification_sample(inputs, task_seed(5, inputs))
         assert rows[0]["reduced_chi2"] < 10, rows[0]
         assert max(abs(r["rel_error"]) for r in rows) < 2e-4, rows
+
+
+@pytest.mark.timeout(120)
+def test_a_misfit_from_too_few_recorded_harmonics_says_so():
+    """The same pitching rig measured with the plans' default 5 harmonics: the fit misfits
+    (the truth itself leaves a deterministic residual, decision 0049) and says why."""
+    import tomllib
+    from dataclasses import replace
+
+    from bench.config import DEFAULTS
+    from bench.studies.montecarlo import _configs, simulate_plan
+    from sim.discrepancy.rigfit import identify_steps
+    raw = tomllib.loads((DEFAULTS / "sim_rig_pitch.toml").read_text())
+    plan, rig = _configs({"plan": dict(PITCH_PLAN["plan"], frequencies={"list_Hz": [25.0, 35.0, 70.0, 150.0]})}, raw)
+    model = dict(rig.model)
+    for harmonics in (5, 9):
+        est = identify_steps(simulate_plan(replace(plan, harmonics=harmonics), rig, model), rig.guess(), model)
+        few = [w for w in est["warnings"] if "harmonics" in w]
+        if harmonics == 5:
+            assert est["misfit"] and few and "record at least 9" in few[0], est["warnings"]
+        else:
+            assert not few and est["reduced_chi2"] < 10, est["warnings"]
