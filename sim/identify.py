@@ -42,9 +42,9 @@ from numba import njit
 from scipy.optimize import least_squares
 
 from .errors import ConfigurationError
-from .masing import LAMBDA_MASING, active_depth, branch_force, push_reversal
+from .masing import LAMBDA_MASING, active_depth, branch_force
 from .step_result import StepResult
-from .virgin import CURVE_SAKAI
+from .virgin import CURVE_SAKAI, virgin_g
 
 log = logging.getLogger(__name__)
 
@@ -130,25 +130,47 @@ class Estimate:
 @njit(cache=True)
 def _loop_friction(paths, tops, lam, p, out):
     """Dimensionless Masing friction along each row of ``paths`` (one period starting at
-    its largest value ``tops[i]``), after virgin loading from 0 to that value."""
-    su = np.empty(16)
-    sF = np.empty(16)
+    its largest value ``tops[i]``), after virgin loading from 0 to that value.
+
+    Per row, two passes: the Masing bookkeeping (reversal stack, active branch) writes each
+    sample's branch as (F at its reversal, +-lam, travel s), then a plain loop evaluates
+    F = F_r +- lam g(s).  The same arithmetic as :func:`sim.masing.quasi_static_path` (the
+    same operations in the same order: equal to the last bit), seven times faster than one
+    pass: the curve's power inside the branchy loop, and a stack that a growable array
+    re-bound on every reversal, stalled it (decision 0048).  A row reverses at most once
+    per sample, so a stack of M + 1 entries never grows."""
+    M = paths.shape[1]
+    su = np.empty(M + 1)
+    sF = np.empty(M + 1)
+    base = np.empty(M)
+    coef = np.empty(M)
+    travel = np.empty(M)
     for i in range(paths.shape[0]):
         k = 0
         d = 1.0 if tops[i] >= 0 else -1.0
         # virgin loading to the top (any path from 0 to it gives the same state)
         prev = tops[i]
-        for j in range(paths.shape[1]):
+        for j in range(M):
             u = paths[i, j]
-            step = u - prev
-            if step * d < 0.0:
+            if (u - prev) * d < 0.0:
                 k = active_depth(prev, k, su, d)
-                F_r = branch_force(prev, k, su, sF, lam, CURVE_SAKAI, p)
-                k, su, sF = push_reversal(prev, F_r, k, su, sF)
+                su[k] = prev
+                sF[k] = branch_force(prev, k, su, sF, lam, CURVE_SAKAI, p)
+                k += 1
                 d = -d
             k = active_depth(u, k, su, d)
-            out[i, j] = branch_force(u, k, su, sF, lam, CURVE_SAKAI, p)
+            if k == 0:                 # the virgin curve: +-g(|u|)
+                base[j] = 0.0
+                travel[j] = abs(u)
+                coef[j] = 1.0 if u >= 0.0 else -1.0
+            else:                      # the branch from reversal k: F_r +- lam g(|u - u_r| / lam)
+                s = (u - su[k - 1]) / lam
+                base[j] = sF[k - 1]
+                travel[j] = abs(s)
+                coef[j] = lam if s >= 0.0 else -lam
             prev = u
+        for j in range(M):
+            out[i, j] = base[j] + coef[j] * virgin_g(CURVE_SAKAI, travel[j], p)
 
 
 def displacement_harmonics(step: StepHarmonics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -191,15 +213,36 @@ def period_paths(X: np.ndarray, M: int) -> tuple[np.ndarray, np.ndarray]:
     spec[:, 1:K + 1] = -1j * X[:, :K] * (M / 2)
     x = np.fft.irfft(spec, M, axis=1)
     starts = np.argmax(x, axis=1)
-    x = x[np.arange(x.shape[0])[:, None], (starts[:, None] + np.arange(M)[None, :]) % M]
-    prev, nxt = np.roll(x, 1, axis=1), np.roll(x, -1, axis=1)
-    turn = ((x - prev) * (nxt - x) <= 0) & (x != prev)
-    den = prev - 2 * x + nxt
-    with np.errstate(divide="ignore", invalid="ignore"):
-        vertex = x - 0.125 * (nxt - prev) ** 2 / den
-    x = np.where(turn & (den != 0), vertex, x)
-    x -= 0.5 * (x.max(axis=1) + x.min(axis=1))[:, None]
-    return x, starts
+    out = np.empty_like(x)
+    _rotate_lift_centre(x, starts, out)
+    return out, starts
+
+
+@njit(cache=True)
+def _rotate_lift_centre(x, starts, out):
+    """:func:`period_paths` after the inverse FFT, one row at a time: rotate the row to
+    start at ``starts[i]``; lift every turning point (a sample not beyond both neighbours,
+    cyclically, and not equal to the one before) to the vertex of the parabola through the
+    three, x - (x+ - x-)^2 / (8 (x- - 2 x + x+)), unless that is flat; centre the row
+    between its extremes.  The arithmetic of the array expressions it replaced, in the same
+    order (equal to the last bit), five times faster: no index arrays, rolls or masks
+    (decision 0048)."""
+    R, M = x.shape
+    r = np.empty(M)
+    for i in range(R):
+        s = starts[i]
+        for j in range(M):
+            r[j] = x[i, (s + j) % M]
+        for j in range(M):
+            prev = r[j - 1] if j > 0 else r[M - 1]
+            nxt = r[j + 1] if j < M - 1 else r[0]
+            v = r[j]
+            if (v - prev) * (nxt - v) <= 0.0 and v != prev:
+                den = prev - 2 * v + nxt
+                if den != 0.0:
+                    v = v - 0.125 * (nxt - prev) ** 2 / den
+            out[i, j] = v
+        out[i] -= 0.5 * (out[i].max() + out[i].min())
 
 
 def path_friction(paths: np.ndarray, x_s: float, n: float, lam: float = LAMBDA_MASING) -> np.ndarray:

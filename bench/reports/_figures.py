@@ -85,40 +85,54 @@ def sparse_tick(v: float, _pos=None) -> str:
     return f"{v:g}" if f"{v:e}"[0] in "235" else ""
 
 
-def _fit_titles(fig: Figure) -> None:
+def _fit_titles(fig: Figure) -> bool:
     """Wrap the figure's title to the figure's width and each axes' title to its axes'
-    width (a long title is otherwise cut at the figure's edges or runs into its neighbour):
-    measured after a draw, rewrapped until it fits."""
+    width (a long title is otherwise cut at the figure's edges or runs into its neighbour),
+    measured on the layout of the figure's last draw, each rewrapped until it fits.  True
+    when a title changed (the figure then needs drawing again)."""
     import textwrap
-    fig.draw_without_rendering()
     texts = [(fig._suptitle, fig.bbox)] if fig._suptitle is not None else []
     texts += [(t, ax.bbox) for ax in fig.axes for t in (ax.title, ax._left_title, ax._right_title)]
+    changed = False
     for text, box in texts:
         for _ in range(4):
             s = text.get_text()
+            if not s:
+                break
             width = text.get_window_extent().width
-            if not s or width <= 0.98 * box.width:
+            if width <= 0.98 * box.width:
                 break
             per_line = max(len(line) for line in s.splitlines())
             text.set_text(textwrap.fill(" ".join(s.split()), max(10, int(per_line * 0.95 * box.width / width))))
-        fig.draw_without_rendering()
+            changed = True
+    return changed
 
 
-def _finish(fig: Figure) -> None:
+def _render(fig: Figure, save) -> None:
+    """``save()`` the figure (savefig: a full draw with the constrained layout), then fit its
+    titles to that layout; saved again only if a title was rewrapped.  A draw of a figure of
+    ten log axes costs about a second: a figure whose titles fit is drawn once, not once to
+    measure and once to save, nor once per title (decision 0048)."""
     _plain_log_ticks(fig)
-    _fit_titles(fig)
+    for _ in range(4):
+        save()
+        if not _fit_titles(fig):
+            return
 
 
 def save_png(fig: Figure, path: Path) -> Path:
-    _finish(fig)
-    fig.savefig(path, dpi=110)
+    _render(fig, lambda: fig.savefig(path, dpi=110))
     return path
 
 
 def png_bytes(fig: Figure, dpi: int = 96) -> bytes:
-    _finish(fig)
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi)
+
+    def save():
+        buf.seek(0)
+        buf.truncate()
+        fig.savefig(buf, format="png", dpi=dpi)
+    _render(fig, save)
     return buf.getvalue()
 
 

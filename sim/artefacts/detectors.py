@@ -333,11 +333,17 @@ def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Lin
     w0 = 2 * np.pi * f0
     nd = 2 if with_decay else 1                # nonlinear parameters: (w - w0) T [, sigma T]
 
+    last: list = [None, None]              # MINPACK asks for the Jacobian where it has just
+    #                                        evaluated the residual: the sines are reused
+
     def parts(p):
-        w = w0 + p[0] / T
-        sig = p[1] / T if with_decay else 0.0
-        e = np.exp(-sig * t)
-        return w, sig, e * np.sin(w * t), e * np.cos(w * t)
+        key = p.tobytes()
+        if last[0] != key:
+            w = w0 + p[0] / T
+            sig = p[1] / T if with_decay else 0.0
+            e = np.exp(-sig * t)
+            last[:] = key, (w, sig, e * np.sin(w * t), e * np.cos(w * t))
+        return last[1]
 
     def resid(p):
         _, _, s, c = parts(p)
@@ -346,10 +352,12 @@ def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Lin
     def jac(p):
         _, _, s, c = parts(p)
         a, b = p[nd], p[nd + 1]
-        cols = [tt * (a * c - b * s)]
+        J = np.empty((n, nd + 3))
+        J[:, 0] = tt * (a * c - b * s)
         if with_decay:
-            cols.append(-tt * (a * s + b * c))
-        return np.column_stack(cols + [s, c, np.ones(n)])
+            J[:, 1] = -tt * (a * s + b * c)
+        J[:, nd], J[:, nd + 1], J[:, nd + 2] = s, c, 1.0
+        return J
 
     ab, *_ = np.linalg.lstsq(np.column_stack([np.sin(w0 * t), np.cos(w0 * t), np.ones(n)]), r, rcond=None)
     p0 = np.concatenate([np.zeros(nd), ab])

@@ -61,3 +61,32 @@ def test_a_long_title_is_wrapped_inside_the_figure_and_its_axes(tmp_path):
     short.suptitle("Compliance: demo")
     png_bytes(short)
     assert short._suptitle.get_text() == "Compliance: demo"          # a title that fits stays as it is
+
+
+def test_the_saved_png_shows_the_wrapped_title_and_a_figure_that_fits_is_drawn_once(monkeypatch):
+    # the figure is saved, its titles fitted to that layout, and saved again when one was
+    # rewrapped (decision 0048): the bytes returned are those of the final, wrapped state
+    import io
+
+    from PIL import Image
+
+    words = "Seed Fig. 17 from measurements: resonance frequency and damping ratio of the pitching mode " \
+            "against the force amplitude, one colour per run, 95 % intervals, the rig model as lines"
+    fig = Figure(figsize=(6, 4), layout="constrained")
+    fig.subplots(1, 2)
+    fig.suptitle(words)
+    saves = []
+    real = Figure.savefig
+    monkeypatch.setattr(Figure, "savefig", lambda self, *a, **k: (saves.append(1), real(self, *a, **k))[1])
+    shown = np.asarray(Image.open(io.BytesIO(png_bytes(fig))))
+    assert "\n" in fig._suptitle.get_text() and len(saves) == 2
+    buf = io.BytesIO()
+    real(fig, buf, format="png", dpi=96)                              # the final state, saved again
+    final = np.asarray(Image.open(io.BytesIO(buf.getvalue())))
+    assert shown.shape == final.shape and (shown != final).any(axis=-1).mean() < 1e-3
+    short = Figure(figsize=(6, 4), layout="constrained")
+    short.subplots(1, 2)
+    short.suptitle("Compliance: demo")
+    saves.clear()
+    png_bytes(short)
+    assert len(saves) == 1                                           # titles that fit: one draw
