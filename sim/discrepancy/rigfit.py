@@ -173,7 +173,8 @@ def few_harmonics_text(f: Fit, recorded: int, wanted: int) -> list[str]:
     if recorded >= wanted or not misfit_text(f.reduced_chi2, f.dof):
         return []
     return [f"the steps record {recorded} harmonics and this model rebuilds the motion from them: a misfit "
-            f"from too few harmonics biases F_s and x_s; record at least {wanted} ([plan.control] harmonics)"]
+            f"from too few harmonics biases F_s and x_s; record more ([plan.control] harmonics: at least {wanted}, "
+            f"25 with levels well above F_s; min_sample_rate_Hz keeps them below Nyquist)"]
 
 
 def _init(effect: str, model: Model, theta: np.ndarray, d: Data, W: Weights) -> np.ndarray:

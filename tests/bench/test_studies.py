@@ -392,6 +392,6 @@ def test_a_misfit_from_too_few_recorded_harmonics_says_so():
         est = identify_steps(simulate_plan(replace(plan, harmonics=harmonics), rig, model), rig.guess(), model)
         few = [w for w in est["warnings"] if "harmonics" in w]
         if harmonics == 5:
-            assert est["misfit"] and few and "record at least 9" in few[0], est["warnings"]
+            assert est["misfit"] and few and "at least 9" in few[0], est["warnings"]
         else:
             assert not few and est["reduced_chi2"] < 10, est["warnings"]
