@@ -369,6 +369,10 @@ def test_identification_mc_on_the_pitching_rig_fits_to_the_noise():
     rig = tomllib.loads((DEFAULTS / "sim_rig_pitch.toml").read_text())
     spec = McSpec(plan=PITCH_PLAN, rig=rig, samples=3, seed=5)
     assert _configs(PITCH_PLAN, rig)[0].harmonics == 25
+    # the demo plan's 1000 Hz allowed 12 below Nyquist at 25.6 kHz (not enough at 100 N): the
+    # study samples fast enough for 25 (the 25th harmonic of 1000 Hz below half the rate)
+    demo = _configs(tomllib.loads((DEFAULTS / "demo_plan.toml").read_text()), rig)[0]
+    assert demo.harmonics == 25 and demo.min_sample_rate_Hz / 2 > 25 * max(demo.freqs_Hz)
     for inputs in spec.tasks():
         rows = identification_sample(inputs, task_seed(5, inputs))
         assert rows[0]["reduced_chi2"] < 10, rows[0]
