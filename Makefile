@@ -59,6 +59,7 @@ bench: setup
 	$(PY) benchmarks/bench_analysis.py --source independent --cases 12 --settle 25
 	$(PY) benchmarks/bench_artefacts.py
 	$(PY) benchmarks/bench_identification.py
+	$(PY) benchmarks/bench_mc_coverage.py
 	$(PY) benchmarks/bench_backbone.py
 	$(PY) benchmarks/bench_twin.py
 	$(PY) benchmarks/bench_modes.py --seeds 6

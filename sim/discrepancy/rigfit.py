@@ -160,7 +160,21 @@ def identify_rig(steps, guess: dict, rig_model: dict | None = None, extra: tuple
         f = base
     Wp = Weights.propagated(f.model, f.theta, d)
     f = fit(f.model, f.theta, d, Wp, max_nfev=max_nfev)
-    return estimate_dict(f, len(steps), source)
+    return estimate_dict(f, len(steps), source, few_harmonics_text(f, d.Xf.shape[1] if d.Xf is not None else d.X.shape[1],
+                                                                    harmonics))
+
+
+def few_harmonics_text(f: Fit, recorded: int, wanted: int) -> list[str]:
+    """Words when a misfit may come from the steps recording fewer harmonics than the model
+    uses: the displacement path, and the friction and |v| along it, are rebuilt from the
+    recorded harmonics only, and a large-slip step's reversals need more (issue 25: on the
+    pitching rig 5 harmonics gave a reduced chi-square of 5-190 at the TRUE parameters on
+    noise-free data and F_s biased by 1-2 standard errors; 9 fitted to the noise, decision 0049)."""
+    if recorded >= wanted or not misfit_text(f.reduced_chi2, f.dof):
+        return []
+    return [f"the steps record {recorded} harmonics and this model rebuilds the motion from them: a misfit "
+            f"from too few harmonics biases F_s and x_s; record more ([plan.control] harmonics: at least {wanted}, "
+            f"25 with levels well above F_s; min_sample_rate_Hz keeps them below Nyquist)"]
 
 
 def _init(effect: str, model: Model, theta: np.ndarray, d: Data, W: Weights) -> np.ndarray:
@@ -273,4 +287,4 @@ def identify_steps(steps, guess: dict, rig_model: dict | None = None, extra: tup
 
 
 __all__ = ["BOUND_FACTOR", "MISFIT_CHI2", "OnlineRigFit", "analysis_effects", "as_steps", "estimate_dict",
-           "identify_rig", "identify_steps", "misfit_text", "rig_effects"]
+           "few_harmonics_text", "identify_rig", "identify_steps", "misfit_text", "rig_effects"]
