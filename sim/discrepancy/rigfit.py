@@ -135,26 +135,21 @@ def identify_rig(steps, guess: dict, rig_model: dict | None = None, extra: tuple
     d = data_from_steps(steps, harmonics)
     base, W = base_fit(steps, d, guess, d.X.shape[1])
     declared = rig_effects(rig_model)
-    model, theta = base.model, base.theta
     if declared or extra:
+        def fitted_from(theta: np.ndarray) -> Fit:
+            """The base model with the declared and the extra effects, fitted from ``theta``."""
+            model = base.model
+            for e, init in declared.items():
+                model, theta = model.extend(theta, e, init)
+            for e in extra:
+                if e not in model.effects:
+                    model, theta = model.extend(theta, e, _init(e, model, theta, d, W))
+            return fit(model, theta, d, W, max_nfev=max_nfev)
         # start the base parameters at the expected values (the one-mode fit is biased by
         # the very effects added here) unless the one-mode fit already fits
-        theta = _guess_theta(guess) if base.reduced_chi2 > MISFIT_CHI2 else theta
-        for e, init in declared.items():
-            model, theta = model.extend(theta, e, init)
-        for e in extra:
-            if e not in model.effects:
-                model, theta = model.extend(theta, e, _init(e, model, theta, d, W))
-        f = fit(model, theta, d, W, max_nfev=max_nfev)
+        f = fitted_from(_guess_theta(guess) if base.reduced_chi2 > MISFIT_CHI2 else base.theta)
         if base.reduced_chi2 < f.reduced_chi2:     # from the guess it went astray: from the base fit
-            th = base.theta
-            m2 = base.model
-            for e, init in declared.items():
-                m2, th = m2.extend(th, e, init)
-            for e in extra:
-                if e not in m2.effects:
-                    m2, th = m2.extend(th, e, _init(e, m2, th, d, W))
-            f2 = fit(m2, th, d, W, max_nfev=max_nfev)
+            f2 = fitted_from(base.theta)
             f = f2 if f2.reduced_chi2 < f.reduced_chi2 else f
     else:
         f = base
