@@ -302,7 +302,36 @@ def cmd_run(args) -> int:
 
 
 def cmd_resume(args) -> int:
+    from .sequence import is_sequence_dir
+    if is_sequence_dir(Path(args.run)):
+        return _sequence(args, resume=True)
     return _run(args, resume=True)
+
+
+def cmd_sequence(args) -> int:
+    """Every entry of SEQ.toml checked, then run one after the other into OUT/<name>/."""
+    return _sequence(args, resume=False)
+
+
+def _sequence(args, resume: bool) -> int:
+    from .sequence import resume_sequence, run_sequence
+    from .signals import SignalLatch
+
+    def progress(entry: str):
+        return Progress(f"{entry}")
+    with SignalLatch().installed():
+        _warm_up()
+        res = (resume_sequence(Path(args.run), progress=progress, report=not args.no_report) if resume else
+               run_sequence(Path(args.sequence), Path(args.out), progress=progress, report=not args.no_report))
+    end_line()
+    for e in res.entries:
+        print(f"{e['name']}: {e['status']}" + (f" ({e['steps_done']}/{e['steps_total']} steps)"
+                                                if e["status"] != "not started" else ""))
+    print(f"sequence report: {res.path / 'report.md'}")
+    statuses = [e["status"] for e in res.entries]
+    if res.completed:
+        return ExitCode.OK
+    return ExitCode.LIMIT if "aborted" in statuses else ExitCode.FAILURE
 
 
 def cmd_demo(args) -> int:
@@ -660,6 +689,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "(e.g. after raising drive_V in run.json's rig); by default they stay skipped")
     _add_watch_options(s)
     s.set_defaults(func=cmd_resume)
+
+    s = sub.add_parser("sequence", help="run a sequence file's entries (plan, rig, labels) one after the other into "
+                                        "OUT/<name>/, every entry checked first; bench resume OUT goes on with it")
+    s.add_argument("sequence", help="sequence file (TOML: [sequence] name, [[sequence.entry]] name, plan, rig, labels)")
+    s.add_argument("--out", required=True, help="new directory for the sequence (one run directory per entry)")
+    s.add_argument("--no-report", action="store_true", help="do not write each entry's report")
+    s.set_defaults(func=cmd_sequence)
 
     s = sub.add_parser("watch", help="serve a live page of a run directory (running, resumed or finished)")
     s.add_argument("run", help="run directory (it may not exist yet: the page waits for it)")
