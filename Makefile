@@ -3,7 +3,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 DEBS := socat mbpoll chromium tmux
 
-.PHONY: setup system-deps demo test check bench paper soak
+.PHONY: setup system-deps demo test check bench paper soak lab-ci examples
 
 $(VENV)/.installed: pyproject.toml
 	python3 -m venv $(VENV)
@@ -39,6 +39,26 @@ paper: setup
 # worker and starts the longest modules first (decision 0046).
 test: setup
 	$(PY) -m pytest -q -n 2 --dist loadscope --durations=15
+
+# A lab's CI from a fresh install (CI runs it after the tests): the package's wheel into a new
+# virtual environment, then examples/lab-ci's own tests, which use only `import bench` and the
+# pytest plugin, run from a copy outside the source tree (decision record 0055).
+LAB := out/lab-ci
+lab-ci: setup
+	rm -rf $(LAB) && mkdir -p $(LAB)
+	$(PY) -m pip wheel -q --no-deps -w $(LAB)/dist .
+	python3 -m venv $(LAB)/venv
+	$(LAB)/venv/bin/python -m pip install -q $(LAB)/dist/guideway_bench-*.whl 'pytest>=8,<10'
+	cp -r examples/lab-ci $(LAB)/project
+	cd $(LAB)/project && ../venv/bin/python -c "import bench, sys; assert '/venv/' in bench.__file__, bench.__file__"
+	cd $(LAB)/project && ../venv/bin/python -m pytest -q -p no:cacheprovider
+
+# Both examples as their users meet them (CI runs this after the tests): the lab's CI above,
+# then examples/tutorial.ipynb executed top to bottom in a fresh kernel of that environment.
+examples: lab-ci
+	$(LAB)/venv/bin/python -m pip install -q 'nbclient>=0.10,<1' 'nbformat>=5.10,<6' 'ipykernel>=6.29,<8'
+	mkdir -p $(LAB)/notebook
+	$(LAB)/venv/bin/python examples/run_notebook.py examples/tutorial.ipynb $(LAB)/notebook
 
 # Static checks (CI runs them before the tests): lint and import order, the layer
 # contract bench -> procedures -> drivers -> sim, types of sim/, drivers/, procedures/.
