@@ -3,7 +3,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 DEBS := socat mbpoll chromium tmux
 
-.PHONY: setup system-deps demo test check bench paper soak lab-ci examples
+.PHONY: setup system-deps demo test check bench paper soak lab-ci examples docs
 
 $(VENV)/.installed: pyproject.toml
 	python3 -m venv $(VENV)
@@ -59,6 +59,13 @@ examples: lab-ci
 	$(LAB)/venv/bin/python -m pip install -q 'nbclient>=0.10,<1' 'nbformat>=5.10,<6' 'ipykernel>=6.29,<8'
 	mkdir -p $(LAB)/notebook
 	$(LAB)/venv/bin/python examples/run_notebook.py examples/tutorial.ipynb $(LAB)/notebook
+
+# The documentation site into out/site (CI runs it): the key reference generated from the
+# parser (docs/gen_keys.py), then mkdocs with warnings as errors (strict: true in mkdocs.yml).
+docs: setup
+	$(PY) -m pip install -q -e '.[test,docs]'
+	$(PY) docs/gen_keys.py
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
 # Static checks (CI runs them before the tests): lint and import order, the layer
 # contract bench -> procedures -> drivers -> sim, types of sim/, drivers/, procedures/.

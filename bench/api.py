@@ -8,9 +8,8 @@
     run.modes()                    # each mode's resonance and damping per level (modes.csv)
     bench.open_run("runs/a")       # any run directory: finished, interrupted or damaged
 
-Everything here is also what the command line does (``bench run`` calls :func:`run`), with
-the same checks, the same named errors (:mod:`sim.errors`, all subclasses of
-:class:`bench.BenchError`) and the same safety: the plan is checked against the rig's limits
+Everything here is also what the command line does, with the same checks, the same named
+errors (``sim.errors``, all subclasses of ``bench.BenchError``) and the same safety: the plan is checked against the rig's limits
 before anything is opened, and on every way out of a run (its end, a limit, an instrument
 error, ``KeyboardInterrupt`` from a notebook's stop button or Ctrl-C, an exception raised
 in the caller's ``progress`` callback) the output is ramped down and switched off, the
@@ -48,13 +47,13 @@ def _steps_columns() -> tuple[str, ...]:
 
 
 def load_rig(path: PathLike) -> Rig:
-    """The rig of a rig file (TOML); every problem of it named in one :class:`ConfigurationError`."""
+    """The rig of a rig file (TOML); every problem of it named in one `ConfigurationError`."""
     from .config import load_rig as _load
     return _load(Path(path))
 
 
 def load_plan(path: PathLike) -> Plan:
-    """The plan of a plan file (TOML); every problem of it named in one :class:`ConfigurationError`."""
+    """The plan of a plan file (TOML); every problem of it named in one `ConfigurationError`."""
     from .config import load_plan as _load
     return _load(Path(path))
 
@@ -92,15 +91,15 @@ def _as_rig(rig: Rig | PathLike) -> Rig:
 def run(plan: Plan | PathLike, rig: Rig | PathLike, out: PathLike, *, labels: Mapping[str, str] | None = None,
         progress: Progress | None = None, seed: int | None = None, identify: bool = True,
         report: bool = True) -> Run:
-    """Run ``plan`` on ``rig`` into the new run directory ``out`` and return it as a :class:`Run`.
+    """Run ``plan`` on ``rig`` into the new run directory ``out`` and return it as a `Run`.
 
-    ``plan`` and ``rig`` are the typed values (:func:`load_plan`, :func:`plan_from_dict`) or
+    ``plan`` and ``rig`` are the typed values (`load_plan`, `plan_from_dict`) or
     the paths of their files.  ``progress(done, total, note)`` is called after each step.
     ``seed`` seeds a simulated rig's noise.  ``report`` writes ``out/report/report.md`` when
     the run completed.  A run stopped by a limit returns normally (its ``status`` says
     ``aborted``); ``KeyboardInterrupt`` and every other exception propagate once the output
     is off and confirmed (the run is then ``interrupted`` or ``failed`` and
-    :meth:`Run.resume` goes on with it)."""
+    `Run.resume` goes on with it)."""
     from .session import run_plan
     plan, rig = _as_plan(plan), _as_rig(rig)
     if labels is not None:
@@ -115,7 +114,7 @@ def run(plan: Plan | PathLike, rig: Rig | PathLike, out: PathLike, *, labels: Ma
 
 
 def open_run(path: PathLike) -> Run:
-    """An existing run directory as a :class:`Run` (finished, interrupted or with damaged
+    """An existing run directory as a `Run` (finished, interrupted or with damaged
     steps: the readers skip a damaged step with a warning naming its file)."""
     return Run(path)
 
@@ -200,7 +199,7 @@ class Run:
         """One row per intact step, in SI units: the columns of ``bench export``'s steps.csv
         (``key``, ``level_index``, ``target_force_N``, ``freq_Hz``, ``force_N``, complex
         compliance, accelerance, THD and noise per channel, force error, control iterations;
-        docs/api.md lists them), then ``kind`` (``sweep``, ``refine``, ``dwell`` or
+        ``bench.STEP_COLUMNS`` lists them), then ``kind`` (``sweep``, ``refine``, ``dwell`` or
         ``backbone``) and ``refined_mode`` (the mode a refinement or dwell step is at)."""
         from procedures.plan import REFINED_KEY
 
@@ -268,6 +267,7 @@ class Run:
 
 
 STEP_COLUMNS = _steps_columns()
+"""The columns of `Run.steps()`: bench export's steps.csv columns, then ``kind`` and ``refined_mode``."""
 
 __all__ = ["STEP_COLUMNS", "Plan", "Rig", "Run", "load_plan", "load_rig", "open_run",
            "plan_from_dict", "rig_from_dict", "run"]

@@ -54,7 +54,7 @@ class Entry:
 
 def load_sequence(path: Path) -> tuple[str, list[Entry]]:
     """The sequence file's name and entries; every problem of every entry named in one
-    :class:`ConfigurationError` (one line each)."""
+    `ConfigurationError` (one line each)."""
     import tomllib
 
     from .config import load_plan, load_rig

@@ -13,21 +13,21 @@ Fixtures:
 - ``sim_rig``: the default simulated rig (``bench/defaults/sim_rig.toml``, or the file
   named by the ``guideway_rig`` ini option or ``--guideway-rig``) with its instruments
   started as servers on ephemeral loopback ports: the SCPI generator (TCP), the Modbus TCP
-  sensor and the DAQ's CAN-over-TCP bridge.  It is a :class:`bench.Rig` whose URLs point at
+  sensor and the DAQ's CAN-over-TCP bridge.  It is a `bench.Rig` whose URLs point at
   them (``simulated = false``: the bench talks to them as to a real rig), so ``bench.run``,
-  and a ``bench run`` process given :func:`write_rig_file`'s file, accept it.
-- ``sim_servers``: the :class:`SimServers` behind ``sim_rig`` (the same servers), for fault
-  injection: :meth:`SimServers.drop_out`.
+  and a ``bench run`` process given `write_rig_file`'s file, accept it.
+- ``sim_servers``: the `SimServers` behind ``sim_rig`` (the same servers), for fault
+  injection: `SimServers.drop_out`.
 - ``sim_rig_factory``: ``make(rig_file=None, *, seed=None, **model)`` starts another
   simulated rig, its model taken from a rig file and/or given as ``[rig.model]`` keys
-  (``make(viscous_N_s_per_m=40.0)``); returns its :class:`SimServers`.
+  (``make(viscous_N_s_per_m=40.0)``); returns its `SimServers`.
 
 Faults (plain functions, usable from any test):
 
-- :func:`interrupt_after`: a signal (SIGINT by default, the notebook's stop button) sent to
+- `interrupt_after`: a signal (SIGINT by default, the notebook's stop button) sent to
   this process once N steps are stored;
-- :func:`drop_out_after`: an instrument stops answering once N steps are stored;
-- :func:`with_limits`: the rig with tighter limits (a limit trip).
+- `drop_out_after`: an instrument stops answering once N steps are stored;
+- `with_limits`: the rig with tighter limits (a limit trip).
 
 Every server binds to 127.0.0.1; nothing here sends traffic anywhere else.
 """
@@ -83,7 +83,7 @@ def start_sim_rig(rig_file: str | Path | None = None, *, seed: int | None = None
     """Start a simulated rig's instruments as servers on ``host`` (loopback by default):
     the plant built from ``rig_file``'s ``[rig.model]`` (default: the bench's
     ``sim_rig.toml``) updated with ``model`` (checked as the file's keys are).  Close it
-    with :meth:`SimServers.close`."""
+    with `SimServers.close`."""
     from drivers import start_twins
     from sim.rig import RigModel, SimulatedRig
 
@@ -236,5 +236,5 @@ def sim_servers(request: pytest.FixtureRequest, sim_rig_factory) -> SimServers:
 
 @pytest.fixture
 def sim_rig(sim_servers: SimServers) -> Rig:
-    """A :class:`bench.Rig` whose instruments are the simulated rig's, served on loopback."""
+    """A `bench.Rig` whose instruments are the simulated rig's, served on loopback."""
     return sim_servers.rig
