@@ -120,12 +120,14 @@ def wait_steps(out: Path, n: int, proc: subprocess.Popen, timeout_s: float = 180
     raise AssertionError(f"no {n} steps within {timeout_s} s")
 
 
-def test_ctrl_c_in_a_script_leaves_the_output_off_and_the_run_resumes(tmp_path):
+def test_ctrl_c_in_a_script_leaves_the_output_off_and_the_run_resumes_once_free(tmp_path):
     out = tmp_path / "run"
     proc = subprocess.Popen([sys.executable, str(script(tmp_path, out))], cwd=tmp_path,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         wait_steps(out, 2, proc)
+        with pytest.raises(bench.BenchError, match="in use"):     # the lock holds across processes
+            bench.open_run(out).resume(report=False)
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=120)
     finally:
