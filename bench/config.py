@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from drivers import check_daq_url, check_generator_url, check_sensor_url
+from procedures.capacity import block_problems, step_count_problems
 from procedures.plan import Backbone, Limits, Plan, Rig
 from sim.errors import ConfigurationError
 
@@ -463,9 +464,18 @@ def _parse_plan(data: dict, source: str, errors: list[str]) -> Plan:
         c.rule(f"{c.where('harmonics')}: must be <= {max_harmonics} (below Nyquist at "
                f"{top:g} Hz with min_sample_rate_Hz = {plan.min_sample_rate_Hz:g}), "
                f"got {plan.harmonics}", (c, "harmonics"), (c, "min_sample_rate_Hz"))
+    if not (p.bad | fr.bad | bb.bad | c.bad | res.bad):   # a stand-in for a bad value makes blocks no plan asks for
+        _instrument_capacity(p, plan, source)
     c.done()
     p.done()
     return plan
+
+
+def _instrument_capacity(p: _Section, plan: Plan, source: str) -> None:
+    """Every block, sample rate and step count the plan makes against what the DAQ and the
+    bench take (procedures.capacity, decision 0050), each problem named with its key."""
+    for problem in block_problems(plan, source) + step_count_problems(plan, source, MAX_STEPS):
+        p.problem(problem)
 
 
 # [rig.model] keys that take one of a few words, key -> allowed values

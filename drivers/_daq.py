@@ -29,6 +29,7 @@ log = logging.getLogger(__name__)
 
 CAN_FD_DATA_BITRATE = 5e6
 MAX_SAMPLE_RATE_HZ = 204_800.0
+MAX_BLOCK_SAMPLES = 2**24 - 1      # the DAQ's largest block (its NSamples field is 24 bits)
 
 
 def plan_block(freq_Hz: float, n_periods: int, min_rate_Hz: float = 25_600.0) -> tuple[float, int]:
@@ -150,7 +151,7 @@ class CanFdDaq:
         if not (1_000_000 <= rate_mHz <= int(MAX_SAMPLE_RATE_HZ * 1000)):
             raise ValueError(f"sample rate {sample_rate_Hz!r} S/s outside 1 kS/s .. "
                              f"{MAX_SAMPLE_RATE_HZ:g} S/s")
-        if not (1 <= n_samples < 2**24):
+        if not (1 <= n_samples <= MAX_BLOCK_SAMPLES):
             raise ValueError(f"block length {n_samples!r} outside 1 .. 2^24-1 samples")
         self._drain()
         self._send(codec.ID_CONFIG, codec.encode(codec.ID_CONFIG, SampleRate_mHz=rate_mHz,
