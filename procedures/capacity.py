@@ -3,8 +3,9 @@ block (decision record 0050).
 
 A procedure asks the DAQ for blocks of whole periods (:func:`drivers.plan_block`: the
 smallest whole number of samples per period that reaches ``min_sample_rate_Hz``); the DAQ
-records at most :data:`drivers.MAX_BLOCK_SAMPLES` samples a block, at most
-:data:`drivers.MAX_SAMPLE_RATE_HZ`.  :func:`block_problems` names, before anything is
+records at most :data:`drivers.MAX_BLOCK_SAMPLES` samples a block (436900: three channels in
+at most 65535 CAN frames of 20 values; not the 2^24-1 its configuration field would hold),
+at most :data:`drivers.MAX_SAMPLE_RATE_HZ` samples a second.  :func:`block_problems` names, before anything is
 switched on, each plan value whose block would not fit, with its key, its unit and the
 largest value that fits; the procedures take their block lengths from the same functions
 (:func:`measure_periods`, :func:`controller_block_periods`), so the check and the run
@@ -104,7 +105,7 @@ def block_problems(plan: Plan, source: str) -> list[str]:
     rate = plan.min_sample_rate_Hz
     out: list[str] = []
     cap = MAX_BLOCK_SAMPLES
-    cap_text = f"the DAQ's largest block is 2^24-1 = {cap} samples"
+    cap_text = f"the DAQ's largest block is {cap} samples"
 
     def at(f: float) -> str:
         return f"{samples_per_period(f, rate)} samples a period at min_sample_rate_Hz = {rate:g}"

@@ -3,7 +3,9 @@ record before anything is switched on (issue 30 item 1, decision record 0050).
 
 On main, ``dwell_cycles = 50000`` passed ``bench dry-run`` and the run failed at the dwell
 with an internal error (block length 18300000 outside 1 .. 2^24-1 samples) after the output
-had been on; ``bench resume`` switched it on again and failed the same way.
+had been on; ``bench resume`` switched it on again and failed the same way.  A block below
+2^24 but above 436900 samples (``dwell_cycles = 3000`` on a 30-300 Hz grid) failed too, as
+an instrument error: the block header counts at most 65535 data frames of 20 values.
 """
 
 from __future__ import annotations
@@ -60,6 +62,23 @@ def largest_said(message: str) -> int:
     return int(message.split("the largest that fits: ")[1].split()[0])
 
 
+def test_the_largest_block_is_what_the_block_header_can_carry():
+    """Independent fact, daq.dbc: NFrames is 16 bits, a data frame holds 20 values of the
+    three channels; a longer block is refused by the driver before anything is sent."""
+    import can
+
+    from drivers import Channel, ChannelSpec
+    from drivers._daq import CanFdDaq
+    from drivers._daq_codec import database
+    header = database().get_message_by_name("DAQ_BlockHeader")
+    assert header.get_signal_by_name("NFrames").maximum == 65535
+    assert MAX_BLOCK_SAMPLES == 65535 * 20 // 3 == 436900
+    channels = tuple(ChannelSpec(c, 1.0, "V") for c in (Channel.FORCE, Channel.ACCELERATION, Channel.DISPLACEMENT))
+    with can.Bus(interface="virtual", channel="capacity-test", fd=True) as bus:
+        with pytest.raises(ValueError, match=r"block length 436901 outside 1 \.\. 436900 samples"):
+            CanFdDaq(bus, channels).configure(25600.0, MAX_BLOCK_SAMPLES + 1)
+
+
 @pytest.mark.parametrize("rate", [25600.0, 51200.0, 102400.0])
 def test_the_largest_dwell_said_is_the_largest_block_the_daq_takes(rate):
     """Independent fact: the DAQ driver's own block plan at the grid's lowest frequency (a
@@ -79,7 +98,7 @@ def test_every_block_value_is_named_with_its_key_and_the_largest_that_fits():
     assert len(lines) == 3, lines
     for key, unit in (("measure_cycles", "cycles"), ("control_cycles", "cycles"), ("min_measure_s", "s")):
         line = next(ln for ln in lines if f"[plan.control] {key}: " in ln)
-        assert "the DAQ's largest block is 2^24-1 = 16777215 samples" in line and line.endswith(unit)
+        assert "the DAQ's largest block is 436900 samples" in line and line.endswith(unit)
     # min_measure_s: the largest said fits at every frequency of the grid and between
     said = float(next(ln for ln in lines if "min_measure_s" in ln).split("fits: ")[1].split()[0])
     f = parse_plan(dwell_plan(10, min_measure_s=said))
@@ -98,7 +117,7 @@ def test_every_block_value_is_named_with_its_key_and_the_largest_that_fits():
     with pytest.raises(ConfigError, match=r"\[plan\] levels: 101 levels; a refined plan .* at most 100"):
         parse_plan(many)
     # the phase-resonance loop: a block after a change is up to 6 x block_periods
-    with pytest.raises(ConfigError, match=r"\[plan.backbone\] block_periods: 1000 cycles .* the largest that fits: 546 cycles"):
+    with pytest.raises(ConfigError, match=r"\[plan.backbone\] block_periods: 1000 cycles .* the largest that fits: 14 cycles"):
         parse_plan({"plan": {"procedure": "phase_resonance", "levels_N": [1.0], "control": {"min_sample_rate_Hz": 102400,
                     "harmonics": 3}, "backbone": {"start_Hz": 80.0, "min_Hz": 20.0, "max_Hz": 160.0,
                                                   "block_periods": 1000}}})
@@ -125,7 +144,7 @@ def test_dry_run_run_and_resume_refuse_a_dwell_the_daq_cannot_record_before_swit
             rc, err = bench(*command, "--plan", str(plan), "--rig", str(rig))
             assert rc == 2, (command, err)
             assert len(err) == 1 and "[plan.resonance] dwell_cycles: 50000 cycles" in err[0], err
-            assert "the largest that fits: 19645 cycles" in err[0] and "Traceback" not in err[0]
+            assert "the largest that fits: 511 cycles" in err[0] and "Traceback" not in err[0]
             assert not out.exists()
             assert twins.generator.state == GeneratorState()       # never configured, never on
 
