@@ -17,6 +17,7 @@ from dataclasses import replace
 
 import pytest
 
+from bench.cli import main
 from bench.config import ConfigError, parse_plan, parse_rig, read_toml
 from bench.storage import RunStore
 from drivers import MAX_BLOCK_SAMPLES, ScpiFunctionGenerator, plan_block, start_twins
@@ -124,8 +125,9 @@ def test_every_block_value_is_named_with_its_key_and_the_largest_that_fits():
 
 
 @pytest.mark.timeout(120)
-def test_dry_run_run_and_resume_refuse_a_dwell_the_daq_cannot_record_before_switching_on(tmp_path):
-    """A real `bench` process against twins held by the test: exit 2, one line naming
+def test_dry_run_run_and_resume_refuse_a_dwell_the_daq_cannot_record_before_switching_on(tmp_path, capsys):
+    """`bench run` and `bench resume` in real processes against twins held by the test
+    (dry-run in this one, on them and on the simulated rig): exit 2, one line naming
     [plan.resonance] dwell_cycles, its unit and the largest that fits; the generator never
     touched (its state as at power-on), no run directory made, a stored run not resumed."""
     with start_twins(SimulatedRig(RigModel(seed=3))) as twins:
@@ -140,13 +142,18 @@ def test_dry_run_run_and_resume_refuse_a_dwell_the_daq_cannot_record_before_swit
                                timeout=60)
             return p.returncode, [ln for ln in p.stderr.splitlines() if ln.strip()]
 
-        for command in (["dry-run"], ["run", "--out", str(out), "--no-report"]):
-            rc, err = bench(*command, "--plan", str(plan), "--rig", str(rig))
-            assert rc == 2, (command, err)
+        def said(err: list[str]) -> None:
             assert len(err) == 1 and "[plan.resonance] dwell_cycles: 50000 cycles" in err[0], err
             assert "the largest that fits: 511 cycles" in err[0] and "Traceback" not in err[0]
-            assert not out.exists()
-            assert twins.generator.state == GeneratorState()       # never configured, never on
+
+        for rig_args in (["--rig", str(rig)], []):         # the twins' rig, the simulated rig
+            assert main(["dry-run", "--plan", str(plan), *rig_args]) == 2
+            said(capsys.readouterr().err.splitlines())
+        rc, err = bench("run", "--out", str(out), "--no-report", "--plan", str(plan), "--rig", str(rig))
+        assert rc == 2
+        said(err)
+        assert not out.exists()
+        assert twins.generator.state == GeneratorState()       # never configured, never on
 
         # a run an earlier version started with that plan (it was accepted then)
         stored = replace(parse_plan(dwell_plan(100)), dwell_cycles=50000)
@@ -154,8 +161,8 @@ def test_dry_run_run_and_resume_refuse_a_dwell_the_daq_cannot_record_before_swit
                                       "rig": parse_rig(read_toml(rig), str(rig)).to_dict()})
         store.update(status="interrupted")
         rc, err = bench("resume", str(out))
-        assert rc == 2, err
-        assert len(err) == 1 and "[plan.resonance] dwell_cycles: 50000 cycles" in err[0], err
+        assert rc == 2
+        said(err)
         assert [e["event"] for e in RunStore(out).events()] == ["start"]      # no resume, no output_off
         assert not list((out / "steps").iterdir())
         assert twins.generator.state == GeneratorState()
