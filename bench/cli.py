@@ -167,7 +167,7 @@ def _session_held(args, resume: bool) -> int:
                   + ("or were skipped at run time as the plan allows (--retry-skipped measures them again) "
                      if acc.skipped else "") + f"({acc.summary()})")
             return ExitCode.OK
-        print(f"resume: {acc.resume_text(retry)}" if acc.missing or acc.damaged or retry else
+        print(f"resume: {acc.resume_text(retry)}" if acc.missing or acc.damaged or acc.owed or retry else
               f"resume: every planned step is there{' or was skipped at run time' if acc.skipped else ''}; "
               f"finishing the run (it ended '{meta.get('status', '?')}')",
               flush=True)
@@ -436,7 +436,8 @@ def cmd_analyze(args) -> int:
 
 def cmd_check(args) -> int:
     """Verify a run directory against its plan: every missing, damaged and orphan step on
-    one line, then the count; exit 1 if there is any problem.  A step skipped at run time
+    one line, and what a refined run still owes (a refinement whose end is not recorded, a
+    dwell not measured: decision 0050), then the count; exit 1 if there is any problem.  A step skipped at run time
     (force unreachable) as the plan allows (``infeasible = "skip"``) is listed and counted,
     not a problem (exit 0 when it is the only gap) unless ``--strict`` (decision 0033)."""
     from .storage import NewerFormat, RunDirError, RunStore
@@ -450,14 +451,14 @@ def cmd_check(args) -> int:
         raise                                 # refused by name (exit 2), as report and resume do
     except RunDirError:                       # run.json damaged or its plan not valid: the files alone
         acc = None
-    problems = store.check() if acc is None else acc.missing + acc.damaged + acc.orphan
+    problems = store.check() if acc is None else acc.missing + acc.damaged + acc.orphan + acc.owed
     skipped = [] if acc is None else acc.skipped
     for p in skipped:
         print(f"{p.kind:>9}  {p.key}: {p.reason}")
     tail = _not_yet_measured(store, acc) if acc is not None else []
     for p in problems:
         if p not in tail:
-            print(f"{p.kind:>9}  {p}")
+            print(f"{p.kind:>9}  {p.key}: {p.reason}" if p.kind == "owed" else f"{p.kind:>9}  {p}")
     if tail:
         last = max((k for k in acc.intact), default=None)
         print(f"{'missing':>9}  interrupted after step {last or '(none)'}; {len(tail)} not yet measured "
@@ -469,7 +470,9 @@ def cmd_check(args) -> int:
         return ExitCode.FAILURE
     print(f"{store.path}: {acc.summary()}"
           + (f" (bench resume {store.path} measures missing and damaged steps again, keeping damaged "
-             "files in damaged/)" if acc.missing or acc.damaged else ""))
+             "files in damaged/)" if acc.missing or acc.damaged else "")
+          + (f" (bench resume {store.path} measures what the refinement still owes)" if acc.owed and not
+             (acc.missing or acc.damaged) else ""))
     if skipped:
         n = len(skipped)
         print(f"{n} step{'s' * (n != 1)} skipped at run time as the plan allows (infeasible = \"skip\"): "

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from drivers import check_daq_url, check_generator_url, check_sensor_url
+from procedures.capacity import block_problems, step_count_problems
 from procedures.plan import Backbone, Limits, Plan, Rig
 from sim.errors import ConfigurationError
 
@@ -75,6 +76,7 @@ class _Section:
         # end, see _collecting); None: each problem raises at once
         self.source, self.path, self.used, self.errors = source, path, set(), errors
         self.named: set[str] = set()
+        self.bad: set[str] = set()        # keys whose value was a problem (a stand-in was used)
         if not isinstance(data, dict):
             self.problem(f"{source}: [{path}] must be a table")
             data = {}
@@ -88,16 +90,24 @@ class _Section:
             raise ConfigError(message)
         self.errors.append(message)
 
-    def _or(self, get, fallback, suffix=""):
+    def _or(self, get, fallback, suffix="", key=""):
         """``get()``, or, if it finds a problem, the problem collected and ``fallback`` (a
-        value of the right type the rest of the file's checks can go on with)."""
+        value of the right type the rest of the file's checks can go on with; ``key`` is
+        then remembered as bad, see :meth:`rule`)."""
         try:
             return get()
         except ConfigError as e:
             if self.errors is None:
                 raise ConfigError(f"{e}{suffix}") from None
-            self.errors.append(f"{e}{suffix}")
+            self.errors.extend(f"{line}{suffix}" for line in str(e).splitlines())
+            self.bad.add(key)
             return fallback
+
+    def rule(self, message: str, *keys: tuple[_Section, str]) -> None:
+        """A problem across keys: collected, unless one of ``keys`` ((section, key) pairs)
+        already had its own problem (its value here was a stand-in; its own line names it)."""
+        if not any(key in sec.bad for sec, key in keys):
+            self.problem(message)
 
     def unknown(self, keys) -> None:
         """Name every key outside ``keys``, with the close valid one when there is one."""
@@ -144,8 +154,12 @@ class _Section:
             raise ConfigError(f"{self.where(key)}: must be a non-empty list of numbers, got {_short(v)}")
         if most is not None and len(v) > most:
             raise ConfigError(f"{self.where(key)}: {len(v)} values; at most {most}")
-        sub = _Section(self.source, self.path, {f"{key}[{i}]": x for i, x in enumerate(v)})   # raises at once
-        return [sub.number(f"{key}[{i}]", lo=lo, hi=hi, lo_open=lo_open, note=note) for i in range(len(v))]
+        # every bad element named, one line each
+        sub = _Section(self.source, self.path, {f"{key}[{i}]": x for i, x in enumerate(v)}, errors=[])
+        out = [sub.number(f"{key}[{i}]", lo=lo, hi=hi, lo_open=lo_open, note=note) for i in range(len(v))]
+        if sub.errors:
+            raise ConfigError("\n".join(sub.errors))
+        return out
 
     def _choice(self, key, default, allowed):
         v = self._get(key, default)
@@ -171,20 +185,21 @@ class _Section:
         ok_default = isinstance(default, (int, float)) and not isinstance(default, bool)
         fallback = default if ok_default else _inside(lo, hi, lo_open)
         return self._or(lambda: self._number(key, default, lo, hi, lo_open=lo_open, integer=integer, note=note),
-                        int(fallback) if integer else float(fallback), suffix)
+                        int(fallback) if integer else float(fallback), suffix, key)
 
     def numbers(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, note="", most=None):
         return self._or(lambda: self._numbers(key, default, lo, hi, lo_open=lo_open, note=note, most=most),
-                        [_inside(lo, hi, lo_open)])
+                        [_inside(lo, hi, lo_open)], key=key)
 
     def choice(self, key, default, allowed):
-        return self._or(lambda: self._choice(key, default, allowed), default if default in allowed else allowed[0])
+        return self._or(lambda: self._choice(key, default, allowed), default if default in allowed else allowed[0],
+                        key=key)
 
     def text(self, key, default=""):
-        return self._or(lambda: self._text(key, default), default if isinstance(default, str) else "")
+        return self._or(lambda: self._text(key, default), default if isinstance(default, str) else "", key=key)
 
     def flag(self, key, default=False):
-        return self._or(lambda: self._flag(key, default), default if isinstance(default, bool) else False)
+        return self._or(lambda: self._flag(key, default), default if isinstance(default, bool) else False, key=key)
 
     def table(self, key) -> _Section:
         self.used.add(key)
@@ -210,10 +225,11 @@ def _inside(lo: float, hi: float, lo_open: bool) -> float:
 
 
 def _collecting(parse, data: dict, source: str):
-    """``parse(data, source, errors)`` with the file's independent problems (unknown keys,
-    bad values) collected: one ConfigError naming each, one line per problem.  A check
-    that comes after a collected problem and fails (a rule across keys, which may have
-    seen a stand-in for a bad value) is left for the next run, once those are fixed."""
+    """``parse(data, source, errors)`` with the file's problems collected: one ConfigError
+    naming each, one line per problem (each bad element of a list, each unknown key, each
+    bad value, each key a procedure does not use).  A rule across keys is collected too
+    (:meth:`_Section.rule`) unless one of its keys already had its own problem: it would
+    have seen a stand-in value; it waits for the next run, once that key is fixed."""
     errors: list[str] = []
     try:
         out = parse(data, source, errors)
@@ -314,14 +330,25 @@ def _backbone(sec: _Section) -> Backbone:
         collapse=sec.number("collapse", 0.2, 0, 1, lo_open=True)).resolved()
     if not MIN_FREQ_HZ <= b.min_Hz < b.start_Hz * (1 - b.probe_step) < b.start_Hz * (1 + b.probe_step) < b.max_Hz \
             <= MAX_FREQ_HZ:
-        raise ConfigError(f"{sec.where('min_Hz')} / max_Hz: the window {b.min_Hz:g}-{b.max_Hz:g} Hz must hold "
-                          f"start_Hz {b.start_Hz:g} Hz and its probe blocks (x (1 -+ probe_step {b.probe_step:g})) "
-                          f"inside the bench's range {MIN_FREQ_HZ:g}-{MAX_FREQ_HZ:g} Hz")
+        sec.rule(f"{sec.where('min_Hz')} / max_Hz: the window {b.min_Hz:g}-{b.max_Hz:g} Hz must hold "
+                 f"start_Hz {b.start_Hz:g} Hz and its probe blocks (x (1 -+ probe_step {b.probe_step:g})) "
+                 f"inside the bench's range {MIN_FREQ_HZ:g}-{MAX_FREQ_HZ:g} Hz",
+                 *((sec, k) for k in ("min_Hz", "max_Hz", "start_Hz", "probe_step")))
     if b.phase_band_deg >= b.lost_phase_deg:
-        raise ConfigError(f"{sec.where('phase_band_deg')}: {b.phase_band_deg:g} deg must be below "
-                          f"lost_phase_deg {b.lost_phase_deg:g} deg")
+        sec.rule(f"{sec.where('phase_band_deg')}: {b.phase_band_deg:g} deg must be below "
+                 f"lost_phase_deg {b.lost_phase_deg:g} deg", (sec, "phase_band_deg"), (sec, "lost_phase_deg"))
     sec.done()
     return b
+
+
+def _response_levels(rc: _Section) -> tuple[list[float], str]:
+    """[plan.response] levels, in the unit of its quantity; the table's keys checked."""
+    quantity = rc.choice("quantity", "disp", ("disp", "accel"))
+    lo, hi, unit = (1e-9, 1e-3, "m") if quantity == "disp" else (1e-4, 1e3, "m/s^2")
+    levels = rc.numbers("levels", _REQUIRED, lo, hi, note=f" ({unit}, the response fundamental's amplitude)",
+                        most=MAX_LEVELS)
+    rc.done()
+    return levels, quantity
 
 
 def load_plan(path: Path) -> Plan:
@@ -342,28 +369,34 @@ def _parse_plan(data: dict, source: str, errors: list[str]) -> Plan:
     quantity = ""
     if procedure == "response_controlled":
         if "levels_N" in p.data:
-            raise ConfigError(f"{p.where('levels_N')}: not used with procedure = \"response_controlled\" "
-                              f"(give [plan.response] levels, response amplitudes)")
-        quantity = rc.choice("quantity", "disp", ("disp", "accel"))
-        lo, hi, unit = (1e-9, 1e-3, "m") if quantity == "disp" else (1e-4, 1e3, "m/s^2")
-        levels = rc.numbers("levels", _REQUIRED, lo, hi, note=f" ({unit}, the response fundamental's amplitude)",
-                            most=MAX_LEVELS)
-        rc.done()
+            p.used.add("levels_N")
+            p.problem(f"{p.where('levels_N')}: not used with procedure = \"response_controlled\" "
+                      f"(give [plan.response] levels, response amplitudes)")
+        levels, quantity = _response_levels(rc)
     elif rc.data:
-        raise ConfigError(f"{source}: [plan.response] needs procedure = \"response_controlled\" in [plan]")
-    else:
+        p.rule(f"{source}: [plan.response] needs procedure = \"response_controlled\" in [plan]", (p, "procedure"))
+        _response_levels(rc)            # its values' own problems too
+    if procedure != "response_controlled":
         levels = p.numbers("levels_N", _REQUIRED, MIN_LEVEL_N, MAX_LEVEL_N, note=FORCE_RANGE, most=MAX_LEVELS)
     fr = p.table("frequencies")
     bb = p.table("backbone")
     backbone = None
     if procedure == "phase_resonance":
         if fr.data:
-            raise ConfigError(f"{source}: [plan.frequencies] is not used with procedure = \"phase_resonance\" "
-                              f"(the controller finds the frequency; give [plan.backbone] start_Hz)")
+            p.problem(f"{source}: [plan.frequencies] is not used with procedure = \"phase_resonance\" "
+                      f"(the controller finds the frequency; give [plan.backbone] start_Hz)")
+            fr = _Section(source, "plan.frequencies", {}, errors=p.errors)
         backbone = _backbone(bb)
         freqs = [backbone.start_Hz]
     elif bb.data:
-        raise ConfigError(f"{source}: [plan.backbone] needs procedure = \"phase_resonance\" in [plan]")
+        p.rule(f"{source}: [plan.backbone] needs procedure = \"phase_resonance\" in [plan]", (p, "procedure"))
+        if "start_Hz" in bb.data:       # its values' own problems too
+            _backbone(bb)
+        else:
+            bb.choice("response", "disp", ("disp", "accel"))
+            bb.done()
+    if procedure == "phase_resonance":
+        pass
     elif "list_Hz" in fr.data:
         freqs = sorted(fr.numbers("list_Hz", None, MIN_FREQ_HZ, MAX_FREQ_HZ, note=FREQ_RANGE, most=MAX_FREQUENCIES))
     else:
@@ -374,10 +407,11 @@ def _parse_plan(data: dict, source: str, errors: list[str]) -> Plan:
         grid = np.geomspace(start, stop, points) if spacing == "log" else np.linspace(start, stop, points)
         freqs = [float(f"{f:.6g}") for f in grid]
     if len(set(freqs)) != len(freqs):
-        raise ConfigError(f"{fr.where('frequencies')}: grid has repeated frequencies")
+        fr.problem(f"{fr.where('frequencies')}: grid has repeated frequencies")
+        freqs = sorted(set(freqs))
     direction = fr.choice("direction", "up", ("up", "down", "both"))
     steps = len(levels) * len(freqs) * (2 if direction == "both" else 1)
-    if steps > MAX_STEPS:                     # before anything is expanded
+    if steps > MAX_STEPS:                     # nothing is expanded after this
         raise ConfigError(f"{source}: [plan] {len(levels)} levels x {len(freqs)} frequencies"
                           f"{' x 2 directions' if direction == 'both' else ''} = {steps} steps; at most {MAX_STEPS} "
                           f"(split the test into several plans)")
@@ -414,23 +448,34 @@ def _parse_plan(data: dict, source: str, errors: list[str]) -> Plan:
         procedure=procedure, backbone=backbone, response=quantity)
     res.done()
     if plan.dwell_cycles and not plan.refine:
-        raise ConfigError(f"{res.where('dwell_cycles')}: needs refine = true (the dwell is at the refined resonance)")
+        res.rule(f"{res.where('dwell_cycles')}: needs refine = true (the dwell is at the refined resonance)",
+                 (res, "refine"))
     if backbone is not None and plan.adaptive_per_sweep:
-        raise ConfigError(f"{p.where('adaptive_per_sweep')}: not used with procedure = \"phase_resonance\"")
+        p.problem(f"{p.where('adaptive_per_sweep')}: not used with procedure = \"phase_resonance\"")
     if backbone is not None and plan.refine:
-        raise ConfigError(f"{res.where('refine')}: not used with procedure = \"phase_resonance\" (the loop finds the resonance itself)")
+        p.problem(f"{res.where('refine')}: not used with procedure = \"phase_resonance\" (the loop finds the "
+                  f"resonance itself)")
     # every fitted harmonic must stay below Nyquist at the highest frequency (the DAQ samples
     # at >= min_sample_rate_Hz); above it harmonics alias and the fit's amplitudes are wrong;
     # phase resonance: anywhere in its frequency window
     top = backbone.max_Hz if backbone is not None else max(plan.freqs_Hz)
     max_harmonics = math.ceil(plan.min_sample_rate_Hz / (2 * top)) - 1
     if plan.harmonics > max_harmonics:
-        raise ConfigError(f"{c.where('harmonics')}: must be <= {max_harmonics} (below Nyquist at "
-                          f"{top:g} Hz with min_sample_rate_Hz = {plan.min_sample_rate_Hz:g}), "
-                          f"got {plan.harmonics}")
+        c.rule(f"{c.where('harmonics')}: must be <= {max_harmonics} (below Nyquist at "
+               f"{top:g} Hz with min_sample_rate_Hz = {plan.min_sample_rate_Hz:g}), "
+               f"got {plan.harmonics}", (c, "harmonics"), (c, "min_sample_rate_Hz"))
+    if not (p.bad | fr.bad | bb.bad | c.bad | res.bad):   # a stand-in for a bad value makes blocks no plan asks for
+        _instrument_capacity(p, plan, source)
     c.done()
     p.done()
     return plan
+
+
+def _instrument_capacity(p: _Section, plan: Plan, source: str) -> None:
+    """Every block, sample rate and step count the plan makes against what the DAQ and the
+    bench take (procedures.capacity, decision 0050), each problem named with its key."""
+    for problem in block_problems(plan, source) + step_count_problems(plan, source, MAX_STEPS):
+        p.problem(problem)
 
 
 # [rig.model] keys that take one of a few words, key -> allowed values

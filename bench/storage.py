@@ -45,13 +45,13 @@ import tempfile
 import threading
 import zipfile
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
-from procedures.plan import Plan
+from procedures.plan import Plan, StepSpec
 from sim.errors import ConfigurationError, RunDirectoryError, StorageError
 from sim.step_result import STEP_FORMAT_VERSION, StepResult, check_step_version, step_fields_problem
 
@@ -242,7 +242,7 @@ def shown(name) -> str:
     return os.fsencode(str(name)).decode("utf-8", "backslashreplace")
 
 
-PROBLEM_KINDS = ("missing", "truncated", "corrupt", "checksum", "unknown", "skipped")
+PROBLEM_KINDS = ("missing", "truncated", "corrupt", "checksum", "unknown", "skipped", "owed")
 
 
 # what a run writes inside its directory: none of them may be a symbolic link
@@ -610,7 +610,47 @@ class RunStore:
                 present_step(key)
         order = {key: i for i, key in enumerate(s.key for s in plan.schedule())}
         missing.sort(key=lambda p: order.get(p.key, -1))
-        return Accounting(n_planned, intact, missing, damaged, orphan, skipped)
+        owed = self._refinement_owed(plan, set(intact), set(allowed), {p.key for p in missing}) if plan.refine else []
+        return Accounting(n_planned, intact, missing, damaged, orphan, skipped, owed)
+
+    def _refinement_owed(self, plan, intact: set[str], skipped: set[str], missing: set[str]) -> list[StepProblem]:
+        """What a refined run still owes (decision record 0050), one problem per level and
+        mode: a refinement whose end no ``refinement_end`` event records (a run that
+        completed ended them all: the procedure goes on only once the refiner says so; runs
+        of earlier versions have no such events), and a dwell that the recorded end owes and
+        that is neither stored intact nor skipped at run time as the plan allows."""
+        from procedures.resonance import END_REASONS
+        completed = self.metadata.get("status") == RunStatus.COMPLETED
+        ends: dict[tuple[int, str], dict] = {}
+        for e in self.events():
+            if e.get("event") == "refinement_end" and e.get("reason") in END_REASONS:
+                ends[(e.get("level_index"), e.get("mode"))] = e
+        last: dict[int, StepSpec] = {}
+        for step in plan.schedule():
+            last[step.level_index] = step
+        sweeps = _sweeps(plan)
+        out = []
+        for li, step in sorted(last.items()):
+            swept = not any(k in missing for k in sweeps.get((li, step.direction), []))
+            for mode in plan.refine_modes:
+                label = f"L{li:02d}-{mode}"
+                end = ends.get((li, mode))
+                if end is None and not completed:
+                    done = len([k for k in intact if k.startswith(f"{step.index:05d}-L{li:02d}-R{mode[0].upper()}")])
+                    out.append(StepProblem(label, self.steps_dir, "owed",
+                                           f"the {mode} refinement at {step.force_N:g} N has not ended"
+                                           + (f" ({done} of at most {plan.refine_steps} steps measured)" if swept else
+                                              " (after the level's sweep)")
+                                           + (", nor its dwell" if plan.dwell_cycles else "")))
+                elif end is not None and end.get("dwell_owed"):
+                    dwell = replace(step, freq_index=-1, refined=0, refined_mode=mode,
+                                    dwell_cycles=plan.dwell_cycles).key
+                    if dwell not in intact and dwell not in skipped:
+                        out.append(StepProblem(label, self.steps_dir / f"{dwell}.json", "owed",
+                                               f"the dwell of {plan.dwell_cycles} cycles at the {mode} resonance at "
+                                               f"{step.force_N:g} N ({dwell}) not measured (the refinement ended: "
+                                               f"{end['reason']})"))
+        return out
 
     def set_aside_damaged(self) -> list[StepProblem]:
         """Move the files of every damaged step to ``<run>/damaged/<time>/`` (so that resume
@@ -740,12 +780,14 @@ class Accounting:
     damaged: list[StepProblem]
     orphan: list[StepProblem]
     skipped: list[StepProblem] = field(default_factory=list)
+    owed: list[StepProblem] = field(default_factory=list)     # a refined run's unended refinements, dwells
 
     @property
     def complete(self) -> bool:
         """Every planned step is there and intact, or was skipped at run time as the plan
-        allows (nothing a resume would measure unless asked to retry the skipped ones)."""
-        return self.planned is not None and not self.missing and not self.damaged
+        allows (nothing a resume would measure unless asked to retry the skipped ones), and
+        a refined run owes nothing (every refinement ended, every dwell it owes measured)."""
+        return self.planned is not None and not self.missing and not self.damaged and not self.owed
 
     @property
     def missing_count(self) -> int:
@@ -761,6 +803,8 @@ class Accounting:
             parts.append("missing: " + _keys_text([_missing_label(p) for p in self.missing], 12))
         if self.damaged:
             parts.append("damaged: " + _keys_text([f"{p.key} ({p.kind})" for p in self.damaged], 12))
+        if self.owed:
+            parts.append("owed: " + _keys_text([_owed_label(p) for p in self.owed], 12))
         if self.skipped:
             parts.append(("skipped at run time, retried: " if retry_skipped else
                           "skipped at run time, not retried (--retry-skipped retries them): ")
@@ -775,7 +819,13 @@ class Accounting:
         return (f"{len(self.intact)} intact / {'?' if self.planned is None else self.planned} planned; {skipped}"
                 f"missing: {_keys_text(missing) or 'none'}; "
                 f"damaged: {_keys_text([f'{p.key} ({p.kind})' for p in self.damaged]) or 'none'}; "
-                f"orphan: {_keys_text([shown(p.path.name) for p in self.orphan]) or 'none'}")
+                f"orphan: {_keys_text([shown(p.path.name) for p in self.orphan]) or 'none'}"
+                + (f"; owed: {_keys_text([_owed_label(p) for p in self.owed])}" if self.owed else ""))
+
+
+def _owed_label(p: StepProblem) -> str:
+    """'L00-feed dwell' or 'L01-pitch refinement'."""
+    return f"{p.key} {'dwell' if p.path.suffix == '.json' else 'refinement'}"
 
 
 def _missing_label(p: StepProblem) -> str:

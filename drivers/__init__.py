@@ -6,7 +6,8 @@ Public surface (everything else is private implementation):
   Channel, DaqBlock, GapReading, SensorStatus, TargetMaterial
 - drivers: ScpiFunctionGenerator (SCPI over serial/TCP or a VISA resource; is_visa_resource
   tells which strings go to pyvisa, VisaTransport), CanFdDaq (CAN FD, python-can),
-  ModbusEddySensor (Modbus TCP/RTU), open_can_bus, plan_block
+  ModbusEddySensor (Modbus TCP/RTU), open_can_bus, plan_block (and the DAQ's
+  MAX_BLOCK_SAMPLES, MAX_SAMPLE_RATE_HZ)
 - twins: start_twins, run_standalone, Twins
 - errors: InstrumentError and its subclasses
 - URL allow-lists: check_generator_url, check_sensor_url, check_daq_url
@@ -15,7 +16,7 @@ Public surface (everything else is private implementation):
 import logging
 
 from ._can_transport import CanTcpBridge, TcpCanBus, open_can_bus
-from ._daq import CanFdDaq, plan_block
+from ._daq import MAX_BLOCK_SAMPLES, MAX_SAMPLE_RATE_HZ, CanFdDaq, plan_block
 from ._daq_codec import dbc_path
 from ._eddy_sensor import ModbusEddySensor
 from ._errors import (
@@ -49,6 +50,7 @@ from ._visa_transport import VisaTransport, is_visa_resource
 log = logging.getLogger(__name__)
 
 __all__ = [
+    "MAX_BLOCK_SAMPLES", "MAX_SAMPLE_RATE_HZ",
     "BlockIntegrityError", "CanFdDaq", "CanTcpBridge", "Channel", "ChannelSpec",
     "ConnectionLost", "Daq", "DaqBlock", "DisplacementSensor", "FrameError",
     "FunctionGenerator", "GapReading", "Identity", "InstrumentError", "InstrumentTimeout",

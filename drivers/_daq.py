@@ -29,6 +29,9 @@ log = logging.getLogger(__name__)
 
 CAN_FD_DATA_BITRATE = 5e6
 MAX_SAMPLE_RATE_HZ = 204_800.0
+# The DAQ's largest block: NSamples of DAQ_Config is 24 bits, but a block of the three
+# channels must also fit in 65535 data frames of 20 values (NFrames is 16 bits): 436900.
+MAX_BLOCK_SAMPLES = min(2**24 - 1, codec.MAX_FRAMES * codec.SAMPLES_PER_FRAME // codec.N_CHANNELS)
 
 
 def plan_block(freq_Hz: float, n_periods: int, min_rate_Hz: float = 25_600.0) -> tuple[float, int]:
@@ -150,8 +153,9 @@ class CanFdDaq:
         if not (1_000_000 <= rate_mHz <= int(MAX_SAMPLE_RATE_HZ * 1000)):
             raise ValueError(f"sample rate {sample_rate_Hz!r} S/s outside 1 kS/s .. "
                              f"{MAX_SAMPLE_RATE_HZ:g} S/s")
-        if not (1 <= n_samples < 2**24):
-            raise ValueError(f"block length {n_samples!r} outside 1 .. 2^24-1 samples")
+        if not (1 <= n_samples <= MAX_BLOCK_SAMPLES):
+            raise ValueError(f"block length {n_samples!r} outside 1 .. {MAX_BLOCK_SAMPLES} samples (three channels "
+                             f"in at most {codec.MAX_FRAMES} data frames of {codec.SAMPLES_PER_FRAME} values)")
         self._drain()
         self._send(codec.ID_CONFIG, codec.encode(codec.ID_CONFIG, SampleRate_mHz=rate_mHz,
                                                  NSamples=n_samples,

@@ -34,8 +34,9 @@ log = logging.getLogger(__name__)
 
 MIN_RATE_mHz = 1_000_000
 MAX_RATE_mHz = 204_800_000
-MAX_SAMPLES = 2**21     # the twin's block limit (the real DAQ's is 2^24-1): about 60 MB in
-                        # flight; the bench asks for at most a few 10^5 (drivers.plan_block)
+# the twin's block limit, the real DAQ's: a block of the three channels fits in 65535 data
+# frames of 20 values (NFrames is 16 bits): 436900 samples, about 10 MB in flight
+MAX_SAMPLES = codec.MAX_FRAMES * codec.SAMPLES_PER_FRAME // codec.N_CHANNELS
 MAX_PENDING_FAULTS = 64
 BUSY_STATUS_INTERVAL_S = 0.1
 

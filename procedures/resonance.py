@@ -13,6 +13,11 @@ The dwell (``[plan.resonance] dwell_cycles`` > 0): once a level's refinement is 
 more step at each refined resonance (the estimate from the level's sweep and refinement
 steps) whose measured block is ``dwell_cycles`` periods long, keyed with ``W`` where a
 refinement step has ``R``.  Dwell steps do not enter the estimates that choose steps.
+
+The end of each mode's refinement at each level is told to ``on_end`` once (decision record
+0050): a reason code (:data:`END_REASONS`), the refinement steps measured and whether a dwell
+is owed; the session stores it as a ``refinement_end`` event, from which ``bench check``
+knows a refined run complete or names what it still owes.
 """
 
 from __future__ import annotations
@@ -29,41 +34,79 @@ from .plan import Plan, StepSpec
 
 log = logging.getLogger(__name__)
 
+# why a mode's refinement at a level ended (a code, stored as is; never parsed from words)
+END_REASONS = {
+    "converged": "the peak is known within the tolerance",
+    "budget_spent": "max_steps refinement steps measured, the peak not yet known within the tolerance",
+    "no_peak": "no peak inside the grid to refine",
+    "no_progress": "the next step would repeat a measured frequency",
+    "too_few_steps": "fewer than 3 steps measured at the level",
+    "not_measured": "a refinement step it asked for was not measured (skipped at run time)",
+}
+
 
 class Refiner:
     """``next_step(last)``: the next refinement step of the level whose sweep ended with
     ``last`` (a step of the schedule), or None when every peak is known within the
     tolerance or the level's budget is spent.  ``results()`` returns the stored steps."""
 
-    def __init__(self, plan: Plan, results: Callable[[], list], pitch_band_Hz: tuple[float, float] | None = None):
+    def __init__(self, plan: Plan, results: Callable[[], list], pitch_band_Hz: tuple[float, float] | None = None,
+                 on_end: Callable[..., None] | None = None):
         self.plan = plan
         self.results = results
         self.pitch_band_Hz = pitch_band_Hz
         self.f_min, self.f_max = min(plan.freqs_Hz), max(plan.freqs_Hz)
+        self.on_end = on_end                  # on_end(level_index=, level=, mode=, reason=, steps=, dwell_owed=)
+        self._ended: set[tuple[int, str]] = set()
+        self._asked: set[str] = set()         # keys of the refinement steps asked for
+
+    def _end(self, last: StepSpec, mode: str, reason: str, steps: int, found) -> None:
+        """Tell ``on_end`` (once per level and mode) that ``mode``'s refinement ended."""
+        if (last.level_index, mode) in self._ended:
+            return
+        self._ended.add((last.level_index, mode))
+        owed = bool(self.plan.dwell_cycles > 0 and found is not None)
+        log.info("level %g N: the %s refinement ended: %s (%d steps)%s", last.force_N, mode, END_REASONS[reason],
+                 steps, "; a dwell follows" if owed else "")
+        if self.on_end:
+            self.on_end(level_index=last.level_index, level=last.force_N, mode=mode, reason=reason, steps=steps,
+                        dwell_owed=owed)
 
     def next_step(self, last: StepSpec) -> StepSpec | None:
         li = last.level_index
         level = [r for r in self.results() if r["level_index"] == li]
         steps = [r for r in level if "-W" not in r["key"]]    # dwells do not choose steps
         if len(steps) < 3:
+            for mode in self.plan.refine_modes:
+                self._end(last, mode, "too_few_steps", 0, None)
             return None
         d = LevelData.from_steps(last.force_N, steps)
+        stored = {r["key"] for r in steps}
         for mode in self.plan.refine_modes:
             done = sum(1 for r in steps if f"-R{mode[0].upper()}" in r["key"])
+            found = self._resonance(mode, d)
+            f = None if found is None else self._next_from(found, d)
             if done >= self.plan.refine_steps:
-                if self._next_for(mode, d) is not None:
+                if f is not None:
                     log.warning("level %g N: the %s peak is not known within %g %% after %d refinement steps "
                                 "(plan: [plan.resonance] max_steps)", last.force_N, mode,
                                 100 * self.plan.refine_tolerance, done)
+                self._end(last, mode, "budget_spent" if f is not None else "converged", done, found)
                 continue
-            f = self._next_for(mode, d)
             if f is None:
+                self._end(last, mode, "no_peak" if found is None else "converged", done, found)
                 continue
             f = float(f"{f:.6g}")
             if np.any(np.isclose(d.f_Hz, f, rtol=1e-9, atol=0)):
+                self._end(last, mode, "no_progress", done, found)
                 continue                 # no progress possible (a step there already)
+            step = StepSpec(last.index, li, -1, last.direction, last.force_N, f, refined=done, refined_mode=mode)
+            if step.key in self._asked and step.key not in stored:      # asked for before, not measured
+                self._end(last, mode, "not_measured", done, found)
+                return step              # (the procedure does not take a step twice: it goes on)
+            self._asked.add(step.key)
             log.info("level %g N: refining the %s peak: step at %.5g Hz", last.force_N, mode, f)
-            return StepSpec(last.index, li, -1, last.direction, last.force_N, f, refined=done, refined_mode=mode)
+            return step
         if self.plan.dwell_cycles > 0:
             for mode in self.plan.refine_modes:
                 if any(f"-W{mode[0].upper()}" in r["key"] for r in level):
@@ -95,10 +138,7 @@ class Refiner:
         fr = est.resonance_Hz if est.ok else self._parabola(d.f_Hz, mag, i)
         return fr, est.damping_ratio, i, mag
 
-    def _next_for(self, mode: str, d: LevelData) -> float | None:
-        found = self._resonance(mode, d)
-        if found is None:
-            return None
+    def _next_from(self, found: tuple[float, float, int, np.ndarray], d: LevelData) -> float | None:
         fr, zeta, i, mag = found
         return next_refinement_Hz(d.f_Hz, mag, i, fr, zeta, self.plan.refine_tolerance, self.f_min, self.f_max)
 

@@ -21,6 +21,7 @@ from sim.step_record import BlockRecord, measure_block
 from sim.step_result import ControlIteration, StepMeasurement, StepResult
 
 from .analysis import fit_harmonics
+from .capacity import measure_periods
 from .instruments import Block, BlockSource, SineSource, StepMarker
 from .plan import Plan, StepSpec
 from .safety import LimitExceeded
@@ -296,7 +297,7 @@ class SteppedSine:
         the limit is logged as a warning and kept in the result (``unsettled``).  A dwell
         step's block is its ``dwell_cycles`` long."""
         f = step.freq_Hz
-        periods = max(self.plan.measure_cycles, math.ceil(self.plan.min_measure_s * f), step.dwell_cycles)
+        periods = measure_periods(self.plan, f, step.dwell_cycles)
         self._wait(f, self.plan.min_settle_s, min_periods=self.plan.settle_cycles)
         if self.marker is not None:   # a simulated rig reseeds its noise here (decision 0013)
             self.marker.mark_step(step.key)
@@ -405,7 +406,7 @@ class SteppedSine:
             self.sensor_check()
         self.ramp(self._first_vpp(step, new_sweep=True), step.freq_Hz)
         self.control_force(step)
-        periods = max(self.plan.measure_cycles, math.ceil(self.plan.min_measure_s * step.freq_Hz))
+        periods = measure_periods(self.plan, step.freq_Hz)
         self._wait(step.freq_Hz, self.plan.min_settle_s, min_periods=self.plan.settle_cycles + periods)
 
     def step(self, step: StepSpec, *, new_sweep: bool, record: Record) -> StepResult | None:

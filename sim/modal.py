@@ -50,6 +50,7 @@ WINDOW_LEVEL = 1 / math.sqrt(2)   # the fit's window: the peak's half-power band
 MAX_POINTS = 15             # ... at most this many points nearest the peak
 MIN_IN_BAND = 3             # a resolved peak: at least this many measured points in its half-power band
 OTHER_MODE_GAP = 1.3        # a pitching peak lies at least this factor above the feed mode
+PEAK_SD_FLOOR = 0.5         # the peak's sd is at least this x the pole's natural frequency's sd
 
 
 @dataclass(frozen=True)
@@ -276,14 +277,22 @@ def local_maxima(f: np.ndarray, mag: np.ndarray, min_prominence: float = 0.02) -
 def _window(f: np.ndarray, mag: np.ndarray, ip: int) -> np.ndarray:
     """The fit's points: the contiguous run around the peak ``ip`` above WINDOW_LEVEL of
     it (the half-power band: there the single-mode shape holds best on a nonlinear
-    mode's skewed peak), widened to the MIN_POINTS + 1 nearest when fewer, never across
-    a point where the curve rises again (another mode), at most MAX_POINTS nearest."""
+    mode's skewed peak), widened when fewer than MIN_POINTS + 1: first by the point
+    beyond the band on each side (both flanks: points crowded near the peak, refinement
+    steps and a dwell, must not push a flank out and leave the fit one-sided, decision
+    0050), then to the MIN_POINTS + 1 nearest; never across a point where the curve
+    rises again (another mode), at most MAX_POINTS nearest."""
     lo = hi = ip
     top, level = mag[ip], WINDOW_LEVEL * mag[ip]
     while lo > 0 and level <= mag[lo - 1] <= top:
         lo -= 1
     while hi < f.size - 1 and level <= mag[hi + 1] <= top:
         hi += 1
+    if hi - lo + 1 < MIN_POINTS + 1:          # both flanks, where the curve keeps falling
+        if lo > 0 and mag[lo - 1] < min(mag[lo], level):
+            lo -= 1
+        if hi < f.size - 1 and mag[hi + 1] < min(mag[hi], level):
+            hi += 1
     while hi - lo + 1 < MIN_POINTS + 1:       # below the half-power level: while the curve keeps falling
         can_lo = lo > 0 and mag[lo - 1] < min(mag[lo], level)
         can_hi = hi < f.size - 1 and mag[hi + 1] < min(mag[hi], level)
@@ -333,16 +342,32 @@ def estimate_mode(f_Hz: ArrayLike, H: ArrayLike, *, mode: str, kind: str, level_
     if sel.size < MIN_POINTS:
         est.status, est.note = "no fit", f"{sel.size} points around the peak at {fp:.4g} Hz; a fit needs {MIN_POINTS}"
         return est
-    try:
-        fit = fit_single_mode(f[sel], Hfit[sel], kind, fp, guess_zeta)
-    except (ValueError, np.linalg.LinAlgError) as e:
-        est.status, est.note = "no fit", f"single-mode fit failed: {e}"
-        return est
+    while True:
+        try:
+            fit = fit_single_mode(f[sel], Hfit[sel], kind, fp, guess_zeta)
+        except (ValueError, np.linalg.LinAlgError) as e:
+            est.status, est.note = "no fit", f"single-mode fit failed: {e}"
+            return est
+        fpk, sd_f, hpk, sd_h = fit.peak_sd()
+        # a fitted peak pinned at the window's edge (its search grid's first or last cell:
+        # the delta method then gives sd 0) is not placed by the data: one more point on
+        # that side, while the curve keeps falling there (decision 0050)
+        cell = (f[sel[-1]] - f[sel[0]]) / 400
+        low, high = fpk <= f[sel[0]] + cell, fpk >= f[sel[-1]] - cell
+        if low and sel[0] > 0 and mag[sel[0] - 1] < mag[sel[0]]:
+            sel = np.concatenate([[sel[0] - 1], sel])
+        elif high and sel[-1] < f.size - 1 and mag[sel[-1] + 1] < mag[sel[-1]]:
+            sel = np.concatenate([sel, [sel[-1] + 1]])
+        else:
+            break
     est.n_points = int(sel.size)
     est.window_Hz = (float(f[sel[0]]), float(f[sel[-1]]))
-    fpk, sd_f, hpk, sd_h = fit.peak_sd()
     t = fit.t
-    if not (f[sel[0]] < fpk < f[sel[-1]]):
+    # the peak cannot be placed better than its pole: at least half the natural
+    # frequency's sd (the delta method's is 0.54-1.0 of it on 99 % of linear fits,
+    # decision 0050; 0 when the peak is pinned at the window's edge)
+    sd_f = max(sd_f, PEAK_SD_FLOOR * fit.natural_Hz()[1])
+    if low or high:
         est.status = "no fit"
         est.note = f"the fitted peak {fpk:.4g} Hz lies at the edge of its window {f[sel[0]]:.4g}-{f[sel[-1]]:.4g} Hz"
         return est
@@ -443,7 +468,10 @@ def level_modes(d: LevelData, *, feed_predicted_Hz: float | None = None, pitch: 
                              curve=d.compliance_pp, curve_name="compliance_pp", peak_index=i)
     out.append(feed)
     if pitch:
-        fh = feed.resonance_Hz if feed.ok else (feed.edge_Hz if math.isfinite(feed.edge_Hz) else None)
+        # the feed mode's frequency: its estimate, its edge, else its measured maximum (a
+        # feed peak without a fit is still no pitching mode)
+        fh = feed.resonance_Hz if feed.ok else (feed.edge_Hz if math.isfinite(feed.edge_Hz) else
+                                                None if i is None else float(d.f_Hz[i]))
         j = find_pitch(d, pitch_predicted_Hz, pitch_band_Hz, fh)
         if j is None:
             out.append(ModeEstimate("pitch", d.level_N, "not found", "|A1/F1|",

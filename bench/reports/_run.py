@@ -23,7 +23,7 @@ from ._steps import Series, legacy_pp, series_of
 
 log = logging.getLogger(__name__)
 
-ROUTINE_EVENTS = {"start", "end", "sensor", "output_off", "probe_noise"}
+ROUTINE_EVENTS = {"start", "end", "sensor", "output_off", "probe_noise", "refinement_end"}   # (0050)
 ANALYSIS_JSON = Path("analysis") / "analysis.json"
 ANALYSIS_HTML = Path("analysis") / "analysis.html"
 

@@ -291,6 +291,50 @@ def test_three_mistakes_of_a_plan_file_are_named_in_one_run(tmp_path, capsys):
     assert "\n" not in str(e.value) and str(e.value).endswith("got 'sideways'")
 
 
+EVERY_PROBLEM = """\
+[plan]
+name = "every problem"
+procedure = "response_controlled"
+levels_N = [1.0]
+levles = 3
+
+[plan.response]
+quantity = "displacement"
+levels = [-1.0, nan, 0.0, 1e9]
+
+[plan.backbone]
+response = "velocity"
+
+[plan.frequencies]
+list_Hz = [40.0, 80.0]
+"""
+
+
+def test_one_invocation_names_every_problem_of_a_plan_file(tmp_path, capsys):
+    """Issue 30 item 8: each bad element of a list, a key the procedure does not use, an
+    unknown key and the bad words of two tables, all in one run, one line each; main named
+    only the unknown key (the rest came one run after the other)."""
+    path = write(tmp_path, "every.toml", EVERY_PROBLEM)
+    assert main(["dry-run", "--plan", str(path)]) == 2
+    lines = [ln.strip() for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    wanted = [r"\[plan\] levles: unknown key; did you mean levels_N\?",
+              r"\[plan\] levels_N: not used with procedure = \"response_controlled\"",
+              r"\[plan.response\] quantity: must be one of \['disp', 'accel'\], got 'displacement'",
+              *(rf"\[plan.response\] levels\[{i}\]: must be >= 1e-09 and <= 0.001 \(m, .*got {v}$"
+                for i, v in enumerate(("-1.0", "nan", "0.0", "1000000000.0"))),
+              r"\[plan.backbone\] response: must be one of \['disp', 'accel'\], got 'velocity'",
+              r"\[plan.backbone\] needs procedure = \"phase_resonance\""]
+    assert lines[0] == f"bench dry-run: error: {len(wanted)} problems:", lines
+    for want in wanted:
+        assert sum(bool(re.search(want, ln)) and ln.startswith(str(path)) for ln in lines) == 1, (want, lines)
+    # a force plan's list: every element named, the good ones not
+    with pytest.raises(ConfigError) as e:
+        load_plan(write(tmp_path, "levels.toml", edit(PLAN, "levels_N = [1.0, 3.0]",
+                                                      "levels_N = [-1.0, nan, 2.0, 0.0, 1e9]")))
+    named = re.findall(r"levels_N\[(\d)\]: must be >= 0.1 and <= 100", str(e.value))
+    assert named == ["0", "1", "3", "4"], str(e.value)
+
+
 # --------------------------------------------------------------------------- schedule
 
 def plan_with(direction: str, levels=(1.0, 3.0), freqs=(160.0, 40.0, 80.0)):

@@ -65,6 +65,10 @@ def test_refined_feed_resonance_matches_the_engines_dense_peak(feed_run):
     assert feed.ok and feed.resonance_Hz == pytest.approx(ref, rel=0.01)
     assert abs(feed.resonance_Hz / ref - 1) < 0.003       # measured: 0.06 %
     assert 0 < feed.damping_ratio_low < feed.damping_ratio < feed.damping_ratio_high < 0.3
+    # never zero width (a `bench run` of this plan on main: 67.8995 Hz [67.8995, 67.8995],
+    # the fitted peak pinned at the first point of a window of refinement steps, decision 0050)
+    assert feed.resonance_low_Hz < feed.resonance_Hz < feed.resonance_high_Hz
+    assert feed.window_Hz[0] < feed.resonance_Hz < feed.window_Hz[1]
 
 
 def test_refined_pitch_resonance_matches_a_dense_window_and_the_feed_is_below_the_grid(pitch_run, tmp_path):
@@ -255,6 +259,14 @@ def test_the_dwell_records_one_long_block_at_the_refined_resonance(tmp_path, cap
     for p in (cut / "steps").glob("*-W*"):
         p.unlink()
     RunStore.open(cut).update(status="interrupted")
+    # the dwell is one more point in the fit: an interval of some width, the damping ratio
+    # within a third of the fit's 95 % half-width without it (one point of n >= 5 moves an
+    # estimate by about sd / sqrt(n); main: 68.1292 Hz [68.1292, 68.1292], the peak pinned at
+    # the window's first point, 68.1292-71.0916 Hz)
+    (without,) = run_modes(cut, model=False).modes
+    assert feed.resonance_low_Hz < feed.resonance_Hz < feed.resonance_high_Hz
+    half = (without.damping_ratio_high - without.damping_ratio_low) / 2
+    assert abs(feed.damping_ratio - without.damping_ratio) < half / 3, (feed, without)
     assert main(["resume", str(cut), "--no-report"]) == 0
     (again,) = [r for r in RunStore.open(cut).results() if "-W" in r["key"]]
     assert again["key"] == dwell["key"] and again["freq_Hz"] == dwell["freq_Hz"]

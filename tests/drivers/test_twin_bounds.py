@@ -106,9 +106,12 @@ def test_a_silent_client_is_dropped_after_the_idle_time(scpi_model):
         server.close()
 
 
-def test_the_daq_twin_refuses_a_block_larger_than_it_holds(daq):
+def test_the_daq_twin_refuses_a_block_larger_than_it_holds(daq, monkeypatch):
+    # the driver refuses it first (drivers.MAX_BLOCK_SAMPLES): a driver without that check
+    monkeypatch.setattr("drivers._daq.MAX_BLOCK_SAMPLES", 2**24 - 1)
+    assert MAX_SAMPLES == 436_900      # 65535 data frames of 20 values, three channels (daq.dbc)
     with pytest.raises(InstrumentError, match="refused CONFIG: BAD_CONFIG"):
-        daq.configure(25_600.0, MAX_SAMPLES + 1)
+        daq.configure(25_600.0, 436_901)   # accepted before, then the block's header could not be encoded
     daq.configure(25_600.0, 256)                               # and keeps serving
     assert daq.acquire().force_N.shape == (256,)
 
