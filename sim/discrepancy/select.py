@@ -268,7 +268,12 @@ def term_scale(current: Fit, d: Data, term: str) -> float:
 
 
 def select(base: Fit, d: Data, W: Weights, catalog: tuple[str, ...] = CATALOG, max_causes: int = 3,
-           library: tuple[str, ...] = LIBRARY, library_fits: int = LIBRARY_FITS) -> Selection:
+           library: tuple[str, ...] = LIBRARY, library_fits: int = LIBRARY_FITS,
+           restart: np.ndarray | None = None) -> Selection:
+    """``restart``: log F_s, log x_s, n, log m to start the candidates from while the
+    current model's F_s or x_s is unbounded (gross sliding beside a spring: the Masing
+    model alone runs off to F_s, x_s ~ 1e30 and a candidate warm-started there stays
+    stuck, chi-square 1.6e5 where the truth gives 1)."""
     current = base
     base_thetas: list = []
     held_cur = heldout_error(base.model, base.theta, d, W, thetas=base_thetas)
@@ -294,7 +299,10 @@ def select(base: Fit, d: Data, W: Weights, catalog: tuple[str, ...] = CATALOG, m
             if e in centres:           # a stiffness term with its rest position: the screen's best start
                 x_c, coef = centres[e]
                 init = np.array([coef / scale_of.get(e, 1.0), x_c / math.exp(current.theta[1])])
-            model, th0 = current.model.extend(current.theta, e, init, scale_of.get(e, 1.0))
+            start = current.theta
+            if restart is not None and {"F_s_N", "x_s_m"} & set(current.unbounded()):
+                start = np.concatenate([restart, current.theta[4:]])
+            model, th0 = current.model.extend(start, e, init, scale_of.get(e, 1.0))
             try:
                 f = fit(model, th0, d, W, max_nfev=SELECT_NFEV)
             except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
