@@ -325,8 +325,16 @@ def select(base: Fit, d: Data, W: Weights, catalog: tuple[str, ...] = CATALOG, m
             break
         chosen.named = True
         named.append(chosen)
-        # the selection's fits stop early; the next round starts from a converged model
+        # the selection's fits stop early; the next round starts from a converged model, and
+        # what the next candidate must beat is that model's own held-out error: measured from
+        # the early-stopped fit it was higher, and a form added beside the cause "improved" on
+        # the cause's unconverged fit, not on the cause (issue 33: coulomb_friction and
+        # virgin_curve_family beside a second mode that was the only effect)
         chosen.fit = fit(chosen.fit.model, chosen.fit.theta, d, W, max_nfev=100)
+        converged: list = []
+        held = heldout_error(chosen.fit.model, chosen.fit.theta, d, W, thetas=converged)
+        if held < chosen.heldout_error:
+            chosen.heldout_error, chosen.heldout_thetas = held, converged
         current, held_cur = chosen.fit, chosen.heldout_error
     return Selection(base=base, final=current, named=named, tried=tried, heldout_base=held_base,
                      screened=screened, base_heldout_thetas=base_thetas)
