@@ -29,7 +29,7 @@ from .fit import Fit, Weights, fit, whitened
 from .gain import frf
 from .models import BASE_PARAMS, CENTRE, CENTRED, EFFECTS, LIBRARY, Data, Model
 from .rounding import interval_text
-from .select import Selection, select, settle_final
+from .select import BIC_GATE, Selection, select, settle_final
 from .terms import accelerance_pair, second_mode_phrase, speed_friction, speed_friction_phrase
 
 log = logging.getLogger(__name__)
@@ -235,6 +235,7 @@ class Analysis:
             last = sel.named[-1]
             parts.append(f"Out-of-sample error falls from {100 * first.heldout_before:.1f} % to "
                          f"{100 * last.heldout_error:.1f} %.")
+            parts += self._not_separable_phrases()
         elif not sel.unexplained:
             parts.append(f"The Masing model explains the data within the noise (reduced chi-square "
                          f"{self.base.reduced_chi2:.2f}, held-out error {base_err:.2f} %); no effect in the "
@@ -252,6 +253,21 @@ class Analysis:
             parts.append(caveat)
         parts += artefact_verdict(self.artefacts)
         return " ".join(parts)
+
+    def _not_separable_phrases(self) -> list[str]:
+        """Library forms that lowered the chi-square beside a named cause but did not predict
+        the held-out levels better than it: not named, and said (issue 33)."""
+        sel = self.selection
+        out = []
+        for c in sel.tried:
+            if (c.kind == "discovered" and not c.named and c.round > 1 and c.delta_bic < BIC_GATE
+                    and math.isfinite(c.heldout_error) and c.id not in self.causes):
+                beside = ", ".join(EFFECTS[n.id].label for n in sel.named if n.round < c.round)
+                out.append(f"{EFFECTS[c.id].label} also lowers the chi-square beside {beside} (BIC by "
+                           f"{-c.delta_bic:.0f}) but does not predict the held-out levels better than it (held-out error "
+                           f"{100 * c.heldout_before:.2f} % -> {100 * c.heldout_error:.2f} %): the data cannot separate "
+                           f"it from {beside}, so it is not named.")
+        return out
 
     def _unbounded_phrases(self) -> list[str]:
         """Words for parameters the data do not bound (an interval beyond any finite value)."""
