@@ -182,7 +182,7 @@ def attribute_lines(quality: list[tuple[str, StepQuality]],
     modes += [(f"the {fr:.4g} Hz resonance of the measured response", float(fr)) for fr in resonances_Hz]
     vib: list[list[float]] = [[a.freq_Hz for a in q.artefacts if _vibration_Hz(a)] for _, q in quality]
     interference: set[int] = set()
-    out = []
+    out: list[tuple[str, StepQuality, list[Artefact], bool]] = []
     for i, (key, q) in enumerate(quality):
         arts, changed = [], False
         for a in q.artefacts:
@@ -222,7 +222,7 @@ def attribute_lines(quality: list[tuple[str, StepQuality]],
             arts.append(_as_vibration(a, q, why, decays))
             vib[i].append(a.freq_Hz)
             changed = True
-        out.append([key, q, arts, changed])
+        out.append((key, q, arts, changed))
     result = []
     for key, q, arts, changed in out:
         final = []
