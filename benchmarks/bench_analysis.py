@@ -239,11 +239,13 @@ def _uff_effects(fx: dict, rig: dict) -> dict:
 
 
 def independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str | None = None,
-                     settle: int | None = None):
+                     settle: int | None = None, hum_m: float | None = None):
     """(UFF58 path, kind, rig, effects as RigModel fields, f_res, generation time) of one
     seeded independent case; simulated unless ``cache`` holds it already.  ``settle``: settle
     periods of every step, the first of a level's included (default :data:`INDEPENDENT_SETTLE`;
-    25 leaves the carriage's free vibration in the records, as a hurried real test does)."""
+    25 leaves the carriage's free vibration in the records, as a hurried real test does);
+    ``hum_m``: the mains line's amplitude of a ``mains_line`` case (default 3-10 x the
+    probe's noise; a strong hum, several um and larger than the response, is issue 33's)."""
     import tempfile
 
     from tests.independent_masing import generate_uff
@@ -260,12 +262,15 @@ def independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str | N
         settle_n = first = settle
     if kind == "mains_line":             # 3-10 x the probe's noise, mains of either kind
         kw.update(line_Hz=float(rng.choice([50.0, 60.0])), line_m=0.002 * rig["x_s_m"] * rng.uniform(3, 10))
+        if hum_m:
+            kw["line_m"] = hum_m
     if kind == "unsettled":
         settle_n, first = 1, 1
     levels_N, freqs_Hz = plan_grid(rig, levels, freqs, 0.3 if kind == "asymmetric_friction" else 0.85)
     d = Path(cache) if cache else Path(tempfile.mkdtemp(prefix="bench_indep_"))
     d.mkdir(parents=True, exist_ok=True)
-    path = d / f"indep_{seed:03d}_{levels}x{freqs}{'' if settle is None else f'_s{settle}'}.uff"
+    hum = f"_hum{hum_m:g}" if hum_m and kind == "mains_line" else ""
+    path = d / f"indep_{seed:03d}_{levels}x{freqs}{'' if settle is None else f'_s{settle}'}{hum}.uff"
     t0 = time.perf_counter()
     if not path.exists():
         tmp = path.with_suffix(".part")
@@ -283,14 +288,14 @@ def _mains_Hz(seed: int) -> float:
 
 
 def run_independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str | None = None,
-                         settle: int | None = None) -> dict:
+                         settle: int | None = None, hum_m: float | None = None) -> dict:
     """One independent case, analysed as ``bench analyze`` analyses a UFF58 file."""
     from types import SimpleNamespace
 
     from bench.sources import load_source
     from sim.artefacts import artefact_causes
 
-    path, kind, rig, fx, f_res, t_gen = independent_case(seed, levels, freqs, cache, settle)
+    path, kind, rig, fx, f_res, t_gen = independent_case(seed, levels, freqs, cache, settle, hum_m)
     rng = np.random.default_rng(seed)
     guess = {k: v * rng.uniform(0.7, 1.3) for k, v in rig.items()}
     t0, c0 = time.perf_counter(), time.process_time()
@@ -306,6 +311,7 @@ def run_independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str
     detail = [dict(id=c["id"], channel=c.get("channel"), steps=len(c.get("evidence", {}).get("steps", [])),
                    freq_Hz=c.get("parameters", {}).get("frequency", {}).get("value")) for c in artefacts]
     row = dict(seed=seed, kind=kind, n=rig["n"], steps=len(steps), steps_rejected=len(src.rejected),
+               line_causes=sum(c["id"] == "line_interference" for c in artefacts),
                artefacts=sorted({c["id"] for c in artefacts}), artefact_detail=detail,
                t_generate_s=t_gen, t_load_s=t_load, cpu_load_s=c_load)
     if kind == "mains_line":            # named: a line on the probe at the mains frequency
@@ -417,6 +423,10 @@ def summarise(rows: list[dict]) -> str:
             k = [st for r, st in tr if r["kind"] == kind]
             out.append(f"  steps with an unsettled transient, {kind} cases: median {np.median(k) if k else 0:.0f} "
                        f"(in {len(k)} of {sum(r['kind'] == kind for r in rows)} cases)")
+    lc = [r for r in rows if "line_causes" in r]
+    if lc:                                      # issue 33: clean none, a humming case one mains cause (+ <= 1)
+        out.append("line_interference causes per case: " + ", ".join(f"seed {r['seed']} {r['kind']} {r['line_causes']}"
+                                                                   for r in lc))
     out.extend(issue16_rates(rows))
     out.extend(phase_lines(rows))
     ta = np.array([r["t_analysis_s"] for r in rows])
@@ -447,6 +457,11 @@ def phase_lines(rows: list[dict]) -> list[str]:
     wall = np.array([r["t_total_s"] for r in cpu if "t_total_s" in r])
     if wall.size:
         out.append(f"  {'wall time, total (the machine shared)':58s} {np.median(wall):7.1f} s {wall.max():5.1f} s")
+    clean = [r["cpu_total_s"] for r in cpu if r["kind"] == "clean"]
+    for r in cpu:
+        if r["kind"] == "mains_line" and clean:      # issue 33: a humming case within twice a clean one
+            out.append(f"  {'mains case seed ' + str(r['seed']) + ' / clean (median), same run':58s} "
+                       f"{r['cpu_total_s'] / np.median(clean):7.2f} x   bar <= 2 x")
     ref = [r for r in cpu if r.get("cpu_identify_s")]
     if ref:
         ratio = np.array([r["cpu_total_s"] / r["cpu_identify_s"] for r in ref])
@@ -612,6 +627,8 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", help="independent source: keep the UFF58 files here (and reuse them)")
     ap.add_argument("--settle", type=int, help="independent source: settle periods of every step (default 40, a "
                                                "level's first 60; 25 leaves free vibration in the records)")
+    ap.add_argument("--hum-m", type=float, help="independent source: the mains line's amplitude of the mains_line "
+                    "cases (m; e.g. 8.2e-6, a strong hum larger than the response: issue 33)")
     ap.add_argument("--profile", action="store_true",
                     help="also profile-likelihood intervals of F_s, x_s, n, m (coverage, width and time)")
     ap.add_argument("--drop-transients", action="store_true",
@@ -625,7 +642,7 @@ def main(argv=None) -> int:
     if args.source == "independent":
         from functools import partial
         case_fn = partial(run_independent_case, levels=args.levels, freqs=args.freqs, cache=args.cache,
-                          settle=args.settle)
+                          settle=args.settle, hum_m=args.hum_m)
     else:
         case_fn = run_case
     t0 = time.perf_counter()

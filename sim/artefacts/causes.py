@@ -9,6 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from .detectors import HARMONIC_GUARD
 from .quality import Artefact, StepQuality
 from .sentences import FORMULAS, LABEL, LABELS, UNIT, mains, si
 
@@ -35,6 +36,10 @@ def _where(qs: list[StepQuality]) -> str:
 REPEAT_STEPS = 3            # a line at one frequency in at least this many steps comes from a steady source
 LINE_CLUSTER_REL = 0.002    # ... one frequency: within 0.2 % (at least 0.05 Hz); a mode wanders more with level
 MODE_REL = 0.1              # the rig's vibrations within 10 % of a line's frequency are the same mode
+COHERENT_FACTOR = 2.0       # a steady source's line keeps its amplitude: within this factor of its median
+COMPONENT_SHARE = 0.5       # a line at most this share of a stronger line of its step and channel ...
+COMPONENT_RESOLUTIONS = 4.0  # ... within this many record resolutions of it, or at a sideband of it with a
+#                              drive harmonic (|f - f_line| or f + f_line a multiple of the drive), is its component
 
 
 def _same_line(f1: float, f2: float) -> bool:
@@ -46,54 +51,155 @@ def _vibration_Hz(a: Artefact) -> bool:
     return a.kind == "unsettled_transient" and math.isfinite(a.freq_Hz)
 
 
+def _coherent(sizes: list[float]) -> int:
+    """How many of these amplitudes lie within ``COHERENT_FACTOR`` of their median."""
+    if not sizes:
+        return 0
+    mid = float(np.median(sizes))
+    return sum(mid / COHERENT_FACTOR <= s <= mid * COHERENT_FACTOR for s in sizes)
+
+
+def _component_of(a: Artefact, q: StepQuality) -> Artefact | None:
+    """The stronger line of ``a``'s step and channel that ``a`` is a component of: what a
+    strong line and the drive make together in one record (spectral leakage and a fit that
+    splits the line into neighbours, within ``COMPONENT_RESOLUTIONS`` of it; sidebands at
+    the line's frequency plus or minus a drive harmonic, within the detector's guard), at
+    most ``COMPONENT_SHARE`` of its amplitude.  None when there is none."""
+    res = 1.0 / q.record_s if math.isfinite(q.record_s) and q.record_s > 0 else 0.0
+    guard = max(HARMONIC_GUARD * res, 0.05)
+    for b in sorted(q.artefacts, key=lambda b: -b.size):
+        if (b is a or b.kind != "line_interference" or b.channel != a.channel
+                or not a.size <= COMPONENT_SHARE * b.size):
+            continue
+        if abs(a.freq_Hz - b.freq_Hz) <= COMPONENT_RESOLUTIONS * max(res, 0.05):
+            return b
+        if math.isfinite(q.freq_Hz) and q.freq_Hz > 0:
+            for gap in (abs(a.freq_Hz - b.freq_Hz), a.freq_Hz + b.freq_Hz):
+                k = round(gap / q.freq_Hz)
+                if k >= 1 and abs(gap - k * q.freq_Hz) <= guard:
+                    return b
+    return None
+
+
 def attribute_lines(quality: list[tuple[str, StepQuality]],
                     resonances_Hz: tuple[float, ...] = ()) -> list[tuple[str, StepQuality]]:
     """Whose line is it?  The steps of one source in the order they were measured, with
-    every ``line_interference`` that is not interference named what it is: the rig's own
-    unsettled free vibration (decision record 0045).
+    every ``line_interference`` that is not interference named what it is: a component of
+    a stronger line of its step, or the rig's own unsettled free vibration (decision
+    records 0045, 0053).
 
     One step cannot tell a weak free vibration seen by one sensor from a hum (decision
-    0033); the source can.  A line at a mains frequency (50/60 Hz and harmonics,
-    :func:`mains`) is interference: the fundamental, or a harmonic when the family shows in
-    at least 2 steps.  Any other line is the rig's own motion when it is
-    within ``MODE_REL`` of the frequency of a vibration of the step before (each frequency
-    change rings the same mode, whose frequency moves a little with the level), of one
-    that any step shows as the rig's (a decaying sinusoid fitted, or probe and accelerometer
-    seeing one motion), or of a resonance of the source's own response (``resonances_Hz``:
-    the most compliant frequency of each force level, where the rig rings); else it is interference from a steady source when it comes back at
-    one frequency (within ``LINE_CLUSTER_REL``) in at least ``REPEAT_STEPS`` steps.  What is
-    left, a line in one or two steps at frequencies no steady source explains, is the rig's
-    own ringing too (pre-rolling friction damps little at small amplitude).  The rig's own
-    becomes an ``unsettled_transient`` without a decay rate of its own, with settle advice
-    from the decay rate of the source's fitted transients near its frequency (else of all
-    of them), counted as :func:`settle_cycles` counts."""
-    lines = [(i, a) for i, (_, q) in enumerate(quality) for a in q.artefacts if a.kind == "line_interference"]
-    family: dict[str, set[int]] = {}             # mains base -> steps with a line of its family
+    0033), nor a source from what a strong line and the drive make together; the source
+    can.  First, per step, a line at most ``COMPONENT_SHARE`` of a stronger line on its
+    channel and within ``COMPONENT_RESOLUTIONS`` of it or at a sideband of it with a drive
+    harmonic is that line's component (:func:`_component_of`): it follows the stronger line
+    (``part_of_Hz``), it is no source of its own.  Of the others, a line at a mains
+    frequency (50/60 Hz and harmonics, :func:`mains`) is mains interference when its family
+    comes back over the run: one of its lines (channel, harmonic) in at least
+    ``REPEAT_STEPS`` steps with a coherent amplitude (within ``COHERENT_FACTOR`` of its
+    median); a mains frequency alone, in one step, makes no hum.  Any other line is the
+    rig's own motion when it is within ``MODE_REL`` of the frequency of a vibration of the
+    step before (each frequency change rings the same mode, whose frequency moves a little
+    with the level), of one that any step shows as the rig's (a decaying sinusoid fitted,
+    or probe and accelerometer seeing one motion), or of a resonance of the source's own
+    response (``resonances_Hz``: the most compliant frequency of each force level, where
+    the rig rings); else it is interference from a steady source when it comes back at one
+    frequency (within ``LINE_CLUSTER_REL``) in at least ``REPEAT_STEPS`` steps, at as many
+    drive frequencies (a by-product of one drive comes back at that drive only) and with a
+    coherent amplitude: what a technician needs to go and look for a pump.  What is left is
+    the rig's own ringing too (pre-rolling friction damps little at small amplitude).  The
+    rig's own becomes an ``unsettled_transient`` without a decay rate of its own, with
+    settle advice from the decay rate of the source's fitted transients near its frequency
+    (else of all of them), counted as :func:`settle_cycles` counts."""
+    parent: dict[int, Artefact] = {}              # id(line) -> the stronger line it is a component of
+    for _, q in quality:
+        for a in q.artefacts:
+            if a.kind == "line_interference":
+                b = _component_of(a, q)
+                if b is not None:
+                    parent[id(a)] = b
+    lines = [(i, a) for i, (_, q) in enumerate(quality) for a in q.artefacts
+             if a.kind == "line_interference" and id(a) not in parent]
+    groups: dict[tuple[str, str, int], list[tuple[int, float]]] = {}    # (mains base, channel, harmonic)
     for i, a in lines:
-        if mains(a.freq_Hz):
-            family.setdefault(mains(a.freq_Hz).split(" (")[0], set()).add(i)
+        src = mains(a.freq_Hz)
+        if src:
+            base = src.split(" (")[0]
+            groups.setdefault((base, a.channel, round(a.freq_Hz / float(base.split()[0]))), []).append((i, a.size))
+    hum = {base for (base, _, _), g in groups.items()
+           if _coherent([s for _, s in g]) >= REPEAT_STEPS and len({i for i, _ in g}) >= REPEAT_STEPS}
 
-    def is_mains(f: float) -> bool:
-        """A mains frequency whose family the source shows: the fundamental, or a harmonic
-        (a window of 0.5 % that a stray line at a high frequency can fall into) seen with
-        its family in at least 2 steps."""
-        src = mains(f)
-        return bool(src) and ("harmonic" not in src or len(family[src.split(" (")[0]]) >= 2)
+    def is_mains(i: int, a: Artefact) -> bool:
+        """At a mains frequency whose family comes back over the run (above): the line of the
+        family that does, or another harmonic of it seen in 2 steps or in a step with that
+        line (a window of 0.5 % that a stray line at a high frequency can fall into)."""
+        src = mains(a.freq_Hz)
+        if not src or src.split(" (")[0] not in hum:
+            return False
+        base = src.split(" (")[0]
+        g = groups[(base, a.channel, round(a.freq_Hz / float(base.split()[0])))]
+        if _coherent([s for _, s in g]) >= REPEAT_STEPS or len({i2 for i2, _ in g}) >= 2:
+            return True
+        return any(key[0] == base and i in {i2 for i2, _ in g2} and _coherent([s for _, s in g2]) >= REPEAT_STEPS
+                   for key, g2 in groups.items())
 
-    repeated = {(i, id(a)) for i, a in lines
-                if len({i2 for i2, b in lines if _same_line(a.freq_Hz, b.freq_Hz)}) >= REPEAT_STEPS}
+    # where the hum sits within the detector's guard of a drive harmonic it is not separable from
+    # it: the step shows no line at its frequency, only its leakage around it (a 50 Hz hum of
+    # 8.2 um at a drive of 10.35 Hz, 1.4 resolutions from harmonic 5: "lines" at 46.75 and
+    # 55.8 Hz of 1.0 and 0.5 um).  Those weaker lines on its channel are the hum's.
+    hidden: dict[int, float] = {}                  # id(line) -> the frequency of the hum it is leakage of
+    for (base, ch, _), g in groups.items():
+        if base not in hum or _coherent([s for _, s in g]) < REPEAT_STEPS:
+            continue
+        F = float(np.median([a.freq_Hz for i, a in lines if (i, a.size) in g and a.channel == ch]))
+        A = float(np.median([s for _, s in g]))
+        with_it = {i for i, _ in g}
+        for i, (_, q) in enumerate(quality):
+            if i in with_it or not (math.isfinite(q.freq_Hz) and q.freq_Hz > 0 and q.record_s > 0):
+                continue
+            k = round(F / q.freq_Hz)
+            if k >= 1 and abs(F - k * q.freq_Hz) <= HARMONIC_GUARD / q.record_s:
+                for a in q.artefacts:
+                    if a.kind == "line_interference" and a.channel == ch and a.size <= A and not mains(a.freq_Hz):
+                        hidden[id(a)] = F
+    lines = [(i, a) for i, a in lines if id(a) not in hidden]
+
+    def steady(i: int, a: Artefact) -> bool:
+        same = [(i2, b) for i2, b in lines if _same_line(a.freq_Hz, b.freq_Hz) and not is_mains(i2, b)]
+        drives: list[float] = []                   # the drive frequencies it comes back at
+        for i2, _ in same:
+            f = quality[i2][1].freq_Hz
+            if not any(_same_line(f, d) for d in drives):
+                drives.append(f)
+        return (len({i2 for i2, _ in same}) >= REPEAT_STEPS and len(drives) >= REPEAT_STEPS
+                and _coherent([b.size for _, b in same]) >= REPEAT_STEPS)
+
+    repeated = {(i, id(a)) for i, a in lines if steady(i, a)}
     decays = [(a.freq_Hz, a.decay_per_s) for _, q in quality for a in q.artefacts
               if _vibration_Hz(a) and a.decay_per_s > 0]
     modes = [(f"the {a.freq_Hz:.4g} Hz vibration of step {key}", a.freq_Hz)
              for key, q in quality for a in q.artefacts if _vibration_Hz(a)]
     modes += [(f"the {fr:.4g} Hz resonance of the measured response", float(fr)) for fr in resonances_Hz]
     vib: list[list[float]] = [[a.freq_Hz for a in q.artefacts if _vibration_Hz(a)] for _, q in quality]
-    out = []
+    interference: set[int] = set()
+    out: list[tuple[str, StepQuality, list[Artefact], bool]] = []
     for i, (key, q) in enumerate(quality):
         arts, changed = [], False
         for a in q.artefacts:
-            if a.kind != "line_interference" or is_mains(a.freq_Hz):
+            if a.kind != "line_interference" or id(a) in parent:
                 arts.append(a)
+                continue
+            if id(a) in hidden:
+                F = hidden[id(a)]
+                arts.append(replace(a, part_of_Hz=F, evidence=(
+                    f"{a.evidence}; leakage of the {F:.4g} Hz line of the source, which lies within "
+                    f"{HARMONIC_GUARD:g} record resolutions of drive harmonic {round(F / q.freq_Hz)} here and cannot be "
+                    f"separated from it: not a source of its own")))
+                changed = True
+                continue
+            if is_mains(i, a):
+                arts.append(a)
+                interference.add(id(a))
                 continue
             near = lambda fv: abs(fv / a.freq_Hz - 1) <= MODE_REL          # noqa: E731
             before = [fv for fv in (vib[i - 1] if i else []) if near(fv)]
@@ -107,20 +213,41 @@ def attribute_lines(quality: list[tuple[str, StepQuality]],
                        + ", the rig's own mode: the rig's own free vibration, not interference")
             elif (i, id(a)) in repeated:
                 arts.append(a)
+                interference.add(id(a))
                 continue
             else:
-                why = (f"at no mains frequency and in fewer than {REPEAT_STEPS} steps at one frequency: the rig's own "
-                       f"free vibration, not interference")
+                why = (f"{'at a mains frequency in too few steps with one amplitude' if mains(a.freq_Hz) else 'at no mains frequency'}"
+                       f" and in fewer than {REPEAT_STEPS} steps at one frequency, drive frequencies and amplitude: "
+                       f"the rig's own free vibration, not interference")
             arts.append(_as_vibration(a, q, why, decays))
             vib[i].append(a.freq_Hz)
             changed = True
+        out.append((key, q, arts, changed))
+    result = []
+    for key, q, arts, changed in out:
+        final = []
+        for a in arts:
+            b = parent.get(id(a))
+            if b is not None and a.kind == "line_interference":
+                root = b
+                while id(root) in parent:
+                    root = parent[id(root)]
+                if id(root) in interference:
+                    a = replace(a, part_of_Hz=root.freq_Hz,
+                                evidence=f"{a.evidence}; a component of the {root.freq_Hz:.4g} Hz line of this step "
+                                         f"(leakage or a sideband with the drive), not a source of its own")
+                else:
+                    a = _as_vibration(a, q, f"beside the stronger {b.freq_Hz:.4g} Hz line of this step, which is "
+                                            f"not interference: the rig's own free vibration", decays)
+                changed = True
+            final.append(a)
         if not changed:
-            out.append((key, q))
+            result.append((key, q))
             continue
         old = {a.describe() for a in q.artefacts}
-        notes = ([a.describe() for a in arts] + [n for n in q.notes if n not in old]) if q.notes else []
-        out.append((key, replace(q, artefacts=arts, notes=notes)))
-    return out
+        notes = ([a.describe() for a in final] + [n for n in q.notes if n not in old]) if q.notes else []
+        result.append((key, replace(q, artefacts=final, notes=notes)))
+    return result
 
 
 def _as_vibration(a: Artefact, q: StepQuality, why: str, decays: list[tuple[float, float]]) -> Artefact:
@@ -171,12 +298,17 @@ def artefact_causes(quality: list[tuple[str, StepQuality]], total: int | None = 
                 hits.setdefault((a.kind, a.channel), []).append((key, q, a))
     out = []
     families: dict[str, list] = {}
-    for it in sorted(lines, key=lambda it: it[2].freq_Hz):
-        src = mains(it[2].freq_Hz)
+
+    def source_Hz(a: Artefact) -> float:        # a component goes with the line it is a component of
+        return a.part_of_Hz if math.isfinite(a.part_of_Hz) else a.freq_Hz
+
+    for it in sorted(lines, key=lambda it: (source_Hz(it[2]), math.isfinite(it[2].part_of_Hz))):
+        f_src = source_Hz(it[2])
+        src = mains(f_src)
         fam = src.split(" (")[0] if src else None
         if fam is None:               # a steady line of another source: its frequency cluster
             fam = next((k for k, g in families.items() if not k.endswith("mains")
-                        and _same_line(g[-1][2].freq_Hz, it[2].freq_Hz)), f"{it[2].freq_Hz:.6g} Hz")
+                        and _same_line(source_Hz(g[-1][2]), f_src)), f"{f_src:.6g} Hz")
         families.setdefault(fam, []).append(it)
     for fam, items in families.items():
         out.append(_line_cause(fam, sorted(items, key=lambda it: order[it[0]]), total))
@@ -206,20 +338,24 @@ def _line_cause(family: str, items, total: int) -> dict:
     def line_of(a: Artefact) -> tuple[str, int]:
         return a.channel, (round(a.freq_Hz / base) if base else 1)
 
+    parts = [(k, a) for k, _, a in items if math.isfinite(a.part_of_Hz)]
     count: dict[tuple[str, int], set] = {}
     for k, _, a in items:
-        count.setdefault(line_of(a), set()).add(k)
+        if not math.isfinite(a.part_of_Hz):
+            count.setdefault(line_of(a), set()).add(k)
     main = max(count, key=lambda c: len(count[c]))
     ch = main[0]
     f = [a.freq_Hz for _, _, a in items if line_of(a) == main]
     amp = [a.size for _, _, a in items if line_of(a) == main]
-    n = len({k for k, _, _ in items})
+    n = len({k for k, _, a in items if not math.isfinite(a.part_of_Hz)})
     what = (f"{family} interference" if base else "interference from another source (a pump, a fan, a switching supply)")
     others = sorted(set(count) - {main})
     also = ("; also " + ", ".join((f"{m * base:g} Hz " if base else "") + f"on the {LABEL[c]} ({len(count[(c, m)])} steps)"
                                   for c, m in others)) if others else ""
+    comp = (f"; with {len(parts)} component(s) of it that the line and the drive make together (leakage, "
+            f"sidebands) in {len({k for k, _ in parts})} steps, not sources of their own") if parts else ""
     sentence = (f"a {np.median(f):.4g} Hz line of {si(float(np.median(amp)), UNIT[ch])} on the {LABEL[ch]} in {n} of "
-                f"{total} steps, not locked to the drive: {what}{also}; removed before the fit")
+                f"{total} steps, not locked to the drive: {what}{also}{comp}; removed before the fit")
     return _entry("line_interference", ch, items, total,
                   dict(frequency=_param(f, "Hz"), amplitude=_param(amp, UNIT[ch])), sentence)
 

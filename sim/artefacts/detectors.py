@@ -8,7 +8,7 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import leastsq
 from scipy.special import log_ndtr, logsumexp
 
 from ..records import analyse_channel
@@ -362,12 +362,19 @@ def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Lin
     ab, *_ = np.linalg.lstsq(np.column_stack([np.sin(w0 * t), np.cos(w0 * t), np.ones(n)]), r, rcond=None)
     p0 = np.concatenate([np.zeros(nd), ab])
     try:
-        sol = least_squares(resid, p0, jac=jac, method="lm", x_scale="jac", max_nfev=40)
-        J = jac(sol.x)
-        cov = float(sol.fun @ sol.fun) / max(1, n - p0.size) * np.linalg.pinv(J.T @ J)
+        # MINPACK's lmder as least_squares(method="lm", x_scale="jac", max_nfev=40) calls it (the
+        # same arguments and tolerances: the same iterates to the last bit), without the
+        # wrappers least_squares puts around every evaluation (a third of the time of a case
+        # with a strong hum on every step, issue 33)
+        if n < p0.size:
+            raise ValueError("fewer samples than parameters")
+        p, _, info, _, _ = leastsq(resid, p0, Dfun=jac, full_output=True, ftol=1e-8, xtol=1e-8, gtol=1e-8,
+                                   maxfev=40)
+        fun = info["fvec"]
+        J = jac(p)
+        cov = float(fun @ fun) / max(1, n - p0.size) * np.linalg.pinv(J.T @ J)
     except (ValueError, np.linalg.LinAlgError):
         return None
-    p = sol.x
     w, sig, s, c = parts(p)
     if not (math.isfinite(w) and w > 0):
         return None

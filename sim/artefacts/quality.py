@@ -32,6 +32,7 @@ class Artefact:
     snr: float = math.nan            # line: amplitude over one standard error of a harmonic of the record
     decay_bound_per_s: float = math.nan   # line: upper bound of its decay rate (fit + 2 standard errors)
     settle_at_least: bool = False    # settle_cycles is a least number (from that bound)
+    part_of_Hz: float = math.nan     # line: a component of this stronger line of the step (leakage, sideband)
 
     @property
     def unit(self) -> str:

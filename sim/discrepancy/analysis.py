@@ -29,7 +29,7 @@ from .fit import Fit, Weights, fit, whitened
 from .gain import frf
 from .models import BASE_PARAMS, CENTRE, CENTRED, EFFECTS, LIBRARY, Data, Model
 from .rounding import interval_text
-from .select import Selection, select, settle_final
+from .select import BIC_GATE, Selection, select, settle_final
 from .terms import accelerance_pair, second_mode_phrase, speed_friction, speed_friction_phrase
 
 log = logging.getLogger(__name__)
@@ -146,8 +146,12 @@ class Analysis:
 
     @staticmethod
     def _params(f: Fit) -> dict:
+        """F_s, x_s, n, m with 95 % intervals; an end the data do not bound is null, with
+        ``bounded: false`` (:meth:`Fit.unbounded`)."""
         iv = f.named_intervals()
-        return {PARAM_KEYS[k]: dict(value=iv[k][0], low=iv[k][1], high=iv[k][2]) for k in BASE_PARAMS}
+        loose = set(f.unbounded())
+        return {PARAM_KEYS[k]: dict(value=iv[k][0], low=_end(iv[k][1]), high=_end(iv[k][2]),
+                                    **(dict(bounded=False) if k in loose else {})) for k in BASE_PARAMS}
 
     def cause_parameters(self, effect: str, f: Fit) -> dict:
         """The effect's parameters with 95 % intervals, in physical units (and derived sizes)."""
@@ -158,7 +162,9 @@ class Analysis:
 
         def put(name, triple, unit, scale=1.0):
             lo, hi = sorted((triple[1] * scale, triple[2] * scale))
-            out[name] = dict(value=triple[0] * scale, low=lo, high=hi, unit=unit)
+            bounded = math.isfinite(lo) and math.isfinite(hi)
+            out[name] = dict(value=triple[0] * scale, low=_end(lo), high=_end(hi), unit=unit,
+                             **({} if bounded else dict(bounded=False)))
         if effect == "viscous_damping":
             put("c", iv["viscous_damping.c"], "N s/m")
             put("damping_ratio_at_resonance", iv["viscous_damping.c"], "1", 1 / (2 * v["mass_kg"] * w_res))
@@ -229,6 +235,7 @@ class Analysis:
             last = sel.named[-1]
             parts.append(f"Out-of-sample error falls from {100 * first.heldout_before:.1f} % to "
                          f"{100 * last.heldout_error:.1f} %.")
+            parts += self._not_separable_phrases()
         elif not sel.unexplained:
             parts.append(f"The Masing model explains the data within the noise (reduced chi-square "
                          f"{self.base.reduced_chi2:.2f}, held-out error {base_err:.2f} %); no effect in the "
@@ -240,11 +247,42 @@ class Analysis:
                          f"Neither the catalog nor the library of force terms accounts for it"
                          + (f"; the intervals above are widened {sel.interval_inflation:.1f}x for it"
                             if sel.interval_inflation > 1.05 else "") + ".")
+        parts += self._unbounded_phrases()
         caveat = self._spring_caveat()
         if caveat:
             parts.append(caveat)
         parts += artefact_verdict(self.artefacts)
         return " ".join(parts)
+
+    def _not_separable_phrases(self) -> list[str]:
+        """Library forms that lowered the chi-square beside a named cause but did not predict
+        the held-out levels better than it: not named, and said (issue 33)."""
+        sel = self.selection
+        out = []
+        for c in sel.tried:
+            if (c.kind == "discovered" and not c.named and c.round > 1 and c.delta_bic < BIC_GATE
+                    and math.isfinite(c.heldout_error) and c.id not in self.causes):
+                beside = ", ".join(EFFECTS[n.id].label for n in sel.named if n.round < c.round)
+                out.append(f"{EFFECTS[c.id].label} also lowers the chi-square beside {beside} (BIC by "
+                           f"{-c.delta_bic:.0f}) but does not predict the held-out levels better than it (held-out error "
+                           f"{100 * c.heldout_before:.2f} % -> {100 * c.heldout_error:.2f} %): the data cannot separate "
+                           f"it from {beside}, so it is not named.")
+        return out
+
+    def _unbounded_phrases(self) -> list[str]:
+        """Words for parameters the data do not bound (an interval beyond any finite value)."""
+        out = []
+        base, final = self.base.unbounded(), self.final.unbounded()
+        if base and self.selection.named and not final:
+            v = self.base.model.values(self.base.theta)
+            out.append(f"Alone, the Masing model cannot bound {' and '.join(base)} on these data (its fit runs off "
+                       f"to F_s = {v['F_s_N']:.3g} N, x_s = {v['x_s_m']:.3g} m: their 95 % intervals reach beyond "
+                       f"any finite value); with the causes above they are bounded.")
+        if final:
+            out.append(f"The data do not bound {', '.join(final)}: the 95 % interval reaches beyond any finite "
+                       f"value (stated as unbounded, with no limit, in analysis.json); the steps do not show the "
+                       f"part of the friction curve that fixes it.")
+        return out
 
     def largest_amplitude_over_x_s(self) -> float:
         """Largest half peak-to-peak displacement of any step over the final model's x_s:
@@ -432,6 +470,11 @@ class Analysis:
         return out
 
 
+def _end(x: float) -> float | None:
+    """An interval's end for analysis.json: None (null) beyond the floats."""
+    return float(x) if math.isfinite(x) else None
+
+
 def artefact_verdict(artefacts: list) -> list[str]:
     """The verdict's sentence on measurement artefacts (causes of kind "artefact")."""
     if not artefacts:
@@ -469,7 +512,9 @@ def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, sourc
         raise ConfigurationError("need steps at two force levels at least (held-out checks leave one level out)")
     base, W = base_fit(steps, d, guess, harmonics)
     log.info("base fit: reduced chi2 %.2f", base.reduced_chi2)
-    sel = settle_final(select(base, d, W, library=LIBRARY if library is None else tuple(library)), d)
+    g = guess or guess_from_data(d)
+    restart = np.array([math.log(g["F_s_N"]), math.log(g["x_s_m"]), g["n"], math.log(g["mass_kg"])])
+    sel = settle_final(select(base, d, W, library=LIBRARY if library is None else tuple(library), restart=restart), d)
     return Analysis(steps=steps, data=d, weights=W, selection=sel, source=source,
                     software_version=software_version, rejected=list(rejected or []), v_ref_m_per_s=v_ref_m_per_s,
                     artefacts=list(artefacts or []))

@@ -213,13 +213,25 @@ class Fit:
         return self.chi2 + self.model.size * math.log(self.n_data)
 
     def interval(self, i: int) -> tuple[float, float, float]:
-        """(value, low, high) of parameter ``i`` in physical units (95 %)."""
-        th, s = self.theta[i], math.sqrt(max(self.cov[i, i], 0.0))
-        w = min(Z95 * s, 700.0)
+        """(value, low, high) of parameter ``i`` in physical units (95 %).  An end beyond
+        the floats (a log parameter the data do not bound, e^(th + w) > 1e308: the base
+        model's F_s and x_s in gross sliding beside a spring) is infinite, never an error:
+        :meth:`unbounded` names such parameters."""
+        th, s = float(self.theta[i]), math.sqrt(max(float(self.cov[i, i]), 0.0))
+        w = Z95 * s
         if i in (0, 1, 3) or self._is_log(i):
-            return math.exp(th), math.exp(th - w), math.exp(th + w)
+            return _exp(th), _exp(th - w), _exp(th + w)
         c = self.model.scale[i]
         return float(th * c), float((th - w) * c), float((th + w) * c)
+
+    def unbounded(self) -> list[str]:
+        """The parameters whose 95 % interval reaches beyond the floats (or zero, for a
+        log parameter) or whose standard error is not finite: the data do not bound them."""
+        out = []
+        for name, (v, lo, hi) in self.named_intervals().items():
+            if not (math.isfinite(v) and math.isfinite(lo) and math.isfinite(hi)) or (lo == 0.0 < hi):
+                out.append(name)
+        return out
 
     def _is_log(self, i: int) -> bool:
         sl = self.model.slices.get("second_mode")
@@ -228,6 +240,11 @@ class Fit:
     def named_intervals(self) -> dict:
         names = list(self.model.values(self.theta))
         return {name: self.interval(i) for i, name in enumerate(names)}
+
+
+def _exp(x: float) -> float:
+    """e^x, infinite above the floats' range (a math.exp overflow is an OverflowError)."""
+    return math.exp(x) if x < 709.0 else math.inf
 
 
 def whitened(theta: np.ndarray, model: Model, d: Data, W: Weights) -> np.ndarray:

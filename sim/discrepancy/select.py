@@ -268,7 +268,12 @@ def term_scale(current: Fit, d: Data, term: str) -> float:
 
 
 def select(base: Fit, d: Data, W: Weights, catalog: tuple[str, ...] = CATALOG, max_causes: int = 3,
-           library: tuple[str, ...] = LIBRARY, library_fits: int = LIBRARY_FITS) -> Selection:
+           library: tuple[str, ...] = LIBRARY, library_fits: int = LIBRARY_FITS,
+           restart: np.ndarray | None = None) -> Selection:
+    """``restart``: log F_s, log x_s, n, log m to start the candidates from while the
+    current model's F_s or x_s is unbounded (gross sliding beside a spring: the Masing
+    model alone runs off to F_s, x_s ~ 1e30 and a candidate warm-started there stays
+    stuck, chi-square 1.6e5 where the truth gives 1)."""
     current = base
     base_thetas: list = []
     held_cur = heldout_error(base.model, base.theta, d, W, thetas=base_thetas)
@@ -294,7 +299,10 @@ def select(base: Fit, d: Data, W: Weights, catalog: tuple[str, ...] = CATALOG, m
             if e in centres:           # a stiffness term with its rest position: the screen's best start
                 x_c, coef = centres[e]
                 init = np.array([coef / scale_of.get(e, 1.0), x_c / math.exp(current.theta[1])])
-            model, th0 = current.model.extend(current.theta, e, init, scale_of.get(e, 1.0))
+            start = current.theta
+            if restart is not None and {"F_s_N", "x_s_m"} & set(current.unbounded()):
+                start = np.concatenate([restart, current.theta[4:]])
+            model, th0 = current.model.extend(start, e, init, scale_of.get(e, 1.0))
             try:
                 f = fit(model, th0, d, W, max_nfev=SELECT_NFEV)
             except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
@@ -317,8 +325,16 @@ def select(base: Fit, d: Data, W: Weights, catalog: tuple[str, ...] = CATALOG, m
             break
         chosen.named = True
         named.append(chosen)
-        # the selection's fits stop early; the next round starts from a converged model
+        # the selection's fits stop early; the next round starts from a converged model, and
+        # what the next candidate must beat is that model's own held-out error: measured from
+        # the early-stopped fit it was higher, and a form added beside the cause "improved" on
+        # the cause's unconverged fit, not on the cause (issue 33: coulomb_friction and
+        # virgin_curve_family beside a second mode that was the only effect)
         chosen.fit = fit(chosen.fit.model, chosen.fit.theta, d, W, max_nfev=100)
+        converged: list = []
+        held = heldout_error(chosen.fit.model, chosen.fit.theta, d, W, thetas=converged)
+        if held < chosen.heldout_error:
+            chosen.heldout_error, chosen.heldout_thetas = held, converged
         current, held_cur = chosen.fit, chosen.heldout_error
     return Selection(base=base, final=current, named=named, tried=tried, heldout_base=held_base,
                      screened=screened, base_heldout_thetas=base_thetas)
