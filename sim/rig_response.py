@@ -43,7 +43,8 @@ TOLERANCE = 2e-5               # relative change of the fundamentals' estimated 
 HARMONICS = 9                  # harmonics of the periodic displacement whose peak-to-peak is compliance_pp
 BEAT, BEAT_PERIODS, BEAT_CHUNKS = 2e-3, 160, 10   # a lasting beat this small is steady enough to draw
 GLIDE_STEPS, GLIDE_PERIODS = 16, 2   # from one frequency to the next: 16 phase-continuous steps of 2 periods
-GOLDEN_TOLERANCE = 2e-4        # relative bracket width at which a peak search stops
+SPLIT = 0.8                    # feed mode below, pitching mode above SPLIT x the friction-free pitch frequency
+GOLDEN_TOLERANCE = 5e-4        # relative bracket width at which a peak search stops
 
 LEFT_OUT = dict(force_noise_N=0.0, accel_noise_m_s2=0.0, disp_noise_m=0.0, line_channel="", line_freq_Hz=0.0,
                 line_amplitude=0.0, shaker_force_constant_N_per_A=0.0, shaker_resistance_ohm=0.0,
@@ -239,6 +240,14 @@ def peak_Hz(model: RigModel | dict, level_N: float, lo_Hz: float, hi_Hz: float,
     return _golden(fun, lo_Hz, hi_Hz)
 
 
+def mode_split_Hz(model: RigModel) -> float:
+    """Where the feed mode's range ends and the pitching mode's begins: SPLIT x the pitching
+    mode's friction-free frequency (friction only raises it; inf without a pitching mode)."""
+    from .modal import pitch_band_Hz
+    band = pitch_band_Hz(model)
+    return SPLIT * band[0] if band else math.inf
+
+
 def resonance_Hz(resp: LevelResponse, model: RigModel | dict, curve: str = "compliance_pp",
                  above_Hz: float = 0.0, below_Hz: float = math.inf) -> tuple[float, float, str]:
     """(frequency, peak value, note) of the largest maximum of ``curve`` on the level's line
@@ -246,10 +255,11 @@ def resonance_Hz(resp: LevelResponse, model: RigModel | dict, curve: str = "comp
     neighbours; NaN and a note when the maximum is at the grid's edge or there is none."""
     y = resp.compliance_pp if curve == "compliance_pp" else np.abs(resp.accelerance)
     f = resp.freq_Hz
-    ok = np.isfinite(y) & resp.converged & (f >= above_Hz) & (f <= below_Hz)
+    valid = np.isfinite(y) & resp.converged
+    ok = valid & (f >= above_Hz) & (f <= below_Hz)
     if not ok.any():
         return math.nan, math.nan, "no model value"
-    idx = [i for i in range(1, f.size - 1) if ok[i - 1] and ok[i] and ok[i + 1] and y[i] >= y[i - 1]
+    idx = [i for i in range(1, f.size - 1) if ok[i] and valid[i - 1] and valid[i + 1] and y[i] >= y[i - 1]
            and y[i] >= y[i + 1]]
     if not idx:
         i = int(np.nanargmax(np.where(ok, y, -np.inf)))

@@ -75,18 +75,18 @@ def model_peaks(cmp: ModelComparison | None) -> tuple[dict, dict]:
     """(feed, pitch): level -> (frequency, peak value, note) of the rig model's resonances
     from the report's model comparison (simulated rigs with a stored model; empty
     otherwise).  On the compiled plant (:mod:`sim.rig_response`) the feed mode is the peak
-    of compliance_pp below the pitching mode's friction-free frequency, the pitching mode
-    the peak of |A1/F1| above it; on the shooting engine the feed peak of
+    of compliance_pp below 0.8 x the pitching mode's friction-free frequency, the pitching
+    mode the peak of |A1/F1| above it; on the shooting engine the feed peak of
     :func:`model_feed_peaks`."""
     if cmp is None:
         return {}, {}
     if not cmp.responses:
         return model_feed_peaks(cmp), {}
     from sim.rig import RigModel
-    from sim.rig_response import resonance_Hz
+    from sim.rig_response import mode_split_Hz, resonance_Hz
     model = RigModel.from_dict(cmp.params)
-    band = pitch_band_Hz(model)
-    split = band[0] if band else math.inf
+    split = mode_split_Hz(model)
+    band = math.isfinite(split)
     feed, pitch = {}, {}
     for level, resp in cmp.responses.items():
         try:
