@@ -36,8 +36,8 @@ from .rig import RigModel, SimulatedRig
 
 log = logging.getLogger(__name__)
 
-SAMPLES_PER_PERIOD = 128       # sensor samples per drive period (the RK4 step is finer: sim.rig)
-CHUNK_PERIODS = 4              # periods between two looks at the fundamentals
+SAMPLES_PER_PERIOD = 64        # sensor samples per drive period (the RK4 step is finer: sim.rig)
+CHUNK_PERIODS, CHUNK_S = 4, 0.05   # a look at the fundamentals: at least 4 periods and 50 ms
 MAX_PERIODS = 1600             # give up (not converged) after this many periods at one frequency
 TOLERANCE = 2e-5               # relative change of the fundamentals' estimated remaining transient
 HARMONICS = 9                  # harmonics of the periodic displacement whose peak-to-peak is compliance_pp
@@ -108,16 +108,19 @@ class _Sweep:
         r = self.rig
         r.state, r.pitch_rad, r.pitch_rate_rad_s, r._phase, self.f = saved[0].copy(), *saved[1:]
 
-    def _period(self, f: float):
-        """Run CHUNK_PERIODS periods; the fundamentals of the last one and its records."""
+    def _chunk(self, f: float) -> tuple[complex, complex, np.ndarray, int]:
+        """Run one look's worth of periods (at least CHUNK_PERIODS and CHUNK_S); the force's
+        and acceleration's fundamentals and the displacement's harmonics 0..HARMONICS over
+        all of them (per period's worth of samples), so a free vibration at another frequency
+        averages out rather than reading as a change of the steady response."""
         n = SAMPLES_PER_PERIOD
-        blk = self.rig.run(n * CHUNK_PERIODS, n * f)
+        k = max(CHUNK_PERIODS, math.ceil(f * CHUNK_S))
+        blk = self.rig.run(n * k, n * f)
         m = self.model
-        sl = slice(n * (CHUNK_PERIODS - 1), None)
-        F = blk.force_V[sl] / m.force_sens_V_per_N
-        A = blk.accel_V[sl] / m.accel_sens_V_per_m_s2
-        X = blk.disp_V[sl] / m.disp_sens_V_per_m
-        return np.fft.rfft(F)[1], np.fft.rfft(A)[1], np.fft.rfft(X), X
+        F = np.fft.rfft(blk.force_V / m.force_sens_V_per_N)[k] / k
+        A = np.fft.rfft(blk.accel_V / m.accel_sens_V_per_m_s2)[k] / k
+        X = np.fft.rfft(blk.disp_V / m.disp_sens_V_per_m)[0:k * (HARMONICS + 1):k] / k
+        return F, A, X, k
 
     def point(self, f: float) -> tuple[complex, complex, float, bool]:
         m = self.model
@@ -135,8 +138,8 @@ class _Sweep:
         periods = 0
         converged = False
         while periods < MAX_PERIODS:
-            F1, A1, Xk, _ = self._period(f)
-            periods += CHUNK_PERIODS
+            F1, A1, Xk, k = self._chunk(f)
+            periods += k
             cur = np.array([A1 / F1, Xk[1] / F1])
             if prev is not None:
                 d = float(np.max(np.abs(cur - prev) / np.maximum(np.abs(cur), 1e-300)))
@@ -153,9 +156,9 @@ class _Sweep:
                     break
             prev = cur
         # compliance_pp of the periodic displacement synthesised from its first HARMONICS harmonics
-        k = np.zeros(SAMPLES_PER_PERIOD // 2 + 1, complex)
-        k[:HARMONICS + 1] = Xk[:HARMONICS + 1]
-        x = np.fft.irfft(k, 8 * SAMPLES_PER_PERIOD) * 8
+        h = np.zeros(SAMPLES_PER_PERIOD // 2 + 1, complex)
+        h[:HARMONICS + 1] = Xk
+        x = np.fft.irfft(h, 8 * SAMPLES_PER_PERIOD) * 8
         pp = 0.5 * float(np.ptp(x)) / (2 * abs(F1) / SAMPLES_PER_PERIOD)
         return complex(Xk[1] / F1), complex(A1 / F1), pp, converged
 
