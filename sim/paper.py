@@ -54,20 +54,19 @@ class Grids:
     fig13_gamma0: tuple[float, ...]
     pitch_levels_N: tuple[float, ...] = (0.1, 3.0, 100.0)   # Figs. 15-17: force amplitudes
     pitch_freqs_Hz: np.ndarray | None = None                # coarse sweep (None: 24 points)
-    pitch_zoom_points: int = 7
 
     @classmethod
     def for_run(cls, quick: bool) -> Grids:
         if quick:
             return cls(np.linspace(0.2, 2.0, 37), np.linspace(0.2, 3.0, 29), (0.4, 0.8),
                        np.geomspace(0.4, 5.0, 25), 7, (0.2, 0.6, 0.9),
-                       (0.1, 3.0, 100.0), np.geomspace(40.0, 300.0, 24), 7)
+                       (0.1, 3.0, 100.0), np.geomspace(40.0, 300.0, 24))
         # The harmonic peak moves up as gamma0 falls (n = 0.5, gamma0 = 0.2: beta ~ 2.5;
         # gamma0 = 0.1: beta ~ 3.7), hence the ranges of Figs. 12 and 13.
         return cls(np.linspace(0.2, 2.0, 200), np.linspace(0.2, 3.0, 200), (0.2, 0.4, 0.6, 0.8, 0.9),
                    np.geomspace(0.4, 5.0, 120), 21,
                    (0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.95),
-                   (0.1, 0.3, 1.0, 2.0, 3.0, 5.0, 10.0, 30.0, 100.0), np.geomspace(30.0, 300.0, 48), 9)
+                   (0.1, 0.3, 1.0, 2.0, 3.0, 5.0, 10.0, 30.0, 100.0), np.geomspace(30.0, 300.0, 48))
 
 
 @dataclass(frozen=True)
@@ -394,75 +393,34 @@ PITCH_MODEL = dict(F_s_N=10.0, x_s_m=10e-6, n=1.5, mass_kg=10.0, friction_alpha=
                    pitch_stiffness_N_m_per_rad=3e5, pitch_damping_N_m_s_per_rad=10.0,
                    drive_height_m=0.2, cg_height_m=0.1,
                    force_noise_N=0.0, accel_noise_m_s2=0.0, disp_noise_m=0.0)
-PITCH_SETTLE_PERIODS, PITCH_MEASURE_PERIODS, PITCH_SAMPLES_PER_PERIOD = 30, 10, 64
-
-
-def pitch_sweep(model, level_N: float, freqs_Hz) -> tuple[np.ndarray, np.ndarray]:
-    """Complex X1 / P (m/N, feed displacement) and A1 / P (1/kg, drive-point acceleration)
-    along a stepped sweep at force ``level_N`` on the RK4 plant (:class:`sim.rig.SimulatedRig`),
-    the state carried from step to step (ideal force: P is the drive's sine)."""
-    from .rig import SimulatedRig
-    rig = SimulatedRig(model)
-    X, A = [], []
-    for i, f in enumerate(freqs_Hz):
-        rig.set_generator(freq_Hz=f, amplitude_Vpp=2 * level_N / model.amp_gain_N_per_V, output_on=True)
-        fs = PITCH_SAMPLES_PER_PERIOD * f
-        rig.run(PITCH_SAMPLES_PER_PERIOD * PITCH_SETTLE_PERIODS * (3 if i == 0 else 1), fs)
-        n = PITCH_SAMPLES_PER_PERIOD * PITCH_MEASURE_PERIODS
-        blk = rig.run(n, fs)
-        e = np.exp(-2j * np.pi * np.arange(n) / PITCH_SAMPLES_PER_PERIOD)
-        p1 = 2 * (e @ (blk.force_V / model.force_sens_V_per_N)) / n      # the force's fundamental (sin drive)
-        X.append(2 * (e @ (blk.disp_V / model.disp_sens_V_per_m)) / n / p1)
-        A.append(2 * (e @ (blk.accel_V / model.accel_sens_V_per_m_s2)) / n / p1)
-    return np.array(X), np.array(A)
-
-
-def pitch_compliance(model, level_N: float, freqs_Hz) -> np.ndarray:
-    """|X1 / P| (m/N) of the feed displacement along a stepped sweep (:func:`pitch_sweep`)."""
-    return np.abs(pitch_sweep(model, level_N, freqs_Hz)[0])
-
-
 PITCH_DAMPING_POINTS, PITCH_DAMPING_SPAN = 13, 0.08   # the damping fit's sweep: +-8 % of the pitch resonance
 
 
 def pitch_damping(model, level_N: float, f_r: float):
     """The pitching mode's damping ratio at ``level_N`` (sim.modal's single-mode fit to the
-    accelerance of a sweep of PITCH_DAMPING_POINTS over f_r (1 +- PITCH_DAMPING_SPAN))."""
+    accelerance of the rig model's steady states at PITCH_DAMPING_POINTS over
+    f_r (1 +- PITCH_DAMPING_SPAN), :mod:`sim.rig_response`)."""
     from .modal import estimate_mode
+    from .rig_response import plant_response
     f = np.linspace(f_r * (1 - PITCH_DAMPING_SPAN), f_r * (1 + PITCH_DAMPING_SPAN), PITCH_DAMPING_POINTS)
-    _, A = pitch_sweep(model, level_N, f)
+    A = plant_response(model, level_N, f).accelerance
     return estimate_mode(f, A, mode="pitch", kind="accelerance", level_N=level_N, guess_zeta=0.02)
 
 
-def _local_maxima(y: np.ndarray) -> list[int]:
-    return [i for i in range(1, y.size - 1) if y[i] > y[i - 1] and y[i] >= y[i + 1]]
-
-
-def pitch_resonances(model, level_N: float, freqs_Hz, zoom_points: int):
-    """(feed, pitch) resonance frequencies (Hz; NaN when not observed), the coarse sweep.
-
-    Peaks of the feed compliance: the pitch mode's is the largest at or above 0.8 x the
-    pitch frequency of the free (frictionless) carriage, the feed mode's the largest
-    below it.  Each is refined on a sweep of ``zoom_points`` between its neighbours."""
-    from .plant_effects import highest_linear_frequency_Hz
-    freqs_Hz = np.asarray(freqs_Hz, dtype=float)
-    G = pitch_compliance(model, level_N, freqs_Hz)
-    split = 0.8 * highest_linear_frequency_Hz(model, 0.0)
-    found = []
-    for band in (freqs_Hz < split, freqs_Hz >= split):
-        peaks = [i for i in _local_maxima(G) if band[i]]
-        if not peaks:
-            found.append(math.nan)
-            continue
-        i = max(peaks, key=lambda j: G[j])
-        fine = np.linspace(freqs_Hz[i - 1], freqs_Hz[i + 1], zoom_points)
-        Gf = pitch_compliance(model, level_N, fine)
-        j = int(np.argmax(Gf))
-        if 0 < j < fine.size - 1:        # parabola through the fine maximum and its neighbours
-            a, b, c = np.log(Gf[j - 1:j + 2])
-            j = j + 0.5 * (a - c) / (a - 2 * b + c)
-        found.append(float(np.interp(j, np.arange(fine.size), fine)))
-    return found[0], found[1], G
+def pitch_resonances(model, level_N: float, freqs_Hz):
+    """(feed, pitch) resonance frequencies (Hz; NaN when not observed) and the sweep's
+    compliance_pp, by the measurement's definitions (decision records 0043, 0054): the feed
+    mode is the peak of compliance_pp (seed Eq. 9) below 0.8 x the pitching mode's
+    friction-free frequency, the pitching mode the peak of the drive point's |A1/F1| above it; each found
+    on the rig model's steady states (:mod:`sim.rig_response`) and refined by golden-section
+    search."""
+    from .rig_response import line_model, mode_split_Hz, plant_response, resonance_Hz
+    m = line_model(model)
+    resp = plant_response(m, level_N, freqs_Hz)
+    split = mode_split_Hz(m)
+    feed = resonance_Hz(resp, m, "compliance_pp", below_Hz=split)[0]
+    pitch = resonance_Hz(resp, m, "accelerance", above_Hz=split)[0] if math.isfinite(split) else math.nan
+    return feed, pitch, resp.compliance_pp
 
 
 def fig15_17_pitch_resonance(rep: Report, grids: Grids, model_dict: dict | None = None,
@@ -479,7 +437,7 @@ def fig15_17_pitch_resonance(rep: Report, grids: Grids, model_dict: dict | None 
     ax_G, ax_feed, ax_pitch, ax_z = (fig.add_subplot(1, 4, i) for i in (1, 2, 3, 4))
     rows, curves, damping = [], [], []
     for level in grids.pitch_levels_N:
-        feed, pitch, G = pitch_resonances(model, level, freqs, grids.pitch_zoom_points)
+        feed, pitch, G = pitch_resonances(model, level, freqs)
         rows.append((level, feed, pitch))
         if math.isfinite(pitch):
             est = pitch_damping(model, level, pitch)
@@ -492,8 +450,10 @@ def fig15_17_pitch_resonance(rep: Report, grids: Grids, model_dict: dict | None 
                 rep.key("fig15_17_pitch_resonance.png", "Figs. 15-17", model.n, level / model.F_s_N, item,
                         f_r / f_s, G_r * model.F_s_N / model.x_s_m)
     levels = np.array([r[0] for r in rows])
-    ax_feed.semilogx(levels, [r[1] for r in rows], "o-", color="tab:blue", label="feed mode (RK4 plant)")
-    ax_pitch.semilogx(levels, [r[2] for r in rows], "s-", color="tab:orange", label="pitching mode (RK4 plant)")
+    ax_feed.semilogx(levels, [r[1] for r in rows], "o-", color="tab:blue",
+                     label="feed mode: peak of compliance_pp (rig model)")
+    ax_pitch.semilogx(levels, [r[2] for r in rows], "s-", color="tab:orange",
+                      label="pitching mode: peak of |A1/F1| (rig model)")
     from .plant_effects import mass_matrix
     k0 = SakaiCurve(model.n).stiffness0 * model.F_s_N / model.x_s_m
     for k, text, ls in ((0.0, "no friction stiffness", "--"), (k0, "initial friction stiffness", ":")):
@@ -504,7 +464,7 @@ def fig15_17_pitch_resonance(rep: Report, grids: Grids, model_dict: dict | None 
             ax_feed.axhline(f_lin[0], color="grey", ls=ls, lw=0.9, label=f"linear 2-DOF, {text}")
         ax_pitch.axhline(f_lin[1], color="grey", ls=ls, lw=0.9, label=f"linear 2-DOF, {text}")
     ax_G.set_xlabel("frequency [Hz]")
-    ax_G.set_ylabel("feed compliance |X/P| [m/N]")
+    ax_G.set_ylabel("feed compliance_pp (seed Eq. 9) [m/N]")
     ax_G.set_title("Seed Fig. 15: FRF of the pitching rig per force")
     ax_G.grid(alpha=0.3, which="both")
     ax_G.legend(fontsize=8, title="force amplitude", title_fontsize=8)
@@ -524,7 +484,7 @@ def fig15_17_pitch_resonance(rep: Report, grids: Grids, model_dict: dict | None 
         d = np.array(damping, dtype=float)
         err = np.nan_to_num(np.clip(np.vstack([d[:, 1] - d[:, 2], d[:, 3] - d[:, 1]]), 0, None))
         ax_z.errorbar(d[:, 0], 100 * d[:, 1], yerr=100 * err, fmt="s-", color="tab:orange", capsize=3,
-                      label="pitching mode (RK4 plant, single-mode fit)")
+                      label="pitching mode (rig model, single-mode fit)")
     for k, m in enumerate(measured or []):
         _overlay(ax_feed, ax_pitch, ax_z, m, f"C{(k + 2) % 10}")
     ax_z.set_xscale("log")
@@ -537,11 +497,11 @@ def fig15_17_pitch_resonance(rep: Report, grids: Grids, model_dict: dict | None 
         for ax in (ax_feed, ax_pitch):
             ax.legend(fontsize=8)
     rep.table("fig17_pitch_damping", ["force [N]", "damping_ratio [-]", "low [-]", "high [-]"], damping)
-    rep.table("fig15_17_pitch_resonance", ["force [N]", "freq [Hz]", "compliance [m/N]"], curves)
+    rep.table("fig15_17_pitch_resonance", ["force [N]", "freq [Hz]", "compliance_pp [m/N]"], curves)
     # NaN: the mode shows no peak at that force (the feed mode above F_s, as in the seed)
     rep.table("fig15_17_pitch_resonance_peaks", ["force [N]", "feed_resonance [Hz]", "pitch_resonance [Hz]"], rows)
     rep.figure(fig, "fig15_17_pitch_resonance", "Figs. 15 and 17",
-               "feed and pitching modes' resonance frequencies against force (pitching rig, RK4 plant; the seed's "
+               "feed and pitching modes' resonance frequencies against force (pitching rig model; the seed's "
                "Fig. 16, the mode shapes, has no counterpart here); measured modes with damping ratios: "
                "`bench modes RUN ... --out DIR`")
     return rows
@@ -579,8 +539,8 @@ def write_index(rep: Report, checks: dict[float, str], quick: bool, seconds: flo
         f"Written by `sim.paper.reproduce` ({'quick, coarse grids' if quick else 'full grids'}; "
         f"{seconds:.1f} s). All quantities dimensionless: u = x/x_s, F/F_s, beta = omega/omega_s, "
         "G = u_0/gamma0. FRFs by half-period shooting (RK4 where it falls back); cycles by RK4 "
-        "with 10000 steps per period, as the seed. Figs. 15-17 are in Hz and N, from stepped sweeps "
-        "of the simulated pitching rig (RK4 plant; beta = f/f_s and G = compliance F_s/x_s in the "
+        "with 10000 steps per period, as the seed. Figs. 15-17 are in Hz and N, from the steady states "
+        "of the simulated pitching rig's model (sim.rig_response; beta = f/f_s and G = compliance_pp F_s/x_s in the "
         "key numbers). Each PNG has a CSV of the same name.",
         "",
         "| file | seed figure | content |",

@@ -1,14 +1,29 @@
 """The backbone of a phase-resonance run (decision record 0044): natural frequency and
-damping ratio against amplitude, measured points over the model's single-harmonic-balance
-backbone (sim.backbone), and its table."""
+damping ratio against amplitude, measured points over the rig model's backbone, and its
+table.
+
+The model's backbone (decision record 0054): on a simulated rig whose model has more than
+the Masing carriage with a spring and a damper (the pitching mode, speed-dependent
+friction, ...), the phase resonance of that full model's steady state at forces spanning
+the run's (:func:`sim.rig_response.phase_backbone`, the procedure's phase criterion and
+energy balance), and the chart says that the rig has a second mode; otherwise the Masing
+loop's single-harmonic balance (sim.backbone)."""
 
 from __future__ import annotations
+
+import logging
+import math
+import textwrap
 
 import numpy as np
 from matplotlib.figure import Figure
 
 from ..backbone import backbone_rows, model_backbone
 from ..config import parse_rig, rig_toml
+
+log = logging.getLogger(__name__)
+
+MODEL_FORCES = 7               # forces of the full model's backbone line, spanning the run's
 
 
 def _model(rig: dict, amplitudes: np.ndarray):
@@ -17,6 +32,41 @@ def _model(rig: dict, amplitudes: np.ndarray):
     except Exception:  # noqa: BLE001 - an old or damaged rig entry: no model curve, the points stay
         return None
     return model_backbone(r, amplitudes)
+
+
+def full_model_line(rig: dict, rows: list[dict], results: list[dict]) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                                              str] | None:
+    """(amplitude, frequency, damping ratio, label) of the rig model's phase-resonance
+    backbone when the run is on a simulated rig whose model the single-harmonic balance
+    leaves something out of; None otherwise (the harmonic balance is that model)."""
+    if not (rig.get("simulated") and rig.get("model")) or not rows:
+        return None
+    from sim.modal import pitch_band_Hz
+    from sim.rig import RigModel
+    from sim.rig_response import line_model, phase_backbone, single_mode
+    model = line_model(RigModel.from_dict(rig["model"]))
+    band = pitch_band_Hz(model)
+    if single_mode(model):
+        return None
+    b0 = next((r.get("backbone") or {} for r in results if r.get("backbone")), {})
+    response, mode = b0.get("response", "disp"), rows[0].get("mode", "feed")
+    locked = [r for r in rows if r["locked"]]
+    start = float(locked[0]["frequency_Hz"]) if locked else float(rows[0]["frequency_Hz"])
+    forces = np.array([float(r["force_N"]) for r in (locked or rows) if float(r["force_N"]) > 0])
+    if not forces.size:
+        return None
+    lo, hi = (band[0], math.inf) if band and mode == "pitch" else (0.0, band[0] if band else math.inf)
+    pts = phase_backbone(model, np.geomspace(forces.min() / 1.5, forces.max() * 1.5, MODEL_FORCES), start,
+                         response=response, mass_kg=float(rows[0]["mass_kg"]), lo_Hz=lo, hi_Hz=hi)
+    pts = [p for p in pts if p.converged and math.isfinite(p.frequency_Hz)]
+    if not pts:
+        return None
+    second = (f"; the rig has a second (pitching) mode, above {band[0]:.4g} Hz with the friction free, "
+              "so the one-mode harmonic balance does not hold here" if band else "")
+    label = (f"rig model: phase resonance of its steady state ({'+90 deg accel' if response == 'accel' else '-90 deg'}"
+             f", every declared effect{second})")
+    return (np.array([p.amplitude_m for p in pts]), np.array([p.frequency_Hz for p in pts]),
+            np.array([p.damping_ratio for p in pts]), label)
 
 
 def stepped_points(others, mode: str = "feed") -> list[dict]:
@@ -50,7 +100,16 @@ def plot_backbone(results: list[dict], rig: dict, title: str, others=()) -> Figu
     fig = Figure(figsize=(10, 4.5), layout="constrained")
     ax1, ax2 = fig.subplots(1, 2)
     grid = np.geomspace(X[X > 0].min() / 3, X.max() * 3, 80) if np.any(X > 0) else np.array([])
-    model = _model(rig, grid) if grid.size else None
+    try:
+        full = full_model_line(rig, rows, results)
+    except Exception as e:  # noqa: BLE001 - the points come out without the model's line; say why
+        log.warning("the rig model's backbone failed: %s", e)
+        full = None
+    model = _model(rig, grid) if grid.size and full is None else None
+    if full is not None:
+        Xm, fm, zm, label = full
+        for ax, y in ((ax1, fm), (ax2, 100 * zm)):
+            ax.plot(Xm, y, "-", color="0.5", label=textwrap.fill(label, 60))
     if model:
         label = "model: Masing loop, single-harmonic balance" + ("" if rig.get("simulated") else " (expected values)")
         ax1.plot(grid, [p.frequency_Hz for p in model], "-", color="0.5", label=label)

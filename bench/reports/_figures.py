@@ -221,7 +221,8 @@ def plot_model(series, colours, title, cmp: ModelComparison) -> Figure:
                  mec=c, ms=7)
         ax2.plot(s.freq_Hz[flagged], diff[flagged], ls="none", marker="x", color="r", ms=5)
     ax1.set(yscale="log", ylabel="compliance_pp (m/N)",
-            title="lines: model (sim.shooting, rig's true parameters); markers: measured compliance_pp")
+            title=("lines: the rig's model (every effect its file declares, compiled plant)" if cmp.responses
+                   else "lines: model (sim.shooting, rig's true parameters)") + "; markers: measured compliance_pp")
     ax2.axhline(0, color="k", lw=0.8)
     ax2.set(xscale="log", xlabel="frequency (Hz)", ylabel="measured / model - 1 (%)",
             title=f"relative difference (red x: displacement residual > {100 * UNSETTLED_RESIDUAL:g} % of the "
@@ -583,6 +584,10 @@ def _mode_points(ax, modes: list, colour, label: str, y, lo=None, hi=None, marke
             ax.plot(F[run], v[run], color=colour, lw=1.2)
 
 
+MODEL_LINE_LABEL = ("rig model: its resonance per level, as measured\n(every declared effect and mode; "
+                    "decision 0054)")
+
+
 def _run_marker(run) -> str:
     """A phase-resonance run's points (bench modes, decision 0044) are diamonds, a stepped sine's circles."""
     return "D" if getattr(run, "kind", "") == "phase_resonance" else "o"
@@ -627,7 +632,7 @@ def plot_fig13(runs: list) -> Figure:
     if pr:
         extra.append(_pr_handle())
     if model:
-        extra.append(Line2D([], [], color="0.3", ls="--", label="rig model (shooting engine)"))
+        extra.append(Line2D([], [], color="0.3", ls="--", label=MODEL_LINE_LABEL))
     if edge:
         extra.append(Line2D([], [], color="0.3", marker="v", mfc="none", ls="none",
                             label="no peak inside the grid:\nat or beyond this edge"))
@@ -661,11 +666,12 @@ def plot_fig17(runs: list, title: str = "") -> Figure:
                 a_z.plot([e.level_N for e in okz], [100 * e.half_power_damping_ratio for e in okz], ls="none",
                          marker="s", mfc="none", mec=colour, ms=6)
             edge |= _edge_points(a_f, ms, colour)
-        pts = sorted((lv, v[0]) for lv, v in r.model_feed.items() if math.isfinite(v[0]))
-        if pts:
-            model = True
-            axes[0][0].plot([p[0] for p in pts], [p[1] for p in pts], color=colour, ls="--", lw=1)
-        if r.pitch_band:
+        for row, peaks in ((0, r.model_feed), (1, getattr(r, "model_pitch", {}))):
+            pts = sorted((lv, v[0]) for lv, v in peaks.items() if math.isfinite(v[0]))
+            if pts:
+                model = True
+                axes[row][0].plot([p[0] for p in pts], [p[1] for p in pts], color=colour, ls="--", lw=1)
+        if r.pitch_band and not getattr(r, "model_pitch", None):
             band = True
             axes[1][0].axhline(r.pitch_band[0], color=colour, ls=":", lw=1)
     titles = (("(a) feed mode: resonance (peak of compliance_pp)", "(b) feed mode: damping ratio"),
@@ -682,7 +688,7 @@ def plot_fig17(runs: list, title: str = "") -> Figure:
     if hp:
         extra.append(Line2D([], [], color="0.3", marker="s", mfc="none", ls="none", label="half-power (cross-check)"))
     if model:
-        extra.append(Line2D([], [], color="0.3", ls="--", label="rig model: feed peak (shooting engine)"))
+        extra.append(Line2D([], [], color="0.3", ls="--", label=MODEL_LINE_LABEL))
     if band:
         extra.append(Line2D([], [], color="0.3", ls=":", label="rig model: pitching mode with the friction free\n(its large-force limit; friction raises it)"))
     if edge:

@@ -358,15 +358,16 @@ def _write_figures(run: RunData, out: Path, others=()) -> list[tuple[str, str]]:
         from ._backbone import plot_backbone
         save(plot_backbone(results, run.rig, title, others), out / "backbone.png")
         files.append(("backbone.png", "phase resonance: natural frequency and damping ratio of each level's "
-                      "locked point against its displacement amplitude, over the model's backbone from "
-                      "single-harmonic balance of the Masing loop (decision 0044)"
+                      "locked point against its displacement amplitude, over the rig model's backbone (single-"
+                      "harmonic balance of the Masing loop, decision 0044; on a rig whose model has a pitching "
+                      "mode or other effects, the phase resonance of that full model, decision 0054)"
                       + (f"; squares: the modes of {len(others)} stepped-sine run{'s' * (len(others) != 1)} "
                          "(`--with`) at their peaks' amplitudes, with 95 % intervals." if others else ".")))
     if run.comparison:
         save(figures.plot_model(series, colours, title, run.comparison), out / "model_vs_measurement.png")
-        files.append(("model_vs_measurement.png", "simulated rig only: the sim/ engine's compliance_pp for "
-                      "the rig's true parameters (lines) over the measured compliance_pp (markers), and the "
-                      "relative differences (flagged steps marked)."))
+        files.append(("model_vs_measurement.png", "simulated rig only: the rig model's compliance_pp (its "
+                      "file's values and every effect it declares; lines) over the measured compliance_pp "
+                      "(markers), and the relative differences from the same lines (flagged steps marked)."))
     ident = run.ident
     if ident.history:
         save(figures.plot_identification(ident, title, _level_starts(ident.history, results)),

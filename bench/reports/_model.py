@@ -1,7 +1,13 @@
-"""The simulated rig against the model engine: the sim/ shooting engine's compliance_pp for
-the rig model's true parameters, per force level, and the relative differences of the
-stored compliance_pp.  Only for runs on a simulated rig with a stored model; the engine
-leaves out the rig's optional effects, which are then named in the notes.
+"""The simulated rig against its model: the rig model's compliance_pp per force level as
+lines, and the relative differences of the stored compliance_pp from the same lines.
+
+The model is the one the identification fits (decision records 0042, 0054): the rig file's
+[rig.model] with every declared effect and the pitching mode (:mod:`sim.rig_response`);
+noise, an interference line and the shaker are left out (an ideal force at the measured
+level).  A plain Masing carriage runs on the shooting engine, any other rig on the compiled
+plant.  The lines are computed at the steps' own frequencies too, so each step's difference
+is read off its level's line: a line and its difference panel cannot disagree.  Only for
+runs on a simulated rig with a stored model.
 """
 
 from __future__ import annotations
@@ -16,7 +22,8 @@ from ._steps import UNSETTLED_RESIDUAL, residual_ratio
 
 log = logging.getLogger(__name__)
 
-MODEL_GRID_POINTS = 120        # dense frequency grid of the model curves
+MODEL_GRID_POINTS = 120        # dense frequency grid of the model curves (shooting engine)
+PLANT_GRID_POINTS = 40         # the compiled plant's grid (plus the steps' frequencies): its points cost more
 
 
 @dataclass
@@ -43,6 +50,7 @@ class ModelComparison:
     at_steps: dict[str, float]                # step key -> model compliance_pp (m/N)
     levels: list[LevelComparison]
     engine_notes: list[str] = field(default_factory=list)
+    responses: dict = field(default_factory=dict)     # level -> sim.rig_response.LevelResponse (compiled plant)
 
     def resonance(self, level_N: float) -> tuple[float, float]:
         f, c, _ = self.curves[level_N]
@@ -75,30 +83,31 @@ def model_comparison(meta: dict, results: list[dict], flagged: set[str] | None =
     if not (rig.get("simulated") and rig.get("model")) or not results:
         return None
     from sim.rig import RigModel
-    from sim.shooting import frf_shooting
+    from sim.rig_response import line_model, plain_masing
 
     model = RigModel.from_dict(rig["model"])
     ws = model.omega_s
-    scale = model.x_s_m / model.F_s_N                     # G (dimensionless) -> m/N
     plan = meta.get("plan") or {}
     levels_N = plan.get("levels_N") or sorted({r["target_force_N"] for r in results})
     freqs = np.array(sorted({r["freq_Hz"] for r in results}))
-    dense = np.geomspace(freqs.min() / 1.1, freqs.max() * 1.1, MODEL_GRID_POINTS)
-    engine_notes = [f"omega_s = sqrt(F_s/(x_s m)) = {ws:.4g} rad/s ({ws / (2 * math.pi):.4g} Hz); "
-                    f"compliance = G x_s/F_s with G from sim.shooting.frf_shooting (n = {model.n:g})"]
+    plain = plain_masing(line_model(model))
+    dense = np.geomspace(freqs.min() / 1.1, freqs.max() * 1.1, MODEL_GRID_POINTS if plain else PLANT_GRID_POINTS)
+    grid = np.union1d(dense, freqs)
     effects = _model_effects(model)
-    rig_ratio = _rig_model_ratio(rig["model"], model, results)
-    if rig_ratio:
-        engine_notes.append("differences: from the model of the rig with the modes and effects its file declares ("
-                            + ", ".join(rig_ratio["effects"]) + ", at the rig file's values; decision 0042): "
-                            "the force that model needs to make the measured motion against the force measured, "
-                            "so model compliance_pp = measured compliance_pp x |P1 measured| / |P1 model|; the lines "
-                            "are the one-mode engine's and leave out: " + ", ".join(effects))
-    elif effects:
-        engine_notes.append("the rig model has effects the engine leaves out, so differences are expected: "
-                            + ", ".join(effects))
+    left_out = [e for e in effects if "shaker" in e or "interference" in e]
+    if plain:
+        engine_notes = [f"omega_s = sqrt(F_s/(x_s m)) = {ws:.4g} rad/s ({ws / (2 * math.pi):.4g} Hz); "
+                        f"compliance = G x_s/F_s with G from sim.shooting.frf_shooting (n = {model.n:g})"]
+    else:
+        engine_notes = ["the rig's model with every effect its file declares ("
+                        + ", ".join(e for e in effects if e not in left_out) + "; decision 0054): steady states "
+                        "of the compiled plant (sim.rig_response), an upward sweep at each level"]
+    engine_notes.append("lines and differences are one computation: each step's difference is measured / the line at "
+                        "its frequency - 1")
+    if left_out:
+        engine_notes.append("left out (an ideal force at the measured level): " + ", ".join(left_out))
 
-    curves, at_steps, levels = {}, {}, []
+    curves, at_steps, levels, responses = {}, {}, [], {}
     by_level: dict[int, list[dict]] = {}
     for r in results:
         by_level.setdefault(r["level_index"], []).append(r)
@@ -108,32 +117,19 @@ def model_comparison(meta: dict, results: list[dict], flagged: set[str] | None =
         notes = []
         if level > model.amp_force_limit_N:
             notes.append(f"level above the amplifier's force limit {model.amp_force_limit_N:g} N")
-        grid = np.union1d(dense, freqs)
         try:
-            fr, fell_back = frf_shooting(2 * math.pi * grid / ws, gamma0, model.n)
-            G = np.where(fr.converged, fr.G, np.nan)
-            f_model = fr.beta * ws / (2 * math.pi)
-            flags = np.array(fr.gross_rolling) | ~np.array(fr.converged)
-            if (~fr.converged).any():
-                notes.append(f"model: no steady state at {int((~fr.converged).sum())} of {grid.size} frequencies")
-            if fell_back.any():
-                notes.append(f"model: RK4 fallback at {int(fell_back.sum())} of {grid.size} frequencies")
-            if np.any(fr.gross_rolling) or gamma0 >= 1:
-                notes.append("gamma0 >= 1: gross rolling; model = centred periodic orbit, the rig's "
-                             "carriage may drift: indicative only" if gamma0 >= 1
-                             else "model: gross rolling at some frequencies")
+            f_model, C, flags = (_shooting_line if plain else _plant_line)(model, level, grid, notes)
+            if not plain:
+                from sim.rig_response import level_response
+                responses[level] = level_response(model, level, grid)     # cached: the line just computed
         except Exception as e:          # the report must come out even if the engine fails
             log.warning("model FRF at %g N failed: %s", level, e)
             notes.append(f"model engine failed: {type(e).__name__}: {e}")
-            f_model, G, flags = grid, np.full(grid.size, np.nan), np.ones(grid.size, bool)
-        C = G * scale
+            f_model, C, flags = grid, np.full(grid.size, np.nan), np.ones(grid.size, bool)
         curves[level] = (f_model, C, flags)
         diff = []
         for s in steps:
-            i = int(np.argmin(np.abs(f_model - s["freq_Hz"])))
-            c_model = float(C[i])
-            if rig_ratio and s["key"] in rig_ratio["ratio"]:
-                c_model = s["compliance_pp_m_per_N"] / rig_ratio["ratio"][s["key"]]
+            c_model = float(C[int(np.argmin(np.abs(f_model - s["freq_Hz"])))])   # the line at the step's frequency
             at_steps[s["key"]] = c_model
             diff.append(s["compliance_pp_m_per_N"] / c_model - 1.0)
         bad = np.array([s["key"] in flagged if flagged is not None else residual_ratio(s) > UNSETTLED_RESIDUAL
@@ -141,28 +137,35 @@ def model_comparison(meta: dict, results: list[dict], flagged: set[str] | None =
         diff = np.array(diff)
         levels.append(LevelComparison(level, gamma0, len(steps), int(bad.sum()), _median(diff), _signed_max(diff),
                                       _signed_max(diff[~bad]), notes))
-    return ModelComparison(model.__dict__.copy(), ws, curves, at_steps, levels, engine_notes)
+    return ModelComparison(model.__dict__.copy(), ws, curves, at_steps, levels, engine_notes, responses)
 
 
-def _rig_model_ratio(model_dict: dict, model, results: list[dict]) -> dict | None:
-    """For a rig file that declares modes or effects (:func:`sim.discrepancy.rigfit.rig_effects`):
-    per step, |P1 measured| / |P1| of the force the rig's model (true parameters, declared
-    effects at the file's values) needs to make the measured motion; None otherwise."""
-    from sim.discrepancy.analysis import data_from_steps
-    from sim.discrepancy.models import Model
-    from sim.discrepancy.rigfit import as_steps, rig_effects
-    declared = rig_effects(model_dict)
-    usable = [r for r in results if all(k in r for k in ("force", "accel", "disp"))]
-    if not declared or not usable:
-        return None
-    d = data_from_steps(as_steps(usable), 9)
-    m = Model((), d.X.shape[1])
-    theta = np.array([math.log(model.F_s_N), math.log(model.x_s_m), model.n, math.log(model.mass_kg)])
-    for e, init in declared.items():
-        m, theta = m.extend(theta, e, init)
-    P, _ = m.predict(theta, d)
-    ratio = np.abs(d.P[:, 0]) / np.maximum(np.abs(P[:, 0]), 1e-300)
-    return dict(effects=list(declared), ratio={r["key"]: float(x) for r, x in zip(usable, ratio)})
+def _shooting_line(model, level: float, grid: np.ndarray, notes: list[str]):
+    """(f, compliance_pp, flags) of the Masing carriage by half-period shooting."""
+    from sim.shooting import frf_shooting
+    ws, gamma0 = model.omega_s, level / model.F_s_N
+    fr, fell_back = frf_shooting(2 * math.pi * grid / ws, gamma0, model.n)
+    G = np.where(fr.converged, fr.G, np.nan)
+    flags = np.array(fr.gross_rolling) | ~np.array(fr.converged)
+    if (~fr.converged).any():
+        notes.append(f"model: no steady state at {int((~fr.converged).sum())} of {grid.size} frequencies")
+    if fell_back.any():
+        notes.append(f"model: RK4 fallback at {int(fell_back.sum())} of {grid.size} frequencies")
+    if np.any(fr.gross_rolling) or gamma0 >= 1:
+        notes.append("gamma0 >= 1: gross rolling; model = centred periodic orbit, the rig's "
+                     "carriage may drift: indicative only" if gamma0 >= 1
+                     else "model: gross rolling at some frequencies")
+    return fr.beta * ws / (2 * math.pi), G * model.x_s_m / model.F_s_N, flags
+
+
+def _plant_line(model, level: float, grid: np.ndarray, notes: list[str]):
+    """(f, compliance_pp, flags) of the rig's full model on the compiled plant."""
+    from sim.rig_response import MAX_PERIODS, level_response
+    resp = level_response(model, level, grid)
+    if (~resp.converged).any():
+        notes.append(f"model: no steady state within {MAX_PERIODS} periods at {int((~resp.converged).sum())} of "
+                     f"{grid.size} frequencies")
+    return resp.freq_Hz, np.where(resp.converged, resp.compliance_pp, np.nan), ~resp.converged
 
 
 def _median(x: np.ndarray) -> float:

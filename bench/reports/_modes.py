@@ -3,11 +3,12 @@ decision record 0043) in one ``modes.csv`` and the seed's Figs. 13 and 17 from t
 measurements, one colour per run with its label, 95 % intervals as bars, the rig model's
 prediction as lines (simulated rigs).
 
-The rig model's prediction: for the feed mode, the peak of compliance_pp the shooting
-engine gives for the rig's F_s, x_s, n, m at each level (the engine leaves the rig's other
-effects out; a peak at the edge of the engine's grid is drawn as a marker "at or beyond",
-never joined into the line); for the pitching mode, the band the 2-DOF model allows
-(:func:`sim.modal.pitch_band_Hz`: above its frequency with the friction free).
+The rig model's prediction (decision record 0054) is the resonance of the same model the
+report's model lines and the identification use (:mod:`sim.rig_response`: every declared
+effect and the pitching mode), by the measurement's definitions: the feed mode the peak of
+compliance_pp, the pitching mode the peak of |A1/F1|, each refined by golden-section search
+on steady states.  A peak at the edge of the model's grid is no value ("at or beyond"),
+never joined into the line.  A plain Masing rig's feed peak comes from the shooting engine.
 """
 
 from __future__ import annotations
@@ -43,11 +44,12 @@ class RunModes:
     model_feed: dict[float, tuple[float, float, str]] = field(default_factory=dict)   # level -> (Hz, m/N, note)
     pitch_band: tuple[float, float] | None = None
     kind: str = "stepped_sine"      # or "phase_resonance": one point per level, drawn with its own marker
+    model_pitch: dict[float, tuple[float, float, str]] = field(default_factory=dict)  # level -> (Hz, 1/kg, note)
 
     def rows(self) -> list[dict]:
         out = []
         for e in self.modes:
-            mf = self.model_feed.get(e.level_N) if e.mode == "feed" else None
+            mf = (self.model_feed if e.mode == "feed" else self.model_pitch).get(e.level_N)
             pk_c = e.peak if e.mode == "feed" else e.extra.get("compliance_pp", math.nan)
             pk_a = e.peak if e.mode == "pitch" else e.extra.get("accelerance", math.nan)
             out.append(dict(run=str(self.path), label=self.label, mode=e.mode, level_N=e.level_N, status=e.status,
@@ -69,11 +71,40 @@ def run_label(meta: dict, path: Path) -> str:
     return ", ".join(f"{k}={v}" for k, v in labels.items()) if labels else Path(path).name
 
 
+def model_peaks(cmp: ModelComparison | None) -> tuple[dict, dict]:
+    """(feed, pitch): level -> (frequency, peak value, note) of the rig model's resonances
+    from the report's model comparison (simulated rigs with a stored model; empty
+    otherwise).  On the compiled plant (:mod:`sim.rig_response`) the feed mode is the peak
+    of compliance_pp below 0.8 x the pitching mode's friction-free frequency, the pitching
+    mode the peak of |A1/F1| above it; on the shooting engine the feed peak of
+    :func:`model_feed_peaks`."""
+    if cmp is None:
+        return {}, {}
+    if not cmp.responses:
+        return model_feed_peaks(cmp), {}
+    from sim.rig import RigModel
+    from sim.rig_response import mode_split_Hz, resonance_Hz
+    model = RigModel.from_dict(cmp.params)
+    split = mode_split_Hz(model)
+    band = math.isfinite(split)
+    feed, pitch = {}, {}
+    for level, resp in cmp.responses.items():
+        try:
+            f, v, note = resonance_Hz(resp, model, "compliance_pp", below_Hz=split)
+            feed[level] = (f, v, note)
+            if band:
+                f, v, note = resonance_Hz(resp, model, "accelerance", above_Hz=split)
+                pitch[level] = (f, v, note)
+        except Exception as e:  # noqa: BLE001 - the measured modes come out without the model's
+            log.warning("model resonance at %g N failed: %s", level, e)
+            feed.setdefault(level, (math.nan, math.nan, f"model failed: {e}"))
+    return feed, pitch
+
+
 def model_feed_peaks(cmp: ModelComparison | None) -> dict[float, tuple[float, float, str]]:
-    """Level -> (frequency, compliance_pp, note) of the rig model's feed peak, from the
-    report's model comparison (simulated rigs with a stored model; empty otherwise): the
-    curve's maximum refined by a parabola in log-log; a maximum at the engine grid's edge
-    is NaN, noted."""
+    """Level -> (frequency, compliance_pp, note) of the shooting engine's feed peak, from the
+    report's model comparison: the curve's maximum refined by a parabola in log-log; a
+    maximum at the engine grid's edge is NaN, noted."""
     if cmp is None:
         return {}
     out = {}
@@ -131,7 +162,7 @@ def modes_of(path: Path, meta: dict, results: list[dict], cmp: ModelComparison |
         by_level.setdefault(r["level_index"], []).append(r)
     data = [LevelData.from_steps(float(levels_N[li]) if li < len(levels_N) else steps[0]["target_force_N"], steps)
             for li, steps in sorted(by_level.items()) if len(steps) >= 3]
-    feed_model = model_feed_peaks(cmp)
+    feed_model, pitch_model = model_peaks(cmp)
     band = None
     if rig.get("simulated") and rig.get("model"):
         from sim.rig import RigModel
@@ -140,7 +171,7 @@ def modes_of(path: Path, meta: dict, results: list[dict], cmp: ModelComparison |
     modes = track_modes(data, feed_predicted_Hz=pred, pitch=True, pitch_band_Hz=band)
     if band is None and not any(e.mode == "pitch" and e.ok for e in modes):
         modes = [e for e in modes if e.mode != "pitch"]    # no pitching mode in the data nor the model
-    return RunModes(Path(path), run_label(meta, path), modes, feed_model, band)
+    return RunModes(Path(path), run_label(meta, path), modes, feed_model, band, model_pitch=pitch_model)
 
 
 def run_modes(path: Path, *, model: bool = True) -> RunModes:

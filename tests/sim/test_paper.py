@@ -29,7 +29,7 @@ EXPECTED = {
     "fig12_frf_levels": ["n [-]", "gamma0 [-]", "beta [-]", "G [-]", "rk4_fallback [0/1]"],
     "fig13_resonance_vs_force": ["n [-]", "gamma0 [-]", "beta_h [-]", "G_h [-]",
                                  "peak_at_grid_edge [0/1]"],
-    "fig15_17_pitch_resonance": ["force [N]", "freq [Hz]", "compliance [m/N]"],
+    "fig15_17_pitch_resonance": ["force [N]", "freq [Hz]", "compliance_pp [m/N]"],
 }
 
 
