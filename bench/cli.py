@@ -21,7 +21,6 @@ from pathlib import Path
 
 from sim.errors import BenchError, ConfigurationError, EnvelopeError, LimitError, RunDirectoryError
 
-from . import __version__
 from .terminal import Progress, end_line, setup_logging, tolerant_streams
 
 log = logging.getLogger(__name__)
@@ -134,14 +133,20 @@ def _duration(seconds: float) -> str:
     return f"{h} h {m:02d} min" if h else f"{m} min {s:02d} s" if m else f"{s} s"
 
 
+def _latch():
+    """The program's signal latch (installed first thing in :func:`main`), or, when the
+    bench runs inside another program (a test), one of this command's own."""
+    from .signals import SignalLatch, process_latch
+    return process_latch() or SignalLatch()
+
+
 def _run(args, resume: bool) -> int:
-    from .signals import SignalLatch
+    latch = _latch()
+    with latch.installed():       # SIGHUP, SIGQUIT, SIGTERM as Ctrl-C from the start
+        return _session(args, resume, latch)
 
-    with SignalLatch().installed():       # SIGHUP, SIGQUIT, SIGTERM as Ctrl-C from the start
-        return _session(args, resume)
 
-
-def _session(args, resume: bool) -> int:
+def _session(args, resume: bool, latch) -> int:
     from contextlib import ExitStack
 
     with ExitStack() as held:
@@ -150,10 +155,10 @@ def _session(args, resume: bool) -> int:
             from .storage import RunStore
             RunStore.open(Path(args.run))
             held.enter_context(runlock.run_dir(Path(args.run)))
-        return _session_held(args, resume)
+        return _session_held(args, resume, latch)
 
 
-def _session_held(args, resume: bool) -> int:
+def _session_held(args, resume: bool, latch) -> int:
     from .session import run_plan
     from .storage import RunStatus, RunStore
 
@@ -187,7 +192,8 @@ def _session_held(args, resume: bool) -> int:
     try:
         store = run_plan(plan, rig, out, resume=resume,
                          progress=Progress("phase resonance" if plan.procedure == "phase_resonance" else "stepped sine"),
-                         sim_seed=seed, retry_skipped=bool(getattr(args, "retry_skipped", False)), labels=labels)
+                         sim_seed=seed, retry_skipped=bool(getattr(args, "retry_skipped", False)), labels=labels,
+                         latch=latch)
     finally:
         if watch:
             watch.close()
@@ -195,10 +201,28 @@ def _session_held(args, resume: bool) -> int:
         _say_output_state(out, before)
     meta = store.metadata
     print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/")
+    code = {RunStatus.COMPLETED: ExitCode.OK, RunStatus.ABORTED: ExitCode.LIMIT}.get(meta["status"], ExitCode.FAILURE)
     if meta["status"] == RunStatus.COMPLETED and not getattr(args, "no_report", False):
-        from .reports import write_report
-        print(f"report: {write_report(out)}")
-    return {RunStatus.COMPLETED: ExitCode.OK, RunStatus.ABORTED: ExitCode.LIMIT}.get(meta["status"], ExitCode.FAILURE)
+        latch.reopen()             # the report is work too; held: nothing raises inside it (0051)
+        if latch.reason is None:
+            _report(out, latch)
+        else:
+            print(f"report not written: {latch.reason} before it began; `bench report {out}` writes it",
+                  file=sys.stderr)
+        latch.finish()
+    if latch.reason is not None and code == ExitCode.OK:
+        raise KeyboardInterrupt(latch.reason)     # a signal before the work was done: exit 130
+    return code
+
+
+def _report(run: Path, latch, with_runs=()) -> None:
+    """Write the run's report with ``latch`` held: a signal meanwhile is recorded, not
+    raised into the numba kernels or the figures' finalizers where it could be swallowed,
+    and is honoured once the report is complete (decision 0051)."""
+    from .reports import write_report
+    latch.hold()
+    path = write_report(run, with_runs)
+    print(f"report: {path}" + (f" (complete; then {latch.reason})" if latch.reason else ""), flush=True)
 
 
 def _warm_up() -> None:
@@ -321,8 +345,12 @@ def cmd_demo(args) -> int:
 
 
 def cmd_report(args) -> int:
-    from .reports import write_report
-    print(f"report: {write_report(Path(args.run), [Path(p) for p in args.with_runs or ()])}")
+    latch = _latch()
+    with latch.installed():
+        _report(Path(args.run), latch, [Path(p) for p in args.with_runs or ()])
+        latch.finish()
+    if latch.reason is not None:
+        raise KeyboardInterrupt(latch.reason)
     return 0
 
 
@@ -618,6 +646,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="bench", description=DESCRIPTION, epilog=EPILOG)
     _add_common(p, argparse.SUPPRESS)
     p.set_defaults(verbose=0, debug=False)
+    from . import __version__
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 
@@ -797,6 +826,26 @@ def _one_line(e: BaseException) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """`bench ARGS`.  As the program (``argv`` None: the command line) the ending signals
+    are caught from here, before the heavy imports, until the process is gone: a signal
+    before the command's work is done gives 130, one after it changes nothing (0051)."""
+    if argv is not None:                  # inside another program (a test): its signals stay its own
+        return _parse_and_run(argv)
+    from .signals import for_process, ignore_at_exit
+    latch = for_process()
+    try:
+        code = _parse_and_run(argv)
+    except KeyboardInterrupt as e:        # before or after the command (its errors are its own)
+        print(f"bench: {_one_line(e)}", file=sys.stderr)
+        code = ExitCode.INTERRUPTED
+    latch.finish()
+    if latch.reason is not None and code == ExitCode.OK:   # a signal a finalizer dropped: never 0
+        code = ExitCode.INTERRUPTED
+    ignore_at_exit()
+    return code
+
+
+def _parse_and_run(argv: list[str] | None) -> int:
     try:
         args = build_parser().parse_args(argv)
     except SystemExit as e:               # usage error or --help: argparse has printed it
