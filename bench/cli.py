@@ -331,17 +331,23 @@ def cmd_resume(args) -> int:
 
 def cmd_demo(args) -> int:
     """The main job: the default plan on the simulated rig, then its report."""
+    from contextlib import nullcontext
+
     from . import runlock
-    from .demo import check_out_dir, clear_earlier_demo
+    from .demo import check_out_dir, clear_earlier_demo, write_manifest
 
     args.plan = args.rig = None
     args.seed = None
     out = Path(args.out)
-    if not check_out_dir(out):       # refuses (deleting nothing) unless out holds only an earlier demo's files
-        return _run(args, resume=False)
-    with runlock.run_dir(out):       # not while another session uses it
-        clear_earlier_demo(out)
-        return _run(args, resume=False)
+    earlier = check_out_dir(out)     # refuses (deleting nothing) unless out holds only an earlier demo's files
+    with runlock.run_dir(out) if earlier else nullcontext():      # not while another session uses it
+        if earlier:
+            clear_earlier_demo(out)
+        try:
+            return _run(args, resume=False)
+        finally:
+            _latch().hold()          # the manifest is written whole (a signal is honoured after it)
+            write_manifest(out)      # what this demo wrote: what the next one may delete (0051)
 
 
 def cmd_report(args) -> int:
