@@ -200,10 +200,12 @@ def _session_held(args, resume: bool, latch) -> int:
         end_line()                 # an interrupted run's progress line ends where it stood
         _say_output_state(out, before)
     meta = store.metadata
-    print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/")
     code = {RunStatus.COMPLETED: ExitCode.OK, RunStatus.ABORTED: ExitCode.LIMIT}.get(meta["status"], ExitCode.FAILURE)
-    if meta["status"] == RunStatus.COMPLETED and not getattr(args, "no_report", False):
+    report = meta["status"] == RunStatus.COMPLETED and not getattr(args, "no_report", False)
+    if report:
         latch.reopen()             # the report is work too; held: nothing raises inside it (0051)
+    print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/", flush=True)
+    if report:
         if latch.reason is None:
             _report(out, latch)
         else:

@@ -370,7 +370,8 @@ def _supervised(plan: Plan, rig: Rig, store: RunStore, latch: SignalLatch, *, pr
             log.exception("run failed")
             raise
         finally:
-            with uninterruptible("switching the output off"):
+            latch.finish()   # the measuring is over: a signal now stops nothing (the switch-off runs on, 0051)
+            with uninterruptible("switching the output off", latch):
                 stack.close()    # output off, then close links and twins
                 try:
                     done = store.done_keys()
@@ -379,7 +380,6 @@ def _supervised(plan: Plan, rig: Rig, store: RunStore, latch: SignalLatch, *, pr
                 except StorageError as e:
                     log.error("the run's end (%s) could not be recorded: %s", status, e)
                     unrecorded = e
-                latch.finish()   # the end is recorded: a signal from now on stops nothing (0051)
     if unrecorded is not None:          # only when nothing else is on its way out
         raise unrecorded
 

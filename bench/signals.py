@@ -143,7 +143,9 @@ def uninterruptible(what: str, latch: SignalLatch | None = None):
     recorded in ``latch`` (so a signal during the switch-off of a completed run still
     stops what the command would do next)."""
     def handler(signum, frame):
-        log.warning("signal %d while %s: finishing that first", signum, what)
+        late = latch is not None and latch._finished
+        log.warning("signal %d while %s%s", signum, what,
+                    ", after the work was done: nothing left to stop" if late else ": finishing that first")
         if latch is not None:
             latch.note(signum)
     return handling(handler, *ENDING)
