@@ -5,8 +5,9 @@ sim/errors.py: 0 done; 1 runtime failure (an instrument error, a failed run, `be
 found problems; an unexpected exception is reported as an internal error); 2 usage or
 configuration error (a bad argument, file or value: the message names it); 3 stopped by a
 limit (a plan the rig's limits refuse, or a run aborted by the safety supervisor); 130
-interrupted (Ctrl-C, SIGTERM, SIGHUP, SIGQUIT).  Errors are one line on stderr; `--debug`
-adds the traceback.
+interrupted (Ctrl-C, SIGTERM, SIGHUP, SIGQUIT before the work was done: the measuring and
+the report; one after it leaves the code as it was, decision record 0051).  Errors are one
+line on stderr; `--debug` adds the traceback.
 """
 
 from __future__ import annotations
@@ -621,8 +622,9 @@ EPILOG = """\
 exit codes: 0 done; 1 failure (an instrument error, a failed run, `bench check` found
 problems); 2 usage or configuration error (the message names the file, key and allowed
 values); 3 stopped by a limit (refused before the output went on, or aborted); 130
-interrupted (Ctrl-C, SIGTERM, SIGHUP: the terminal closed, SIGQUIT).  The output is
-switched off on every exit.
+interrupted (Ctrl-C, SIGTERM, SIGHUP: the terminal closed, SIGQUIT) before the work
+was done; a signal while the report is written is honoured once it is complete.  The
+output is switched off on every exit.
 -v, --debug and -vv may come before or after the command."""
 
 
@@ -668,7 +670,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_paper)
 
     s = sub.add_parser("demo", help="the main job: the default plan on the simulated rig, with its report")
-    s.add_argument("--out", default="out/demo", help="run directory (an earlier demo run there is deleted first; anything else is refused)")
+    s.add_argument("--out", default="out/demo", help="run directory (the files an earlier demo wrote there, listed in its "
+                                           "demo-manifest.json, are deleted first; anything else is refused)")
     _add_watch_options(s)
     s.set_defaults(func=cmd_demo)
 
