@@ -523,7 +523,13 @@ def cmd_twins(args) -> int:
     rig = load_rig(Path(args.rig) if args.rig else DEFAULTS / "sim_rig.toml")
     if not rig.simulated:
         raise ConfigurationError(f"{args.rig}: not a simulated rig (simulated = true is needed)")
-    run_standalone(SimulatedRig(RigModel.from_dict(rig.model)), args.host, serial_ports=args.serial)
+    import threading
+
+    from .signals import ENDING, handling
+    stop = threading.Event()          # serving until a signal is this command's work: it ends it, exit 0
+    with handling(lambda signum, frame: stop.set(), *ENDING):
+        run_standalone(SimulatedRig(RigModel.from_dict(rig.model)), args.host, serial_ports=args.serial, stop=stop)
+    print("stopping twins")
     return 0
 
 
