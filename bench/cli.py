@@ -205,6 +205,7 @@ def _session_held(args, resume: bool, latch) -> int:
     report = meta["status"] == RunStatus.COMPLETED and not getattr(args, "no_report", False)
     if report:
         latch.reopen()             # the report is work too; held: nothing raises inside it (0051)
+        latch.hold(doing=REPORTING)
     print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/", flush=True)
     if report:
         if latch.reason is None:
@@ -218,12 +219,15 @@ def _session_held(args, resume: bool, latch) -> int:
     return code
 
 
+REPORTING = "the report is written (the output is off)"
+
+
 def _report(run: Path, latch, with_runs=()) -> None:
     """Write the run's report with ``latch`` held: a signal meanwhile is recorded, not
     raised into the numba kernels or the figures' finalizers where it could be swallowed,
     and is honoured once the report is complete (decision 0051)."""
+    latch.hold(doing=REPORTING)
     from .reports import write_report
-    latch.hold()
     path = write_report(run, with_runs)
     print(f"report: {path}" + (f" (complete; then {latch.reason})" if latch.reason else ""), flush=True)
 

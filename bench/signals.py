@@ -63,6 +63,7 @@ class SignalLatch:
         self.late: str | None = None        # one that came after (:meth:`finish`)
         self._hold = False
         self._finished = False
+        self._doing = ""                    # what a held latch lets finish (said when a signal comes)
 
     def handler(self, signum, frame):
         if self._finished:
@@ -72,6 +73,8 @@ class SignalLatch:
         self.reason = reason(signum)
         if not self._hold:
             raise KeyboardInterrupt(self.reason)
+        if self._doing:
+            log.warning("%s while %s: finishing it first", self.reason, self._doing)
 
     def note(self, signum: int) -> None:
         """Record ``signum`` without raising (a handler of its own ran instead)."""
@@ -87,20 +90,24 @@ class SignalLatch:
     def installed(self):
         return handling(self.handler, *ENDING)
 
-    def hold(self) -> None:
+    def hold(self, doing: str = "") -> None:
         """From now on latch a signal without raising it (a run directory being set up must
-        not be left half-written) until :meth:`release`."""
+        not be left half-written) until :meth:`release`; ``doing``: what is let finish, said
+        on the terminal when a signal comes."""
         self._hold = True
+        self._doing = doing
 
     def release(self) -> None:
         """Raise again at once; raise now a signal latched while held."""
         self._hold = False
+        self._doing = ""
         self.check()
 
     def finish(self) -> None:
         """The work is done (the run's end recorded, the report written): from now on a
         signal is only recorded as :attr:`late`; nothing is left for it to stop."""
         self._hold = self._finished = True
+        self._doing = ""
 
     def reopen(self) -> None:
         """More work follows the end (the report): held, and a signal that came since

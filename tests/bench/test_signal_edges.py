@@ -154,6 +154,7 @@ def test_a_signal_while_the_report_is_written_is_honoured_once_it_is_complete(tm
             proc.kill()
     assert proc.returncode == 130, err
     assert "(complete; then signal 1)" in rest
+    assert "signal 1 while the report is written (the output is off): finishing it first" in err
     report = (out / "report" / "report.md").read_text()
     figures = [name for name in ("compliance.png", "accelerance.png", "quality.png", "model_vs_measurement.png")
                if f"]({name})" in report or f"({name})" in report]
