@@ -275,8 +275,8 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
     status and the output-off confirmation are recorded whatever happens.  A resume does
     not measure again the steps skipped at run time (force unreachable, ``infeasible =
     "skip"``) unless ``retry_skipped`` (after raising a limit, say).  ``latch``: the
-    program's (it keeps a signal that comes during the switch-off or after the end is
-    recorded, for the caller to decide, decision 0051); by default one of the run's own."""
+    program's (marked finished when the measuring is over: a signal during the switch-off
+    or later is kept for the caller to decide, decision 0051); by default the run's own."""
     plan = check_envelope(plan, rig)
     warnings = identifiability(plan, rig) if plan.procedure == "stepped_sine" else []
     for w in warnings:

@@ -103,9 +103,13 @@ class SignalLatch:
         self._doing = ""
         self.check()
 
+    @property
+    def finished(self) -> bool:
+        return self._finished
+
     def finish(self) -> None:
-        """The work is done (the run's end recorded, the report written): from now on a
-        signal is only recorded as :attr:`late`; nothing is left for it to stop."""
+        """The work is done (the measuring over, the report written): from now on a signal
+        is only recorded as :attr:`late`; nothing is left for it to stop."""
         self._hold = self._finished = True
         self._doing = ""
 
@@ -150,7 +154,7 @@ def uninterruptible(what: str, latch: SignalLatch | None = None):
     recorded in ``latch`` (so a signal during the switch-off of a completed run still
     stops what the command would do next)."""
     def handler(signum, frame):
-        late = latch is not None and latch._finished
+        late = latch is not None and latch.finished
         log.warning("signal %d while %s%s", signum, what,
                     ", after the work was done: nothing left to stop" if late else ": finishing that first")
         if latch is not None:
