@@ -202,13 +202,15 @@ def _session_held(args, resume: bool, latch) -> int:
         _say_output_state(out, before)
     meta = store.metadata
     code = {RunStatus.COMPLETED: ExitCode.OK, RunStatus.ABORTED: ExitCode.LIMIT}.get(meta["status"], ExitCode.FAILURE)
-    report = meta["status"] == RunStatus.COMPLETED and not getattr(args, "no_report", False)
-    if report:
+    wants_report = meta["status"] == RunStatus.COMPLETED and not getattr(args, "no_report", False)
+    begin_report = False
+    if wants_report:
         latch.reopen()             # the report is work too; held: nothing raises inside it (0051)
         latch.hold(doing=REPORTING)
+        begin_report = latch.reason is None    # decided before "run completed": a signal after it is one during the report
     print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/", flush=True)
-    if report:
-        if latch.reason is None:
+    if wants_report:
+        if begin_report:
             _report(out, latch)
         else:
             print(f"report not written: {latch.reason} before it began; `bench report {out}` writes it",
@@ -862,6 +864,8 @@ def main(argv: list[str] | None = None) -> int:
     latch.finish()
     if latch.reason is not None and code == ExitCode.OK:   # a signal a finalizer dropped: never 0
         code = ExitCode.INTERRUPTED
+    elif latch.late is not None:
+        print(f"bench: {latch.late} after the work was done: nothing left to stop", file=sys.stderr, flush=True)
     ignore_at_exit()
     return code
 

@@ -67,8 +67,7 @@ class SignalLatch:
 
     def handler(self, signum, frame):
         if self._finished:
-            self.late = reason(signum)
-            log.warning("%s after the work was done: nothing left to stop", self.late)
+            self.late = reason(signum)      # said by the caller, which knows whether work follows
             return
         self.reason = reason(signum)
         if not self._hold:
@@ -154,9 +153,7 @@ def uninterruptible(what: str, latch: SignalLatch | None = None):
     recorded in ``latch`` (so a signal during the switch-off of a completed run still
     stops what the command would do next)."""
     def handler(signum, frame):
-        late = latch is not None and latch.finished
-        log.warning("signal %d while %s%s", signum, what,
-                    ", after the work was done: nothing left to stop" if late else ": finishing that first")
+        log.warning("signal %d while %s: finishing that first", signum, what)
         if latch is not None:
             latch.note(signum)
     return handling(handler, *ENDING)
