@@ -76,6 +76,8 @@ check: $(VENV)/.installed
 
 # The last bench_analysis line: 90-step independent cases whose records keep the carriage's
 # free vibration (25 settle cycles): the time bench analyze spends, no line where none was put (0045).
+# bench_signals: 20 runs, a random ending signal in stepped sine, response control, phase
+# resonance, a dwell and the report (0040, 0051; about 5 min).
 bench: setup
 	$(PY) benchmarks/bench_sim.py
 	$(PY) benchmarks/bench_drivers.py
@@ -85,6 +87,7 @@ bench: setup
 	$(PY) benchmarks/bench_analysis.py --source independent --cases 60 --levels 3 --freqs 10
 	$(PY) benchmarks/bench_analysis.py --source independent --cases 12 --settle 25
 	$(PY) benchmarks/bench_artefacts.py
+	$(PY) benchmarks/bench_signals.py
 	$(PY) benchmarks/bench_identification.py
 	$(PY) benchmarks/bench_mc_coverage.py
 	$(PY) benchmarks/bench_backbone.py

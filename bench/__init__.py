@@ -6,17 +6,11 @@ Python API (``import bench``; decision record 0055).
     run.steps(), run.modes(), run.backbone(), run.identification
     run.resume(), run.report(), run.export(), run.analyze(), run.check()
 
-The names are loaded on first use (``import bench`` stays light, so the command line
-starts, and installs its signal handlers, before numpy and the rest are imported).
+Every name, ``__version__`` included, is looked up when first asked for: ``import bench``
+stays light (importlib.metadata alone costs about 0.1 s), so the command line starts and
+catches the ending signals before numpy and the rest are imported (decision 0051).
 Everything not listed in ``__all__`` is private.
 """
-
-from importlib import metadata as _metadata
-
-try:
-    __version__ = _metadata.version("guideway-bench")
-except _metadata.PackageNotFoundError:      # a source tree that was never installed
-    __version__ = "unknown"
 
 # name -> the module that defines it
 _API = {name: "bench.api" for name in ("Run", "STEP_COLUMNS", "load_plan", "load_rig", "open_run",
@@ -29,14 +23,25 @@ _API.update({"Plan": "procedures.plan", "Rig": "procedures.plan", "Limits": "pro
 __all__ = ["__version__", *sorted(_API)]
 
 
+def _version() -> str:
+    from importlib import metadata
+    try:
+        return metadata.version("guideway-bench")
+    except metadata.PackageNotFoundError:      # a source tree that was never installed
+        return "unknown"
+
+
 def __getattr__(name: str):
-    if name in _API:
+    if name == "__version__":
+        value = _version()
+    elif name in _API:
         import importlib
         value = getattr(importlib.import_module(_API[name]), name)
-        globals()[name] = value           # once
-        return value
-    raise AttributeError(f"module 'bench' has no attribute {name!r}")
+    else:
+        raise AttributeError(f"module 'bench' has no attribute {name!r}")
+    globals()[name] = value           # once
+    return value
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_API))
+    return sorted(set(globals()) | set(_API) | {"__version__"})

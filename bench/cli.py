@@ -5,8 +5,9 @@ sim/errors.py: 0 done; 1 runtime failure (an instrument error, a failed run, `be
 found problems; an unexpected exception is reported as an internal error); 2 usage or
 configuration error (a bad argument, file or value: the message names it); 3 stopped by a
 limit (a plan the rig's limits refuse, or a run aborted by the safety supervisor); 130
-interrupted (Ctrl-C, SIGTERM, SIGHUP, SIGQUIT).  Errors are one line on stderr; `--debug`
-adds the traceback.
+interrupted (Ctrl-C, SIGTERM, SIGHUP, SIGQUIT before the work was done: the measuring and
+the report; one after it leaves the code as it was, decision record 0051).  Errors are one
+line on stderr; `--debug` adds the traceback.
 """
 
 from __future__ import annotations
@@ -21,7 +22,6 @@ from pathlib import Path
 
 from sim.errors import BenchError, ConfigurationError, EnvelopeError, LimitError, RunDirectoryError
 
-from . import __version__
 from .terminal import Progress, end_line, setup_logging, tolerant_streams
 
 log = logging.getLogger(__name__)
@@ -134,14 +134,20 @@ def _duration(seconds: float) -> str:
     return f"{h} h {m:02d} min" if h else f"{m} min {s:02d} s" if m else f"{s} s"
 
 
+def _latch():
+    """The program's signal latch (installed first thing in :func:`main`), or, when the
+    bench runs inside another program (a test), one of this command's own."""
+    from .signals import SignalLatch, process_latch
+    return process_latch() or SignalLatch()
+
+
 def _run(args, resume: bool) -> int:
-    from .signals import SignalLatch
+    latch = _latch()
+    with latch.installed():       # SIGHUP, SIGQUIT, SIGTERM as Ctrl-C from the start
+        return _session(args, resume, latch)
 
-    with SignalLatch().installed():       # SIGHUP, SIGQUIT, SIGTERM as Ctrl-C from the start
-        return _session(args, resume)
 
-
-def _session(args, resume: bool) -> int:
+def _session(args, resume: bool, latch) -> int:
     from contextlib import ExitStack
 
     with ExitStack() as held:
@@ -150,10 +156,10 @@ def _session(args, resume: bool) -> int:
             from .storage import RunStore
             RunStore.open(Path(args.run))
             held.enter_context(runlock.run_dir(Path(args.run)))
-        return _session_held(args, resume)
+        return _session_held(args, resume, latch)
 
 
-def _session_held(args, resume: bool) -> int:
+def _session_held(args, resume: bool, latch) -> int:
     from .session import run_plan
     from .storage import RunStatus, RunStore
 
@@ -187,18 +193,45 @@ def _session_held(args, resume: bool) -> int:
     try:
         store = run_plan(plan, rig, out, resume=resume,
                          progress=Progress("phase resonance" if plan.procedure == "phase_resonance" else "stepped sine"),
-                         sim_seed=seed, retry_skipped=bool(getattr(args, "retry_skipped", False)), labels=labels)
+                         sim_seed=seed, retry_skipped=bool(getattr(args, "retry_skipped", False)), labels=labels,
+                         latch=latch)
     finally:
         if watch:
             watch.close()
         end_line()                 # an interrupted run's progress line ends where it stood
         _say_output_state(out, before)
     meta = store.metadata
-    print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/")
-    if meta["status"] == RunStatus.COMPLETED and not getattr(args, "no_report", False):
-        from .reports import write_report
-        print(f"report: {write_report(out)}")
-    return {RunStatus.COMPLETED: ExitCode.OK, RunStatus.ABORTED: ExitCode.LIMIT}.get(meta["status"], ExitCode.FAILURE)
+    code = {RunStatus.COMPLETED: ExitCode.OK, RunStatus.ABORTED: ExitCode.LIMIT}.get(meta["status"], ExitCode.FAILURE)
+    wants_report = meta["status"] == RunStatus.COMPLETED and not getattr(args, "no_report", False)
+    begin_report = False
+    if wants_report:
+        latch.reopen()             # the report is work too; held: nothing raises inside it (0051)
+        latch.hold(doing=REPORTING)
+        begin_report = latch.reason is None    # decided before "run completed": a signal after it is one during the report
+    print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/", flush=True)
+    if wants_report:
+        if begin_report:
+            _report(out, latch)
+        else:
+            print(f"report not written: {latch.reason} before it began; `bench report {out}` writes it",
+                  file=sys.stderr)
+        latch.finish()
+    if latch.reason is not None and code == ExitCode.OK:
+        raise KeyboardInterrupt(latch.reason)     # a signal before the work was done: exit 130
+    return code
+
+
+REPORTING = "the report is written (the output is off)"
+
+
+def _report(run: Path, latch, with_runs=()) -> None:
+    """Write the run's report with ``latch`` held: a signal meanwhile is recorded, not
+    raised into the numba kernels or the figures' finalizers where it could be swallowed,
+    and is honoured once the report is complete (decision 0051)."""
+    latch.hold(doing=REPORTING)
+    from .reports import write_report
+    path = write_report(run, with_runs)
+    print(f"report: {path}" + (f" (complete; then {latch.reason})" if latch.reason else ""), flush=True)
 
 
 def _warm_up() -> None:
@@ -336,22 +369,32 @@ def _sequence(args, resume: bool) -> int:
 
 def cmd_demo(args) -> int:
     """The main job: the default plan on the simulated rig, then its report."""
+    from contextlib import nullcontext
+
     from . import runlock
-    from .demo import check_out_dir, clear_earlier_demo
+    from .demo import check_out_dir, clear_earlier_demo, write_manifest
 
     args.plan = args.rig = None
     args.seed = None
     out = Path(args.out)
-    if not check_out_dir(out):       # refuses (deleting nothing) unless out holds only an earlier demo's files
-        return _run(args, resume=False)
-    with runlock.run_dir(out):       # not while another session uses it
-        clear_earlier_demo(out)
-        return _run(args, resume=False)
+    earlier = check_out_dir(out)     # refuses (deleting nothing) unless out holds only an earlier demo's files
+    with runlock.run_dir(out) if earlier else nullcontext():      # not while another session uses it
+        if earlier:
+            clear_earlier_demo(out)
+        try:
+            return _run(args, resume=False)
+        finally:
+            _latch().hold()          # the manifest is written whole (a signal is honoured after it)
+            write_manifest(out)      # what this demo wrote: what the next one may delete (0051)
 
 
 def cmd_report(args) -> int:
-    from .reports import write_report
-    print(f"report: {write_report(Path(args.run), [Path(p) for p in args.with_runs or ()])}")
+    latch = _latch()
+    with latch.installed():
+        _report(Path(args.run), latch, [Path(p) for p in args.with_runs or ()])
+        latch.finish()
+    if latch.reason is not None:
+        raise KeyboardInterrupt(latch.reason)
     return 0
 
 
@@ -518,7 +561,13 @@ def cmd_twins(args) -> int:
     rig = load_rig(Path(args.rig) if args.rig else DEFAULTS / "sim_rig.toml")
     if not rig.simulated:
         raise ConfigurationError(f"{args.rig}: not a simulated rig (simulated = true is needed)")
-    run_standalone(SimulatedRig(RigModel.from_dict(rig.model)), args.host, serial_ports=args.serial)
+    import threading
+
+    from .signals import ENDING, handling
+    stop = threading.Event()          # serving until a signal is this command's work: it ends it, exit 0
+    with handling(lambda signum, frame: stop.set(), *ENDING):
+        run_standalone(SimulatedRig(RigModel.from_dict(rig.model)), args.host, serial_ports=args.serial, stop=stop)
+    print("stopping twins")
     return 0
 
 
@@ -617,8 +666,9 @@ EPILOG = """\
 exit codes: 0 done; 1 failure (an instrument error, a failed run, `bench check` found
 problems); 2 usage or configuration error (the message names the file, key and allowed
 values); 3 stopped by a limit (refused before the output went on, or aborted); 130
-interrupted (Ctrl-C, SIGTERM, SIGHUP: the terminal closed, SIGQUIT).  The output is
-switched off on every exit.
+interrupted (Ctrl-C, SIGTERM, SIGHUP: the terminal closed, SIGQUIT) before the work
+was done; a signal while the report is written is honoured once it is complete.  The
+output is switched off on every exit.
 -v, --debug and -vv may come before or after the command."""
 
 
@@ -650,6 +700,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="bench", description=DESCRIPTION, epilog=EPILOG)
     _add_common(p, argparse.SUPPRESS)
     p.set_defaults(verbose=0, debug=False)
+    from . import __version__
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 
@@ -663,7 +714,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_paper)
 
     s = sub.add_parser("demo", help="the main job: the default plan on the simulated rig, with its report")
-    s.add_argument("--out", default="out/demo", help="run directory (an earlier demo run there is deleted first; anything else is refused)")
+    s.add_argument("--out", default="out/demo", help="run directory (the files an earlier demo wrote there, listed in its "
+                                           "demo-manifest.json, are deleted first; anything else is refused)")
     _add_watch_options(s)
     s.set_defaults(func=cmd_demo)
 
@@ -836,6 +888,28 @@ def _one_line(e: BaseException) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """`bench ARGS`.  As the program (``argv`` None: the command line) the ending signals
+    are caught from here, before the heavy imports, until the process is gone: a signal
+    before the command's work is done gives 130, one after it changes nothing (0051)."""
+    if argv is not None:                  # inside another program (a test): its signals stay its own
+        return _parse_and_run(argv)
+    from .signals import for_process, ignore_at_exit
+    latch = for_process()
+    try:
+        code = _parse_and_run(argv)
+    except KeyboardInterrupt as e:        # before or after the command (its errors are its own)
+        print(f"bench: {_one_line(e)}", file=sys.stderr)
+        code = ExitCode.INTERRUPTED
+    latch.finish()
+    if latch.reason is not None and code == ExitCode.OK:   # a signal a finalizer dropped: never 0
+        code = ExitCode.INTERRUPTED
+    elif latch.late is not None:
+        print(f"bench: {latch.late} after the work was done: nothing left to stop", file=sys.stderr, flush=True)
+    ignore_at_exit()
+    return code
+
+
+def _parse_and_run(argv: list[str] | None) -> int:
     try:
         args = build_parser().parse_args(argv)
     except SystemExit as e:               # usage error or --help: argparse has printed it

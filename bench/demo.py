@@ -1,77 +1,128 @@
-"""`bench demo --out DIR` starts afresh, but deletes only an earlier demo run.
+"""`bench demo --out DIR` starts afresh, but deletes only the files an earlier demo wrote.
 
-DIR is cleared only when it is recognisably what an earlier `bench demo` left: its
-run.json names the demo plan on the simulated rig, and every entry in it is one the demo
-(or a resume of it) writes: the run's own files, ``steps/`` holding step files only,
-``report/`` holding the report's pictures and text, ``damaged/`` of a resume.  Anything
-else (a thesis, another run, an export or analysis made from the demo, ``--out .``) and
-nothing is deleted: the demo refuses, naming what it found (decision record 0040).
+Each demo leaves a manifest in DIR (``demo-manifest.json``): every file it wrote there,
+with its size and SHA-256, and the directories it made.  A later demo deletes exactly
+those files (then the directories, if that leaves them empty), and only when DIR holds
+nothing else: a file the manifest does not list (a thesis in ``report/``, an export, a
+resume's new steps), a listed file changed since, a link, or no manifest at all (an older
+bench's demo, a run that is not a demo, ``--out .``) and the demo refuses in one line,
+naming what it found, and deletes nothing (decision records 0040, 0051).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
-import re
-import shutil
+import logging
+import os
 from pathlib import Path
 
 from sim.errors import ConfigurationError
 
-from .config import DEFAULTS, load_plan, load_rig
 from .runlock import LOCK_NAME
 
-RUN_FILES = {"run.json", "events.jsonl", "bench.log", "identification.jsonl", "stop.request", LOCK_NAME}
-STEP_FILE = re.compile(r"(\d{5}-L\d{2}-F\d{3}-(up|down)\.(json|npz)|\..+\.tmp)")
-REPORT_FILE = re.compile(r"[\w.-]+\.(png|md|html)")
+log = logging.getLogger(__name__)
+
+MANIFEST = "demo-manifest.json"
+_OWN = {LOCK_NAME, MANIFEST}             # the session lock is never deleted (decision 0040)
 
 
-def is_demo_run(meta: object) -> bool:
-    """run.json of a demo: the demo plan on the simulated rig."""
-    if not isinstance(meta, dict):
-        return False
-    plan, rig = meta.get("plan"), meta.get("rig")
-    return (isinstance(plan, dict) and isinstance(rig, dict) and rig.get("simulated") is True
-            and plan.get("name") == load_plan(DEFAULTS / "demo_plan.toml").name
-            and rig.get("name") == load_rig(DEFAULTS / "sim_rig.toml").name)
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
 
 
-def _foreign(out: Path) -> list[str]:
-    """What in ``out`` the demo did not write (relative names; a directory ends in /)."""
-    found = []
-    for p in sorted(out.iterdir()):
-        if p.is_symlink():
-            found.append(p.name + " (a link)")
-        elif p.is_file() and p.name in RUN_FILES:
-            continue
-        elif p.is_dir() and p.name in ("steps", "report", "damaged"):
-            pattern = {"steps": STEP_FILE, "report": REPORT_FILE}.get(p.name)
-            for q in sorted(p.rglob("*") if p.name == "damaged" else p.iterdir()):
-                ok = (q.is_dir() or (q.is_file() and STEP_FILE.fullmatch(q.name))) if p.name == "damaged" else \
-                    (q.is_file() and not q.is_symlink() and pattern.fullmatch(q.name))
-                if q.is_symlink() or not ok:
-                    found.append(f"{q.relative_to(out)}{'/' if q.is_dir() else ''}")
-        else:
-            found.append(p.name + ("/" if p.is_dir() else ""))
-    return found
+def _entries(out: Path) -> tuple[list[Path], list[Path], list[Path]]:
+    """Files, directories and links under ``out`` (links not followed), the demo's own
+    lock and manifest left out."""
+    files, dirs, links = [], [], []
+    for root, dnames, fnames in os.walk(out):
+        for name in sorted(dnames) + sorted(fnames):
+            p = Path(root) / name
+            if p.is_symlink():
+                links.append(p)
+            elif p.is_dir():
+                dirs.append(p)
+            elif not (Path(root) == out and name in _OWN):
+                files.append(p)
+        dnames[:] = [d for d in dnames if not (Path(root) / d).is_symlink()]
+    return files, dirs, links
+
+
+def write_manifest(out: Path) -> None:
+    """List what is in ``out`` as written by this demo (it was absent or emptied before the
+    demo began).  Written atomically; nothing when this process did not start the run
+    there (``out`` never made, another session's run)."""
+    out = Path(out)
+    try:
+        process = json.loads((out / "run.json").read_bytes()).get("process") or {}
+    except (OSError, ValueError, AttributeError):
+        return
+    if process.get("pid") != os.getpid():
+        return
+    files, dirs, _ = _entries(out)
+    manifest = {"written_by": "bench demo",
+                "files": {p.relative_to(out).as_posix(): {"bytes": p.stat().st_size, "sha256": _sha256(p)}
+                          for p in files},
+                "dirs": [d.relative_to(out).as_posix() for d in dirs]}
+    tmp = out / f".{MANIFEST}.{os.getpid()}.tmp"
+    tmp.write_text(json.dumps(manifest, indent=1) + "\n")
+    os.replace(tmp, out / MANIFEST)
+
+
+def _manifest(out: Path) -> dict | None:
+    try:
+        m = json.loads((out / MANIFEST).read_bytes())
+    except (OSError, ValueError):
+        return None
+    ok = (isinstance(m, dict) and isinstance(m.get("files"), dict) and isinstance(m.get("dirs"), list)
+          and all(isinstance(v, dict) for v in m["files"].values()))
+    return m if ok else None
+
+
+def _foreign(out: Path, manifest: dict) -> list[str]:
+    """What in ``out`` the earlier demo did not write, or changed since (relative names; a
+    directory ends in /)."""
+    files, dirs, links = _entries(out)
+    listed, listed_dirs = manifest["files"], set(manifest["dirs"])
+
+    def new_dir(p: Path) -> str | None:          # the outermost directory the demo did not make
+        parts = p.relative_to(out).parts[:-1]
+        return next((f"{'/'.join(parts[:k])}/" for k in range(1, len(parts) + 1)
+                     if "/".join(parts[:k]) not in listed_dirs), None)
+
+    found = set()
+    for p in files + links + dirs:
+        name = p.relative_to(out).as_posix()
+        outer = new_dir(p) or (f"{name}/" if p in dirs and name not in listed_dirs else None)
+        if outer:
+            found.add(outer)
+        elif p in links:
+            found.add(f"{name} (a link)")
+        elif p in files and name not in listed:
+            found.add(name)
+        elif p in files and (p.stat().st_size != listed[name].get("bytes") or _sha256(p) != listed[name].get("sha256")):
+            found.add(f"{name} (changed since the demo wrote it)")
+    return sorted(found)
 
 
 def check_out_dir(out: Path) -> bool:
-    """True if ``out`` holds an earlier demo run and nothing else, False if it is absent or
-    empty; anything else raises :class:`ConfigurationError` naming what is there."""
+    """True if ``out`` holds an earlier demo's files and nothing else, False if it is absent
+    or empty; anything else raises :class:`ConfigurationError` naming what is there."""
     out = Path(out)
     if not out.exists() or (out.is_dir() and not any(p.name != LOCK_NAME for p in out.iterdir())):
         return False
     how = "bench demo --out: choose a new or empty directory, or remove"
-    if not out.is_dir():
+    if not out.is_dir() or out.is_symlink():
         raise ConfigurationError(f"{out}: not a directory; {how} it")
-    try:
-        meta = json.loads((out / "run.json").read_bytes())
-    except (OSError, ValueError):
-        meta = None
-    if not is_demo_run(meta):
-        raise ConfigurationError(f"{out} is not empty and holds no earlier demo run (no run.json of the demo plan "
-                                 f"on the simulated rig); the demo deletes nothing else: {how} its contents")
-    foreign = _foreign(out)
+    manifest = _manifest(out)
+    if manifest is None:
+        raise ConfigurationError(f"{out} is not empty and holds no earlier demo run (no readable {MANIFEST} listing "
+                                 f"the files a demo wrote there); the demo deletes nothing else: {how} its contents")
+    foreign = _foreign(out, manifest)
     if foreign:
         shown = ", ".join(foreign[:6]) + (f" (+{len(foreign) - 6} more)" if len(foreign) > 6 else "")
         raise ConfigurationError(f"{out} holds an earlier demo run and files the demo did not write ({shown}); "
@@ -80,14 +131,16 @@ def check_out_dir(out: Path) -> bool:
 
 
 def clear_earlier_demo(out: Path) -> None:
-    """Delete the earlier demo run in ``out`` (see :func:`check_out_dir`, which refuses
-    anything else, deleting nothing); the session lock stays (its holder is the caller)."""
+    """Delete the files the earlier demo in ``out`` wrote, the directories it made once
+    empty, then its manifest (see :func:`check_out_dir`, which refuses anything else,
+    deleting nothing); the session lock stays (its holder is the caller)."""
+    out = Path(out)
     if not check_out_dir(out):
         return
-    for p in Path(out).iterdir():
-        if p.name == LOCK_NAME:
-            continue                      # held by this session
-        if p.is_dir():
-            shutil.rmtree(p)
-        else:
-            p.unlink()
+    files, dirs, _ = _entries(out)        # each one listed and unchanged (checked just now)
+    for p in files:
+        p.unlink()
+    for d in sorted(dirs, key=lambda d: len(d.parts), reverse=True):
+        d.rmdir()
+    (out / MANIFEST).unlink()
+    log.info("deleted the earlier demo in %s (%d files)", out, len(files))

@@ -268,18 +268,20 @@ def open_instruments(rig: Rig, stack: ExitStack, *, sim_seed: int | None = None,
 
 def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=None,
              sim_seed: int | None = None, identify: bool = True, retry_skipped: bool = False,
-             labels: dict[str, str] | None = None) -> RunStore:
+             labels: dict[str, str] | None = None, latch: SignalLatch | None = None) -> RunStore:
     """Run (or resume) ``plan`` on ``rig`` into the run directory ``out``.
 
     The plan is checked against the rig's limits before anything is opened; the run's
     status and the output-off confirmation are recorded whatever happens.  A resume does
     not measure again the steps skipped at run time (force unreachable, ``infeasible =
-    "skip"``) unless ``retry_skipped`` (after raising a limit, say)."""
+    "skip"``) unless ``retry_skipped`` (after raising a limit, say).  ``latch``: the
+    program's (marked finished when the measuring is over: a signal during the switch-off
+    or later is kept for the caller to decide, decision 0051); by default the run's own."""
     plan = check_envelope(plan, rig)
     warnings = identifiability(plan, rig) if plan.procedure == "stepped_sine" else []
     for w in warnings:
         log.warning("identifiability: %s", w)
-    latch = SignalLatch()
+    latch = latch or SignalLatch()
     out = Path(out)
     if not resume:
         RunStore.check_new(out)            # before anything, the lock file included, is written
@@ -350,7 +352,7 @@ def _supervised(plan: Plan, rig: Rig, store: RunStore, latch: SignalLatch, *, pr
             status = RunStatus.INTERRUPTED
             _note(store, "interrupted", reason=str(e) or "Ctrl-C")
             if sup is not None:
-                with uninterruptible("ramping down"):
+                with uninterruptible("ramping down", latch):
                     sup.shutdown()       # ramp down; the output is switched off below
             stop_request.clear(store.path)
             log.warning("interrupted; resume with: bench resume %s", store.path)
@@ -368,7 +370,8 @@ def _supervised(plan: Plan, rig: Rig, store: RunStore, latch: SignalLatch, *, pr
             log.exception("run failed")
             raise
         finally:
-            with uninterruptible("switching the output off"):
+            latch.finish()   # the measuring is over: a signal now stops nothing (the switch-off runs on, 0051)
+            with uninterruptible("switching the output off", latch):
                 stack.close()    # output off, then close links and twins
                 try:
                     done = store.done_keys()

@@ -13,6 +13,13 @@ between tasks).  A :class:`SignalLatch` raises at once as well, but also remembe
 signal, and long loops call :meth:`SignalLatch.check` at their safe points (a run before
 each DAQ block, a study after each task) to raise it again.  A SIGTERM dropped that way
 once let a CI run finish all 30 of its steps.
+
+The `bench` program installs one latch for the whole process first thing (:func:`for_process`,
+before the heavy imports) and never gives the defaults back: after the command's work it
+only records (:meth:`SignalLatch.finish`), and at the very end the process ignores the
+ending signals (:func:`ignore_at_exit`), since Python's own finalisation would otherwise
+restore their default action (exit -1, -15) while it tears the modules down.  The exit
+code follows decision record 0051: 130 when a signal came before the work was done.
 """
 
 from __future__ import annotations
@@ -52,13 +59,28 @@ class SignalLatch:
     a signal is latched without raising (:meth:`release` raises it)."""
 
     def __init__(self):
-        self.reason: str | None = None
+        self.reason: str | None = None      # a signal that came before the work was done
+        self.late: str | None = None        # one that came after (:meth:`finish`)
         self._hold = False
+        self._finished = False
+        self._doing = ""                    # what a held latch lets finish (said when a signal comes)
 
     def handler(self, signum, frame):
+        if self._finished:
+            self.late = reason(signum)      # said by the caller, which knows whether work follows
+            return
         self.reason = reason(signum)
         if not self._hold:
             raise KeyboardInterrupt(self.reason)
+        if self._doing:
+            log.warning("%s while %s: finishing it first", self.reason, self._doing)
+
+    def note(self, signum: int) -> None:
+        """Record ``signum`` without raising (a handler of its own ran instead)."""
+        if self._finished:
+            self.late = reason(signum)
+        else:
+            self.reason = reason(signum)
 
     def check(self) -> None:
         if self.reason is not None:
@@ -67,20 +89,71 @@ class SignalLatch:
     def installed(self):
         return handling(self.handler, *ENDING)
 
-    def hold(self) -> None:
+    def hold(self, doing: str = "") -> None:
         """From now on latch a signal without raising it (a run directory being set up must
-        not be left half-written) until :meth:`release`."""
+        not be left half-written) until :meth:`release`; ``doing``: what is let finish, said
+        on the terminal when a signal comes."""
         self._hold = True
+        self._doing = doing
 
     def release(self) -> None:
         """Raise again at once; raise now a signal latched while held."""
         self._hold = False
+        self._doing = ""
         self.check()
 
+    @property
+    def finished(self) -> bool:
+        return self._finished
 
-def uninterruptible(what: str):
+    def finish(self) -> None:
+        """The work is done (the measuring over, the report written): from now on a signal
+        is only recorded as :attr:`late`; nothing is left for it to stop."""
+        self._hold = self._finished = True
+        self._doing = ""
+
+    def reopen(self) -> None:
+        """More work follows the end (the report): held, and a signal that came since
+        :meth:`finish` counts as one that came before the work was done."""
+        self._finished = False
+        self._hold = True
+        if self.late is not None:
+            self.reason, self.late = self.late, None
+
+
+_process: SignalLatch | None = None
+
+
+def for_process() -> SignalLatch:
+    """The `bench` program's latch, installed for the ending signals at once and never
+    uninstalled (a handler of a command may stand in for it and give it back)."""
+    global _process
+    if _process is None:
+        _process = SignalLatch()
+        for s in ENDING:
+            signal.signal(s, _process.handler)
+    return _process
+
+
+def process_latch() -> SignalLatch | None:
+    """The program's latch, None when the bench runs inside another program (a test)."""
+    return _process
+
+
+def ignore_at_exit() -> None:
+    """The process only exits from now on: the ending signals are ignored (an ignored
+    signal stays ignored through Python's finalisation, a handler does not)."""
+    for s in ENDING:
+        signal.signal(s, signal.SIG_IGN)
+
+
+def uninterruptible(what: str, latch: SignalLatch | None = None):
     """Hold the ending signals off while ``what`` runs (switching the output off must not
-    be cut short by an impatient second Ctrl-C); they are logged, not lost silently."""
+    be cut short by an impatient second Ctrl-C); they are logged, not lost silently, and
+    recorded in ``latch`` (so a signal during the switch-off of a completed run still
+    stops what the command would do next)."""
     def handler(signum, frame):
         log.warning("signal %d while %s: finishing that first", signum, what)
+        if latch is not None:
+            latch.note(signum)
     return handling(handler, *ENDING)
