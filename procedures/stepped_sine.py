@@ -358,6 +358,7 @@ class SteppedSine:
         per_sweep = self.plan.adaptive_per_sweep if choose else 0
         total = sum(min(len(sw), per_sweep) if per_sweep else len(sw) for sw in sweeps)
         finished = len(done)
+        q = self.plan.level_quantity         # the progress line prints each level in its unit
         prev: StepSpec | None = None
         for n_sweep, sweep in enumerate(sweeps):
             before: StepSpec | None = None          # the step measured before, in this sweep
@@ -375,9 +376,9 @@ class SteppedSine:
                 before = step
                 finished += 1
                 if progress:
-                    progress(finished, total, f"{step.force_N:g} N {step.freq_Hz:7.1f} Hz {step.direction:4s} "
-                             + (f"err {100 * res['force_error']:+.1f}% THD(x) {100 * res['disp']['thd']:.1f}%"
-                                if res else "skipped: force unreachable"))
+                    progress(finished, total, f"{q.format(step.force_N)} {step.freq_Hz:7.1f} Hz {step.direction:4s} "
+                             + (f"err {100 * _control_error(res):+.1f}% THD(x) {100 * res['disp']['thd']:.1f}%"
+                                if res else f"skipped: {q.name} unreachable"))
                 prev = step
             if refine and (n_sweep == len(sweeps) - 1 or sweeps[n_sweep + 1][0].level_index != sweep[0].level_index):
                 tried: set[str] = set()
@@ -389,9 +390,9 @@ class SteppedSine:
                     finished += 1
                     total += 1
                     if progress:
-                        progress(finished, total, f"{extra.force_N:g} N {extra.freq_Hz:7.2f} Hz "
+                        progress(finished, total, f"{q.format(extra.force_N)} {extra.freq_Hz:7.2f} Hz "
                                  + (f"dwell {extra.dwell_cycles} cycles " if extra.dwell_cycles else "refine ")
-                                 + (f"err {100 * res['force_error']:+.1f}%" if res else "skipped: force unreachable"))
+                                 + (f"err {100 * _control_error(res):+.1f}%" if res else f"skipped: {q.name} unreachable"))
                     prev = extra
         self.stop()
 
@@ -433,9 +434,10 @@ class SteppedSine:
                 self.on_skip(step, reason)
             return None
         if not ok:
-            log.warning("step %s: force %.3g N not reached within %.1f %% after %d iterations "
-                        "(error %+.1f %%)", step.key, step.force_N, 100 * self.plan.force_tolerance,
-                        iterations, 100 * err)
+            q = self.plan.level_quantity
+            log.warning("step %s: %s %s not reached within %.1f %% after %d iterations "
+                        "(error %+.1f %%)", step.key, q.name, q.format(step.force_N, ".3g"),
+                        100 * self.plan.force_tolerance, iterations, 100 * err)
         measured, raw = self.measure(step)
         result = StepResult(**measured, key=step.key, index=step.index, level_index=step.level_index,
                             freq_index=step.freq_index, direction=step.direction,
@@ -444,3 +446,10 @@ class SteppedSine:
                             control_history=[ControlIteration(drive_Vpp=v, force_N=F) for v, F in self.history])
         record(step, result, raw)
         return result
+
+
+def _control_error(res: StepResult) -> float:
+    """The error of the quantity the step's level holds: the response's when a
+    response_control record says so, else the force's."""
+    rc = res.get("response_control")
+    return float(rc["error"]) if isinstance(rc, dict) else float(res["force_error"])
