@@ -451,6 +451,10 @@ def cmd_check(args) -> int:
     print(f"{store.path}: {acc.summary()}"
           + (f" (bench resume {store.path} measures missing and damaged steps again, keeping damaged "
              "files in damaged/)" if acc.missing or acc.damaged else ""))
+    from .verdict import promise
+    kept = promise(store.metadata.get("plan") or {}, store.results(warn=False))
+    if kept.short:        # the steps are intact; what they say against the procedure's promise (decision 0052)
+        print(f"{kept.kind.label}: {'; '.join(kept.short)}")
     if skipped:
         n = len(skipped)
         print(f"{n} step{'s' * (n != 1)} skipped at run time as the plan allows (infeasible = \"skip\"): "
