@@ -32,11 +32,12 @@ from drivers import (
     open_can_bus,
     start_twins,
 )
+from procedures.factory import procedure_for
 from procedures.kind import FORCE, ProcedureKind, Quantity
 from procedures.online_id import OnlineIdentification, identifiability
 from procedures.plan import StepSpec
 from procedures.safety import LimitExceeded, SupervisedDaq, SupervisedGenerator, Supervisor, check_gap, tightest
-from procedures.stepped_sine import SteppedSine, StepResult
+from procedures.stepped_sine import StepResult
 from sim.errors import EnvelopeError, StorageError
 
 from . import runlock
@@ -425,12 +426,7 @@ def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Super
     kwargs: dict[str, Any] = dict(amp_gain_N_per_V=rig.amp_gain_N_per_V, sensor_check=sensor_check, marker=ins.generator,
                   drive_limit_V=sup.limits.drive_V,
                   on_skip=lambda step, why: store.event("step_skipped", key=step.key, reason=why))
-    if plan.procedure is ProcedureKind.RESPONSE_CONTROLLED:
-        from procedures.response_control import ResponseControlled
-        proc: SteppedSine = ResponseControlled(plan, gen, daq, quantity=plan.response, mass_kg=rig.expected_mass_kg,
-                                               **kwargs)
-    else:
-        proc = SteppedSine(plan, gen, daq, **kwargs)
+    proc = procedure_for(plan, gen, daq, mass_kg=rig.expected_mass_kg, **kwargs)
     proc.preload(store.results())             # a resumed run: the force per volt measured so far
     proc.disp_noise_floor_m = float(np.std(rest))
     # the probe's resolution as this run saw it (the report names steps that move less)
