@@ -234,6 +234,10 @@ def _header_md(run: RunData) -> list[str]:
                        "; ".join(f"{k}={v}" for k, v in e.items() if k not in ("time", "event"))] for e in notable])
     else:
         md.append("none (events.jsonl records only start, sensor checks, output off and end)")
+    blocks = sum(1 for e in run.events if e.get("event") == "lock_block")
+    if blocks:
+        md.append(f"\nThe phase-resonance loop's {blocks} controller blocks are progress, not interruptions "
+                  "(`lock_block` events in events.jsonl; the watch page showed them as they ran).")
     md.append("")
     return md
 
