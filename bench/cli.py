@@ -204,7 +204,7 @@ def _session_held(args, resume: bool) -> int:
         print(f"report: {write_report(out)}")
     if meta["status"] == RunStatus.COMPLETED:
         from .verdict import promise
-        kept = promise(meta.get("plan") or {}, store.results(warn=False))
+        kept = promise(meta.get("plan") or {}, store.results(warn=False), meta.get("rig"))
         if kept.fatal:           # completed, but not what the procedure was run for (decision 0052)
             print(f"the {kept.kind.label} did not measure what it promised: {'; '.join(kept.short)}", file=sys.stderr)
             return ExitCode.FAILURE
@@ -420,7 +420,7 @@ def cmd_check(args) -> int:
     one line, then the count; exit 1 if there is any problem.  A step skipped at run time
     (force unreachable) as the plan allows (``infeasible = "skip"``) is listed and counted,
     not a problem (exit 0 when it is the only gap) unless ``--strict`` (decision 0033)."""
-    from .storage import NewerFormat, RunDirError, RunStore
+    from .storage import NewerFormat, RunDirError, RunStatus, RunStore
 
     store = RunStore(Path(args.run))
     if not store.path.is_dir():
@@ -452,7 +452,9 @@ def cmd_check(args) -> int:
           + (f" (bench resume {store.path} measures missing and damaged steps again, keeping damaged "
              "files in damaged/)" if acc.missing or acc.damaged else ""))
     from .verdict import promise
-    kept = promise(store.metadata.get("plan") or {}, store.results(warn=False))
+    meta = store.metadata
+    kept = promise(meta.get("plan") or {}, store.results(warn=False), meta.get("rig"),
+                   completed=meta.get("status") == RunStatus.COMPLETED)
     if kept.short:        # the steps are intact; what they say against the procedure's promise (decision 0052)
         print(f"{kept.kind.label}: {'; '.join(kept.short)}")
     if skipped:

@@ -309,7 +309,7 @@ def accounting_md(run: RunData) -> list[str]:
     errors = [e for e in run.events if e.get("event") in ("instrument_error", "error")]
     if errors:
         why.append(f"{len(errors)} instrument or run error{'s' * (len(errors) != 1)} (see the events below)")
-    kept = promise(run.plan, run.results)
+    kept = promise(run.plan, run.results, run.rig, completed=status == "completed")
     why += kept.short
     if acc.orphan:
         why.append(f"{len(acc.orphan)} file{'s' * (len(acc.orphan) != 1)} in steps/ that no planned step owns "
