@@ -13,7 +13,7 @@ import io
 import logging
 from pathlib import Path
 
-from procedures.phase_resonance import PhaseResonance
+from procedures.factory import procedure_for
 from procedures.plan import Plan, StepSpec
 from sim.backbone import backbone_point
 from sim.step_result import StepResult
@@ -82,9 +82,9 @@ def run_backbone(plan: Plan, rig: Rig, store: RunStore, gen, daq, sensor_check, 
                      f"locking {state['level_N']:g} N: {state['freq_Hz']:.3f} Hz, phase error "
                      f"{state['phase_error_deg']:+.2f} deg, {state['settled_periods']} periods in band")
 
-    proc = PhaseResonance(plan, gen, daq, amp_gain_N_per_V=rig.amp_gain_N_per_V, mass_kg=rig.expected_mass_kg,
-                          sensor_check=sensor_check, marker=marker, drive_limit_V=drive_limit_V,
-                          on_event=store.event, on_block=on_block)
+    proc = procedure_for(plan, gen, daq, amp_gain_N_per_V=rig.amp_gain_N_per_V, mass_kg=rig.expected_mass_kg,
+                         sensor_check=sensor_check, marker=marker, drive_limit_V=drive_limit_V,
+                         on_event=store.event, on_block=on_block)
     proc.preload(store.results())
     proc.disp_noise_floor_m = noise_floor_m
     if progress and hasattr(progress, "restart"):

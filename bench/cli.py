@@ -20,6 +20,7 @@ from dataclasses import replace
 from enum import IntEnum
 from pathlib import Path
 
+from procedures.kind import ProcedureKind
 from sim.errors import BenchError, ConfigurationError, EnvelopeError, LimitError, RunDirectoryError
 
 from .terminal import Progress, end_line, setup_logging, tolerant_streams
@@ -93,7 +94,7 @@ def cmd_dry_run(args) -> int:
     steps = plan.schedule()
     if plan.backbone:
         b = plan.backbone
-        print(f"plan '{plan.name}': phase resonance, {len(plan.levels_N)} levels from {b.start_Hz:g} Hz in the window "
+        print(f"plan '{plan.name}': phase resonance, {len(plan.levels_N)} force levels (N) from {b.start_Hz:g} Hz in the window "
               f"{b.min_Hz:g}-{b.max_Hz:g} Hz (envelope at both ends); rig '{rig.name}'"
               f"{' (simulated)' if rig.simulated else ''}")
     else:
@@ -105,11 +106,14 @@ def cmd_dry_run(args) -> int:
                      f"modes {', '.join(plan.refine_modes)}, tolerance {100 * plan.refine_tolerance:g} %"
                      + (f"; with a dwell of {plan.dwell_cycles} cycles at each mode's resonance per level"
                         if plan.dwell_cycles else "") + ")")
-        print(f"plan '{plan.name}': {len(plan.levels_N)} levels x {len(plan.freqs_Hz)} frequencies "
+        q = plan.level_quantity
+        print(f"plan '{plan.name}': {plan.procedure.label}, {len(plan.levels_N)} levels x {len(plan.freqs_Hz)} frequencies "
               f"({plan.direction}) = {len(steps)} steps, {runs}; rig '{rig.name}'{' (simulated)' if rig.simulated else ''}")
+        print(f"levels: {', '.join(q.format(v) for v in plan.levels_N)} ({q.name} amplitude"
+              + (", the response fundamental held at each frequency)" if q.key != "force" else ")"))
         print(f"expected rig time: about {_duration(seconds)}"
               + (" with the refinement budget used up" if refined else "")
-              + " (force control, settling, measured blocks and ramps; a simulated rig runs faster or slower "
+              + f" ({q.name} control, settling, measured blocks and ramps; a simulated rig runs faster or slower "
                 "than real time)")
     print(envelope_report(envelope(plan, rig)))
     from procedures.online_id import identifiability
@@ -123,7 +127,7 @@ def cmd_dry_run(args) -> int:
               f"skipped (infeasible = \"skip\")")
     else:
         print("envelope ok: the rig's limits hold every step")
-    for w in identifiability(runnable, rig) if plan.procedure == "stepped_sine" else []:
+    for w in identifiability(runnable, rig) if plan.procedure is ProcedureKind.STEPPED_SINE else []:
         print(f"identifiability warning: {w}")
     return 0
 
@@ -192,7 +196,7 @@ def _session_held(args, resume: bool, latch) -> int:
     watch = _start_watch(out, args)
     try:
         store = run_plan(plan, rig, out, resume=resume,
-                         progress=Progress("phase resonance" if plan.procedure == "phase_resonance" else "stepped sine"),
+                         progress=Progress(plan.procedure.label),
                          sim_seed=seed, retry_skipped=bool(getattr(args, "retry_skipped", False)), labels=labels,
                          latch=latch)
     finally:
@@ -216,6 +220,12 @@ def _session_held(args, resume: bool, latch) -> int:
             print(f"report not written: {latch.reason} before it began; `bench report {out}` writes it",
                   file=sys.stderr)
         latch.finish()
+    if meta["status"] == RunStatus.COMPLETED:
+        from .verdict import promise
+        kept = promise(meta.get("plan") or {}, store.results(warn=False), meta.get("rig"))
+        if kept.fatal:           # completed, but not what the procedure was run for (decision 0052)
+            print(f"the {kept.kind.label} did not measure what it promised: {'; '.join(kept.short)}", file=sys.stderr)
+            code = ExitCode.FAILURE
     if latch.reason is not None and code == ExitCode.OK:
         raise KeyboardInterrupt(latch.reason)     # a signal before the work was done: exit 130
     return code
@@ -483,7 +493,7 @@ def cmd_check(args) -> int:
     dwell not measured: decision 0050), then the count; exit 1 if there is any problem.  A step skipped at run time
     (force unreachable) as the plan allows (``infeasible = "skip"``) is listed and counted,
     not a problem (exit 0 when it is the only gap) unless ``--strict`` (decision 0033)."""
-    from .storage import NewerFormat, RunDirError, RunStore
+    from .storage import NewerFormat, RunDirError, RunStatus, RunStore
 
     store = RunStore(Path(args.run))
     if not store.path.is_dir():
@@ -516,6 +526,12 @@ def cmd_check(args) -> int:
              "files in damaged/)" if acc.missing or acc.damaged else "")
           + (f" (bench resume {store.path} measures what the refinement still owes)" if acc.owed and not
              (acc.missing or acc.damaged) else ""))
+    from .verdict import promise
+    meta = store.metadata
+    kept = promise(meta.get("plan") or {}, store.results(warn=False), meta.get("rig"),
+                   completed=meta.get("status") == RunStatus.COMPLETED)
+    if kept.short:        # the steps are intact; what they say against the procedure's promise (decision 0052)
+        print(f"{kept.kind.label}: {'; '.join(kept.short)}")
     if skipped:
         n = len(skipped)
         print(f"{n} step{'s' * (n != 1)} skipped at run time as the plan allows (infeasible = \"skip\"): "
@@ -604,17 +620,17 @@ def cmd_compare(args) -> int:
 
 
 def cmd_modes(args) -> int:
-    """Each run's modes per force level into OUT/modes.csv, with the seed's Figs. 13 and 17."""
+    """Each run's modes per level (in its quantity's unit) into OUT/modes.csv, with the seed's Figs. 13 and 17."""
     from .reports import write_modes
     runs, files = write_modes([Path(r) for r in args.runs], Path(args.out), model=not args.no_model)
     for r in runs:
         for e in r.modes:
             if e.ok:
-                print(f"{r.label}: {e.mode} at {e.level_N:g} N: {e.resonance_Hz:.5g} Hz "
+                print(f"{r.label}: {e.mode} at {r.level_quantity.format(e.level_N)}: {e.resonance_Hz:.5g} Hz "
                       f"[{e.resonance_low_Hz:.5g}, {e.resonance_high_Hz:.5g}], damping ratio "
                       f"{100 * e.damping_ratio:.3g} % [{100 * e.damping_ratio_low:.3g}, {100 * e.damping_ratio_high:.3g}]")
             else:
-                print(f"{r.label}: {e.mode} at {e.level_N:g} N: {e.status}" + (f" ({e.note})" if e.note else ""))
+                print(f"{r.label}: {e.mode} at {r.level_quantity.format(e.level_N)}: {e.status}" + (f" ({e.note})" if e.note else ""))
     print("wrote " + ", ".join(str(f) for f in files))
     return ExitCode.OK
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from drivers import check_daq_url, check_generator_url, check_sensor_url
 from procedures.capacity import block_problems, step_count_problems
+from procedures.kind import ProcedureKind
 from procedures.plan import Backbone, Limits, Plan, Rig
 from sim.errors import ConfigurationError
 
@@ -445,7 +446,7 @@ def _parse_plan(data: dict, source: str, errors: list[str]) -> Plan:
         refine_steps=res.number("max_steps", 10, 1, 999, integer=True),
         refine_modes=tuple(dict.fromkeys(modes)),
         dwell_cycles=res.number("dwell_cycles", 0, 0, 1e6, integer=True),
-        procedure=procedure, backbone=backbone, response=quantity)
+        procedure=ProcedureKind(procedure), backbone=backbone, response=quantity)
     res.done()
     if plan.dwell_cycles and not plan.refine:
         res.rule(f"{res.where('dwell_cycles')}: needs refine = true (the dwell is at the refined resonance)",

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from procedures.kind import FORCE, QUANTITIES, of_stored_plan
 from sim.errors import ConfigurationError
 from sim.records import estimate_frequency
 
@@ -41,7 +42,10 @@ CSV_COLUMNS = (
     "compliance_re_m_per_N", "compliance_im_m_per_N", "compliance_abs_m_per_N", "compliance_phase_rad",
     "compliance_pp_m_per_N", "accelerance_abs_kg_inv", "accelerance_phase_rad",
     "thd_force", "thd_accel", "thd_disp", "noise_force_N", "noise_accel_m_s2", "noise_disp_m",
-    "force_error", "control_iterations", "force_converged")
+    "force_error", "control_iterations", "force_converged",
+    # the level in its quantity's unit and that quantity's control error (decision 0052): a
+    # response-controlled step's target_force_N / force_error are the force it needed / 0
+    "level", "level_unit", "control_error")
 
 # channel -> (specific data type of UFF 58 record 9, unit label, raw key in steps/<key>.npz)
 CHANNELS = {"force": (13, "N", "force_N"), "accel": (12, "m/s^2", "accel_m_s2"), "disp": (8, "m", "disp_m")}
@@ -66,7 +70,18 @@ def step_row(r: dict) -> dict:
         "noise_disp_m": r["disp"]["noise_rms"],
         "force_error": r["force_error"], "control_iterations": r["control_iterations"],
         "force_converged": int(bool(r["force_converged"])),
+        **_level_of(r),
     }
+
+
+def _level_of(r: dict) -> dict:
+    """The level a step held in its quantity's unit (decision 0052): a response-controlled
+    step's target response (m or m/s^2) and its control error, else the force level (N)."""
+    rc = r.get("response_control")
+    if isinstance(rc, dict) and "target" in rc:
+        unit = QUANTITIES[rc["quantity"]].unit if rc.get("quantity") in QUANTITIES else "?"
+        return {"level": rc["target"], "level_unit": unit, "control_error": rc.get("error", math.nan)}
+    return {"level": r["target_force_N"], "level_unit": "N", "control_error": r["force_error"]}
 
 
 def write_csv(results: list[dict], path: Path) -> Path:
@@ -113,6 +128,7 @@ def frf_datasets(meta: dict, results: list[dict]) -> list[dict]:
     """One FRF (compliance X1/F1, m/N) per force level and sweep direction."""
     plan = meta.get("plan") or {}
     levels = plan.get("levels_N") or []
+    q = of_stored_plan(plan)[1]
     groups: dict[tuple[int, str], list[dict]] = {}
     for r in results:
         groups.setdefault((r["level_index"], r["direction"]), []).append(r)
@@ -121,15 +137,16 @@ def frf_datasets(meta: dict, results: list[dict]) -> list[dict]:
         steps = sorted(steps, key=lambda s: s["freq_Hz"])
         level = levels[li] if li < len(levels) else steps[0]["target_force_N"]
         if len(steps) < 2:        # an FRF record needs two abscissa values (pyuff, and the format)
-            log.warning("export: level %g N %s has one readable step (%s): no FRF record in frf.uff; "
-                        "it is in steps.csv", level, d, steps[0]["key"])
+            log.warning("export: level %s %s has one readable step (%s): no FRF record in frf.uff; "
+                        "it is in steps.csv", q.format(level), d, steps[0]["key"])
             continue
         H = np.array([complex(s["compliance_m_per_N"]["re"], s["compliance_m_per_N"]["im"]) for s in steps])
         ds = _dset58(func_type=FUNC_FRF, func_id=len(out) + 1, x=[s["freq_Hz"] for s in steps], data=H,
-                     id1=f"compliance X/F, {level:g} N, {d} sweep",
+                     id1=f"compliance X/F, {q.format(level)}, {d} sweep",
                      id2=f"{plan.get('name', '')} on {(meta.get('rig') or {}).get('name', '')}",
-                     id3=str(meta.get("started", "")), id4=_tags(level=f"{level:g}", L=li, dir=d, n=len(steps)),
-                     id5="X1/F1 from harmonic fits; force amplitude held at the level",
+                     id3=str(meta.get("started", "")),
+                     id4=_tags(level=f"{level:g}", L=li, dir=d, n=len(steps), **({} if q == FORCE else {"unit": q.unit})),
+                     id5=f"X1/F1 from harmonic fits; {q.name} amplitude held at the level",
                      abscissa=(SDT_FREQ, "Hz"), ordinate=(8, "m"), denominator=(13, "N"))
         out.append(ds)
     return out
@@ -205,7 +222,9 @@ class UffImport:
 
 def _frf_steps(ds: dict, n_fn: int) -> list[dict]:
     tags = _parse_tags(ds.get("id4", ""))
-    level = float(tags["level"]) if "level" in tags else math.nan
+    # a force level is the step's level; another quantity's (unit=m: a response-controlled
+    # run) is not a force: the steps' level then comes from their force fundamentals
+    level = float(tags["level"]) if "level" in tags and tags.get("unit", "N") == "N" else math.nan
     li = int(tags.get("L", n_fn))
     direction = tags.get("dir", "up")
     out = []

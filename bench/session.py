@@ -32,10 +32,12 @@ from drivers import (
     open_can_bus,
     start_twins,
 )
+from procedures.factory import procedure_for
+from procedures.kind import FORCE, ProcedureKind, Quantity
 from procedures.online_id import OnlineIdentification, identifiability
 from procedures.plan import StepSpec
 from procedures.safety import LimitExceeded, SupervisedDaq, SupervisedGenerator, Supervisor, check_gap, tightest
-from procedures.stepped_sine import SteppedSine, StepResult
+from procedures.stepped_sine import StepResult
 from sim.errors import EnvelopeError, StorageError
 
 from . import runlock
@@ -51,12 +53,18 @@ FORCE_MARGIN = 1.25      # control overshoot allowance: the envelope is checked 
 
 @dataclass(frozen=True)
 class EnvelopePoint:
-    force_N: float
+    level: float             # in the plan's level unit (Plan.level_quantity: N, m or m/s^2)
     freq_Hz: float
     drive_V: float           # generator output amplitude (= Vpp/2) at the level, without the margin
     disp_m: float            # bounds at FORCE_MARGIN x the level
     accel_m_s2: float
     problems: tuple[str, ...]
+    quantity: Quantity = FORCE   # what ``level`` is an amplitude of
+
+    @property
+    def where(self) -> str:
+        """'0.0009 m at 20 Hz': the level in its unit and the frequency."""
+        return f"{self.quantity.format(self.level)} at {self.freq_Hz:g} Hz"
 
 
 def envelope(plan: Plan, rig: Rig) -> list[EnvelopePoint]:
@@ -72,7 +80,7 @@ def envelope(plan: Plan, rig: Rig) -> list[EnvelopePoint]:
     out = []
     # phase resonance: its frequency window's ends bound what the loop can drive
     window = (plan.backbone.min_Hz, plan.backbone.max_Hz) if plan.backbone else ()
-    if plan.response:
+    if plan.procedure is ProcedureKind.RESPONSE_CONTROLLED:
         return _response_envelope(plan, rig, lim)
     for F in plan.levels_N:
         for f in window or plan.freqs_Hz:
@@ -98,28 +106,30 @@ def _response_envelope(plan: Plan, rig: Rig, lim) -> list[EnvelopePoint]:
     level sets, at FORCE_MARGIN; the force and drive it needs are found by the control
     (given here as the free mass's, m w^2 X) and held by the supervisor's limits."""
     out = []
+    q = plan.level_quantity
     for level in plan.levels_N:
         for f in plan.freqs_Hz:
             w2 = (2 * math.pi * f) ** 2
             X = (level if plan.response == "disp" else level / w2) * FORCE_MARGIN
             force = rig.expected_mass_kg * w2 * X / FORCE_MARGIN
             problems = tuple(p for p, bad in (
-                (f"displacement {X * 1e3:.3g} mm at {level:g} x {FORCE_MARGIN:g} > disp_m {lim.disp_m * 1e3:g} mm",
-                 X > lim.disp_m),
-                (f"acceleration {X * w2:.3g} m/s^2 at {level:g} x {FORCE_MARGIN:g} > accel_m_s2 "
+                (f"displacement {X * 1e3:.3g} mm at {q.format(level)} x {FORCE_MARGIN:g} > disp_m "
+                 f"{lim.disp_m * 1e3:g} mm", X > lim.disp_m),
+                (f"acceleration {X * w2:.3g} m/s^2 at {q.format(level)} x {FORCE_MARGIN:g} > accel_m_s2 "
                  f"{lim.accel_m_s2:g} m/s^2", X * w2 > lim.accel_m_s2)) if bad)
-            out.append(EnvelopePoint(level, f, force / rig.amp_gain_N_per_V, X, X * w2, problems))
+            out.append(EnvelopePoint(level, f, force / rig.amp_gain_N_per_V, X, X * w2, problems, q))
     return out
 
 
 def envelope_report(points: list[EnvelopePoint]) -> str:
-    lines = [f"{'level N':>8} {'drive V':>8} {'disp mm (max)':>14} {'accel m/s2':>10}  problems",
+    unit = points[0].quantity.unit if points else "N"
+    lines = [f"{'level ' + unit:>11} {'drive V':>8} {'disp mm (max)':>14} {'accel m/s2':>10}  problems",
              f"(drive: the generator's amplitude, V = Vpp/2, at the level; displacement, acceleration and every "
              f"limit check: at {FORCE_MARGIN:g} x the level, the control's overshoot margin)"]
-    for F in sorted({p.force_N for p in points}):
-        ps = [p for p in points if p.force_N == F]
+    for F in sorted({p.level for p in points}):
+        ps = [p for p in points if p.level == F]
         bad = [f"{p.freq_Hz:g} Hz: {'; '.join(p.problems)}" for p in ps if p.problems]
-        lines.append(f"{F:8.3g} {max(p.drive_V for p in ps):8.3g} {max(p.disp_m for p in ps) * 1e3:14.4g} "
+        lines.append(f"{F:11.3g} {max(p.drive_V for p in ps):8.3g} {max(p.disp_m for p in ps) * 1e3:14.4g} "
                      f"{max(p.accel_m_s2 for p in ps):10.3g}  {bad[0] + (f' (+{len(bad) - 1} more)' if len(bad) > 1 else '') if bad else 'ok'}")
     return "\n".join(lines)
 
@@ -132,17 +142,17 @@ def check_envelope(plan: Plan, rig: Rig) -> Plan:
     if bad and plan.infeasible == "skip":
         if plan.backbone:
             raise EnvelopeError(f"infeasible = \"skip\" cannot skip part of a phase-resonance window: "
-                                f"{bad[0].force_N:g} N at {bad[0].freq_Hz:g} Hz: {'; '.join(bad[0].problems)}\n"
+                                f"{bad[0].where}: {'; '.join(bad[0].problems)}\n"
                                 + envelope_report(points))
         li = {F: i for i, F in enumerate(plan.levels_N)}
         fi = {f: i for i, f in enumerate(plan.freqs_Hz)}
-        skip = tuple(sorted({(li[p.force_N], fi[p.freq_Hz]) for p in bad}))
+        skip = tuple(sorted({(li[p.level], fi[p.freq_Hz]) for p in bad}))
         log.warning("skipping %d of %d (level, frequency) points the rig's limits cannot hold",
                     len(skip), len(points))
         return replace(plan, skip=skip)
     if bad:
         raise EnvelopeError(f"the rig's limits cannot hold {len(bad)} of {len(points)} steps of the plan, "
-                            f"e.g. {bad[0].force_N:g} N at {bad[0].freq_Hz:g} Hz: {'; '.join(bad[0].problems)}\n"
+                            f"e.g. {bad[0].where}: {'; '.join(bad[0].problems)}\n"
                             + envelope_report(points))
     return plan
 
@@ -278,7 +288,7 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
     program's (marked finished when the measuring is over: a signal during the switch-off
     or later is kept for the caller to decide, decision 0051); by default the run's own."""
     plan = check_envelope(plan, rig)
-    warnings = identifiability(plan, rig) if plan.procedure == "stepped_sine" else []
+    warnings = identifiability(plan, rig) if plan.procedure is ProcedureKind.STEPPED_SINE else []
     for w in warnings:
         log.warning("identifiability: %s", w)
     latch = latch or SignalLatch()
@@ -318,7 +328,8 @@ def _open_store(plan: Plan, rig: Rig, out: Path, *, resume: bool, sim_seed: int 
         store.event("resume", done=len(store.done_keys()))
         store.update(status=RunStatus.RUNNING)
     else:
-        store = RunStore.create(out, {"plan": plan.to_dict(), "rig": rig.to_dict(), "versions": versions(),
+        store = RunStore.create(out, {"plan": plan.to_dict(), "procedure": plan.describe(), "rig": rig.to_dict(),
+                                      "versions": versions(),
                                       "sim_seed": sim_seed, "identifiability_warnings": warnings})
     stop_request.clear(store.path)      # a request left from an earlier session is not for this one
     store.update(process={"pid": os.getpid(), "host": socket.gethostname()})   # watch: is it still alive?
@@ -410,7 +421,7 @@ def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Super
     # reference position with the output off
     rest = ins.daq.acquire_periods(100.0, 10).disp_m
     sup.x_ref_m = float(np.mean(rest))
-    if plan.procedure == "phase_resonance":
+    if plan.procedure is ProcedureKind.PHASE_RESONANCE:
         from .backbone import run_backbone
         run_backbone(plan, rig, store, gen, daq, sensor_check, marker=ins.generator, drive_limit_V=sup.limits.drive_V,
                      noise_floor_m=float(np.std(rest)), progress=progress)
@@ -418,19 +429,14 @@ def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Super
     kwargs: dict[str, Any] = dict(amp_gain_N_per_V=rig.amp_gain_N_per_V, sensor_check=sensor_check, marker=ins.generator,
                   drive_limit_V=sup.limits.drive_V,
                   on_skip=lambda step, why: store.event("step_skipped", key=step.key, reason=why))
-    if plan.response:
-        from procedures.response_control import ResponseControlled
-        proc: SteppedSine = ResponseControlled(plan, gen, daq, quantity=plan.response, mass_kg=rig.expected_mass_kg,
-                                               **kwargs)
-    else:
-        proc = SteppedSine(plan, gen, daq, **kwargs)
+    proc = procedure_for(plan, gen, daq, mass_kg=rig.expected_mass_kg, **kwargs)
     proc.preload(store.results())             # a resumed run: the force per volt measured so far
     proc.disp_noise_floor_m = float(np.std(rest))
     # the probe's resolution as this run saw it (the report names steps that move less)
     store.event("probe_noise", rms_m=proc.disp_noise_floor_m)
     if progress and hasattr(progress, "restart"):
         progress.restart(len(store.done_keys()))     # the ETA counts steps from here
-    online = OnlineIdentification(store.path, rig, plan.harmonics) if identify and not plan.response else None
+    online = OnlineIdentification(store.path, rig, plan.harmonics) if identify and plan.procedure is ProcedureKind.STEPPED_SINE else None
     if online:
         online.preload(store.results(), store.raw)
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 import re
 from dataclasses import asdict, dataclass, field
 
+from .kind import ProcedureKind, Quantity, controlled_quantity, level_quantity
+
 # the rig file's [rig.expected] values, as every identification names its starting guess
 GUESS_KEYS = ("F_s_N", "x_s_m", "n", "mass_kg")
 
@@ -85,10 +87,25 @@ class Plan:
     refine_steps: int = 10            # per mode and level
     refine_modes: tuple[str, ...] = ("feed", "pitch")
     dwell_cycles: int = 0             # > 0: after the refinement, one block this long at each refined resonance
-    procedure: str = "stepped_sine"      # or "phase_resonance" (then freqs_Hz = (start_Hz,)), "response_controlled"
+    procedure: ProcedureKind = ProcedureKind.STEPPED_SINE   # phase resonance: freqs_Hz = (start_Hz,)
     backbone: Backbone | None = None     # [plan.backbone], phase_resonance only
     response: str = ""                   # response_controlled: "disp" or "accel"; levels_N then holds
-                                         # response amplitudes (m or m/s^2), not forces
+                                         # response amplitudes in level_quantity's unit (m or m/s^2)
+
+    @property
+    def level_quantity(self) -> Quantity:
+        """What ``levels_N`` holds amplitudes of (force, or the response held)."""
+        return level_quantity(self.procedure, self.response)
+
+    @property
+    def controlled(self) -> Quantity:
+        """What the controller holds at each point (force, response, or phase)."""
+        return controlled_quantity(self.procedure, self.response)
+
+    def describe(self) -> dict[str, str]:
+        """The kind and quantities as run.json records them (``meta["procedure"]``)."""
+        from .kind import describe
+        return describe(self.procedure, self.response)
 
     def sweeps(self) -> list[tuple[str, tuple[float, ...]]]:
         up = ("up", self.freqs_Hz)
@@ -109,7 +126,7 @@ class Plan:
         return steps
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        return dict(asdict(self), procedure=self.procedure.value)
 
     def refined_key_ok(self, key: str) -> bool:
         """Whether ``key`` names a refinement step this plan may add (refine on, a level of

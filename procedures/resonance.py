@@ -122,6 +122,25 @@ class Refiner:
                                 dwell_cycles=self.plan.dwell_cycles)
         return None
 
+    def outcome(self, level_index: int, level: float) -> list[tuple[str, str, int]]:
+        """How the refinement of a finished level ended, per refined mode: (mode, "converged"
+        | "budget spent" | "no peak", refinement steps taken); "budget spent" means the
+        peak was still not known within the tolerance when the budget ran out (decision 0052)."""
+        steps = [r for r in self.results() if r["level_index"] == level_index and "-W" not in r["key"]]
+        if len(steps) < 3:
+            return []
+        d = LevelData.from_steps(level, steps)
+        out = []
+        for mode in self.plan.refine_modes:
+            done = sum(1 for r in steps if f"-R{mode[0].upper()}" in r["key"])
+            if self._resonance(mode, d) is None:
+                out.append((mode, "no peak", done))
+            elif done >= self.plan.refine_steps and self._next_for(mode, d) is not None:
+                out.append((mode, "budget spent", done))
+            else:
+                out.append((mode, "converged", done))
+        return out
+
     def _resonance(self, mode: str, d: LevelData) -> tuple[float, float, int, np.ndarray] | None:
         """(resonance estimate in Hz, damping ratio, index of the measured maximum, the
         peak's magnitudes) of ``mode`` in ``d``, or None without a peak inside the grid."""

@@ -22,44 +22,24 @@ from sim.step_result import ControlIteration, StepMeasurement, StepResult
 
 from .analysis import fit_harmonics
 from .capacity import measure_periods
+from .control import FIRST_DRIVE_MARGIN, Controller, ForceControl, Outcome, Reason, next_drive
 from .instruments import Block, BlockSource, SineSource, StepMarker
 from .plan import Plan, StepSpec
 from .safety import LimitExceeded
 
-__all__ = ["MIN_VPP", "DriveState", "ForceUnreachable", "SteppedSine", "StepResult", "Unsettled", "next_drive", "unsettled"]
+__all__ = ["FIRST_DRIVE_MARGIN", "MIN_VPP", "DriveState", "ForceUnreachable", "SteppedSine", "StepResult", "Unsettled",
+           "next_drive", "unsettled"]
 
 Record = Callable[[StepSpec, StepResult, dict[str, np.ndarray]], None]
 
 log = logging.getLogger(__name__)
 
 MIN_VPP = 2e-3       # the generator's smallest amplitude into a high-impedance load
-MAX_FACTOR = 10.0    # one control update changes the drive by at most this factor
-FIRST_DRIVE_MARGIN = 0.9   # a sweep starts 10 % below the force its gain estimate predicts
 
 
 class ForceUnreachable(LimitExceeded):
-    """A step's force cannot be reached within the drive limit (plan: infeasible = "refuse");
+    """A step's level cannot be reached within the drive limit (plan: infeasible = "refuse");
     the output has been ramped down and switched off."""
-
-
-def next_drive(vpp: float, force: float, target: float, prev: tuple[float, float] | None) -> float:
-    """The next drive amplitude (Vpp) of the force control (decision 0025).
-
-    Secant in log-log: force ~ drive^s, s from this and the previous iteration (exact for a
-    linear rig, s = 1: the measured force per volt scales the drive; a resonance that moves
-    with the amplitude makes s < 1 at a force drop-out).  Without a previous iteration, with
-    drives within 5 % of each other (what the settling left in the force dominates) or a
-    force that did not grow with the drive, s = 1; otherwise s is kept within 0.25-2.  The
-    update is bounded to a factor MAX_FACTOR either way."""
-    s = 1.0
-    if prev is not None:
-        v0, f0 = prev
-        if abs(math.log(vpp / v0)) > 0.05 and f0 > 0:
-            slope = math.log(force / f0) / math.log(vpp / v0)
-            if slope > 0:
-                s = min(max(slope, 0.25), 2.0)
-    nxt = vpp * (target / force) ** (1.0 / s)
-    return min(max(nxt, vpp / MAX_FACTOR), vpp * MAX_FACTOR)
 
 
 SETTLE_KINDS = ("unsettled_transient", "offset_drift")   # what settling longer cures
@@ -123,12 +103,16 @@ class DriveState:
 
 
 class SteppedSine:
-    """Runs a :class:`~bench.config.Plan` on supervised instruments."""
+    """Runs a :class:`~bench.config.Plan` on supervised instruments: the one loop over its
+    points (level, frequency) with a :class:`procedures.control.Controller` that brings the
+    controlled quantity to each level (default: the force)."""
 
     def __init__(self, plan: Plan, generator: SineSource, daq: BlockSource, *, amp_gain_N_per_V: float,
                  sensor_check: Callable[[], object] | None = None, marker: StepMarker | None = None,
-                 drive_limit_V: float = math.inf, on_skip: Callable[[StepSpec, str], None] | None = None):
+                 drive_limit_V: float = math.inf, on_skip: Callable[[StepSpec, str], None] | None = None,
+                 controller: Controller | None = None):
         self.plan = plan
+        self.controller: Controller = controller or ForceControl()
         self.gen = generator
         self.daq = daq
         self.sensor_check = sensor_check          # gap in range? called before each sweep
@@ -152,7 +136,11 @@ class SteppedSine:
                 self.drive.gain_N_per_Vpp = self.gain_at[r["freq_Hz"]] = gain
 
     def _first_vpp(self, step: StepSpec, new_sweep: bool = False) -> float:
-        """First drive of a step, within the drive limit: inside a sweep, from the force per
+        """First drive of a step, the controller's (within the drive limit)."""
+        return self.controller.first_vpp(self, step, new_sweep)
+
+    def force_first_vpp(self, step: StepSpec, new_sweep: bool = False) -> float:
+        """First drive of a force level, within the drive limit: inside a sweep, from the force per
         volt of the step before (same level, the next frequency); a new sweep (a new level)
         from the force per volt measured at its first frequency before (an earlier level),
         FIRST_DRIVE_MARGIN below it: the force per volt depends on the level (the rig's
@@ -245,40 +233,10 @@ class SteppedSine:
             self.drive.on = False
 
     # ------------------------------------------------------------------ one step
-    def control_force(self, step: StepSpec) -> tuple[float, int, bool, str]:
-        """Iterate the drive until the force fundamental is within tolerance.
-
-        Each iteration's (Vpp, force) is kept in ``history`` and logged.  Returns (relative
-        force error, iterations, converged, reason); the reason is "" when converged, names
-        the drive limit when the force is still short with the drive at the limit."""
-        f, target = step.freq_Hz, step.force_N
-        err, it = math.inf, 0
-        prev: tuple[float, float] | None = None
-        self.history = []
-        for it in range(1, self.plan.max_iterations + 1):
-            self._wait(f, 0.0, min_periods=self.plan.control_cycles)   # let the change settle
-            block = self._acquire(f, self.plan.control_cycles)
-            F1 = float(fit_harmonics(block.force_N, block.fs_Hz, f, 1).amplitude[0])
-            vpp = self.drive.amplitude_Vpp
-            err = F1 / target - 1.0
-            self.history.append((vpp, F1))
-            log.debug("step %s iteration %d: %.5g Vpp -> %.5g N (error %+.2f %%)", step.key, it, vpp, F1, 100 * err)
-            if F1 > 0:
-                self.drive.gain_N_per_Vpp = self.gain_at[f] = F1 / vpp
-            if abs(err) <= self.plan.force_tolerance:
-                return err, it, True, ""
-            if F1 <= 0 or not math.isfinite(F1):
-                return err, it, False, f"no force measured at {vpp:.4g} Vpp"
-            nxt = next_drive(vpp, F1, target, prev)
-            if nxt > self.max_vpp:
-                if vpp >= self.max_vpp * (1 - 1e-6):
-                    return err, it, False, (f"force {target:g} N unreachable at {f:g} Hz within the drive "
-                                            f"limit {self.max_vpp / 2:.4g} V: {F1:.4g} N at the limit "
-                                            f"({F1 / vpp:.4g} N/Vpp)")
-                nxt = self.max_vpp
-            prev = (vpp, F1)
-            self._change(vpp=nxt)
-        return err, it, False, f"not within {100 * self.plan.force_tolerance:g} % after {it} iterations"
+    def control_force(self, step: StepSpec) -> Outcome:
+        """Bring the controlled quantity to the step's level (the controller's control: the
+        force, or the response); each iteration's (Vpp, force) is kept in ``history``."""
+        return self.controller.control(self, step)
 
     def _measure_block(self, block: Block, f: float) -> BlockRecord:
         """The block's one analysis, from which its step record is made (decision 0047)."""
@@ -359,6 +317,7 @@ class SteppedSine:
         per_sweep = self.plan.adaptive_per_sweep if choose else 0
         total = sum(min(len(sw), per_sweep) if per_sweep else len(sw) for sw in sweeps)
         finished = len(done)
+        q = self.plan.level_quantity         # the progress line prints each level in its unit
         prev: StepSpec | None = None
         for n_sweep, sweep in enumerate(sweeps):
             before: StepSpec | None = None          # the step measured before, in this sweep
@@ -376,9 +335,9 @@ class SteppedSine:
                 before = step
                 finished += 1
                 if progress:
-                    progress(finished, total, f"{step.force_N:g} N {step.freq_Hz:7.1f} Hz {step.direction:4s} "
-                             + (f"err {100 * res['force_error']:+.1f}% THD(x) {100 * res['disp']['thd']:.1f}%"
-                                if res else "skipped: force unreachable"))
+                    progress(finished, total, f"{q.format(step.force_N)} {step.freq_Hz:7.1f} Hz {step.direction:4s} "
+                             + (f"err {100 * _control_error(res):+.1f}% THD(x) {100 * res['disp']['thd']:.1f}%"
+                                if res else f"skipped: {q.name} unreachable"))
                 prev = step
             if refine and (n_sweep == len(sweeps) - 1 or sweeps[n_sweep + 1][0].level_index != sweep[0].level_index):
                 tried: set[str] = set()
@@ -390,9 +349,9 @@ class SteppedSine:
                     finished += 1
                     total += 1
                     if progress:
-                        progress(finished, total, f"{extra.force_N:g} N {extra.freq_Hz:7.2f} Hz "
+                        progress(finished, total, f"{q.format(extra.force_N)} {extra.freq_Hz:7.2f} Hz "
                                  + (f"dwell {extra.dwell_cycles} cycles " if extra.dwell_cycles else "refine ")
-                                 + (f"err {100 * res['force_error']:+.1f}%" if res else "skipped: force unreachable"))
+                                 + (f"err {100 * _control_error(res):+.1f}%" if res else f"skipped: {q.name} unreachable"))
                     prev = extra
         self.stop()
 
@@ -423,25 +382,33 @@ class SteppedSine:
             self.ramp(first_vpp, step.freq_Hz)
         else:
             self._change(freq_Hz=step.freq_Hz, vpp=first_vpp)
-        err, iterations, ok, reason = self.control_force(step)
-        if not ok and "unreachable" in reason:
-            log.warning("step %s: %s", step.key, reason)
+        outcome = self.control_force(step)
+        if outcome.reason is Reason.UNREACHABLE:
+            log.warning("step %s: %s", step.key, outcome.message)
             if self.plan.infeasible == "refuse":
                 self.stop()
-                raise ForceUnreachable(f"step {step.key}: {reason} (plan: infeasible = \"refuse\"; "
+                raise ForceUnreachable(f"step {step.key}: {outcome.message} (plan: infeasible = \"refuse\"; "
                                        f"\"skip\" goes on without it)")
             if self.on_skip:
-                self.on_skip(step, reason)
+                self.on_skip(step, outcome.message)
             return None
-        if not ok:
-            log.warning("step %s: force %.3g N not reached within %.1f %% after %d iterations "
-                        "(error %+.1f %%)", step.key, step.force_N, 100 * self.plan.force_tolerance,
-                        iterations, 100 * err)
+        if not outcome.ok:
+            q = self.controller.quantity
+            log.warning("step %s: %s %s not reached within %.1f %% after %d iterations "
+                        "(error %+.1f %%)", step.key, q.name, q.format(step.force_N, ".3g"),
+                        100 * self.plan.force_tolerance, outcome.iterations, 100 * outcome.error)
         measured, raw = self.measure(step)
         result = StepResult(**measured, key=step.key, index=step.index, level_index=step.level_index,
                             freq_index=step.freq_index, direction=step.direction,
-                            target_force_N=step.force_N, control_iterations=iterations,
-                            force_converged=ok, force_error=measured["force_N"] / step.force_N - 1.0,
-                            control_history=[ControlIteration(drive_Vpp=v, force_N=F) for v, F in self.history])
+                            control_iterations=outcome.iterations,
+                            control_history=[ControlIteration(drive_Vpp=v, force_N=F) for v, F in self.history],
+                            **self.controller.fields(step, measured, outcome))
         record(step, result, raw)
         return result
+
+
+def _control_error(res: StepResult) -> float:
+    """The error of the quantity the step's level holds: the response's when a
+    response_control record says so, else the force's."""
+    rc = res.get("response_control")
+    return float(rc["error"]) if isinstance(rc, dict) else float(res["force_error"])

@@ -18,10 +18,12 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
+from procedures.kind import FORCE, Quantity
+
 from ._analysis import FRF_QUANTITIES, level_groups, relative_error
 from ._identification import ID_PARAMS, IdentificationData, finite, steps_of
 from ._model import ModelComparison
-from ._steps import UNSETTLED_RESIDUAL, phase_deg, residual_ratio
+from ._steps import UNSETTLED_RESIDUAL, control_error, phase_deg, residual_ratio
 
 DIRECTION_STYLE = {"up": "-", "down": "--"}
 DIRECTION_MARKER = {"up": "o", "down": "v"}
@@ -42,15 +44,15 @@ def level_colours(levels: list[float]) -> dict[float, tuple]:
     return {v: cmap(0.9 * (math.log(v) - lo) / (hi - lo)) for v in lv}
 
 
-def _legend(ax, colours: dict[float, tuple], directions: set[str], extra: list = ()) -> None:
-    handles = [Line2D([], [], color=c, lw=2, label=f"{lv:g} N") for lv, c in sorted(colours.items())]
+def _legend(ax, colours: dict[float, tuple], directions: set[str], extra: list = (), level: Quantity = FORCE) -> None:
+    handles = [Line2D([], [], color=c, lw=2, label=level.format(lv)) for lv, c in sorted(colours.items())]
     for d in ("up", "down"):
         if d in directions:
             handles.append(Line2D([], [], color="0.3", ls=DIRECTION_STYLE[d], marker=DIRECTION_MARKER[d],
                                   label=f"{d} sweep"))
     handles.extend(extra)
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8,
-              title="force level", title_fontsize=8, frameon=False)
+              title=f"{level.name} level", title_fontsize=8, frameon=False)
 
 
 def _plot_series(ax, series, colours, y, *, marker=True, **kw):
@@ -139,7 +141,7 @@ def png_bytes(fig: Figure, dpi: int = 96) -> bytes:
 # ---------------------------------------------------------------------------- run report
 
 
-def plot_compliance(series, colours, title, legacy: bool = False) -> Figure:
+def plot_compliance(series, colours, title, legacy: bool = False, level: Quantity = FORCE) -> Figure:
     fig = Figure(figsize=(10, 10), layout="constrained")
     ax1, ax2, ax3 = fig.subplots(3, 1, sharex=True)
     _plot_series(ax1, series, colours, lambda s: s.col(lambda st: st["compliance_abs_m_per_N"]))
@@ -156,12 +158,12 @@ def plot_compliance(series, colours, title, legacy: bool = False) -> Figure:
     ax3.set_ylim(-280, 100)
     for ax in (ax1, ax2, ax3):
         ax.grid(True, which="both", alpha=0.3)
-    _legend(ax1, colours, {s.direction for s in series})
+    _legend(ax1, colours, {s.direction for s in series}, level=level)
     fig.suptitle(f"Compliance: {title}")
     return fig
 
 
-def plot_accelerance(series, colours, title, mass_kg: float | None) -> Figure:
+def plot_accelerance(series, colours, title, mass_kg: float | None, level: Quantity = FORCE) -> Figure:
     fig = Figure(figsize=(10, 5.5), layout="constrained")
     ax = fig.subplots()
     _plot_series(ax, series, colours, lambda s: s.col(lambda st: st["accelerance_abs_kg_inv"]))
@@ -172,22 +174,23 @@ def plot_accelerance(series, colours, title, mass_kg: float | None) -> Figure:
     ax.set(xscale="log", yscale="log", xlabel="frequency (Hz)", ylabel="|A1/F1|  (1/kg = m/s^2 per N)",
            title=f"Accelerance |A1/F1| (tends to 1/m above the friction resonance): {title}")
     ax.grid(True, which="both", alpha=0.3)
-    _legend(ax, colours, {s.direction for s in series}, extra)
+    _legend(ax, colours, {s.direction for s in series}, extra, level=level)
     return fig
 
 
-def plot_quality(series, colours, title, tolerance: float | None) -> Figure:
+def plot_quality(series, colours, title, tolerance: float | None, level: Quantity = FORCE) -> Figure:
+    """THD, the control error of the quantity the levels hold (``level``) and the residual."""
     fig = Figure(figsize=(10, 10), layout="constrained")
     ax1, ax2, ax3 = fig.subplots(3, 1, sharex=True)
     _plot_series(ax1, series, colours, lambda s: 100 * s.col(lambda st: st["disp"]["thd"]))
     ax1.set(yscale="log", ylabel="THD of displacement (%)",
             title="displacement THD: sqrt(sum A_k^2, k >= 2) / A_1 (friction nonlinearity)")
-    _plot_series(ax2, series, colours, lambda s: 100 * s.col(lambda st: st["force_error"]))
+    _plot_series(ax2, series, colours, lambda s: 100 * s.col(control_error))
     if tolerance:
         for sgn in (-1, 1):
             ax2.axhline(100 * sgn * tolerance, color="r", lw=1, ls=":")
-    ax2.set(ylabel="force error F1/target - 1 (%)",
-            title="force control: error of the force fundamental (red: tolerance)")
+    ax2.set(ylabel=f"{level.name} error {level.symbol}/target - 1 (%)",
+            title=f"{level.name} control: error of the {level.name} fundamental (red: tolerance)")
     _plot_series(ax3, series, colours, lambda s: 100 * s.col(residual_ratio))
     ax3.axhline(100 * UNSETTLED_RESIDUAL, color="r", lw=1, ls=":")
     ax3.set(xscale="log", yscale="log", xlabel="frequency (Hz)", ylabel="residual rms / A_1 (%)",
@@ -195,17 +198,17 @@ def plot_quality(series, colours, title, tolerance: float | None) -> Figure:
                   "(noise + non-periodic motion; red: flag level)")
     for ax in (ax1, ax2, ax3):
         ax.grid(True, which="both", alpha=0.3)
-    _legend(ax1, colours, {s.direction for s in series})
+    _legend(ax1, colours, {s.direction for s in series}, level=level)
     fig.suptitle(f"Signal quality: {title}")
     return fig
 
 
-def plot_model(series, colours, title, cmp: ModelComparison) -> Figure:
+def plot_model(series, colours, title, cmp: ModelComparison, level: Quantity = FORCE) -> Figure:
     fig = Figure(figsize=(10, 9), layout="constrained")
     ax1, ax2 = fig.subplots(2, 1, sharex=True, height_ratios=(2, 1))
     gamma0 = {c.level_N: c.gamma0 for c in cmp.levels}
-    for level, (f, C, flags) in sorted(cmp.curves.items()):
-        ax1.plot(f, C, color=colours.get(level, "k"), lw=1.5, alpha=0.8, ls=":" if gamma0.get(level, 0) >= 1 else "-")
+    for lv, (f, C, flags) in sorted(cmp.curves.items()):
+        ax1.plot(f, C, color=colours.get(lv, "k"), lw=1.5, alpha=0.8, ls=":" if gamma0.get(lv, 0) >= 1 else "-")
         bad = ~np.isfinite(C)
         if bad.any():
             ax1.plot(f[bad], np.full(bad.sum(), np.nanmin(C) if np.isfinite(C).any() else 1e-9), ls="none",
@@ -234,7 +237,7 @@ def plot_model(series, colours, title, cmp: ModelComparison) -> Figure:
              Line2D([], [], color="0.3", lw=1.5, ls=":", label="model, gamma0 >= 1\n(gross rolling)"),
              Line2D([], [], color="r", marker="x", ls="none", label="flagged step (residual)"),
              Line2D([], [], color="r", marker="|", ls="none", label="model: no steady state")]
-    handles = [Line2D([], [], color=c, lw=2, label=f"{lv:g} N") for lv, c in sorted(colours.items())]
+    handles = [Line2D([], [], color=c, lw=2, label=level.format(lv)) for lv, c in sorted(colours.items())]
     handles += [Line2D([], [], color="0.3", marker=DIRECTION_MARKER[d], mfc="none", ls="none",
                        label=f"measured, {d} sweep") for d in ("up", "down") if d in {s.direction for s in series}]
     ax1.legend(handles=handles + extra, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
@@ -624,9 +627,9 @@ def plot_fig13(runs: list) -> Figure:
             model = True
             ax1.plot([p[0] for p in pts], [p[1][0] for p in pts], color=colour, ls="--", lw=1)
             ax2.plot([p[0] for p in pts], [p[1][1] for p in pts], color=colour, ls="--", lw=1)
-    ax1.set(xscale="log", xlabel="force amplitude (N)", ylabel="resonance frequency (Hz)",
+    ax1.set(xscale="log", xlabel=level_axis(runs), ylabel="resonance frequency (Hz)",
             title="(a) feed mode: peak of compliance_pp")
-    ax2.set(xscale="log", yscale="log", xlabel="force amplitude (N)", ylabel="compliance_pp at the resonance (m/N)",
+    ax2.set(xscale="log", yscale="log", xlabel=level_axis(runs), ylabel="compliance_pp at the resonance (m/N)",
             title="(b) compliance at the resonance")
     extra = [Line2D([], [], color="0.3", marker="o", lw=0, label="measured, 95 % interval")]
     if pr:
@@ -642,6 +645,15 @@ def plot_fig13(runs: list) -> Figure:
     ax1.legend(handles=h + extra, fontsize=8)
     fig.suptitle("Seed Fig. 13 from measurements: the feed mode against force")
     return fig
+
+
+def level_axis(runs: list) -> str:
+    """The x label of a figure against the runs' levels: their quantity and unit; runs of
+    different quantities (a force and a response-controlled run) each named with theirs."""
+    qs = list(dict.fromkeys(getattr(r, "level_quantity", FORCE) for r in runs)) or [FORCE]
+    if len(qs) == 1:
+        return f"{qs[0].name} amplitude ({qs[0].unit})"
+    return "level: " + ", ".join(f"{q.name} ({q.unit})" for q in qs) + " (one axis, see each run's label)"
 
 
 def plot_fig17(runs: list, title: str = "") -> Figure:
@@ -679,7 +691,7 @@ def plot_fig17(runs: list, title: str = "") -> Figure:
     for row in range(2):
         for col in range(2):
             ax = axes[row][col]
-            ax.set(xscale="log", xlabel="force amplitude (N)", title=titles[row][col],
+            ax.set(xscale="log", xlabel=level_axis(runs), title=titles[row][col],
                    ylabel="resonance frequency (Hz)" if col == 0 else "damping ratio (%)")
             ax.grid(True, which="both", alpha=0.3)
     extra = [Line2D([], [], color="0.3", marker="o", lw=0, label="measured: single-mode fit, 95 % interval")]

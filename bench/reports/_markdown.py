@@ -21,15 +21,17 @@ from pathlib import Path
 
 import numpy as np
 
+from procedures.kind import ProcedureKind
 from sim.discrepancy.rounding import round_to_interval
 
 from ..numbers import number, percent
 from ..storage import shown
+from ..verdict import promise
 from . import _figures as figures
 from ._analysis import analysis_data
 from ._identification import ID_PARAMS, IdentificationData, determined_from, finite, steps_of
 from ._run import ANALYSIS_HTML, RunData, load_run
-from ._steps import UNSETTLED_RESIDUAL, pp_source
+from ._steps import UNSETTLED_RESIDUAL, control_error, pp_source
 
 log = logging.getLogger(__name__)
 
@@ -199,7 +201,8 @@ def write_report(run_dir: Path, with_runs=()) -> Path:
 def _header_md(run: RunData) -> list[str]:
     meta, plan, rig, levels_N = run.meta, run.plan, run.rig, run.levels_N
 
-    md = [f"# Stepped-sine report: {plan.get('name', '?')}", ""]
+    kind = run.kind
+    md = [f"# {kind.label[:1].upper() + kind.label[1:]} report: {plan.get('name', '?')}", ""]
     md += accounting_md(run)
     acc = run.accounting
     recorded = f"{meta.get('steps_done', '?')}/{meta.get('steps_total', '?')}"
@@ -212,9 +215,9 @@ def _header_md(run: RunData) -> list[str]:
         ["status", f"**{meta.get('status', '?')}**"],
         ["steps", f"{readable} (the run recorded {recorded} done when it ended)"],
         ["started / ended (UTC)", f"{meta.get('started', '?')} / {meta.get('ended', '?')}"],
-        ["levels (N)", ", ".join(f"{v:g}" for v in levels_N)],
-        ["frequencies", f"{len(plan.get('freqs_Hz', []))} from {min(plan.get('freqs_Hz', [math.nan])):g} to "
-                        f"{max(plan.get('freqs_Hz', [math.nan])):g} Hz, direction {plan.get('direction', '?')}"],
+        ["procedure", _procedure_row(run)],
+        [f"levels ({run.level_quantity.name}, {run.level_quantity.unit})", ", ".join(f"{v:g}" for v in levels_N)],
+        _frequency_row(run),
     ])
     md += ["", "## Instruments", ""]
     ids = meta.get("identities") or {}
@@ -231,8 +234,38 @@ def _header_md(run: RunData) -> list[str]:
                        "; ".join(f"{k}={v}" for k, v in e.items() if k not in ("time", "event"))] for e in notable])
     else:
         md.append("none (events.jsonl records only start, sensor checks, output off and end)")
+    blocks = sum(1 for e in run.events if e.get("event") == "lock_block")
+    if blocks:
+        md.append(f"\nThe phase-resonance loop's {blocks} controller blocks are progress, not interruptions "
+                  "(`lock_block` events in events.jsonl; the watch page showed them as they ran).")
     md.append("")
     return md
+
+
+def _procedure_row(run: RunData) -> str:
+    """What ran and what its controller held, in the plan's words and units."""
+    plan, q = run.plan, run.level_quantity
+    tol = plan.get("force_tolerance")
+    within = f"within {100 * tol:g} %" if isinstance(tol, (int, float)) else "within tolerance"
+    if run.kind is ProcedureKind.PHASE_RESONANCE:
+        bb = plan.get("backbone") or {}
+        return (f"phase resonance: at each force level the frequency moved until the {bb.get('response', '?')} "
+                f"fundamental's phase against the force's was {bb.get('phase_deg', math.nan):g} deg "
+                f"(band +-{bb.get('phase_band_deg', math.nan):g} deg), then held and measured")
+    if run.kind is ProcedureKind.RESPONSE_CONTROLLED:
+        return (f"response-controlled stepped sine: at each frequency the {q.name} fundamental |{q.symbol}| held "
+                f"{within} of the level ({q.unit}); the force it needed is the measurement")
+    return f"stepped sine: at each frequency the force fundamental |F1| held {within} of the level (N)"
+
+
+def _frequency_row(run: RunData) -> list[str]:
+    plan = run.plan
+    if run.kind is ProcedureKind.PHASE_RESONANCE:
+        bb = plan.get("backbone") or {}
+        return ["frequency", f"found by the loop, from {bb.get('start_Hz', math.nan):g} Hz inside the window "
+                             f"{bb.get('min_Hz', math.nan):g}-{bb.get('max_Hz', math.nan):g} Hz"]
+    return ["frequencies", f"{len(plan.get('freqs_Hz', []))} from {min(plan.get('freqs_Hz', [math.nan])):g} to "
+                           f"{max(plan.get('freqs_Hz', [math.nan])):g} Hz, direction {plan.get('direction', '?')}"]
 
 
 def accounting_md(run: RunData) -> list[str]:
@@ -276,9 +309,8 @@ def accounting_md(run: RunData) -> list[str]:
     errors = [e for e in run.events if e.get("event") in ("instrument_error", "error")]
     if errors:
         why.append(f"{len(errors)} instrument or run error{'s' * (len(errors) != 1)} (see the events below)")
-    off = [r for r in run.results if not r.get("force_converged", True)]
-    if off:
-        why.append(f"force error out of tolerance at {len(off)} step{'s' * (len(off) != 1)}")
+    kept = promise(run.plan, run.results, run.rig, completed=status == "completed")
+    why += kept.short
     if acc.orphan:
         why.append(f"{len(acc.orphan)} file{'s' * (len(acc.orphan) != 1)} in steps/ that no planned step owns "
                    f"({', '.join(shown(p.path.name) for p in acc.orphan[:5])})")
@@ -312,14 +344,15 @@ def accounting_md(run: RunData) -> list[str]:
                + (f" Also: {'; '.join(notes)}." if notes else ""), ""]
     else:
         n = len(acc.skipped)
-        but = (f" but {n} skipped at run time as the plan allows (infeasible = \"skip\": force unreachable "
+        but = (f" but {n} skipped at run time as the plan allows (infeasible = \"skip\": {run.level_quantity.name} unreachable "
                "within the drive limit)" if n else "")
+        fits = ", the identified model fits" if kept.kind is ProcedureKind.STEPPED_SINE and est is not None else ""
         if notes:
-            md += [f"Overall: **went well, with notes**: every planned step measured, intact and usable{but}, the "
-                   f"force within tolerance at every step, no limit trip or error; but {'; '.join(notes)}.", ""]
+            md += [f"Overall: **went well, with notes**: every planned step measured, intact and usable{but}, "
+                   f"{kept.kept}, no limit trip or error; but {'; '.join(notes)}.", ""]
         else:
-            md += [f"Overall: **went well**: every planned step measured, intact and usable{but}, the force within "
-                   "tolerance at every step, no limit trip, error or interruption, the identified model fits.", ""]
+            md += [f"Overall: **went well**: every planned step measured, intact and usable{but}, {kept.kept}, "
+                   f"no limit trip, error or interruption{fits}.", ""]
     return md
 
 
@@ -329,28 +362,30 @@ def _write_figures(run: RunData, out: Path, others=()) -> list[tuple[str, str]]:
     colours = figures.level_colours(sorted({s.level_N for s in series}) or [1.0])
     save = figures.save_png
     files: list[tuple[str, str]] = []
-    save(figures.plot_compliance(series, colours, title, run.legacy), out / "compliance.png")
-    files.append(("compliance.png", "compliance vs frequency, log-log, one colour per force level, "
+    q = run.level_quantity
+    save(figures.plot_compliance(series, colours, title, run.legacy, level=q), out / "compliance.png")
+    files.append(("compliance.png", f"compliance vs frequency, log-log, one colour per {q.name} level ({q.unit}), "
                   "solid = up sweep, dashed = down sweep. Top: |X1/F1| from the fundamentals of the harmonic "
                   "fits; middle: compliance_pp = (x_max - x_min)/(2 F1), the seed's Eq. 9 in SI, from "
                   f"{pp_source(results)}; bottom: phase of X1/F1 in degrees (0 = spring-like, -180 = mass-like)."))
-    save(figures.plot_accelerance(series, colours, title, run.rig.get("expected_mass_kg")), out / "accelerance.png")
+    save(figures.plot_accelerance(series, colours, title, run.rig.get("expected_mass_kg"), level=q),
+         out / "accelerance.png")
     files.append(("accelerance.png", "|A1/F1| vs frequency per level; it tends to 1/m above the friction "
                   "resonance (dotted line: the rig file's expected mass)."))
-    save(figures.plot_quality(series, colours, title, run.plan.get("force_tolerance")), out / "quality.png")
-    files.append(("quality.png", "THD of the displacement (friction nonlinearity), force-control error "
+    save(figures.plot_quality(series, colours, title, run.plan.get("force_tolerance"), level=q), out / "quality.png")
+    files.append(("quality.png", f"THD of the displacement (friction nonlinearity), {q.name}-control error "
                   "of the fundamental with the tolerance, and the displacement residual after the harmonic fit "
                   "relative to the fundamental (noise and non-periodic motion such as an unsettled free vibration; "
                   f"steps above {100 * UNSETTLED_RESIDUAL:g} % are flagged)."))
 
     if run.modes is not None:
-        save(figures.plot_fig17([run.modes], f"Modes per force level: {title}"), out / "modes.png")
+        save(figures.plot_fig17([run.modes], f"Modes per {q.name} level: {title}"), out / "modes.png")
         if run.modes.kind == "phase_resonance":
             files.append(("modes.png", "each level's locked point (diamonds): frequency and damping ratio against "
                           "force, no interval."))
         else:
             files.append(("modes.png", "each mode's resonance frequency (feed: the peak of compliance_pp; pitch: the "
-                          "peak of |A1/F1|) and damping ratio against force, from a single-mode fit around each peak "
+                          f"peak of |A1/F1|) and damping ratio against {q.name} ({q.unit}), from a single-mode fit around each peak "
                           "(bars: 95 % intervals; squares: half-power cross-check; triangles: no peak inside the "
                           "grid, the mode lies at or beyond that edge; lines: the rig model's prediction, simulated "
                           "rigs)."))
@@ -364,10 +399,13 @@ def _write_figures(run: RunData, out: Path, others=()) -> list[tuple[str, str]]:
                       + (f"; squares: the modes of {len(others)} stepped-sine run{'s' * (len(others) != 1)} "
                          "(`--with`) at their peaks' amplitudes, with 95 % intervals." if others else ".")))
     if run.comparison:
-        save(figures.plot_model(series, colours, title, run.comparison), out / "model_vs_measurement.png")
+        save(figures.plot_model(series, colours, title, run.comparison, level=q), out / "model_vs_measurement.png")
         files.append(("model_vs_measurement.png", "simulated rig only: the rig model's compliance_pp (its "
-                      "file's values and every effect it declares; lines) over the measured compliance_pp "
-                      "(markers), and the relative differences from the same lines (flagged steps marked)."))
+                      "file's values and every effect it declares; lines" + (", at each level's held response"
+                                                                            if run.kind is
+                                                                            ProcedureKind.RESPONSE_CONTROLLED else "")
+                      + ") over the measured compliance_pp (markers), and the relative differences from the same "
+                      "lines (flagged steps marked)."))
     ident = run.ident
     if ident.history:
         save(figures.plot_identification(ident, title, _level_starts(ident.history, results)),
@@ -377,6 +415,13 @@ def _write_figures(run: RunData, out: Path, others=()) -> list[tuple[str, str]]:
                       + (", the final fit (star) and the rig model's truth (dashed)" if ident.truth
                          else " and the final fit (star)") + "; dotted: the first step of each force level."))
     return files
+
+
+def _step_level(r: dict) -> float:
+    """The level a step held, in its quantity's unit (a response-controlled step's target
+    response; otherwise the force level)."""
+    rc = r.get("response_control")
+    return float(rc["target"]) if isinstance(rc, dict) and "target" in rc else float(r["target_force_N"])
 
 
 def _interval(v: float, lo: float, hi: float, scale: float = 1.0) -> str:
@@ -392,7 +437,7 @@ def modes_md(run: RunData) -> list[str]:
     """The modes per level (sim.modal, decision 0043): each mode's resonance, damping
     ratio and peak with 95 % intervals; a mode at the grid's edge said to be there."""
     md = ["## Modes per level", "",
-          "Each mode's resonance at each force level: the feed mode's is the peak of compliance_pp "
+          f"Each mode's resonance at each {run.level_quantity.name} level ({run.level_quantity.unit}): the feed mode's is the peak of compliance_pp "
           "(x_max - x_min)/(2 F1) (the seed's Eq. 9 and Fig. 13), the pitching mode's the peak of the accelerance "
           "|A1/F1|; both, and the damping ratio, from a single-mode fit (rational fraction with a constant "
           "residual) to the complex FRF around the peak, with 95 % intervals from the fit's covariance; the "
@@ -419,7 +464,7 @@ def modes_md(run: RunData) -> list[str]:
         rows.append([e.mode, f"{e.level_N:g}", status, _interval(e.resonance_Hz, e.resonance_low_Hz,
                      e.resonance_high_Hz), _interval(e.damping_ratio, e.damping_ratio_low, e.damping_ratio_high, 100),
                      _interval(e.half_power_damping_ratio, math.nan, math.nan, 100), peak, str(e.n_points), model])
-    md += [""] + _table(["mode", "level (N)", "status", "resonance (Hz) [95 %]", "damping ratio (%) [95 %]",
+    md += [""] + _table(["mode", run.level_quantity.heading, "status", "resonance (Hz) [95 %]", "damping ratio (%) [95 %]",
                          "half-power (%)", "peak [95 %]", "points", "model resonance (Hz)"], rows) + [""]
     for mode in ("feed", "pitch"):
         ms = [e for e in run.modes.modes if e.mode == mode]
@@ -427,8 +472,8 @@ def modes_md(run: RunData) -> list[str]:
         if len(ok) >= 2 and len(ok) == len(ms):
             falls = all(b.resonance_Hz < a.resonance_Hz for a, b in zip(ok, ok[1:]))
             md.append(f"The {mode} mode's resonance {'falls' if falls else 'does not fall monotonically'} as the "
-                      f"force rises ({ok[0].resonance_Hz:.4g} Hz at {ok[0].level_N:g} N to {ok[-1].resonance_Hz:.4g} "
-                      f"Hz at {ok[-1].level_N:g} N; the seed: it falls).")
+                      f"{run.level_quantity.name} rises ({ok[0].resonance_Hz:.4g} Hz at {run.level(ok[0].level_N)} "
+                      f"to {ok[-1].resonance_Hz:.4g} Hz at {run.level(ok[-1].level_N)}; the seed: it falls).")
         elif len(ok) >= 2:
             md.append(f"The {mode} mode lies inside the grid at {len(ok)} of {len(ms)} levels; no trend is drawn "
                       "across the levels where it does not.")
@@ -458,8 +503,9 @@ def _results_md(run: RunData, out: Path, files: list[tuple[str, str]]) -> list[s
                f"{pp_source(results)}), over all steps; max = the value of largest magnitude.",
                f"- flagged: steps whose displacement residual is above {100 * UNSETTLED_RESIDUAL:g} % of the "
                "fundamental (see quality.png and the steps needing attention).", ""]
-        md += _table(["level (N)", "gamma0", "steps (flagged)", "median", "max", "max, unflagged steps", "notes"],
-                     [[f"{c.level_N:g}", f"{c.gamma0:.3g}", f"{c.n_steps} ({c.n_flagged})", _pct(c.median),
+        md += _table([run.level_quantity.heading, "gamma0", "steps (flagged)", "median", "max", "max, unflagged steps",
+                      "notes"],
+                     [[f"{c.level_N:g}", f"{c.gamma0:.3g}" if math.isfinite(c.gamma0) else "-", f"{c.n_steps} ({c.n_flagged})", _pct(c.median),
                        _pct(c.max), _pct(c.max_unflagged), "; ".join(c.notes) or "ok"] for c in cmp.levels])
         md.append("")
 
@@ -468,14 +514,15 @@ def _results_md(run: RunData, out: Path, files: list[tuple[str, str]]) -> list[s
 
     md += ["## Steps needing attention", ""]
     failed = [r for r in results if not r.get("force_converged", True)]
+    q = run.level_quantity
     if failed:
-        md.append("Force control did not reach the tolerance:")
+        md.append(f"{q.name.capitalize()} control did not reach the tolerance:")
         md.append("")
-        md += _table(["step", "level (N)", "freq (Hz)", "force error", "iterations"],
-                     [[r["key"], f"{r['target_force_N']:g}", f"{r['freq_Hz']:g}", _pct(r["force_error"]),
+        md += _table(["step", q.heading, "freq (Hz)", f"{q.name} error", "iterations"],
+                     [[r["key"], f"{_step_level(r):g}", f"{r['freq_Hz']:g}", _pct(control_error(r)),
                        r["control_iterations"]] for r in failed])
     else:
-        md.append("Force control reached the tolerance at every step.")
+        md.append(f"{q.name.capitalize()} control reached the tolerance at every step.")
     md += ["", "Step quality, from the time records (`sim.artefacts`: interference lines and offset drift "
            "removed, unsettled transients removed or their first periods dropped, clipping and drop-outs "
            "rejected, periodicity gate, displacement residual above "

@@ -21,14 +21,19 @@ from pathlib import Path
 
 import numpy as np
 
+from procedures.kind import FORCE, Quantity, of_stored_plan
 from sim.modal import LevelData, ModeEstimate, pitch_band_Hz, track_modes
 
 from ..storage import RunStore
-from ._model import ModelComparison, model_comparison
+from ._held import comparison_of
+from ._model import ModelComparison
 
 log = logging.getLogger(__name__)
 
-COLUMNS = ("run", "label", "mode", "level_N", "status", "curve", "resonance_Hz", "resonance_low_Hz",
+# a run's levels are amplitudes of its procedure's quantity (decision 0052): `level` in
+# `level_unit` (N, m, m/s^2); `level_N` stays for the readers of force levels and is empty
+# for a level that is not a force (before, it held a response level's metres)
+COLUMNS = ("run", "label", "mode", "level", "level_unit", "level_N", "status", "curve", "resonance_Hz", "resonance_low_Hz",
            "resonance_high_Hz", "damping_ratio", "damping_ratio_low", "damping_ratio_high",
            "half_power_damping_ratio", "peak_compliance_m_per_N", "peak_accelerance_per_kg", "n_points",
            "model_resonance_Hz", "model_note", "note")
@@ -45,6 +50,7 @@ class RunModes:
     pitch_band: tuple[float, float] | None = None
     kind: str = "stepped_sine"      # or "phase_resonance": one point per level, drawn with its own marker
     model_pitch: dict[float, tuple[float, float, str]] = field(default_factory=dict)  # level -> (Hz, 1/kg, note)
+    level_quantity: Quantity = FORCE   # what the levels are amplitudes of (a response-controlled run: m or m/s^2)
 
     def rows(self) -> list[dict]:
         out = []
@@ -52,7 +58,9 @@ class RunModes:
             mf = (self.model_feed if e.mode == "feed" else self.model_pitch).get(e.level_N)
             pk_c = e.peak if e.mode == "feed" else e.extra.get("compliance_pp", math.nan)
             pk_a = e.peak if e.mode == "pitch" else e.extra.get("accelerance", math.nan)
-            out.append(dict(run=str(self.path), label=self.label, mode=e.mode, level_N=e.level_N, status=e.status,
+            q = self.level_quantity
+            out.append(dict(run=str(self.path), label=self.label, mode=e.mode, level=e.level_N, level_unit=q.unit,
+                            level_N=e.level_N if q == FORCE else math.nan, status=e.status,
                             curve=e.curve, resonance_Hz=e.resonance_Hz, resonance_low_Hz=e.resonance_low_Hz,
                             resonance_high_Hz=e.resonance_high_Hz, damping_ratio=e.damping_ratio,
                             damping_ratio_low=e.damping_ratio_low, damping_ratio_high=e.damping_ratio_high,
@@ -156,6 +164,7 @@ def modes_of(path: Path, meta: dict, results: list[dict], cmp: ModelComparison |
     if any(r.get("backbone") for r in results):
         return RunModes(Path(path), run_label(meta, path), backbone_modes(results), kind="phase_resonance")
     plan, rig = meta.get("plan") or {}, meta.get("rig") or {}
+    level = of_stored_plan(plan)[1]
     levels_N = plan.get("levels_N") or sorted({r["target_force_N"] for r in results})
     by_level: dict[int, list[dict]] = {}
     for r in results:
@@ -171,7 +180,8 @@ def modes_of(path: Path, meta: dict, results: list[dict], cmp: ModelComparison |
     modes = track_modes(data, feed_predicted_Hz=pred, pitch=True, pitch_band_Hz=band)
     if band is None and not any(e.mode == "pitch" and e.ok for e in modes):
         modes = [e for e in modes if e.mode != "pitch"]    # no pitching mode in the data nor the model
-    return RunModes(Path(path), run_label(meta, path), modes, feed_model, band, model_pitch=pitch_model)
+    return RunModes(Path(path), run_label(meta, path), modes, feed_model, band, model_pitch=pitch_model,
+                    level_quantity=level)
 
 
 def run_modes(path: Path, *, model: bool = True) -> RunModes:
@@ -182,7 +192,7 @@ def run_modes(path: Path, *, model: bool = True) -> RunModes:
     cmp = None
     if model and not any(r.get("backbone") for r in results):
         try:
-            cmp = model_comparison(meta, results)
+            cmp = comparison_of(meta, results)
         except Exception as e:  # noqa: BLE001 - the measured modes come out without the model
             log.warning("model prediction failed: %s", e)
     return modes_of(Path(path), meta, results, cmp)
@@ -194,7 +204,8 @@ def write_csv(runs: list[RunModes], path: Path) -> Path:
         w.writeheader()
         for r in runs:
             for row in r.rows():
-                w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()})
+                w.writerow({k: ("" if k == "level_N" and math.isnan(v) else f"{v:.6g}" if isinstance(v, float) else v)
+                            for k, v in row.items()})
     return path
 
 

@@ -14,16 +14,22 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from procedures.kind import ProcedureKind, Quantity, of_stored_plan
+
 from ..files import read_file
 from ..storage import Accounting, RunStore
+from ._held import comparison_of
 from ._identification import IdentificationData, identification_data
-from ._model import ModelComparison, model_comparison
+from ._model import ModelComparison
 from ._modes import RunModes, modes_of
 from ._steps import Series, legacy_pp, series_of
 
 log = logging.getLogger(__name__)
 
 ROUTINE_EVENTS = {"start", "end", "sensor", "output_off", "probe_noise", "refinement_end"}   # (0050)
+# a phase-resonance run's progress (bench/backbone.py): each controller block, the probe
+# blocks and each point; a lost or missed lock is not progress and stays listed
+PROGRESS_EVENTS = {"lock_block", "backbone_probe", "backbone_point"}
 ANALYSIS_JSON = Path("analysis") / "analysis.json"
 ANALYSIS_HTML = Path("analysis") / "analysis.html"
 
@@ -109,7 +115,21 @@ class RunData:
 
     @property
     def notable_events(self) -> list[dict]:
-        return [e for e in self.events if e.get("event") not in ROUTINE_EVENTS]
+        return [e for e in self.events if e.get("event") not in ROUTINE_EVENTS | PROGRESS_EVENTS]
+
+    @property
+    def kind(self) -> ProcedureKind:
+        """The procedure that ran (a plan stored before the field existed: a stepped sine)."""
+        return of_stored_plan(self.plan)[0]
+
+    @property
+    def level_quantity(self) -> Quantity:
+        """What the plan's levels are amplitudes of: every level is printed in its unit."""
+        return of_stored_plan(self.plan)[1]
+
+    def level(self, value: float) -> str:
+        """A level with its unit: '3e-06 m', '1 N'."""
+        return self.level_quantity.format(value)
 
 
 def _analysis(run_dir: Path) -> tuple[dict | None, str | None]:
@@ -138,7 +158,7 @@ def load_run(run_dir: Path) -> RunData:
     cmp, cmp_error = None, None
     if results and rig.get("simulated") and rig.get("model"):
         try:
-            cmp = model_comparison(meta, results, flagged)
+            cmp = comparison_of(meta, results, flagged)
         except Exception as e:
             log.warning("model comparison failed: %s", e)
             cmp_error = f"{type(e).__name__}: {e}"

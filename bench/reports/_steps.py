@@ -62,3 +62,10 @@ def phase_deg(phase_rad: np.ndarray) -> np.ndarray:
     """Compliance phase in degrees in (-270, 90]: a mass-spring-like lag runs 0 -> -180
     without wrapping at -180."""
     return (np.degrees(phase_rad) - 90.0) % 360.0 - 270.0
+
+
+def control_error(step: dict) -> float:
+    """The control error of the quantity the step's level holds: the response's (a
+    ``response_control`` record, decision 0044) or the force's, relative."""
+    rc = step.get("response_control")
+    return float(rc["error"]) if isinstance(rc, dict) and "error" in rc else float(step["force_error"])

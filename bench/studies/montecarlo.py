@@ -153,16 +153,16 @@ def draw_rig(expected: dict, spread: float, n_spread: float, rng: np.random.Gene
 def simulate_plan(plan, rig, model: dict) -> list[dict]:
     """Run ``plan`` on the RK4 plant with ``model`` (RigModel keys); the step results."""
     from bench.session import check_envelope
+    from procedures.factory import procedure_for
     from procedures.safety import tightest
-    from procedures.stepped_sine import SteppedSine
     from sim.rig import RigModel
 
     plan = check_envelope(plan, rig)
     plant = SimulatedRig(RigModel.from_dict(model))
     daq = PlantDaq(plant)
     rest = daq.acquire_periods(100.0, 10).disp_m
-    proc = SteppedSine(plan, PlantGenerator(plant), daq, amp_gain_N_per_V=rig.amp_gain_N_per_V,
-                       drive_limit_V=tightest(rig.limits, plan.limits).drive_V)
+    proc = procedure_for(plan, PlantGenerator(plant), daq, amp_gain_N_per_V=rig.amp_gain_N_per_V,
+                         mass_kg=rig.expected_mass_kg, drive_limit_V=tightest(rig.limits, plan.limits).drive_V)
     proc.disp_noise_floor_m = float(np.std(rest))
     results: list[dict] = []
     proc.run(set(), lambda step, res, raw: results.append(res))

@@ -68,12 +68,14 @@ function renderProgress(s) {
 function renderCurrent(s) {
   const rows = [];
   const n = s.next_step, l = s.last_step;
-  if (n) rows.push(["now", `<b>${num(n.level_N)} N</b> at <b>${num(n.freq_Hz, 4)} Hz</b> (${esc(n.direction)})`]);
+  const unit = esc(s.level_unit || "N");
+  if (n) rows.push(["now", `<b>${num(n.level_N)} ${unit}</b> at <b>${num(n.freq_Hz, 4)} Hz</b> (${esc(n.direction)})`]);
   else if (s.status !== "running") rows.push(["now", `<span class="muted">nothing: the run is ${esc(s.status)}</span>`]);
   if (l) {
-    rows.push(["last done", `${num(l.level_N)} N at ${num(l.freq_Hz, 4)} Hz (${esc(l.direction)}) <span class="muted">${esc(l.key)}</span>`]);
+    rows.push(["last done", `${num(l.level_N)} ${unit} at ${num(l.freq_Hz, 4)} Hz (${esc(l.direction)}) <span class="muted">${esc(l.key)}</span>`]);
     const ok = l.force_converged === false ? ' <span class="sev-warn">not within tolerance</span>' : "";
-    rows.push(["force", `${num(l.force_N, 4)} N, error ${pct2(l.force_error)}${ok}`]);
+    if (unit === "N") rows.push(["force", `${num(l.force_N, 4)} N, error ${pct2(l.force_error)}${ok}`]);
+    else rows.push([esc(s.level_quantity || "response"), `error ${pct2(l.control_error)}${ok}; the force it needed ${num(l.force_N, 4)} N`]);
     rows.push(["control iterations", esc(l.control_iterations ?? "–")]);
     rows.push(["THD", `force ${pct(l.thd_force)} · acceleration ${pct(l.thd_accel)} · displacement ${pct(l.thd_disp)}`]);
     rows.push(["drive", `${num(l.drive_V)} V amplitude`]);
@@ -103,7 +105,7 @@ function renderIdent(s) {
 
 function renderModes(s) {
   const ms = s.modes || [];
-  let html = "<tr><th>mode</th><th class='num'>level (N)</th><th>status</th><th class='num'>resonance (Hz)</th>" +
+  let html = `<tr><th>mode</th><th class='num'>level (${esc(s.level_unit || "N")})</th>` + "<th>status</th><th class='num'>resonance (Hz)</th>" +
              "<th class='num'>95 % interval</th><th class='num'>damping ratio</th><th class='num'>95 % interval</th></tr>";
   for (const m of ms) {
     const status = m.status === "below grid" || m.status === "above grid"
@@ -146,7 +148,7 @@ function renderCompliance(s) {
   let points = 0;
   for (const c of series) {
     const colour = levelColour(c.level_index, nLevels), dash = c.direction === "down" ? "dash" : "solid";
-    const name = `${num(c.level_N)} N${c.direction ? " " + esc(c.direction) : ""}`;
+    const name = `${num(c.level_N)} ${esc(s.level_unit || "N")}${c.direction ? " " + esc(c.direction) : ""}`;
     const marker = {color: colour, size: 6, symbol: c.direction === "down" ? "triangle-down" : "circle",
                     line: {width: c.converged.map((ok) => ok ? 0 : 2), color: "#c62828"}};
     points += c.freq_Hz.length;
@@ -177,7 +179,7 @@ function renderAccelerance(s, nLevels) {
   let points = 0;
   for (const c of s.compliance || []) {
     const colour = levelColour(c.level_index, nLevels), dash = c.direction === "down" ? "dash" : "solid";
-    const name = `${num(c.level_N)} N${c.direction ? " " + esc(c.direction) : ""}`;
+    const name = `${num(c.level_N)} ${esc(s.level_unit || "N")}${c.direction ? " " + esc(c.direction) : ""}`;
     const y = c.accel_abs_per_kg || [];
     points += y.filter((v) => v !== null && isFinite(v)).length;
     traces.push({x: c.freq_Hz, y, name, mode: "lines+markers", line: {color: colour, dash, width: 1.5},

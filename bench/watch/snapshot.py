@@ -24,6 +24,7 @@ import threading
 from datetime import datetime
 from pathlib import Path
 
+from procedures.kind import ProcedureKind
 from procedures.plan import GUESS_KEYS, Plan
 
 from ..files import open_regular, read_file
@@ -115,7 +116,11 @@ def _phase_deg(phase_rad: float) -> float:
 
 
 def _step_summary(r: dict) -> dict:
-    return dict(key=r.get("key"), level_N=r.get("target_force_N"), freq_Hz=r.get("freq_Hz"),
+    """The page's summary of a step; ``level_N`` is the level it held in the run's level unit
+    (a response-controlled step: its target response, ``control_error`` the response's error)."""
+    rc = r.get("response_control") if isinstance(r.get("response_control"), dict) else {}
+    return dict(key=r.get("key"), level_N=rc.get("target", r.get("target_force_N")), freq_Hz=r.get("freq_Hz"),
+                control_error=rc.get("error", r.get("force_error")),
                 direction=r.get("direction"), force_N=r.get("force_N"), force_error=r.get("force_error"),
                 control_iterations=r.get("control_iterations"), force_converged=r.get("force_converged"),
                 thd_force=r.get("force", {}).get("thd"), thd_accel=r.get("accel", {}).get("thd"),
@@ -216,7 +221,10 @@ class RunReader:
             "rig": meta.get("rig", {}).get("name", ""),
             "simulated": bool(meta.get("rig", {}).get("simulated")),
             "status": status,
-            "levels_N": list(plan.levels_N) if plan else [],
+            "levels_N": list(plan.levels_N) if plan else [],       # in level_unit
+            "procedure": plan.procedure.label if plan else "",
+            "level_quantity": plan.level_quantity.name if plan else "force",
+            "level_unit": plan.level_quantity.unit if plan else "N",
             "started": meta.get("started"),
             "ended": meta.get("ended") if status != RunStatus.RUNNING else None,
             "stop_pending": (self.path / STOP_FILE).exists(),
@@ -297,7 +305,7 @@ class RunReader:
         """A phase-resonance run's lock (decision records 0044, 0046): the latest block's
         frequency, phase error and response amplitude (its ``lock_block`` event) and each
         stored point; None for other procedures."""
-        if plan is None or plan.procedure != "phase_resonance":
+        if plan is None or plan.procedure is not ProcedureKind.PHASE_RESONANCE:
             return None
         blocks = [e for e in events if e.get("event") == LOCK_EVENT]
         points = [dict(level_N=r.get("target_force_N"), **{k: r["backbone"].get(k) for k in (

@@ -156,6 +156,26 @@ def test_the_report_shows_the_backbone_over_the_model(bar_run):
         assert f"| feed | {float(r['level_N']):g} | ok | {float(r['frequency_Hz']):.4g} |" in modes
 
 
+def test_the_report_speaks_of_phase_resonance_and_its_locked_levels(bar_run):
+    """Issue 31 item 2 / issue 30 item 4 (decision 0052): the title, run table and headline
+    name phase resonance and count the levels locked; no identification is claimed and the
+    lock blocks are progress, not "Interruptions and aborts"."""
+    from bench.reports import write_report
+    _, store = bar_run
+    md = write_report(store.path).read_text()
+    assert md.startswith("# Phase resonance report: backbone")
+    assert "Stepped-sine" not in md and "| frequencies |" not in md
+    assert "| frequency | found by the loop, from 80 Hz inside the window 40-160 Hz |" in md
+    overall = next(line for line in md.splitlines() if line.startswith("Overall:"))
+    assert "**went well**" in overall and f"{len(BAR_LEVELS)} of {len(BAR_LEVELS)} levels locked" in overall
+    assert "identified model" not in overall and "force within tolerance at every step" not in overall
+    assert any(e["event"] == "lock_block" for e in events(store))
+    listed = md[md.index("## Interruptions and aborts"):md.index("## Files")]
+    rows = [line for line in listed.splitlines() if line.startswith("| ")]
+    assert not any("lock_block" in r or "backbone_point" in r for r in rows), rows
+    assert "controller blocks are progress, not interruptions" in listed
+
+
 def test_ctrl_c_ends_with_the_output_off_and_resume_goes_on_at_the_next_level(tmp_path, mocker):
     from bench.storage import RunStore
     from procedures.phase_resonance import PhaseResonance
