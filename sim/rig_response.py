@@ -46,7 +46,7 @@ GLIDE_STEPS, GLIDE_PERIODS = 16, 2   # from one frequency to the next: 16 phase-
 SPLIT = 0.8                    # feed mode below, pitching mode above SPLIT x the friction-free pitch frequency
 GOLDEN_TOLERANCE = 5e-4        # relative bracket width at which a peak search stops
 
-LEFT_OUT = dict(force_noise_N=0.0, accel_noise_m_s2=0.0, disp_noise_m=0.0, line_channel="", line_freq_Hz=0.0,
+LEFT_OUT: dict = dict(force_noise_N=0.0, accel_noise_m_s2=0.0, disp_noise_m=0.0, line_channel="", line_freq_Hz=0.0,
                 line_amplitude=0.0, shaker_force_constant_N_per_A=0.0, shaker_resistance_ohm=0.0,
                 shaker_inductance_H=0.0, shaker_armature_mass_kg=0.0, shaker_suspension_N_per_m=0.0,
                 shaker_damping_N_s_per_m=0.0)
@@ -228,9 +228,7 @@ def peak_Hz(model: RigModel | dict, level_N: float, lo_Hz: float, hi_Hz: float,
     at ``lo_Hz`` approached from below."""
     m = line_model(model)
     if plain_masing(m) and curve == "compliance_pp":
-        def fun(f):
-            return float(shooting_response(m, level_N, [f]).compliance_pp[0])
-        return _golden(fun, lo_Hz, hi_Hz)
+        return _golden(lambda f: float(shooting_response(m, level_N, [f]).compliance_pp[0]), lo_Hz, hi_Hz)
     sweep = _Sweep(m, level_N)
     for f in np.geomspace(lo_Hz / 1.05, lo_Hz, 3):
         sweep.point(float(f))
