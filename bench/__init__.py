@@ -20,7 +20,7 @@ _API.update({"Plan": "procedures.plan", "Rig": "procedures.plan", "Limits": "pro
              "LimitError": "sim.errors", "InstrumentError": "sim.errors", "RunDirectoryError": "sim.errors",
              "StorageError": "sim.errors"})
 
-__all__ = ["__version__", *sorted(_API)]
+__all__ = sorted(_API)          # and __version__
 
 
 def _version() -> str:

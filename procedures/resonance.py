@@ -133,9 +133,10 @@ class Refiner:
         out = []
         for mode in self.plan.refine_modes:
             done = sum(1 for r in steps if f"-R{mode[0].upper()}" in r["key"])
-            if self._resonance(mode, d) is None:
+            found = self._resonance(mode, d)
+            if found is None:
                 out.append((mode, "no peak", done))
-            elif done >= self.plan.refine_steps and self._next_for(mode, d) is not None:
+            elif done >= self.plan.refine_steps and self._next_from(found, d) is not None:
                 out.append((mode, "budget spent", done))
             else:
                 out.append((mode, "converged", done))
