@@ -911,16 +911,17 @@ def main(argv: list[str] | None = None) -> int:
         return _parse_and_run(argv)
     from .signals import for_process, ignore_at_exit
     latch = for_process()
-    try:
-        code = _parse_and_run(argv)
-    except KeyboardInterrupt as e:        # before or after the command (its errors are its own)
-        print(f"bench: {_one_line(e)}", file=sys.stderr)
-        code = ExitCode.INTERRUPTED
-    latch.finish()
-    if latch.reason is not None and code == ExitCode.OK:   # a signal a finalizer dropped: never 0
-        code = ExitCode.INTERRUPTED
-    elif latch.late is not None:
-        print(f"bench: {latch.late} after the work was done: nothing left to stop", file=sys.stderr, flush=True)
+    with tolerant_streams():              # these lines too may meet a terminal that is gone
+        try:
+            code = _parse_and_run(argv)
+        except KeyboardInterrupt as e:    # before or after the command (its errors are its own)
+            print(f"bench: {_one_line(e)}", file=sys.stderr)
+            code = ExitCode.INTERRUPTED
+        latch.finish()
+        if latch.reason is not None and code == ExitCode.OK:   # a signal a finalizer dropped: never 0
+            code = ExitCode.INTERRUPTED
+        elif latch.late is not None:
+            print(f"bench: {latch.late} after the work was done: nothing left to stop", file=sys.stderr, flush=True)
     ignore_at_exit()
     return code
 
