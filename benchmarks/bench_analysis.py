@@ -239,13 +239,15 @@ def _uff_effects(fx: dict, rig: dict) -> dict:
 
 
 def independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str | None = None,
-                     settle: int | None = None, hum_m: float | None = None):
+                     settle: int | None = None, hum_m: float | None = None, top_level: float | None = None):
     """(UFF58 path, kind, rig, effects as RigModel fields, f_res, generation time) of one
     seeded independent case; simulated unless ``cache`` holds it already.  ``settle``: settle
     periods of every step, the first of a level's included (default :data:`INDEPENDENT_SETTLE`;
     25 leaves the carriage's free vibration in the records, as a hurried real test does);
     ``hum_m``: the mains line's amplitude of a ``mains_line`` case (default 3-10 x the
-    probe's noise; a strong hum, several um and larger than the response, is issue 33's)."""
+    probe's noise; a strong hum, several um and larger than the response, is issue 33's);
+    ``top_level``: the highest force level over F_s (default 0.85, 0.3 for asymmetric
+    friction; above 1 the carriage slides grossly at the upper levels)."""
     import tempfile
 
     from tests.independent_masing import generate_uff
@@ -266,10 +268,10 @@ def independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str | N
             kw["line_m"] = hum_m
     if kind == "unsettled":
         settle_n, first = 1, 1
-    levels_N, freqs_Hz = plan_grid(rig, levels, freqs, 0.3 if kind == "asymmetric_friction" else 0.85)
+    levels_N, freqs_Hz = plan_grid(rig, levels, freqs, top_level or (0.3 if kind == "asymmetric_friction" else 0.85))
     d = Path(cache) if cache else Path(tempfile.mkdtemp(prefix="bench_indep_"))
     d.mkdir(parents=True, exist_ok=True)
-    hum = f"_hum{hum_m:g}" if hum_m and kind == "mains_line" else ""
+    hum = (f"_hum{hum_m:g}" if hum_m and kind == "mains_line" else "") + (f"_top{top_level:g}" if top_level else "")
     path = d / f"indep_{seed:03d}_{levels}x{freqs}{'' if settle is None else f'_s{settle}'}{hum}.uff"
     t0 = time.perf_counter()
     if not path.exists():
@@ -288,14 +290,15 @@ def _mains_Hz(seed: int) -> float:
 
 
 def run_independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str | None = None,
-                         settle: int | None = None, hum_m: float | None = None) -> dict:
+                         settle: int | None = None, hum_m: float | None = None,
+                         top_level: float | None = None) -> dict:
     """One independent case, analysed as ``bench analyze`` analyses a UFF58 file."""
     from types import SimpleNamespace
 
     from bench.sources import load_source
     from sim.artefacts import artefact_causes
 
-    path, kind, rig, fx, f_res, t_gen = independent_case(seed, levels, freqs, cache, settle, hum_m)
+    path, kind, rig, fx, f_res, t_gen = independent_case(seed, levels, freqs, cache, settle, hum_m, top_level)
     rng = np.random.default_rng(seed)
     guess = {k: v * rng.uniform(0.7, 1.3) for k, v in rig.items()}
     t0, c0 = time.perf_counter(), time.process_time()
@@ -629,6 +632,8 @@ def main(argv=None) -> int:
                                                "level's first 60; 25 leaves free vibration in the records)")
     ap.add_argument("--hum-m", type=float, help="independent source: the mains line's amplitude of the mains_line "
                     "cases (m; e.g. 8.2e-6, a strong hum larger than the response: issue 33)")
+    ap.add_argument("--top-level", type=float, help="independent source: the highest force level over F_s "
+                    "(e.g. 3: gross sliding at the upper levels, issue 33; default 0.85)")
     ap.add_argument("--profile", action="store_true",
                     help="also profile-likelihood intervals of F_s, x_s, n, m (coverage, width and time)")
     ap.add_argument("--drop-transients", action="store_true",
@@ -642,7 +647,7 @@ def main(argv=None) -> int:
     if args.source == "independent":
         from functools import partial
         case_fn = partial(run_independent_case, levels=args.levels, freqs=args.freqs, cache=args.cache,
-                          settle=args.settle, hum_m=args.hum_m)
+                          settle=args.settle, hum_m=args.hum_m, top_level=args.top_level)
     else:
         case_fn = run_case
     t0 = time.perf_counter()

@@ -236,6 +236,10 @@ def attribute_lines(quality: list[tuple[str, StepQuality]],
                     a = replace(a, part_of_Hz=root.freq_Hz,
                                 evidence=f"{a.evidence}; a component of the {root.freq_Hz:.4g} Hz line of this step "
                                          f"(leakage or a sideband with the drive), not a source of its own")
+                elif id(root) in hidden:          # beside the leakage of a hum the step cannot separate
+                    F = hidden[id(root)]
+                    a = replace(a, part_of_Hz=F, evidence=f"{a.evidence}; beside the leakage of the {F:.4g} Hz line of "
+                                                          f"the source (not separable in this step): its own too")
                 else:
                     a = _as_vibration(a, q, f"beside the stronger {b.freq_Hz:.4g} Hz line of this step, which is "
                                             f"not interference: the rig's own free vibration", decays)

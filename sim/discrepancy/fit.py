@@ -244,7 +244,7 @@ class Fit:
 
 def _exp(x: float) -> float:
     """e^x, infinite above the floats' range (a math.exp overflow is an OverflowError)."""
-    return math.exp(x) if x < 709.0 else math.inf
+    return math.exp(x) if x < 709.0 else (math.nan if math.isnan(x) else math.inf)
 
 
 def whitened(theta: np.ndarray, model: Model, d: Data, W: Weights) -> np.ndarray:
