@@ -100,17 +100,35 @@ def run(plan: Plan | PathLike, rig: Rig | PathLike, out: PathLike, *, labels: Ma
     ``aborted``); ``KeyboardInterrupt`` and every other exception propagate once the output
     is off and confirmed (the run is then ``interrupted`` or ``failed`` and
     `Run.resume` goes on with it)."""
-    from .session import run_plan
     plan, rig = _as_plan(plan), _as_rig(rig)
-    if labels is not None:
-        labels = _checked_labels(labels)
-    _warm_if_simulated(rig)
-    run_plan(plan, rig, Path(out), progress=progress, sim_seed=seed, identify=identify,
-             labels=dict(labels) if labels else None)
+    execute(plan, rig, Path(out), progress=progress, seed=seed, identify=identify,
+            labels=_checked_labels(labels) if labels is not None else None)
     done = Run(out)
     if report and done.status == "completed":
         done.report()
     return done
+
+
+def execute(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress: Progress | None = None,
+            seed: int | None = None, identify: bool = True, retry_skipped: bool = False,
+            labels: dict[str, str] | None = None, latch: Any = None):
+    """The one way every caller (`run`, `Run.resume`, ``bench run``, ``bench resume``,
+    ``bench sequence``) measures: the kernels compiled first for a simulated rig (so the
+    compile never counts in a progress ETA), then ``bench.session.run_plan`` with its safety
+    path.  Returns the run's store.  ``latch``: the command line's process-wide signal
+    latch (decision 0051); a script's run makes its own."""
+    from .session import run_plan
+    warm_if_simulated(rig)
+    return run_plan(plan, rig, Path(out), resume=resume, progress=progress, sim_seed=seed, identify=identify,
+                    retry_skipped=retry_skipped, labels=labels, latch=latch)
+
+
+def stored_configs(meta: Mapping[str, Any], where: str) -> tuple[Plan, Rig]:
+    """The plan and the rig stored in a run's ``run.json`` (``meta``), validated as the files
+    are; the envelope's skips are left to be worked out again (the limits may have changed)."""
+    from .config import parse_rig, rig_toml
+    from .storage import stored_plan
+    return replace(stored_plan(dict(meta), where), skip=()), parse_rig({"rig": rig_toml(meta["rig"])}, where)
 
 
 def open_run(path: PathLike) -> Run:
@@ -128,12 +146,14 @@ def _checked_labels(labels: Mapping[str, str]) -> dict[str, str]:
     return out
 
 
-def _warm_if_simulated(rig: Rig) -> None:
+def warm_if_simulated(rig: Rig) -> None:
+    """Compile the simulation kernels first if a simulated rig needs them and they are not,
+    with a one-line notice."""
     if rig.simulated:
         from .warmup import kernels_warm, warm_up
         if not kernels_warm():
             log.warning("compiling the simulation kernels (first run only; `make setup` does it ahead)")
-            warm_up()
+            log.info("kernels compiled in %.0f s", warm_up())
 
 
 def _frame(rows: list[dict], columns: tuple[str, ...]) -> pd.DataFrame:
@@ -177,8 +197,7 @@ class Run:
 
     @property
     def rig(self) -> Rig:
-        from .config import parse_rig, rig_toml
-        return parse_rig({"rig": rig_toml(self.metadata["rig"])}, f"{self.path}/run.json")
+        return stored_configs(self.metadata, f"{self.path}/run.json")[1]
 
     @property
     def labels(self) -> dict[str, str]:
@@ -232,12 +251,9 @@ class Run:
         """Go on with an interrupted, aborted or damaged run (``bench resume``): the missing and
         damaged steps are measured (damaged files kept in ``damaged/``), the limits checked
         again first.  Returns this run, re-read."""
-        from .session import run_plan
-        plan = replace(self.plan, skip=())      # the envelope's skips are worked out again
-        rig = self.rig
-        _warm_if_simulated(rig)
-        run_plan(plan, rig, self.path, resume=True, progress=progress, sim_seed=self.metadata.get("sim_seed"),
-                 retry_skipped=retry_skipped)
+        plan, rig = stored_configs(self.metadata, f"{self.path}/run.json")
+        execute(plan, rig, self.path, resume=True, progress=progress, seed=self.metadata.get("sim_seed"),
+                retry_skipped=retry_skipped)
         again = Run(self.path)
         if report and again.status == "completed":
             again.report()

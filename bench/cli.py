@@ -16,7 +16,6 @@ import argparse
 import logging
 import sys
 import time
-from dataclasses import replace
 from enum import IntEnum
 from pathlib import Path
 
@@ -164,11 +163,10 @@ def _session(args, resume: bool, latch) -> int:
 
 
 def _session_held(args, resume: bool, latch) -> int:
-    from .session import run_plan
+    from .api import execute, stored_configs
     from .storage import RunStatus, RunStore
 
     if resume:
-        from .config import parse_rig, parse_stored_plan, rig_toml
         store = RunStore.open(Path(args.run))
         meta, acc = store.metadata, store.account()
         retry = bool(getattr(args, "retry_skipped", False)) and bool(acc.skipped)
@@ -181,24 +179,18 @@ def _session_held(args, resume: bool, latch) -> int:
               f"resume: every planned step is there{' or was skipped at run time' if acc.skipped else ''}; "
               f"finishing the run (it ended '{meta.get('status', '?')}')",
               flush=True)
-        # validated as account() did; the envelope's skips are worked out again (limits may have changed)
-        plan = replace(parse_stored_plan(meta["plan"], f"{args.run}/run.json"), skip=())
-        rig = parse_rig({"rig": rig_toml(meta["rig"])}, f"{args.run}/run.json")
+        plan, rig = stored_configs(meta, f"{args.run}/run.json")     # validated as account() did
         out, seed = Path(args.run), meta.get("sim_seed")
         labels = None
     else:
         plan, rig = _load_configs(args)
         out, seed = Path(args.out), args.seed
         labels = parse_labels(getattr(args, "label", None))
-    if rig.simulated:
-        _warm_up()
     before = _event_count(out)
     watch = _start_watch(out, args)
     try:
-        store = run_plan(plan, rig, out, resume=resume,
-                         progress=Progress(plan.procedure.label),
-                         sim_seed=seed, retry_skipped=bool(getattr(args, "retry_skipped", False)), labels=labels,
-                         latch=latch)
+        store = execute(plan, rig, out, resume=resume, progress=Progress(plan.procedure.label), seed=seed,
+                        retry_skipped=bool(getattr(args, "retry_skipped", False)), labels=labels, latch=latch)
     finally:
         if watch:
             watch.close()
@@ -239,18 +231,9 @@ def _report(run: Path, latch, with_runs=()) -> None:
     raised into the numba kernels or the figures' finalizers where it could be swallowed,
     and is honoured once the report is complete (decision 0051)."""
     latch.hold(doing=REPORTING)
-    from .reports import write_report
-    path = write_report(run, with_runs)
+    from .api import open_run
+    path = open_run(run).report(with_runs=tuple(with_runs))
     print(f"report: {path}" + (f" (complete; then {latch.reason})" if latch.reason else ""), flush=True)
-
-
-def _warm_up() -> None:
-    """Compile the simulation kernels first if they are not (so compiling never counts in
-    the progress line's ETA), with a one-line notice."""
-    from .warmup import kernels_warm, warm_up
-    if not kernels_warm():
-        log.warning("compiling the simulation kernels (first run only; `make setup` does it ahead)")
-        log.info("kernels compiled in %.0f s", warm_up())
 
 
 def _event_count(out: Path) -> int:
@@ -358,12 +341,10 @@ def cmd_sequence(args) -> int:
 
 def _sequence(args, resume: bool) -> int:
     from .sequence import resume_sequence, run_sequence
-    from .signals import SignalLatch
 
     def progress(entry: str):
         return Progress(f"{entry}")
-    with SignalLatch().installed():
-        _warm_up()
+    with _latch().installed():    # between entries; each entry's session has its own (0051)
         res = (resume_sequence(Path(args.run), progress=progress, report=not args.no_report) if resume else
                run_sequence(Path(args.sequence), Path(args.out), progress=progress, report=not args.no_report))
     end_line()
@@ -409,9 +390,8 @@ def cmd_report(args) -> int:
 
 
 def cmd_export(args) -> int:
-    from .export import export_run
-    paths = export_run(Path(args.run), Path(args.out) if args.out else None, time_records=not args.no_time)
-    for p in paths:
+    from .api import open_run
+    for p in open_run(args.run).export(args.out, time_records=not args.no_time):
         print(p)
     return 0
 

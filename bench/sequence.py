@@ -177,7 +177,7 @@ def _status(run_dir: Path) -> str:
 def _go(out: Path, name: str, entries: list[Entry], *, progress, report: bool) -> SequenceResult:
     from dataclasses import replace
 
-    from .session import run_plan
+    from .api import execute
     try:
         for i, e in enumerate(entries):
             d = out / e.name
@@ -188,9 +188,9 @@ def _go(out: Path, name: str, entries: list[Entry], *, progress, report: bool) -
                         "resumed" if status != "not started" else "started")
             cb = progress(e.name) if progress else None
             if status == "not started":
-                run_plan(e.plan, e.rig, d, progress=cb, labels={**e.labels, "sequence": name, "entry": e.name})
+                execute(e.plan, e.rig, d, progress=cb, labels={**e.labels, "sequence": name, "entry": e.name})
             else:
-                run_plan(replace(e.plan, skip=()), e.rig, d, resume=True, progress=cb)
+                execute(replace(e.plan, skip=()), e.rig, d, resume=True, progress=cb)
             if _status(d) == "completed" and report:
                 from .reports import write_report
                 write_report(d)
