@@ -185,3 +185,37 @@ def test_the_models_phase_resonance_is_at_minus_90_degrees_in_the_independent_si
         return math.degrees(np.angle((u @ e1) / (P @ e1)))
     assert lag_deg(p.frequency_Hz) == pytest.approx(-90.0, abs=1.0)
     assert abs(lag_deg(one_mode) + 90.0) > 3.0, one_mode
+
+
+def test_bench_paper_draws_each_rigs_model_in_its_runs_colour(runs, tmp_path):
+    """`bench paper --rig A --rig B --runs a b` (issue 32 item 4): each oil's points beside
+    its own rig's model, not oil A's, the model named and in its run's colour; its pitching
+    resonance by the measurement's definition (within 2 % of the measured at 3 N)."""
+    from dataclasses import replace
+
+    from bench.reports import run_modes
+    from bench.rig_model import paper_model
+    from sim.paper import Grids, Report, fig15_17_pitch_resonance
+
+    class Kept(Report):
+        def figure(self, fig, stem, seed_figure, what):
+            self.fig = fig
+            return super().figure(fig, stem, seed_figure, what)
+
+    rep = Kept(tmp_path)
+    grids = replace(Grids.for_run(True), pitch_levels_N=(3.0,), pitch_freqs_Hz=np.geomspace(40.0, 300.0, 16))
+    measured = [{"label": m.label, "rows": m.rows()} for m in (run_modes(runs[o].path, model=False) for o in "AB")]
+    rows = fig15_17_pitch_resonance(rep, grids, paper_model(pitch_rig("A"), "A"), measured,
+                                    [("oil_b", paper_model(pitch_rig("B"), "B"))], "oil_a")
+    with open(tmp_path / "fig15_17_pitch_resonance_peaks_oil_b.csv") as fh:
+        (b,) = [[float(x) for x in line.split(",")] for line in fh.read().splitlines()[1:]]
+    for oil, (_, feed, pitch) in (("A", rows[0]), ("B", b)):
+        got = {r["mode"]: r for m in measured if m["label"] == f"oil={oil}" for r in m["rows"]
+               if r["level_N"] == 3.0 and r["status"] == "ok"}
+        assert feed == pytest.approx(got["feed"]["resonance_Hz"], rel=0.02), oil
+        assert pitch == pytest.approx(got["pitch"]["resonance_Hz"], rel=0.02), oil
+    ax_pitch = rep.fig.axes[2]
+    for name, label in (("oil_a", "oil=A"), ("oil_b", "oil=B")):
+        (model,) = [ln for ln in ax_pitch.lines if name in ln.get_label()]
+        (points,) = [c for c in ax_pitch.containers if c.get_label() == f"measured: {label}"]
+        assert to_rgba(model.get_color()) == to_rgba(points.lines[0].get_color()), name
