@@ -39,11 +39,12 @@ def cmd_paper(args) -> int:
     from sim.paper import reproduce
 
     out = Path(args.out)
-    pitch_model, measured = None, None
+    pitch_model, measured, name, others = None, None, "", []
     if args.rig:
         from .config import load_rig
         from .rig_model import paper_model
-        pitch_model = paper_model(load_rig(Path(args.rig)), args.rig)
+        models = [(Path(r).stem, paper_model(load_rig(Path(r)), r)) for r in args.rig]
+        (name, pitch_model), others = models[0], models[1:]
     if args.runs:
         from .reports import run_modes
         measured = []
@@ -51,7 +52,7 @@ def cmd_paper(args) -> int:
             rm = run_modes(Path(r), model=False)
             measured.append({"label": rm.label, "rows": rm.rows()})
     files = reproduce(out, quick=args.quick, progress=Progress("paper figures"), pitch_model=pitch_model,
-                      measured=measured)
+                      measured=measured, pitch_name=name, other_models=others)
     print(f"wrote {len(files)} files to {out}/ (start with {out}/README.md)")
     return 0
 
@@ -703,8 +704,9 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("paper", help="redraw the seed paper's numerical figures (PNG + CSV)")
     s.add_argument("--out", default="out/paper", help="directory for the figures, their CSV and a README")
     s.add_argument("--quick", action="store_true", help="coarse grids (seconds instead of minutes)")
-    s.add_argument("--rig", help="rig TOML with a pitching mode in [rig.model]: Figs. 15 and 17 at its parameters "
-                                 "(default: bench/defaults/sim_rig_pitch.toml's)")
+    s.add_argument("--rig", action="append", help="rig TOML with a pitching mode in [rig.model]: Figs. 15 and 17 "
+                   "at its parameters (default: bench/defaults/sim_rig_pitch.toml's); repeat it for several "
+                   "rigs, each model named by its file and drawn in the colour of the run of its position")
     s.add_argument("--runs", nargs="+", metavar="RUN", help="run directories whose measured modes are drawn over "
                                                              "Figs. 15 and 17 (legends: their --label)")
     s.set_defaults(func=cmd_paper)

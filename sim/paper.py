@@ -423,12 +423,37 @@ def pitch_resonances(model, level_N: float, freqs_Hz):
     return feed, pitch, resp.compliance_pp
 
 
+def _other_rig(rep: Report, grids: Grids, freqs, name: str, model_dict: dict, colour, ax_feed, ax_pitch, ax_z) -> None:
+    """A further rig's model (``bench paper --rig A --rig B``): its modes against force in
+    its own colour and name, and its own peaks' CSV."""
+    from .rig import RigModel
+    model = RigModel.from_dict(model_dict)
+    rows, damping = [], []
+    for level in grids.pitch_levels_N:
+        feed, pitch, _ = pitch_resonances(model, level, freqs)
+        rows.append((level, feed, pitch))
+        if math.isfinite(pitch):
+            est = pitch_damping(model, level, pitch)
+            damping.append((level, est.damping_ratio))
+    levels = [r[0] for r in rows]
+    ax_feed.semilogx(levels, [r[1] for r in rows], "o--", color=colour, label=f"rig model {name}: feed")
+    ax_pitch.semilogx(levels, [r[2] for r in rows], "s--", color=colour, label=f"rig model {name}: pitch")
+    if damping:
+        ax_z.plot([d[0] for d in damping], [100 * d[1] for d in damping], "s--", color=colour,
+                  label=f"rig model {name}")
+    stem = "fig15_17_pitch_resonance_peaks_" + "".join(c if c.isalnum() else "_" for c in name)
+    rep.table(stem, ["force [N]", "feed_resonance [Hz]", "pitch_resonance [Hz]"], rows)
+
+
 def fig15_17_pitch_resonance(rep: Report, grids: Grids, model_dict: dict | None = None,
-                             measured: list[dict] | None = None):
+                             measured: list[dict] | None = None, others: list[tuple[str, dict]] | None = None,
+                             name: str = ""):
     """Seed Figs. 15 and 17 from the pitching rig's model (``model_dict``: a rig file's
-    [rig.model], default PITCH_MODEL), with a damping panel; ``measured``: rows of
-    `bench modes` (label, mode, level_N, status, resonance_Hz, ..._low/_high,
-    damping_ratio, ..._low/_high) drawn over the model's."""
+    [rig.model], default PITCH_MODEL; ``name``: its name on the figure), with a damping
+    panel; ``others``: further rigs' (name, [rig.model]), each drawn in the colour of the
+    measured run of its position (:func:`_other_rig`); ``measured``: rows of `bench modes`
+    (label, mode, level_N, status, resonance_Hz, ..._low/_high, damping_ratio,
+    ..._low/_high) drawn over the model's."""
     from .rig import RigModel
     model = RigModel.from_dict(model_dict or PITCH_MODEL)
     freqs = grids.pitch_freqs_Hz if grids.pitch_freqs_Hz is not None else np.geomspace(40.0, 300.0, 24)
@@ -450,10 +475,15 @@ def fig15_17_pitch_resonance(rep: Report, grids: Grids, model_dict: dict | None 
                 rep.key("fig15_17_pitch_resonance.png", "Figs. 15-17", model.n, level / model.F_s_N, item,
                         f_r / f_s, G_r * model.F_s_N / model.x_s_m)
     levels = np.array([r[0] for r in rows])
-    ax_feed.semilogx(levels, [r[1] for r in rows], "o-", color="tab:blue",
-                     label="feed mode: peak of compliance_pp (rig model)")
-    ax_pitch.semilogx(levels, [r[2] for r in rows], "s-", color="tab:orange",
-                      label="pitching mode: peak of |A1/F1| (rig model)")
+    # several rigs: each rig's model in the colour of the run of its position (rig k, run k)
+    colours = [f"C{(k + 2) % 10}" for k in range(1 + len(others or []))] if others else ["tab:blue", "tab:orange"]
+    named = f" {name}" if name else ""
+    ax_feed.semilogx(levels, [r[1] for r in rows], "o-", color=colours[0],
+                     label=f"feed mode: peak of compliance_pp (rig model{named})")
+    ax_pitch.semilogx(levels, [r[2] for r in rows], "s-", color=colours[-1] if not others else colours[0],
+                      label=f"pitching mode: peak of |A1/F1| (rig model{named})")
+    for j, (other, md) in enumerate(others or [], start=1):
+        _other_rig(rep, grids, freqs, other, md, colours[j], ax_feed, ax_pitch, ax_z)
     from .plant_effects import mass_matrix
     k0 = SakaiCurve(model.n).stiffness0 * model.F_s_N / model.x_s_m
     for k, text, ls in ((0.0, "no friction stiffness", "--"), (k0, "initial friction stiffness", ":")):
@@ -483,8 +513,8 @@ def fig15_17_pitch_resonance(rep: Report, grids: Grids, model_dict: dict | None 
     if damping:
         d = np.array(damping, dtype=float)
         err = np.nan_to_num(np.clip(np.vstack([d[:, 1] - d[:, 2], d[:, 3] - d[:, 1]]), 0, None))
-        ax_z.errorbar(d[:, 0], 100 * d[:, 1], yerr=100 * err, fmt="s-", color="tab:orange", capsize=3,
-                      label="pitching mode (rig model, single-mode fit)")
+        ax_z.errorbar(d[:, 0], 100 * d[:, 1], yerr=100 * err, fmt="s-", color="tab:orange" if not others
+                      else colours[0], capsize=3, label=f"pitching mode (rig model{named}, single-mode fit)")
     for k, m in enumerate(measured or []):
         _overlay(ax_feed, ax_pitch, ax_z, m, f"C{(k + 2) % 10}")
     ax_z.set_xscale("log")
@@ -565,13 +595,16 @@ def write_index(rep: Report, checks: dict[float, str], quick: bool, seconds: flo
 
 
 def reproduce(out_dir: Path, *, quick: bool = False, progress=None, pitch_model: dict | None = None,
-              measured: list[dict] | None = None) -> list[Path]:
+              measured: list[dict] | None = None, pitch_name: str = "",
+              other_models: list[tuple[str, dict]] | None = None) -> list[Path]:
     """Write the seed's numerical figures (PNG + CSV each) and an index into ``out_dir``.
 
     ``quick`` uses coarse grids (seconds instead of minutes). ``progress(done, total,
     label)`` is called after each figure. ``pitch_model``: a rig's [rig.model] for Figs. 15
-    and 17 (default PITCH_MODEL); ``measured``: runs' modes to overlay there (``[{"label":
-    ..., "rows": [bench modes rows]}]``). Returns the paths written.
+    and 17 (default PITCH_MODEL), named ``pitch_name``; ``other_models``: further rigs'
+    (name, [rig.model]) drawn beside it, rig k in the colour of run k; ``measured``: runs'
+    modes to overlay there (``[{"label": ..., "rows": [bench modes rows]}]``). Returns the
+    paths written.
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -591,7 +624,8 @@ def reproduce(out_dir: Path, *, quick: bool = False, progress=None, pitch_model:
         ("fig11_time_history_B", lambda: fig10_11_time_history(rep, cycles, "B")),
         ("fig12_frf_levels", lambda: fig12_frf_levels(rep, grids)),
         ("fig13_resonance_vs_force", lambda: fig13_resonance_vs_force(rep, grids)),
-        ("fig15_17_pitch_resonance", lambda: fig15_17_pitch_resonance(rep, grids, pitch_model, measured)),
+        ("fig15_17_pitch_resonance", lambda: fig15_17_pitch_resonance(rep, grids, pitch_model, measured,
+                                                                      other_models, pitch_name)),
     ]
     for done, (label, step) in enumerate(steps, start=1):
         t = time.perf_counter()

@@ -158,3 +158,64 @@ def test_the_backbone_figure_draws_the_two_mode_models_phase_resonance_and_says_
             model = np.interp(np.log(r["amplitude_m"]), np.log(X), y) / (100.0 if key == "damping_ratio" else 1.0)
             assert model == pytest.approx(r[key], rel=tol), (key, r)
         assert "second (pitching) mode" in line.get_label()
+
+
+def test_the_models_phase_resonance_is_at_minus_90_degrees_in_the_independent_simulation():
+    """The backbone line's point at 3 N (oil A: pitch, speed-dependent friction): the
+    independent simulation driven there lags the force by 90 degrees within 1 degree (its
+    slope here is about 4 degrees per per cent, so within about 0.25 % in frequency); the
+    one-mode single-harmonic balance's frequency at the same force is not there."""
+    from sim.backbone import backbone_at_force
+    from sim.rig_response import phase_point
+    m = pitch_rig("A").model
+    p = phase_point(m, 3.0, 60.0)
+    one_mode = backbone_at_force(3.0, m["mass_kg"], m["F_s_N"], m["x_s_m"], m["n"]).frequency_Hz
+    F_s, x_s = m["F_s_N"], m["x_s_m"]
+    ws = math.sqrt(F_s / (x_s * m["mass_kg"]))
+    J, h, e = m["pitch_inertia_kg_m2"], m["drive_height_m"], m["cg_height_m"]
+    pitch = (m["mass_kg"] * h * h / J, e / h, m["pitch_stiffness_N_m_per_rad"] / (J * ws * ws),
+             m["pitch_damping_N_m_s_per_rad"] / (J * ws))
+
+    def lag_deg(f):
+        beta = 2 * math.pi * f / ws
+        ((t, u, _, P),) = list(simulate_level(m["n"], 3.0 / F_s, [beta], 40, 2, 200 * beta / (2 * math.pi),
+                                              rtol=1e-9, pitch=pitch,
+                                              speed=m["friction_alpha"] * x_s * ws / m["friction_v_ref_m_per_s"]))
+        e1 = np.exp(-1j * beta * t)
+        return math.degrees(np.angle((u @ e1) / (P @ e1)))
+    assert lag_deg(p.frequency_Hz) == pytest.approx(-90.0, abs=1.0)
+    assert abs(lag_deg(one_mode) + 90.0) > 3.0, one_mode
+
+
+def test_bench_paper_draws_each_rigs_model_in_its_runs_colour(runs, tmp_path):
+    """`bench paper --rig A --rig B --runs a b` (issue 32 item 4): each oil's points beside
+    its own rig's model, not oil A's, the model named and in its run's colour; its pitching
+    resonance by the measurement's definition (within 2 % of the measured at 3 N)."""
+    from dataclasses import replace
+
+    from bench.reports import run_modes
+    from bench.rig_model import paper_model
+    from sim.paper import Grids, Report, fig15_17_pitch_resonance
+
+    class Kept(Report):
+        def figure(self, fig, stem, seed_figure, what):
+            self.fig = fig
+            return super().figure(fig, stem, seed_figure, what)
+
+    rep = Kept(tmp_path)
+    grids = replace(Grids.for_run(True), pitch_levels_N=(3.0,), pitch_freqs_Hz=np.geomspace(40.0, 300.0, 16))
+    measured = [{"label": m.label, "rows": m.rows()} for m in (run_modes(runs[o].path, model=False) for o in "AB")]
+    rows = fig15_17_pitch_resonance(rep, grids, paper_model(pitch_rig("A"), "A"), measured,
+                                    [("oil_b", paper_model(pitch_rig("B"), "B"))], "oil_a")
+    with open(tmp_path / "fig15_17_pitch_resonance_peaks_oil_b.csv") as fh:
+        (b,) = [[float(x) for x in line.split(",")] for line in fh.read().splitlines()[1:]]
+    for oil, (_, feed, pitch) in (("A", rows[0]), ("B", b)):
+        got = {r["mode"]: r for m in measured if m["label"] == f"oil={oil}" for r in m["rows"]
+               if r["level_N"] == 3.0 and r["status"] == "ok"}
+        assert feed == pytest.approx(got["feed"]["resonance_Hz"], rel=0.02), oil
+        assert pitch == pytest.approx(got["pitch"]["resonance_Hz"], rel=0.02), oil
+    ax_pitch = rep.fig.axes[2]
+    for name, label in (("oil_a", "oil=A"), ("oil_b", "oil=B")):
+        (model,) = [ln for ln in ax_pitch.lines if name in ln.get_label()]
+        (points,) = [c for c in ax_pitch.containers if c.get_label() == f"measured: {label}"]
+        assert to_rgba(model.get_color()) == to_rgba(points.lines[0].get_color()), name
