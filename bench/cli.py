@@ -529,9 +529,12 @@ def cmd_modes(args) -> int:
     for r in runs:
         for e in r.modes:
             if e.ok:
+                eb = e.extra.get("energy_balance")
                 print(f"{r.label}: {e.mode} at {e.level_N:g} N: {e.resonance_Hz:.5g} Hz "
-                      f"[{e.resonance_low_Hz:.5g}, {e.resonance_high_Hz:.5g}], damping ratio "
-                      f"{100 * e.damping_ratio:.3g} % [{100 * e.damping_ratio_low:.3g}, {100 * e.damping_ratio_high:.3g}]")
+                      f"[{e.resonance_low_Hz:.5g}, {e.resonance_high_Hz:.5g}], damping ratio (single-mode fit) "
+                      f"{100 * e.damping_ratio:.3g} % [{100 * e.damping_ratio_low:.3g}, {100 * e.damping_ratio_high:.3g}]"
+                      + (f", (energy balance at resonance) {100 * eb.value:.3g} % [{100 * eb.low:.3g}, "
+                         f"{100 * eb.high:.3g}]" if eb is not None else ""))
             else:
                 print(f"{r.label}: {e.mode} at {e.level_N:g} N: {e.status}" + (f" ({e.note})" if e.note else ""))
     print("wrote " + ", ".join(str(f) for f in files))

@@ -23,13 +23,13 @@ import numpy as np
 from sim.modal import LevelData, ModeEstimate, pitch_band_Hz, track_modes
 
 from ..storage import RunStore
+from ._damping import DAMPING_COLUMNS, add_damping, damping_row
 from ._model import ModelComparison, model_comparison
 
 log = logging.getLogger(__name__)
 
 COLUMNS = ("run", "label", "mode", "level_N", "status", "curve", "resonance_Hz", "resonance_low_Hz",
-           "resonance_high_Hz", "damping_ratio", "damping_ratio_low", "damping_ratio_high",
-           "half_power_damping_ratio", "peak_compliance_m_per_N", "peak_accelerance_per_kg", "n_points",
+           "resonance_high_Hz", *DAMPING_COLUMNS, "peak_compliance_m_per_N", "peak_accelerance_per_kg", "n_points",
            "model_resonance_Hz", "model_note", "note")
 
 
@@ -52,9 +52,7 @@ class RunModes:
             pk_a = e.peak if e.mode == "pitch" else e.extra.get("accelerance", math.nan)
             out.append(dict(run=str(self.path), label=self.label, mode=e.mode, level_N=e.level_N, status=e.status,
                             curve=e.curve, resonance_Hz=e.resonance_Hz, resonance_low_Hz=e.resonance_low_Hz,
-                            resonance_high_Hz=e.resonance_high_Hz, damping_ratio=e.damping_ratio,
-                            damping_ratio_low=e.damping_ratio_low, damping_ratio_high=e.damping_ratio_high,
-                            half_power_damping_ratio=e.half_power_damping_ratio, peak_compliance_m_per_N=pk_c,
+                            resonance_high_Hz=e.resonance_high_Hz, **damping_row(e), peak_compliance_m_per_N=pk_c,
                             peak_accelerance_per_kg=pk_a, n_points=e.n_points,
                             model_resonance_Hz=mf[0] if mf else math.nan,
                             model_note=mf[2] if mf else (f"model: above {self.pitch_band[0]:.4g} Hz (friction free)"
@@ -140,6 +138,7 @@ def modes_of(path: Path, meta: dict, results: list[dict], cmp: ModelComparison |
     modes = track_modes(data, feed_predicted_Hz=pred, pitch=True, pitch_band_Hz=band)
     if band is None and not any(e.mode == "pitch" and e.ok for e in modes):
         modes = [e for e in modes if e.mode != "pitch"]    # no pitching mode in the data nor the model
+    add_damping(modes, results, meta, [float(x) for x in levels_N])
     return RunModes(Path(path), run_label(meta, path), modes, feed_model, band)
 
 

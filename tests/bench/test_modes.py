@@ -89,8 +89,9 @@ def test_refined_pitch_resonance_matches_a_dense_window_and_the_feed_is_below_th
 def test_bench_modes_writes_two_runs_with_their_labels(feed_run, pitch_run, tmp_path, capsys):
     assert main(["modes", str(feed_run.path), str(pitch_run.path), "--out", str(tmp_path / "m"), "--no-model"]) == 0
     rows = list(csv.DictReader(open(tmp_path / "m" / "modes.csv")))
-    need = {"run", "mode", "level_N", "resonance_Hz", "resonance_low_Hz", "resonance_high_Hz", "damping_ratio",
-            "damping_ratio_low", "damping_ratio_high", "peak_compliance_m_per_N"}
+    need = {"run", "mode", "level_N", "resonance_Hz", "resonance_low_Hz", "resonance_high_Hz", "damping_fit_fraction",
+            "damping_fit_low_fraction", "damping_fit_high_fraction", "damping_energy_balance_fraction",
+            "damping_half_power_fraction", "energy_balance_mass_kg", "peak_compliance_m_per_N"}
     assert need <= set(rows[0])
     assert {(r["label"], r["mode"], r["status"]) for r in rows} == {
         ("rig=plain", "feed", "ok"), ("lubricant=ISO VG 32", "feed", "below grid"),
@@ -300,8 +301,9 @@ def test_bench_modes_reads_a_backbone_run_beside_a_stepped_sine(feed_run, backbo
     assert [(r["mode"], float(r["level_N"]), r["status"]) for r in rows] == [("feed", 0.3, "ok"), ("feed", 1.0, "ok")]
     for r, p in zip(rows, points):
         assert float(r["resonance_Hz"]) == pytest.approx(float(p["frequency_Hz"]), rel=1e-5)
-        assert float(r["damping_ratio"]) == pytest.approx(float(p["damping_ratio"]), rel=1e-5)
-        assert r["resonance_low_Hz"] == r["damping_ratio_high"] == "nan"
+        # a locked point's ratio is the energy balance's (decision 0044), named so
+        assert float(r["damping_energy_balance_fraction"]) == pytest.approx(float(p["damping_ratio"]), rel=1e-5)
+        assert r["resonance_low_Hz"] == r["damping_fit_fraction"] == "nan"
         assert "phase resonance" in r["note"]
     # the feed mode softens with the level: the backbone's frequency falls (seed Fig. 13)
     assert float(rows[1]["resonance_Hz"]) < float(rows[0]["resonance_Hz"])
@@ -378,3 +380,31 @@ def test_the_backbone_figure_overlays_a_stepped_sines_modes_at_their_amplitudes(
     md = (bb / "report" / "report.md").read_text()
     assert "squares: the modes of 1 stepped-sine run (`--with`)" in md
     assert (bb / "report" / "backbone.png").stat().st_size > 10_000
+
+
+def test_damping_ratios_name_their_definition_and_the_energy_balance_is_the_backbones(feed_run, pitch_run, tmp_path):
+    """Issue 32 item 2: modes.csv holds three named damping ratios as fractions; the feed
+    mode's energy balance at resonance (from the refined step nearest it, the carriage's
+    mass) is within 5 % of the single-harmonic Masing backbone's ratio at the step's
+    measured amplitude (sim.backbone, independent of the modal fit); the pitching mode's
+    uses the rig model's drive-point modal mass, not the carriage's 10 kg."""
+    from sim.backbone import backbone_point
+    assert main(["modes", str(feed_run.path), str(pitch_run.path), "--out", str(tmp_path / "m")]) == 0
+    rows = {(r["label"], r["mode"]): r for r in csv.DictReader(open(tmp_path / "m" / "modes.csv"))}
+    feed = rows[("rig=plain", "feed")]
+    assert feed["energy_balance_mass"].startswith("carriage mass") and float(feed["energy_balance_mass_kg"]) == 10.0
+    key = feed["energy_balance_step"].split()[0]
+    assert "-RF" in key and "(refined," in feed["energy_balance_step"]
+    step = next(r for r in feed_run.results() if r["key"] == key)
+    hb = backbone_point(step["disp"]["amplitude"][0], 10.0, 10.0, 10e-6, 1.5)
+    z_eb = float(feed["damping_energy_balance_fraction"])
+    assert z_eb == pytest.approx(hb.damping_ratio, rel=0.05)
+    assert float(feed["damping_energy_balance_low_fraction"]) < z_eb < float(feed["damping_energy_balance_high_fraction"])
+    for d in ("fit", "half_power"):     # fractions, not per cent
+        assert 0 < float(feed[f"damping_{d}_fraction"]) < 0.5
+    hp = [float(feed[f"damping_half_power_{k}fraction"]) for k in ("low_", "", "high_")]
+    assert hp[0] <= hp[1] <= hp[2]
+    pitch = rows[("lubricant=ISO VG 32", "pitch")]
+    assert "modal mass" in pitch["energy_balance_mass"]
+    assert abs(float(pitch["energy_balance_mass_kg"]) / 10.0 - 1) > 0.2
+    assert 0 < float(pitch["damping_energy_balance_fraction"]) < 0.2
