@@ -35,11 +35,28 @@ class Refiner:
     ``last`` (a step of the schedule), or None when every peak is known within the
     tolerance or the level's budget is spent.  ``results()`` returns the stored steps."""
 
-    def __init__(self, plan: Plan, results: Callable[[], list], pitch_band_Hz: tuple[float, float] | None = None):
+    def __init__(self, plan: Plan, results: Callable[[], list], pitch_band_Hz: tuple[float, float] | None = None,
+                 on_event: Callable[..., None] | None = None):
         self.plan = plan
         self.results = results
         self.pitch_band_Hz = pitch_band_Hz
         self.f_min, self.f_max = min(plan.freqs_Hz), max(plan.freqs_Hz)
+        self.on_event = on_event          # (kind, **fields): the run's events.jsonl
+        self._told: set[tuple[int, str]] = set()
+        self._asked: dict[tuple[int, str], str] = {}
+
+    def _not_converged(self, li: int, level_N: float, mode: str, reason: str, steps: int) -> None:
+        """Once per level and mode: the refinement ended without the peak known within the
+        tolerance (``reason``: "budget_spent" or "no_progress"), a warning and an event."""
+        if (li, mode) in self._told:
+            return
+        self._told.add((li, mode))
+        log.warning("level %g N: the %s peak is not known within %g %% after %d refinement steps (%s%s)", level_N,
+                    mode, 100 * self.plan.refine_tolerance, steps, reason.replace("_", " "),
+                    "; plan: [plan.resonance] max_steps" if reason == "budget_spent" else "")
+        if self.on_event:
+            self.on_event("refinement_not_converged", level_index=li, level_N=level_N, mode=mode, reason=reason,
+                          steps=steps, tolerance=self.plan.refine_tolerance)
 
     def next_step(self, last: StepSpec) -> StepSpec | None:
         li = last.level_index
@@ -50,20 +67,19 @@ class Refiner:
         d = LevelData.from_steps(last.force_N, steps)
         for mode in self.plan.refine_modes:
             done = sum(1 for r in steps if f"-R{mode[0].upper()}" in r["key"])
-            if done >= self.plan.refine_steps:
-                if self._next_for(mode, d) is not None:
-                    log.warning("level %g N: the %s peak is not known within %g %% after %d refinement steps "
-                                "(plan: [plan.resonance] max_steps)", last.force_N, mode,
-                                100 * self.plan.refine_tolerance, done)
+            why = refinement_end(self, mode, d, done)
+            if why in NOT_CONVERGED:
+                self._not_converged(li, last.force_N, mode, why, done)
+            if why is not None:
                 continue
-            f = self._next_for(mode, d)
-            if f is None:
+            f = float(f"{self._next_for(mode, d):.6g}")
+            spec = StepSpec(last.index, li, -1, last.direction, last.force_N, f, refined=done, refined_mode=mode)
+            if spec.key == self._asked.get((li, mode)):     # asked before and not stored: it was skipped
+                self._not_converged(li, last.force_N, mode, "no_progress", done)
                 continue
-            f = float(f"{f:.6g}")
-            if np.any(np.isclose(d.f_Hz, f, rtol=1e-9, atol=0)):
-                continue                 # no progress possible (a step there already)
+            self._asked[(li, mode)] = spec.key
             log.info("level %g N: refining the %s peak: step at %.5g Hz", last.force_N, mode, f)
-            return StepSpec(last.index, li, -1, last.direction, last.force_N, f, refined=done, refined_mode=mode)
+            return spec
         if self.plan.dwell_cycles > 0:
             for mode in self.plan.refine_modes:
                 if any(f"-W{mode[0].upper()}" in r["key"] for r in level):
@@ -108,3 +124,45 @@ class Refiner:
         x, y = np.log(f[i - 1:i + 2]), np.log(mag[i - 1:i + 2])
         a, b, _ = np.polyfit(x, y, 2)
         return float(math.exp(-b / (2 * a))) if a < 0 else float(f[i])
+
+
+NOT_CONVERGED = ("budget_spent", "no_progress")
+
+
+def refinement_end(refiner: Refiner, mode: str, d: LevelData, done: int) -> str | None:
+    """Why a level's refinement of ``mode`` is over, from its stored steps ``d`` (sweep and
+    ``done`` refinement steps of that mode), or None while it goes on: "converged" (the
+    peak known within the tolerance), "no peak" (none inside the grid), "budget_spent"
+    (``refine_steps`` taken, the peak still not known), "no_progress" (the next frequency
+    is one measured already)."""
+    if refiner._resonance(mode, d) is None:
+        return "no peak"
+    f = refiner._next_for(mode, d)
+    if f is None:
+        return "converged"
+    if done >= refiner.plan.refine_steps:
+        return "budget_spent"
+    if np.any(np.isclose(d.f_Hz, float(f"{f:.6g}"), rtol=1e-9, atol=0)):
+        return "no_progress"
+    return None
+
+
+def refinement_outcomes(plan: Plan, results: list[dict], pitch_band_Hz: tuple[float, float] | None = None
+                        ) -> dict[tuple[int, str], str]:
+    """(level index, mode) -> how each level's refinement of each refined mode ended
+    (:func:`refinement_end`; "not finished" for a level whose refinement had not ended when
+    the run stopped), from the stored steps alone: what the run decided depends only on
+    them (module docstring), so a report knows it without the run's events."""
+    if not plan.refine:
+        return {}
+    refiner = Refiner(plan, lambda: results, pitch_band_Hz)
+    out: dict[tuple[int, str], str] = {}
+    for li, level_N in enumerate(plan.levels_N):
+        steps = [r for r in results if r["level_index"] == li and "-W" not in r["key"]]
+        if len(steps) < 3:
+            continue
+        d = LevelData.from_steps(level_N, steps)
+        for mode in plan.refine_modes:
+            done = sum(1 for r in steps if f"-R{mode[0].upper()}" in r["key"])
+            out[(li, mode)] = refinement_end(refiner, mode, d, done) or "not finished"
+    return out

@@ -29,6 +29,7 @@ from . import _figures as figures
 from ._analysis import analysis_data
 from ._damping import DAMPING_HEADS, DAMPING_KINDS, damping_notes, damping_row
 from ._identification import ID_PARAMS, IdentificationData, determined_from, finite, steps_of
+from ._refinement import refinement_lines
 from ._run import ANALYSIS_HTML, RunData, load_run
 from ._steps import UNSETTLED_RESIDUAL, pp_source
 
@@ -425,6 +426,7 @@ def modes_md(run: RunData) -> list[str]:
                          *(f"damping: {DAMPING_HEADS[d]} (%) [95 %]" for d in DAMPING_KINDS),
                          "peak [95 %]", "points", "model resonance (Hz)"], rows) + [""]
     md += damping_notes(run.modes.modes)
+    md += [*refinement_lines(run.modes.refinement), ""] if refinement_lines(run.modes.refinement) else []
     for mode in ("feed", "pitch"):
         ms = [e for e in run.modes.modes if e.mode == mode]
         ok = [e for e in ms if e.ok]

@@ -25,6 +25,7 @@ from sim.modal import LevelData, ModeEstimate, pitch_band_Hz, track_modes
 from ..storage import RunStore
 from ._damping import DAMPING_COLUMNS, add_damping, damping_row
 from ._model import ModelComparison, model_comparison
+from ._refinement import mark_refinement
 
 log = logging.getLogger(__name__)
 
@@ -43,6 +44,7 @@ class RunModes:
     model_feed: dict[float, tuple[float, float, str]] = field(default_factory=dict)   # level -> (Hz, m/N, note)
     pitch_band: tuple[float, float] | None = None
     kind: str = "stepped_sine"      # or "phase_resonance": one point per level, drawn with its own marker
+    refinement: dict = field(default_factory=dict)   # (level_N, mode) -> how its refinement ended (_refinement)
 
     def rows(self) -> list[dict]:
         out = []
@@ -139,7 +141,8 @@ def modes_of(path: Path, meta: dict, results: list[dict], cmp: ModelComparison |
     if band is None and not any(e.mode == "pitch" and e.ok for e in modes):
         modes = [e for e in modes if e.mode != "pitch"]    # no pitching mode in the data nor the model
     add_damping(modes, results, meta, [float(x) for x in levels_N])
-    return RunModes(Path(path), run_label(meta, path), modes, feed_model, band)
+    refinement = mark_refinement(modes, meta, results, data, levels_N, band)
+    return RunModes(Path(path), run_label(meta, path), modes, feed_model, band, refinement=refinement)
 
 
 def run_modes(path: Path, *, model: bool = True) -> RunModes:
