@@ -443,7 +443,9 @@ def level_modes(d: LevelData, *, feed_predicted_Hz: float | None = None, pitch: 
                              curve=d.compliance_pp, curve_name="compliance_pp", peak_index=i)
     out.append(feed)
     if pitch:
-        fh = feed.resonance_Hz if feed.ok else (feed.edge_Hz if math.isfinite(feed.edge_Hz) else None)
+        # a coarse feed mode is still the feed mode: the pitching one lies above it
+        fh = feed.resonance_Hz if math.isfinite(feed.resonance_Hz) else (
+            feed.edge_Hz if math.isfinite(feed.edge_Hz) else None)
         j = find_pitch(d, pitch_predicted_Hz, pitch_band_Hz, fh)
         if j is None:
             out.append(ModeEstimate("pitch", d.level_N, "not found", "|A1/F1|",

@@ -24,6 +24,7 @@ from sim.modal import LevelData, ModeEstimate, pitch_band_Hz, track_modes
 
 from ..storage import RunStore
 from ._damping import DAMPING_COLUMNS, add_damping, damping_row
+from ._earned import earned_pitch, has_pitch
 from ._model import ModelComparison, model_comparison
 from ._refinement import mark_refinement
 
@@ -137,7 +138,10 @@ def modes_of(path: Path, meta: dict, results: list[dict], cmp: ModelComparison |
         from sim.rig import RigModel
         band = pitch_band_Hz(RigModel.from_dict(rig["model"]))
     pred = {lv: v[0] for lv, v in feed_model.items()}
-    modes = track_modes(data, feed_predicted_Hz=pred, pitch=True, pitch_band_Hz=band)
+    model_without_pitch = bool(rig.get("model")) and band is None and not has_pitch(rig["model"])
+    modes = track_modes(data, feed_predicted_Hz=pred, pitch=not model_without_pitch, pitch_band_Hz=band)
+    if band is None and not rig.get("model"):
+        modes = earned_pitch(modes, data)                  # no model: a second peak must earn its place
     if band is None and not any(e.mode == "pitch" and e.ok for e in modes):
         modes = [e for e in modes if e.mode != "pitch"]    # no pitching mode in the data nor the model
     add_damping(modes, results, meta, [float(x) for x in levels_N])
