@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from sim.modal import LevelData, ModeEstimate, pitch_band_Hz, track_modes
+from sim.modal_flat import mark_overdamped
 
 from ..storage import RunStore
 from ._damping import DAMPING_COLUMNS, add_damping, damping_row
@@ -144,6 +145,11 @@ def modes_of(path: Path, meta: dict, results: list[dict], cmp: ModelComparison |
         modes = earned_pitch(modes, data)                  # no model: a second peak must earn its place
     if band is None and not any(e.mode == "pitch" and e.ok for e in modes):
         modes = [e for e in modes if e.mode != "pitch"]    # no pitching mode in the data nor the model
+    by_level = {d.level_N: d for d in data}
+    for e in modes:                                        # a plateau is not a point (decision 0056)
+        if e.level_N in by_level:
+            d = by_level[e.level_N]
+            mark_overdamped(e, d.f_Hz, d.compliance_pp if e.mode == "feed" else np.abs(d.accelerance))
     add_damping(modes, results, meta, [float(x) for x in levels_N])
     refinement = mark_refinement(modes, meta, results, data, levels_N, band)
     return RunModes(Path(path), run_label(meta, path), modes, feed_model, band, refinement=refinement)
