@@ -462,7 +462,8 @@ def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Super
             from sim.modal import pitch_band_Hz
             from sim.rig import RigModel
             band = pitch_band_Hz(RigModel.from_dict(rig.model))
-        refiner = Refiner(plan, lambda: store.results(warn=False), band, on_event=store.event).next_step
+        refiner = Refiner(plan, lambda: store.results(warn=False), band, on_event=store.event,
+                          no_pitch=bool(rig.simulated and rig.model) and band is None).next_step
     proc.run(store.done_keys() | skipped, record, show, choose=choose, refine=refiner)
     if online:
         store.update(identification=online.final())

@@ -36,8 +36,10 @@ class Refiner:
     tolerance or the level's budget is spent.  ``results()`` returns the stored steps."""
 
     def __init__(self, plan: Plan, results: Callable[[], list], pitch_band_Hz: tuple[float, float] | None = None,
-                 on_event: Callable[..., None] | None = None):
+                 on_event: Callable[..., None] | None = None, no_pitch: bool = False):
         self.plan = plan
+        # a rig model without a pitching mode: its pitch is not chased (decision 0056)
+        self.modes = tuple(m for m in plan.refine_modes if not (no_pitch and m == "pitch"))
         self.results = results
         self.pitch_band_Hz = pitch_band_Hz
         self.f_min, self.f_max = min(plan.freqs_Hz), max(plan.freqs_Hz)
@@ -65,7 +67,7 @@ class Refiner:
         if len(steps) < 3:
             return None
         d = LevelData.from_steps(last.force_N, steps)
-        for mode in self.plan.refine_modes:
+        for mode in self.modes:
             done = sum(1 for r in steps if f"-R{mode[0].upper()}" in r["key"])
             why = refinement_end(self, mode, d, done)
             if why in NOT_CONVERGED:
@@ -81,7 +83,7 @@ class Refiner:
             log.info("level %g N: refining the %s peak: step at %.5g Hz", last.force_N, mode, f)
             return spec
         if self.plan.dwell_cycles > 0:
-            for mode in self.plan.refine_modes:
+            for mode in self.modes:
                 if any(f"-W{mode[0].upper()}" in r["key"] for r in level):
                     continue
                 found = self._resonance(mode, d)
@@ -147,22 +149,22 @@ def refinement_end(refiner: Refiner, mode: str, d: LevelData, done: int) -> str 
     return None
 
 
-def refinement_outcomes(plan: Plan, results: list[dict], pitch_band_Hz: tuple[float, float] | None = None
-                        ) -> dict[tuple[int, str], str]:
+def refinement_outcomes(plan: Plan, results: list[dict], pitch_band_Hz: tuple[float, float] | None = None,
+                        no_pitch: bool = False) -> dict[tuple[int, str], str]:
     """(level index, mode) -> how each level's refinement of each refined mode ended
     (:func:`refinement_end`; "not finished" for a level whose refinement had not ended when
     the run stopped), from the stored steps alone: what the run decided depends only on
     them (module docstring), so a report knows it without the run's events."""
     if not plan.refine:
         return {}
-    refiner = Refiner(plan, lambda: results, pitch_band_Hz)
+    refiner = Refiner(plan, lambda: results, pitch_band_Hz, no_pitch=no_pitch)
     out: dict[tuple[int, str], str] = {}
     for li, level_N in enumerate(plan.levels_N):
         steps = [r for r in results if r["level_index"] == li and "-W" not in r["key"]]
         if len(steps) < 3:
             continue
         d = LevelData.from_steps(level_N, steps)
-        for mode in plan.refine_modes:
+        for mode in refiner.modes:
             done = sum(1 for r in steps if f"-R{mode[0].upper()}" in r["key"])
             out[(li, mode)] = refinement_end(refiner, mode, d, done) or "not finished"
     return out

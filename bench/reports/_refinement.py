@@ -34,8 +34,10 @@ def mark_refinement(modes: Sequence[ModeEstimate], meta: dict, results: list[dic
     except Exception as e:  # noqa: BLE001 - an unreadable plan: the modes come out without the outcome
         log.warning("refinement outcome unknown (stored plan: %s)", e)
         return {}
+    rig = meta.get("rig") or {}
+    no_pitch = bool(rig.get("simulated") and rig.get("model")) and pitch_band_Hz is None
     outcomes = {(float(plan.levels_N[li]), mode): why
-                for (li, mode), why in refinement_outcomes(plan, results, pitch_band_Hz).items()}
+                for (li, mode), why in refinement_outcomes(plan, results, pitch_band_Hz, no_pitch).items()}
     by_level = {d.level_N: d for d in data}
     for e in modes:
         why = outcomes.get((e.level_N, e.mode))

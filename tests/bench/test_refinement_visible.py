@@ -65,6 +65,12 @@ def test_how_a_refinement_ended_follows_from_the_stored_steps(short_budget):
                                   "resonance": {"refine": True, "modes": ["feed"], "max_steps": 20,
                                                 "tolerance": 0.0005}}})
     assert refinement_outcomes(larger, short_budget.results()) == {(0, "feed"): "not finished"}
+    # a plain rig's model has no pitching mode: its pitch is not chased, nor reported as not converged
+    both = parse_plan({"plan": {"name": "both", "levels_N": [1.0],
+                                "frequencies": {"start_Hz": 40.0, "stop_Hz": 160.0, "points": 8},
+                                "resonance": {"refine": True, "modes": ["feed", "pitch"], "max_steps": 2,
+                                              "tolerance": 0.0005}}})
+    assert set(refinement_outcomes(both, short_budget.results(), no_pitch=True)) == {(0, "feed")}
     assert run_modes(short_budget.path, model=False).modes[0].status == "not converged"
 
 
