@@ -88,6 +88,7 @@ def _load_configs(args):
 
 
 def cmd_dry_run(args) -> int:
+    from .plan_time import planned_step_list
     from .session import EnvelopeError, check_envelope, envelope, envelope_report, planned_steps
 
     plan, rig = _load_configs(args)
@@ -111,10 +112,9 @@ def cmd_dry_run(args) -> int:
               f"({plan.direction}) = {len(steps)} steps, {runs}; rig '{rig.name}'{' (simulated)' if rig.simulated else ''}")
         print(f"levels: {', '.join(q.format(v) for v in plan.levels_N)} ({q.name} amplitude"
               + (", the response fundamental held at each frequency)" if q.key != "force" else ")"))
-        print(f"expected rig time: about {_duration(seconds)}"
-              + (" with the refinement budget used up" if refined else "")
-              + f" ({q.name} control, settling, measured blocks and ramps; a simulated rig runs faster or slower "
-                "than real time)")
+        print(dry_run_time_line(plan, seconds, refined).replace("force control", f"{q.name} control"))
+        if getattr(args, "steps", False):
+            print("\n".join(["steps, in the order they run:"] + [p.line() for p in planned_step_list(plan)]))
     print(envelope_report(envelope(plan, rig)))
     from procedures.online_id import identifiability
     try:
@@ -130,6 +130,18 @@ def cmd_dry_run(args) -> int:
     for w in identifiability(runnable, rig) if plan.procedure is ProcedureKind.STEPPED_SINE else []:
         print(f"identifiability warning: {w}")
     return 0
+
+
+def dry_run_time_line(plan, typical_s: float, refined: int) -> str:
+    """dry-run's rig time: the upper bound (bench.plan_time) and the typical figure."""
+    from .plan_time import extra_block_seconds_max, rig_time_bound_s
+    return (f"expected rig time: at most {_duration(rig_time_bound_s(plan))} (every step's force control and extra "
+            f"settle blocks to the plan's limits, steps chosen online at the lowest frequency, refinement budget "
+            f"used up); without the extra settle blocks at most {_duration(rig_time_bound_s(plan, extra_settle=False))}, "
+            f"plus at most {extra_block_seconds_max(plan, min(plan.freqs_Hz)):.3g} s for each extra settle block a "
+            f"step needs (at most {plan.max_extra_settle_blocks} a step); typically about {_duration(typical_s)}"
+            + (" with the refinement budget used up" if refined else "")
+            + " (a simulated rig runs faster or slower than real time)")
 
 
 def _duration(seconds: float) -> str:
@@ -607,9 +619,12 @@ def cmd_modes(args) -> int:
     for r in runs:
         for e in r.modes:
             if e.ok:
+                eb = e.extra.get("energy_balance")
                 print(f"{r.label}: {e.mode} at {r.level_quantity.format(e.level_N)}: {e.resonance_Hz:.5g} Hz "
-                      f"[{e.resonance_low_Hz:.5g}, {e.resonance_high_Hz:.5g}], damping ratio "
-                      f"{100 * e.damping_ratio:.3g} % [{100 * e.damping_ratio_low:.3g}, {100 * e.damping_ratio_high:.3g}]")
+                      f"[{e.resonance_low_Hz:.5g}, {e.resonance_high_Hz:.5g}], damping ratio (single-mode fit) "
+                      f"{100 * e.damping_ratio:.3g} % [{100 * e.damping_ratio_low:.3g}, {100 * e.damping_ratio_high:.3g}]"
+                      + (f", (energy balance at resonance) {100 * eb.value:.3g} % [{100 * eb.low:.3g}, "
+                         f"{100 * eb.high:.3g}]" if eb is not None else ""))
             else:
                 print(f"{r.label}: {e.mode} at {r.level_quantity.format(e.level_N)}: {e.status}" + (f" ({e.note})" if e.note else ""))
     print("wrote " + ", ".join(str(f) for f in files))
@@ -732,6 +747,9 @@ def build_parser() -> argparse.ArgumentParser:
                            help="a label kept in run.json (repeatable), used by the legends of `bench modes`, "
                                 "e.g. --label lubricant=\"ISO VG 32\"")
             _add_watch_options(s)
+        else:
+            s.add_argument("--steps", action="store_true", help="list the steps the plan will run (key, level, "
+                           "frequency or \"refined, chosen online\")")
         s.set_defaults(func=func)
 
     s = sub.add_parser("resume", help="continue an interrupted run without repeating completed steps")

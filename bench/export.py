@@ -2,7 +2,11 @@
 
     <out>/steps.csv      one row per step (columns: CSV_COLUMNS)
     <out>/frf.uff        dataset 58, function type 4 (FRF): complex compliance X1/F1 (m/N)
-                         over frequency, one function per force level and sweep direction
+                         and accelerance A1/F1 ((m/s^2)/N) over frequency, one function of
+                         each per force level and sweep direction (tag q=X / q=A)
+    <out>/modes.csv      the modes per level, as `bench modes` writes them (bench.reports)
+    <out>/modes.uff      dataset 55 (data at nodes, normal mode): one record per mode and
+                         level with a value (bench.export_modes)
     <out>/time.uff       dataset 58, function type 1 (time response): force (N),
                          acceleration (m/s^2) and displacement (m) of every step's measured
                          block, abscissa spacing 1/fs
@@ -141,15 +145,26 @@ def frf_datasets(meta: dict, results: list[dict]) -> list[dict]:
                         "it is in steps.csv", q.format(level), d, steps[0]["key"])
             continue
         H = np.array([complex(s["compliance_m_per_N"]["re"], s["compliance_m_per_N"]["im"]) for s in steps])
-        ds = _dset58(func_type=FUNC_FRF, func_id=len(out) + 1, x=[s["freq_Hz"] for s in steps], data=H,
-                     id1=f"compliance X/F, {q.format(level)}, {d} sweep",
-                     id2=f"{plan.get('name', '')} on {(meta.get('rig') or {}).get('name', '')}",
-                     id3=str(meta.get("started", "")),
-                     id4=_tags(level=f"{level:g}", L=li, dir=d, n=len(steps), **({} if q == FORCE else {"unit": q.unit})),
-                     id5=f"X1/F1 from harmonic fits; {q.name} amplitude held at the level",
-                     abscissa=(SDT_FREQ, "Hz"), ordinate=(8, "m"), denominator=(13, "N"))
-        out.append(ds)
+        A = np.array([s["accelerance_abs_kg_inv"] * np.exp(1j * s["accelerance_phase_rad"]) for s in steps])
+        unit_tag = {} if q == FORCE else {"unit": q.unit}
+        for kind, data, what, sdt, unit, how in (
+                ("X", H, "compliance X/F", 8, "m", "X1/F1, probe"),
+                ("A", A, "accelerance A/F", 12, "m/s^2", "A1/F1, drive point")):
+            out.append(_dset58(
+                func_type=FUNC_FRF, func_id=len(out) + 1, x=[s["freq_Hz"] for s in steps], data=data,
+                id1=f"{what}, {q.format(level)}, {d} sweep",
+                id2=f"{plan.get('name', '')} on {(meta.get('rig') or {}).get('name', '')}",
+                id3=str(meta.get("started", "")),
+                id4=_tags(level=f"{level:g}", L=li, dir=d, n=len(steps), q=kind, **unit_tag),
+                id5=f"{how}, {q.name} amplitude held at the level; {_labels(meta)}",
+                abscissa=(SDT_FREQ, "Hz"), ordinate=(sdt, unit), denominator=(13, "N")))
     return out
+
+
+def _labels(meta: dict) -> str:
+    """The run's labels (bench run --label k=v) for a UFF ID line."""
+    labels = meta.get("labels") or {}
+    return "labels: " + (", ".join(f"{k}={v}" for k, v in labels.items()) if labels else "none")
 
 
 def time_datasets(store: RunStore, meta: dict, results: list[dict]) -> list[dict]:
@@ -191,6 +206,8 @@ def export_run(run_dir: Path, out_dir: Path | None = None, *, time_records: bool
     paths = [write_csv(results, out / "steps.csv")]
     if results:
         paths.append(_write_uff(out / "frf.uff", frf_datasets(meta, results)))
+        from .export_modes import export_modes
+        paths += export_modes(store.path, out, _write_uff)
         if time_records:
             paths.append(_write_uff(out / "time.uff", time_datasets(store, meta, results)))
     else:
@@ -218,6 +235,36 @@ class UffImport:
 
     steps: list[dict] = field(default_factory=list)
     raw: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
+
+
+def is_accelerance(ds: dict) -> bool:
+    """An FRF record of acceleration per force (our tag q=A, else the ordinate's data type 12)."""
+    q = _parse_tags(ds.get("id4", "")).get("q")
+    return q == "A" if q else int(ds.get("ordinate_spec_data_type", 8) or 8) == 12
+
+
+def _add_accelerance(steps: list[dict], ds: dict, n_fn: int) -> list[dict]:
+    """The accelerance record's values into the steps of its level and direction (same
+    frequency); a frequency without a compliance step gets a step of its own."""
+    tags = _parse_tags(ds.get("id4", ""))
+    li, direction = int(tags.get("L", n_fn)), tags.get("dir", "up")
+    mine = {(s["level_index"], s["direction"], round(s["freq_Hz"], 9)): s for s in steps}
+    extra = []
+    for f, A in zip(np.asarray(ds["x"], float), np.asarray(ds["data"])):
+        A = complex(A)
+        s = mine.get((li, direction, round(float(f), 9)))
+        if s is None:
+            s = _frf_step(tags, n_fn, len(extra), float(f))
+            extra.append(s)
+        s.update(accelerance_abs_kg_inv=abs(A), accelerance_phase_rad=float(np.angle(A)))
+    return extra
+
+
+def _frf_step(tags: dict, n_fn: int, i: int, f: float) -> dict:
+    level = float(tags["level"]) if "level" in tags else math.nan
+    li, direction = int(tags.get("L", n_fn)), tags.get("dir", "up")
+    return dict(key=f"uff-L{li:02d}-F{i:03d}-{direction}", level_index=li, freq_index=i, direction=direction,
+                target_force_N=level, force_N=level, freq_Hz=f, source="uff58-frf")
 
 
 def _frf_steps(ds: dict, n_fn: int) -> list[dict]:
@@ -329,9 +376,17 @@ def import_uff58(path: Path) -> UffImport:
     out = UffImport()
     frfs = [d for d in sets if int(d["func_type"]) == FUNC_FRF]
     times = [d for d in sets if int(d["func_type"]) == FUNC_TIME]
+    for n, ds in enumerate(frfs):        # compliance first, then each accelerance into its steps
+        try:
+            if is_accelerance(ds):
+                continue
+            out.steps.extend(_frf_steps(ds, n))
+        except (KeyError, ValueError, TypeError, IndexError) as e:
+            log.warning("%s: FRF record %d unusable (%s: %s); skipped", path, n + 1, type(e).__name__, e)
     for n, ds in enumerate(frfs):
         try:
-            out.steps.extend(_frf_steps(ds, n))
+            if is_accelerance(ds):
+                out.steps.extend(_add_accelerance(out.steps, ds, n))
         except (KeyError, ValueError, TypeError, IndexError) as e:
             log.warning("%s: FRF record %d unusable (%s: %s); skipped", path, n + 1, type(e).__name__, e)
     t = _time_steps(times)

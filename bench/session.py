@@ -472,7 +472,8 @@ def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Super
             from sim.rig import RigModel
             band = pitch_band_Hz(RigModel.from_dict(rig.model))
         refiner = Refiner(plan, lambda: store.results(warn=False), band,
-                          on_end=lambda **end: store.event("refinement_end", **end)).next_step   # decision 0050
+                          on_end=lambda **end: store.event("refinement_end", **end),       # decision 0050
+                          no_pitch=bool(rig.simulated and rig.model) and band is None).next_step   # 0056
     proc.run(store.done_keys() | skipped, record, show, choose=choose, refine=refiner)
     if online:
         store.update(identification=online.final())

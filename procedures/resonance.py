@@ -51,8 +51,10 @@ class Refiner:
     tolerance or the level's budget is spent.  ``results()`` returns the stored steps."""
 
     def __init__(self, plan: Plan, results: Callable[[], list], pitch_band_Hz: tuple[float, float] | None = None,
-                 on_end: Callable[..., None] | None = None):
+                 on_end: Callable[..., None] | None = None, no_pitch: bool = False):
         self.plan = plan
+        # a rig model without a pitching mode: its pitch is not chased (decision 0056)
+        self.modes = tuple(m for m in plan.refine_modes if not (no_pitch and m == "pitch"))
         self.results = results
         self.pitch_band_Hz = pitch_band_Hz
         self.f_min, self.f_max = min(plan.freqs_Hz), max(plan.freqs_Hz)
@@ -61,13 +63,18 @@ class Refiner:
         self._asked: set[str] = set()         # keys of the refinement steps asked for
 
     def _end(self, last: StepSpec, mode: str, reason: str, steps: int, found) -> None:
-        """Tell ``on_end`` (once per level and mode) that ``mode``'s refinement ended."""
+        """Tell ``on_end`` (once per level and mode) that ``mode``'s refinement ended; one
+        that ended without the peak known within the tolerance is also a warning."""
         if (last.level_index, mode) in self._ended:
             return
         self._ended.add((last.level_index, mode))
         owed = bool(self.plan.dwell_cycles > 0 and found is not None)
         log.info("level %g N: the %s refinement ended: %s (%d steps)%s", last.force_N, mode, END_REASONS[reason],
                  steps, "; a dwell follows" if owed else "")
+        if reason in NOT_CONVERGED:
+            log.warning("level %g N: the %s peak is not known within %g %% after %d refinement steps (%s%s)",
+                        last.force_N, mode, 100 * self.plan.refine_tolerance, steps, END_REASONS[reason],
+                        "; plan: [plan.resonance] max_steps" if reason == "budget_spent" else "")
         if self.on_end:
             self.on_end(level_index=last.level_index, level=last.force_N, mode=mode, reason=reason, steps=steps,
                         dwell_owed=owed)
@@ -77,29 +84,19 @@ class Refiner:
         level = [r for r in self.results() if r["level_index"] == li]
         steps = [r for r in level if "-W" not in r["key"]]    # dwells do not choose steps
         if len(steps) < 3:
-            for mode in self.plan.refine_modes:
+            for mode in self.modes:
                 self._end(last, mode, "too_few_steps", 0, None)
             return None
         d = LevelData.from_steps(last.force_N, steps)
         stored = {r["key"] for r in steps}
-        for mode in self.plan.refine_modes:
+        for mode in self.modes:
             done = sum(1 for r in steps if f"-R{mode[0].upper()}" in r["key"])
             found = self._resonance(mode, d)
-            f = None if found is None else self._next_from(found, d)
-            if done >= self.plan.refine_steps:
-                if f is not None:
-                    log.warning("level %g N: the %s peak is not known within %g %% after %d refinement steps "
-                                "(plan: [plan.resonance] max_steps)", last.force_N, mode,
-                                100 * self.plan.refine_tolerance, done)
-                self._end(last, mode, "budget_spent" if f is not None else "converged", done, found)
+            why = refinement_end(self, mode, d, done)
+            if why is not None:
+                self._end(last, mode, why, done, found)
                 continue
-            if f is None:
-                self._end(last, mode, "no_peak" if found is None else "converged", done, found)
-                continue
-            f = float(f"{f:.6g}")
-            if np.any(np.isclose(d.f_Hz, f, rtol=1e-9, atol=0)):
-                self._end(last, mode, "no_progress", done, found)
-                continue                 # no progress possible (a step there already)
+            f = float(f"{self._next_from(found, d):.6g}")      # type: ignore[arg-type]  # found: why is None
             step = StepSpec(last.index, li, -1, last.direction, last.force_N, f, refined=done, refined_mode=mode)
             if step.key in self._asked and step.key not in stored:      # asked for before, not measured
                 self._end(last, mode, "not_measured", done, found)
@@ -108,7 +105,7 @@ class Refiner:
             log.info("level %g N: refining the %s peak: step at %.5g Hz", last.force_N, mode, f)
             return step
         if self.plan.dwell_cycles > 0:
-            for mode in self.plan.refine_modes:
+            for mode in self.modes:
                 if any(f"-W{mode[0].upper()}" in r["key"] for r in level):
                     continue
                 found = self._resonance(mode, d)
@@ -124,22 +121,17 @@ class Refiner:
 
     def outcome(self, level_index: int, level: float) -> list[tuple[str, str, int]]:
         """How the refinement of a finished level ended, per refined mode: (mode, "converged"
-        | "budget spent" | "no peak", refinement steps taken); "budget spent" means the
-        peak was still not known within the tolerance when the budget ran out (decision 0052)."""
+        | "budget spent" | "no peak", refinement steps taken), the run's own decision
+        (:func:`refinement_end`) replayed from the stored steps (decision 0052)."""
         steps = [r for r in self.results() if r["level_index"] == level_index and "-W" not in r["key"]]
         if len(steps) < 3:
             return []
         d = LevelData.from_steps(level, steps)
         out = []
-        for mode in self.plan.refine_modes:
+        for mode in self.modes:
             done = sum(1 for r in steps if f"-R{mode[0].upper()}" in r["key"])
-            found = self._resonance(mode, d)
-            if found is None:
-                out.append((mode, "no peak", done))
-            elif done >= self.plan.refine_steps and self._next_from(found, d) is not None:
-                out.append((mode, "budget spent", done))
-            else:
-                out.append((mode, "converged", done))
+            why = refinement_end(self, mode, d, done) or "converged"
+            out.append((mode, {"no_peak": "no peak", "budget_spent": "budget spent"}.get(why, "converged"), done))
         return out
 
     def _resonance(self, mode: str, d: LevelData) -> tuple[float, float, int, np.ndarray] | None:
@@ -168,3 +160,46 @@ class Refiner:
         x, y = np.log(f[i - 1:i + 2]), np.log(mag[i - 1:i + 2])
         a, b, _ = np.polyfit(x, y, 2)
         return float(math.exp(-b / (2 * a))) if a < 0 else float(f[i])
+
+
+NOT_CONVERGED = ("budget_spent", "no_progress")
+
+
+def refinement_end(refiner: Refiner, mode: str, d: LevelData, done: int) -> str | None:
+    """Why a level's refinement of ``mode`` is over, from its stored steps ``d`` (sweep and
+    ``done`` refinement steps of that mode), or None while it goes on: "converged" (the
+    peak known within the tolerance), "no_peak" (none inside the grid), "budget_spent"
+    (``refine_steps`` taken, the peak still not known), "no_progress" (the next frequency
+    is one measured already)."""
+    found = refiner._resonance(mode, d)
+    if found is None:
+        return "no_peak"
+    f = refiner._next_from(found, d)
+    if f is None:
+        return "converged"
+    if done >= refiner.plan.refine_steps:
+        return "budget_spent"
+    if np.any(np.isclose(d.f_Hz, float(f"{f:.6g}"), rtol=1e-9, atol=0)):
+        return "no_progress"
+    return None
+
+
+def refinement_outcomes(plan: Plan, results: list[dict], pitch_band_Hz: tuple[float, float] | None = None,
+                        no_pitch: bool = False) -> dict[tuple[int, str], str]:
+    """(level index, mode) -> how each level's refinement of each refined mode ended
+    (:func:`refinement_end`; "not finished" for a level whose refinement had not ended when
+    the run stopped), from the stored steps alone: what the run decided depends only on
+    them (module docstring), so a report knows it without the run's events."""
+    if not plan.refine:
+        return {}
+    refiner = Refiner(plan, lambda: results, pitch_band_Hz, no_pitch=no_pitch)
+    out: dict[tuple[int, str], str] = {}
+    for li, level_N in enumerate(plan.levels_N):
+        steps = [r for r in results if r["level_index"] == li and "-W" not in r["key"]]
+        if len(steps) < 3:
+            continue
+        d = LevelData.from_steps(level_N, steps)
+        for mode in refiner.modes:
+            done = sum(1 for r in steps if f"-R{mode[0].upper()}" in r["key"])
+            out[(li, mode)] = refinement_end(refiner, mode, d, done) or "not finished"
+    return out

@@ -468,10 +468,10 @@ def level_modes(d: LevelData, *, feed_predicted_Hz: float | None = None, pitch: 
                              curve=d.compliance_pp, curve_name="compliance_pp", peak_index=i)
     out.append(feed)
     if pitch:
-        # the feed mode's frequency: its estimate, its edge, else its measured maximum (a
-        # feed peak without a fit is still no pitching mode)
-        fh = feed.resonance_Hz if feed.ok else (feed.edge_Hz if math.isfinite(feed.edge_Hz) else
-                                                None if i is None else float(d.f_Hz[i]))
+        # the feed mode's frequency: its estimate (a coarse one too), its edge, else its
+        # measured maximum (a feed peak without a fit is still no pitching mode)
+        fh = feed.resonance_Hz if math.isfinite(feed.resonance_Hz) else (
+            feed.edge_Hz if math.isfinite(feed.edge_Hz) else None if i is None else float(d.f_Hz[i]))
         j = find_pitch(d, pitch_predicted_Hz, pitch_band_Hz, fh)
         if j is None:
             out.append(ModeEstimate("pitch", d.level_N, "not found", "|A1/F1|",

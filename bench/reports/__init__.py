@@ -8,15 +8,17 @@ Decision record 0016.
 """
 
 from ._compare import render_compare_html, write_compare_html
+from ._damping import damping_row
 from ._figures import plot_identification
 from ._html import render_analysis_html, write_analysis_html
 from ._identification import ID_PARAMS, IdentificationData, analysis_estimate, identification_data
 from ._markdown import write_report
 from ._modes import COLUMNS as MODES_COLUMNS
 from ._modes import RunModes, run_modes, write_modes
+from ._modes import write_csv as write_modes_csv
 from ._run import RunData, load_run
 from ._steps import UNSETTLED_RESIDUAL, residual_ratio
 
-__all__ = ["ID_PARAMS", "UNSETTLED_RESIDUAL", "IdentificationData", "MODES_COLUMNS", "RunData", "RunModes", "analysis_estimate", "identification_data", "load_run",
+__all__ = ["ID_PARAMS", "UNSETTLED_RESIDUAL", "IdentificationData", "MODES_COLUMNS", "RunData", "RunModes", "analysis_estimate", "damping_row", "identification_data", "load_run",
            "plot_identification", "render_analysis_html", "render_compare_html", "residual_ratio", "run_modes", "write_analysis_html",
-           "write_compare_html", "write_modes", "write_report"]
+           "write_compare_html", "write_modes", "write_modes_csv", "write_report"]

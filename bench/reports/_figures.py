@@ -591,6 +591,22 @@ MODEL_LINE_LABEL = ("rig model: its resonance per level, as measured\n(every dec
                     "decision 0054)")
 
 
+def _energy_balance_points(ax, modes: list, colour) -> bool:
+    """The energy-balance damping ratios (per cent, 95 % bars) of one run's estimates of one
+    mode (bench.reports._damping); True when any was drawn."""
+    pts = [(e.level_N, eb) for e in modes if (eb := e.extra.get("energy_balance")) is not None
+           and math.isfinite(eb.value)]
+    if not pts:
+        return False
+    F = np.array([p[0] for p in pts])
+    v = np.array([100 * p[1].value for p in pts])
+    err = np.vstack([np.clip(v - [100 * p[1].low for p in pts], 0, None),
+                     np.clip(np.array([100 * p[1].high for p in pts]) - v, 0, None)])
+    ax.errorbar(F * 1.03, v, yerr=np.where(np.isfinite(err), err, 0.0), color=colour, marker="*", ms=7, capsize=2,
+                lw=0, elinewidth=0.8)
+    return True
+
+
 def _run_marker(run) -> str:
     """A phase-resonance run's points (bench modes, decision 0044) are diamonds, a stepped sine's circles."""
     return "D" if getattr(run, "kind", "") == "phase_resonance" else "o"
@@ -661,7 +677,7 @@ def plot_fig17(runs: list, title: str = "") -> Figure:
     damping ratio against the force amplitude, per run (one colour each)."""
     fig = Figure(figsize=(11, 8), layout="constrained")
     axes = fig.subplots(2, 2)
-    edge = model = band = hp = pr = False
+    edge = model = band = hp = pr = eb = False
     for r, colour in zip(runs, RUN_COLOURS * 10):
         mk = _run_marker(r)
         pr |= mk != "o"
@@ -677,6 +693,7 @@ def plot_fig17(runs: list, title: str = "") -> Figure:
                 hp = True
                 a_z.plot([e.level_N for e in okz], [100 * e.half_power_damping_ratio for e in okz], ls="none",
                          marker="s", mfc="none", mec=colour, ms=6)
+            eb |= _energy_balance_points(a_z, ms, colour)
             edge |= _edge_points(a_f, ms, colour)
         for row, peaks in ((0, r.model_feed), (1, getattr(r, "model_pitch", {}))):
             pts = sorted((lv, v[0]) for lv, v in peaks.items() if math.isfinite(v[0]))
@@ -694,11 +711,16 @@ def plot_fig17(runs: list, title: str = "") -> Figure:
             ax.set(xscale="log", xlabel=level_axis(runs), title=titles[row][col],
                    ylabel="resonance frequency (Hz)" if col == 0 else "damping ratio (%)")
             ax.grid(True, which="both", alpha=0.3)
-    extra = [Line2D([], [], color="0.3", marker="o", lw=0, label="measured: single-mode fit, 95 % interval")]
+    extra = [Line2D([], [], color="0.3", marker="o", lw=0,
+                    label="measured: single-mode fit, 95 % interval\n(damping: the fit's zeta)")]
     if pr:
         extra.append(_pr_handle())
+    if eb:
+        extra.append(Line2D([], [], color="0.3", marker="*", lw=0, label="damping: energy balance at resonance,\n"
+                            "|F1| sin(-phase) / (2 m w^2 |X1|), 95 %\n(pitch: m the model's modal mass)"))
     if hp:
-        extra.append(Line2D([], [], color="0.3", marker="s", mfc="none", ls="none", label="half-power (cross-check)"))
+        extra.append(Line2D([], [], color="0.3", marker="s", mfc="none", ls="none",
+                            label="damping: half-power bandwidth"))
     if model:
         extra.append(Line2D([], [], color="0.3", ls="--", label=MODEL_LINE_LABEL))
     if band:

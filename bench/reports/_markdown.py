@@ -29,7 +29,9 @@ from ..storage import shown
 from ..verdict import promise
 from . import _figures as figures
 from ._analysis import analysis_data
+from ._damping import DAMPING_HEADS, DAMPING_KINDS, damping_notes, damping_row
 from ._identification import ID_PARAMS, IdentificationData, determined_from, finite, steps_of
+from ._refinement import refinement_lines
 from ._run import ANALYSIS_HTML, RunData, load_run
 from ._steps import UNSETTLED_RESIDUAL, control_error, pp_source
 
@@ -461,11 +463,16 @@ def modes_md(run: RunData) -> list[str]:
                 if e.ok else "-")
         model = (f"{row['model_resonance_Hz']:.4g}" if math.isfinite(row["model_resonance_Hz"])
                  else row["model_note"] or "-")
+        z = damping_row(e)
         rows.append([e.mode, f"{e.level_N:g}", status, _interval(e.resonance_Hz, e.resonance_low_Hz,
-                     e.resonance_high_Hz), _interval(e.damping_ratio, e.damping_ratio_low, e.damping_ratio_high, 100),
-                     _interval(e.half_power_damping_ratio, math.nan, math.nan, 100), peak, str(e.n_points), model])
-    md += [""] + _table(["mode", run.level_quantity.heading, "status", "resonance (Hz) [95 %]", "damping ratio (%) [95 %]",
-                         "half-power (%)", "peak [95 %]", "points", "model resonance (Hz)"], rows) + [""]
+                     e.resonance_high_Hz), *(_interval(z[f"damping_{d}_fraction"], z[f"damping_{d}_low_fraction"],
+                                                       z[f"damping_{d}_high_fraction"], 100) for d in DAMPING_KINDS),
+                     peak, str(e.n_points), model])
+    md += [""] + _table(["mode", run.level_quantity.heading, "status", "resonance (Hz) [95 %]",
+                         *(f"damping: {DAMPING_HEADS[d]} (%) [95 %]" for d in DAMPING_KINDS),
+                         "peak [95 %]", "points", "model resonance (Hz)"], rows) + [""]
+    md += damping_notes(run.modes.modes)
+    md += [*refinement_lines(run.modes.refinement), ""] if refinement_lines(run.modes.refinement) else []
     for mode in ("feed", "pitch"):
         ms = [e for e in run.modes.modes if e.mode == mode]
         ok = [e for e in ms if e.ok]

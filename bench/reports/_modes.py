@@ -23,19 +23,23 @@ import numpy as np
 
 from procedures.kind import FORCE, Quantity, of_stored_plan
 from sim.modal import LevelData, ModeEstimate, pitch_band_Hz, track_modes
+from sim.modal_flat import mark_overdamped
 
 from ..storage import RunStore
+from ._damping import DAMPING_COLUMNS, add_damping, damping_row
+from ._earned import earned_pitch, has_pitch
 from ._held import comparison_of
 from ._model import ModelComparison
+from ._refinement import mark_refinement
 
 log = logging.getLogger(__name__)
 
 # a run's levels are amplitudes of its procedure's quantity (decision 0052): `level` in
 # `level_unit` (N, m, m/s^2); `level_N` stays for the readers of force levels and is empty
-# for a level that is not a force (before, it held a response level's metres)
+# for a level that is not a force (before, it held a response level's metres); damping
+# ratios as fractions, each named by its definition (decision 0056)
 COLUMNS = ("run", "label", "mode", "level", "level_unit", "level_N", "status", "curve", "resonance_Hz", "resonance_low_Hz",
-           "resonance_high_Hz", "damping_ratio", "damping_ratio_low", "damping_ratio_high",
-           "half_power_damping_ratio", "peak_compliance_m_per_N", "peak_accelerance_per_kg", "n_points",
+           "resonance_high_Hz", *DAMPING_COLUMNS, "peak_compliance_m_per_N", "peak_accelerance_per_kg", "n_points",
            "model_resonance_Hz", "model_note", "note")
 
 
@@ -51,6 +55,7 @@ class RunModes:
     kind: str = "stepped_sine"      # or "phase_resonance": one point per level, drawn with its own marker
     model_pitch: dict[float, tuple[float, float, str]] = field(default_factory=dict)  # level -> (Hz, 1/kg, note)
     level_quantity: Quantity = FORCE   # what the levels are amplitudes of (a response-controlled run: m or m/s^2)
+    refinement: dict = field(default_factory=dict)   # (level_N, mode) -> how its refinement ended (_refinement)
 
     def rows(self) -> list[dict]:
         out = []
@@ -62,9 +67,7 @@ class RunModes:
             out.append(dict(run=str(self.path), label=self.label, mode=e.mode, level=e.level_N, level_unit=q.unit,
                             level_N=e.level_N if q == FORCE else math.nan, status=e.status,
                             curve=e.curve, resonance_Hz=e.resonance_Hz, resonance_low_Hz=e.resonance_low_Hz,
-                            resonance_high_Hz=e.resonance_high_Hz, damping_ratio=e.damping_ratio,
-                            damping_ratio_low=e.damping_ratio_low, damping_ratio_high=e.damping_ratio_high,
-                            half_power_damping_ratio=e.half_power_damping_ratio, peak_compliance_m_per_N=pk_c,
+                            resonance_high_Hz=e.resonance_high_Hz, **damping_row(e), peak_compliance_m_per_N=pk_c,
                             peak_accelerance_per_kg=pk_a, n_points=e.n_points,
                             model_resonance_Hz=mf[0] if mf else math.nan,
                             model_note=mf[2] if mf else (f"model: above {self.pitch_band[0]:.4g} Hz (friction free)"
@@ -177,11 +180,21 @@ def modes_of(path: Path, meta: dict, results: list[dict], cmp: ModelComparison |
         from sim.rig import RigModel
         band = pitch_band_Hz(RigModel.from_dict(rig["model"]))
     pred = {lv: v[0] for lv, v in feed_model.items()}
-    modes = track_modes(data, feed_predicted_Hz=pred, pitch=True, pitch_band_Hz=band)
+    model_without_pitch = bool(rig.get("model")) and band is None and not has_pitch(rig["model"])
+    modes = track_modes(data, feed_predicted_Hz=pred, pitch=not model_without_pitch, pitch_band_Hz=band)
+    if band is None and not rig.get("model"):
+        modes = earned_pitch(modes, data)                  # no model: a second peak must earn its place
     if band is None and not any(e.mode == "pitch" and e.ok for e in modes):
         modes = [e for e in modes if e.mode != "pitch"]    # no pitching mode in the data nor the model
+    data_at = {d.level_N: d for d in data}
+    for e in modes:                                        # a plateau is not a point (decision 0056)
+        if e.level_N in data_at:
+            d = data_at[e.level_N]
+            mark_overdamped(e, d.f_Hz, d.compliance_pp if e.mode == "feed" else np.abs(d.accelerance))
+    add_damping(modes, results, meta, [float(x) for x in levels_N])
+    refinement = mark_refinement(modes, meta, results, data, levels_N, band)
     return RunModes(Path(path), run_label(meta, path), modes, feed_model, band, model_pitch=pitch_model,
-                    level_quantity=level)
+                    level_quantity=level, refinement=refinement)
 
 
 def run_modes(path: Path, *, model: bool = True) -> RunModes:

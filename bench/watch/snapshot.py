@@ -333,7 +333,9 @@ class RunReader:
             if rig.get("simulated") and rig.get("model"):
                 from sim.rig import RigModel
                 band = pitch_band_Hz(RigModel.from_dict(rig["model"]))
-            modes = track_modes(data, pitch=True, pitch_band_Hz=band)
+            # a rig model without a pitching mode: no pitch rows (decision 0056)
+            modes = track_modes(data, pitch=not (rig.get("simulated") and rig.get("model") and band is None),
+                                pitch_band_Hz=band)
         except Exception as e:  # noqa: BLE001 - the page must come out; the rest of it is unaffected
             log.warning("modes could not be estimated: %s", e)
             return []

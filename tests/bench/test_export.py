@@ -24,8 +24,8 @@ def exported(run, tmp_path_factory):
     return {p.name: p for p in paths}
 
 
-def test_export_writes_csv_frf_and_time_files(exported):
-    assert set(exported) == {"steps.csv", "frf.uff", "time.uff"}
+def test_export_writes_csv_frf_time_and_mode_files(exported):
+    assert set(exported) == {"steps.csv", "frf.uff", "time.uff", "modes.csv", "modes.uff"}
 
 
 def test_csv_has_the_documented_columns_and_one_row_per_step(run, exported):
@@ -44,25 +44,34 @@ def test_csv_has_the_documented_columns_and_one_row_per_step(run, exported):
         assert row["force_converged"] in ("0", "1") and row["direction"] in ("up", "down")
 
 
-def test_frf_uff_holds_one_compliance_frf_per_level_and_direction(run, exported):
+def test_frf_uff_holds_compliance_and_accelerance_per_level_and_direction(run, exported):
+    """Issue 32 item 5: the accelerance A1/F1 ((m/s^2)/N, ordinate data type 12) beside
+    the compliance X1/F1 (m/N, type 8), as pyuff (any UFF reader) sees them."""
     sets = pyuff.UFF(str(exported["frf.uff"])).read_sets()
     sets = [sets] if isinstance(sets, dict) else sets
     results = run.results()
-    assert len(sets) == 4
+    assert len(sets) == 8
     seen = set()
     for ds in sets:
         assert ds["type"] == 58 and ds["func_type"] == 4
         assert ds["abscissa_spec_data_type"] == 18 and ds["abscissa_axis_units_lab"].strip() == "Hz"
-        assert ds["ordinate_axis_units_lab"].strip() == "m" and ds["orddenom_axis_units_lab"].strip() == "N"
+        assert ds["orddenom_spec_data_type"] == 13 and ds["orddenom_axis_units_lab"].strip() == "N"
         tags = dict(w.split("=") for w in ds["id4"].split()[1:])
-        level, direction = float(tags["level"]), tags["dir"]
-        seen.add((level, direction))
+        level, direction, q = float(tags["level"]), tags["dir"], tags["q"]
+        seen.add((level, direction, q))
         steps = sorted((r for r in results if r["target_force_N"] == level and r["direction"] == direction),
                        key=lambda r: r["freq_Hz"])
         np.testing.assert_allclose(ds["x"], [r["freq_Hz"] for r in steps], rtol=1e-5)
-        expected = [complex(r["compliance_m_per_N"]["re"], r["compliance_m_per_N"]["im"]) for r in steps]
+        if q == "X":
+            assert ds["ordinate_spec_data_type"] == 8 and ds["ordinate_axis_units_lab"].strip() == "m"
+            expected = [complex(r["compliance_m_per_N"]["re"], r["compliance_m_per_N"]["im"]) for r in steps]
+        else:
+            assert ds["ordinate_spec_data_type"] == 12 and ds["ordinate_axis_units_lab"].strip() == "m/s^2"
+            assert "accelerance" in ds["id1"]
+            expected = [r["accelerance_abs_kg_inv"] * np.exp(1j * r["accelerance_phase_rad"]) for r in steps]
         np.testing.assert_allclose(ds["data"], expected, rtol=1e-9)
-    assert seen == {(1.0, "up"), (1.0, "down"), (5.0, "up"), (5.0, "down")}
+        assert "labels: " in ds["id5"]
+    assert seen == {(lv, d, q) for lv in (1.0, 5.0) for d in ("up", "down") for q in ("X", "A")}
 
 
 def test_time_uff_holds_force_acceleration_and_displacement_of_every_step(run, exported):
@@ -94,6 +103,8 @@ def test_imported_frfs_give_the_stored_compliance(run, exported):
         assert s["freq_Hz"] == pytest.approx(r["freq_Hz"], rel=1e-5)
         assert s["compliance_abs_m_per_N"] == pytest.approx(r["compliance_abs_m_per_N"], rel=1e-9)
         assert s["compliance_phase_rad"] == pytest.approx(r["compliance_phase_rad"], abs=1e-9)
+        assert s["accelerance_abs_kg_inv"] == pytest.approx(r["accelerance_abs_kg_inv"], rel=1e-9)
+        assert s["accelerance_phase_rad"] == pytest.approx(r["accelerance_phase_rad"], abs=1e-9)
 
 
 def test_imported_time_records_rebuild_the_step_results(run, exported):
@@ -115,7 +126,7 @@ def test_imported_time_records_rebuild_the_step_results(run, exported):
 
 def test_bench_export_command_writes_into_the_given_directory(run, tmp_path, capsys):
     assert main(["export", str(run.path), "--out", str(tmp_path / "x"), "--no-time"]) == 0
-    assert sorted(p.name for p in (tmp_path / "x").iterdir()) == ["frf.uff", "steps.csv"]
+    assert sorted(p.name for p in (tmp_path / "x").iterdir()) == ["frf.uff", "modes.csv", "modes.uff", "steps.csv"]
     assert "frf.uff" in capsys.readouterr().out
 
 
@@ -126,3 +137,34 @@ def test_import_of_a_file_without_dataset_58_says_so(tmp_path):
                                     mode="overwrite")
     with pytest.raises(ValueError, match="no dataset 58"):
         import_uff58(path)
+
+
+def test_the_modes_leave_as_csv_and_as_uff_dataset_55(run, exported):
+    """Issue 32 item 5: modes.csv (the columns of `bench modes`, damping in fractions) and
+    one dataset 55 (normal mode) per mode and level with a value, read back by pyuff: its
+    frequency and viscous damping the single-mode fit's pole, its ID lines the resonance
+    with its interval and the three named damping ratios in per cent."""
+    from bench.reports import run_modes
+    from bench.reports._modes import COLUMNS
+    with open(exported["modes.csv"], newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert tuple(rows[0]) == COLUMNS and "damping_fit_fraction" in COLUMNS
+    modes = [e for e in run_modes(run.path).modes if np.isfinite(e.resonance_Hz)]
+    assert modes
+    sets = pyuff.UFF(str(exported["modes.uff"])).read_sets()
+    sets = [sets] if isinstance(sets, dict) else sets
+    assert len(sets) == len(modes)
+    for ds, e in zip(sets, modes):
+        assert ds["type"] == 55 and ds["analysis_type"] == 2
+        assert ds["mode_n"] == {"feed": 1, "pitch": 2}[e.mode]
+        assert ds["freq"] == pytest.approx(e.natural_Hz if np.isfinite(e.natural_Hz) else e.resonance_Hz, rel=1e-5)
+        assert ds["modal_damp_vis"] == pytest.approx(e.damping_ratio if np.isfinite(e.damping_ratio) else 0.0,
+                                                     rel=1e-5, abs=1e-9)
+        tags = dict(w.split("=") for w in ds["id4"].split()[1:])
+        assert (tags["mode"], float(tags["level"])) == (e.mode, e.level_N)
+        assert float(tags["fr"]) == pytest.approx(e.resonance_Hz, rel=1e-6)
+        assert float(tags["lo"]) <= float(tags["fr"]) <= float(tags["hi"])
+        assert "zeta % energy balance" in ds["id3"] and "half-power" in ds["id3"]
+        if e.mode == "feed" and ds["modal_m"] > 0:
+            assert ds["modal_m"] == pytest.approx(10.0)       # the carriage's mass, as modes.csv says
+            assert ds["r1"][0] == pytest.approx(1 / np.sqrt(10.0), rel=1e-5)
