@@ -203,7 +203,15 @@ def plot_quality(series, colours, title, tolerance: float | None, level: Quantit
     return fig
 
 
-def plot_model(series, colours, title, cmp: ModelComparison, level: Quantity = FORCE) -> Figure:
+def default_lines(cmp: ModelComparison) -> str:
+    """What a comparison's lines are: the rig's full model on the compiled plant (decision
+    0054) or the plain Masing carriage by shooting."""
+    return ("the rig's model (every effect its file declares, compiled plant)" if cmp.responses
+            else "model (sim.shooting, rig's true parameters)")
+
+
+def plot_model(series, colours, title, cmp: ModelComparison, level: Quantity = FORCE,
+               lines: str = "") -> Figure:
     fig = Figure(figsize=(10, 9), layout="constrained")
     ax1, ax2 = fig.subplots(2, 1, sharex=True, height_ratios=(2, 1))
     gamma0 = {c.level_N: c.gamma0 for c in cmp.levels}
@@ -224,8 +232,7 @@ def plot_model(series, colours, title, cmp: ModelComparison, level: Quantity = F
                  mec=c, ms=7)
         ax2.plot(s.freq_Hz[flagged], diff[flagged], ls="none", marker="x", color="r", ms=5)
     ax1.set(yscale="log", ylabel="compliance_pp (m/N)",
-            title=("lines: the rig's model (every effect its file declares, compiled plant)" if cmp.responses
-                   else "lines: model (sim.shooting, rig's true parameters)") + "; markers: measured compliance_pp")
+            title=f"lines: {lines or default_lines(cmp)}; markers: measured compliance_pp")
     ax2.axhline(0, color="k", lw=0.8)
     ax2.set(xscale="log", xlabel="frequency (Hz)", ylabel="measured / model - 1 (%)",
             title=f"relative difference (red x: displacement residual > {100 * UNSETTLED_RESIDUAL:g} % of the "

@@ -401,11 +401,14 @@ def _write_figures(run: RunData, out: Path, others=()) -> list[tuple[str, str]]:
                       + (f"; squares: the modes of {len(others)} stepped-sine run{'s' * (len(others) != 1)} "
                          "(`--with`) at their peaks' amplitudes, with 95 % intervals." if others else ".")))
     if run.comparison:
-        save(figures.plot_model(series, colours, title, run.comparison, level=q), out / "model_vs_measurement.png")
+        held = run.kind is ProcedureKind.RESPONSE_CONTROLLED
+        save(figures.plot_model(series, colours, title, run.comparison, level=q,
+                                **({"lines": "model at the held response (single-harmonic balance, rig's true "
+                                             "parameters)"} if held else {})), out / "model_vs_measurement.png")
         files.append(("model_vs_measurement.png", "simulated rig only: the rig model's compliance_pp (its "
-                      "file's values and every effect it declares; lines" + (", at each level's held response"
-                                                                            if run.kind is
-                                                                            ProcedureKind.RESPONSE_CONTROLLED else "")
+                      "file's values and every effect it declares; lines" + (", at each level's held response: "
+                                                                            "one mode, single-harmonic balance"
+                                                                            if held else "")
                       + ") over the measured compliance_pp (markers), and the relative differences from the same "
                       "lines (flagged steps marked)."))
     ident = run.ident
