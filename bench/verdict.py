@@ -2,8 +2,9 @@
 
 A stepped sine promises each step's force within tolerance; a response-controlled stepped
 sine the response within tolerance at each step; phase resonance a locked point at every
-planned level.  The report's overall line and ``bench run``'s exit status read the same
-:func:`promise` (a completed phase-resonance run with a level not locked exits 1).
+planned level; a refined plan each refined peak known within its tolerance.  The report's
+overall line and ``bench run``'s exit status read the same :func:`promise` (a completed
+run with a level not locked, or a refinement that spent its budget, exits 1).
 """
 
 from __future__ import annotations
@@ -48,7 +49,8 @@ def refinement(plan: dict, results: list[dict], rig: dict | None = None) -> tupl
         from sim.modal import pitch_band_Hz
         from sim.rig import RigModel
         band = pitch_band_Hz(RigModel.from_dict(rig["model"]))
-    refiner = Refiner(p, lambda: results, band)
+    no_pitch = bool(rig and rig.get("simulated") and rig.get("model")) and band is None   # as the run (0056)
+    refiner = Refiner(p, lambda: results, band, no_pitch=no_pitch)
     q = p.level_quantity
     ends = [(q.format(level), mode, how, n) for li, level in enumerate(p.levels_N)
             for mode, how, n in refiner.outcome(li, level)]
@@ -65,7 +67,7 @@ def promise(plan: dict, results: list[dict], rig: dict | None = None, *, complet
     """The procedure's promise against the stored steps ``results`` of a run whose stored
     plan is ``plan`` (run.json's; an older one without ``procedure`` is a stepped sine); a
     refined plan's refinement too, once ``completed`` (converged, or the budget spent: then
-    not "went well"; the exit status stays 0: decision 0052)."""
+    not "went well" and ``fatal``: `bench run` exits 1, issue 30 item 4)."""
     kind, level = of_stored_plan(plan)
     tol = plan.get("force_tolerance")
     within = f"within {100 * tol:g} %" if isinstance(tol, (int, float)) else "within tolerance"
@@ -84,6 +86,6 @@ def promise(plan: dict, results: list[dict], rig: dict | None = None, *, complet
     if kind is ProcedureKind.RESPONSE_CONTROLLED:
         name = level.name
         return Promise(kind, f"the {name} ({level.symbol}) held {within} of its level at every step{also}",
-                       _missed_tolerance(results, f"{name} ({level.symbol})") + unrefined, False)
+                       _missed_tolerance(results, f"{name} ({level.symbol})") + unrefined, bool(unrefined))
     return Promise(kind, f"the force {within} at every step{also}", _missed_tolerance(results, "force") + unrefined,
-                   False)
+                   bool(unrefined))

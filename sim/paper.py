@@ -548,8 +548,9 @@ def _overlay(ax_feed, ax_pitch, ax_z, run: dict, colour) -> None:
         err = np.abs(np.array([[r["resonance_low_Hz"] for r in rs], [r["resonance_high_Hz"] for r in rs]]) - v)
         ax.errorbar(F, v, yerr=err, fmt="o", color=colour, mfc="none", capsize=3, label=f"measured: {run['label']}")
         if mode == "pitch":
-            z = np.array([r["damping_ratio"] for r in rs])
-            zerr = np.abs(np.array([[r["damping_ratio_low"] for r in rs], [r["damping_ratio_high"] for r in rs]]) - z)
+            z = np.array([r["damping_fit_fraction"] for r in rs])        # modes.csv (decision 0056)
+            zerr = np.abs(np.array([[r["damping_fit_low_fraction"] for r in rs],
+                                    [r["damping_fit_high_fraction"] for r in rs]]) - z)
             ax_z.errorbar(F, 100 * z, yerr=100 * zerr, fmt="o", color=colour, mfc="none", capsize=3,
                           label=f"measured: {run['label']}")
 

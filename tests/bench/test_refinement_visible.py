@@ -35,10 +35,10 @@ def short_budget(tmp_path_factory):
 
 def test_a_refinement_out_of_budget_is_an_event_a_status_and_a_report_line(short_budget, tmp_path):
     events = [json.loads(line) for line in (short_budget.path / "events.jsonl").read_text().splitlines()]
-    told = [e for e in events if e["event"] == "refinement_not_converged"]
+    told = [e for e in events if e["event"] == "refinement_end"]          # decision 0050's record
     assert len(told) == 1                       # once, however often the refiner was asked
-    assert (told[0]["mode"], told[0]["level_N"], told[0]["reason"], told[0]["steps"]) == ("feed", 1.0,
-                                                                                         "budget_spent", 2)
+    assert (told[0]["mode"], told[0]["level"], told[0]["reason"], told[0]["steps"]) == ("feed", 1.0,
+                                                                                       "budget_spent", 2)
     assert main(["modes", str(short_budget.path), "--out", str(tmp_path / "m"), "--no-model"]) == 0
     (row,) = list(csv.DictReader(open(tmp_path / "m" / "modes.csv")))
     assert row["status"] == "not converged" and "budget" in row["note"]

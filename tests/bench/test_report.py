@@ -420,8 +420,11 @@ def test_the_report_lists_the_same_rejected_and_flagged_steps_as_bench_analyze(r
         store.write_step(key, r, raw)
     src = load_source(run)
     assert [x.step for x in src.rejected] == [clipped] and "force sensor (force)" in src.rejected[0].reason
-    lines = [a for s in src.steps if s.key == hummed for a in s.quality.artefacts if a.kind == "line_interference"]
-    assert len(lines) == 1 and lines[0].freq_Hz == pytest.approx(50.0, abs=0.05)
+    # one step's 50 Hz line: no source comes back over the run, so no mains cause (decision
+    # 0053); the step is flagged for it all the same (the rig's own ringing, or a line)
+    at50 = [a for s in src.steps if s.key == hummed for a in s.quality.artefacts
+            if a.kind in ("line_interference", "unsettled_transient") and abs(a.freq_Hz - 50.0) <= 0.05]
+    assert len(at50) == 1
     section = _section(write_report(run).read_text(), "Steps needing attention")
     listed = {}
     for line in section.splitlines():
@@ -430,4 +433,4 @@ def test_the_report_lists_the_same_rejected_and_flagged_steps_as_bench_analyze(r
             listed[cells[0]] = (cells[1], cells[2])
     assert listed == {k: (status, why.replace("|", "\\|")) for k, status, why in src.attention()}
     assert listed[clipped][0] == "rejected" and "clipping" in listed[clipped][1]
-    assert listed[hummed][0] == "flagged" and "50 Hz line" in listed[hummed][1]
+    assert listed[hummed][0] == "flagged" and "50" in listed[hummed][1]
