@@ -18,9 +18,9 @@ from pathlib import Path
 import pytest
 
 from bench.config import DEFAULTS, parse_plan, parse_stored_plan
+from benchtools import REPO
 from procedures.kind import DISP, FORCE, PHASE, ProcedureKind, of_stored_plan
 
-REPO = Path(__file__).resolve().parents[2]
 RIG = str(DEFAULTS / "sim_rig.toml")
 RC_LEVELS = (1e-6, 3e-6)
 

@@ -3,7 +3,7 @@ fitted to a run's drive-voltage-to-force ratios, and the twin of a source with a
 discovered term or a measurement artefact reproducing that source.
 
 - shaker: a run on the simulated rig with a shaker unlike the defaults
-  (tests/bench/twin_sources.SHAKER).  Its fitted parameters must cover the truth, the
+  (benchtools/twin_sources.SHAKER).  Its fitted parameters must cover the truth, the
   fitted force per volt must reproduce each step's measured one, and the plan run on the
   twin must measure the same force per volt and need the same force-control iterations.
   The formula is checked on its own against sim.plant_effects.shaker_frf (the complex
@@ -27,11 +27,10 @@ from bench.session import run_plan
 from bench.sources import load_source
 from bench.storage import RunStore
 from bench.twin import SHAKER_PARAMS, drive_ratio, make_twin, shaker_model, shaker_ratio
+from benchtools.twin_sources import SHAKER, shaker_plan, shaker_rig, write_foreign_uff
 from sim.discrepancy.cases import make_case
 from sim.plant_effects import shaker_frf
 from sim.rig import RigModel
-
-from .twin_sources import SHAKER, shaker_plan, shaker_rig, write_foreign_uff
 
 RATIO_TOL = 0.002         # the fitted and the twin run's force per volt, per step (observed: 1e-4)
 
