@@ -676,17 +676,23 @@ def _json_reason(e: json.JSONDecodeError) -> str:
     return f"{cut}not valid JSON ({e.msg} at line {e.lineno} column {e.colno}, file of {len(e.doc)} characters)"
 
 
+def _read_step_file(path: Path, key: str, what: str) -> bytes:
+    """The bytes of one of a step's two files (``what``: which, for a missing one); a file
+    missing, not a regular file, over its bound or unreadable is a :class:`DamagedStep`."""
+    try:
+        return read_file(path)
+    except FileNotFoundError:
+        raise DamagedStep(StepProblem(key, path, "missing", f"missing ({what})")) from None
+    except UnreadableFile as e:
+        raise DamagedStep(StepProblem(key, path, "corrupt", str(e).split(": ", 1)[-1])) from None
+    except OSError as e:
+        raise DamagedStep(StepProblem(key, path, "corrupt", f"unreadable ({e.strerror})")) from None
+
+
 def _read_step_json(path: Path, key: str) -> tuple[StepResult, dict | None]:
     def bad(kind, reason):
         return DamagedStep(StepProblem(key, path, kind, reason))
-    try:
-        data = read_file(path)
-    except FileNotFoundError:
-        raise bad("missing", "missing (the step's result file)") from None
-    except UnreadableFile as e:
-        raise bad("corrupt", str(e).split(": ", 1)[-1]) from None
-    except OSError as e:
-        raise bad("corrupt", f"unreadable ({e.strerror})") from None
+    data = _read_step_file(path, key, "the step's result file")
     if not data.strip():
         raise bad("truncated", "empty (truncated to 0 bytes)")
     try:
@@ -717,14 +723,7 @@ def _read_step_json(path: Path, key: str) -> tuple[StepResult, dict | None]:
 def _check_npz(path: Path, key: str, integrity: dict | None) -> None:
     def bad(kind, reason):
         return DamagedStep(StepProblem(key, path, kind, reason))
-    try:
-        data = read_file(path)
-    except FileNotFoundError:
-        raise bad("missing", "missing (the step's raw block; its result file is there)") from None
-    except UnreadableFile as e:
-        raise bad("corrupt", str(e).split(": ", 1)[-1]) from None
-    except OSError as e:
-        raise bad("corrupt", f"unreadable ({e.strerror})") from None
+    data = _read_step_file(path, key, "the step's raw block; its result file is there")
     size = len(data)
     if integrity is None:                       # a step written before checksums existed
         if not zipfile.is_zipfile(io.BytesIO(data)):

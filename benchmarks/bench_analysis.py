@@ -17,7 +17,7 @@ physical cause in <= 5 % of cases, clean cases with no cause >= 95 %, a 90-step 
     python benchmarks/bench_analysis.py --source independent [--cases 36] [--levels 5 --freqs 18] [--cache DIR]
     python benchmarks/bench_analysis.py ... [--profile] [--drop-transients]
 
-``--source independent``: the cases come from tests/independent_masing.py (solve_ivp on
+``--source independent``: the cases come from benchtools/independent_masing.py (solve_ivp on
 the documented equations, no code shared with ``sim/``), written to an untagged UFF58
 file and analysed as ``bench analyze FILE`` does (``bench.sources.load_source``, the
 step-quality check's artefacts, ``analyze_steps``).  Kinds: clean, every catalog effect,
@@ -222,7 +222,7 @@ def run_case(seed: int) -> dict:
 
 
 def _uff_effects(fx: dict, rig: dict) -> dict:
-    """tests/independent_masing.generate_uff's arguments for RigModel fields (draw_effect's)."""
+    """benchtools/independent_masing.generate_uff's arguments for RigModel fields (draw_effect's)."""
     names = dict(cubic_spring_N_per_m3="cubic_N_per_m3", quadratic_damping_N_s2_per_m2="quadratic_N_s2_per_m2",
                  friction_asymmetry="asymmetry")
     out: dict = {}
@@ -250,7 +250,7 @@ def independent_case(seed: int, levels: int = 5, freqs: int = 18, cache: str | N
     friction; above 1 the carriage slides grossly at the upper levels)."""
     import tempfile
 
-    from tests.independent_masing import generate_uff
+    from benchtools.independent_masing import generate_uff
 
     kind = INDEPENDENT_KINDS[seed % len(INDEPENDENT_KINDS)]
     rng = np.random.default_rng(5000 + seed)

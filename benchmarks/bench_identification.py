@@ -28,8 +28,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from tests.procedures.test_identification import TOLERANCE, run_rigs  # noqa: E402
-from tests.sim.test_identify_clean import KEYS, plant_case, uff_case  # noqa: E402
+from benchtools.clean_cases import KEYS, plant_case, uff_case  # noqa: E402
+from benchtools.procedure_rigs import TOLERANCE, run_rigs  # noqa: E402
 
 
 def job(args):

@@ -39,18 +39,12 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.storage import RunStore  # noqa: E402
+from benchtools.plans import FAST_CONTROL  # noqa: E402
+from benchtools.procs import bench_process, rig_toml_for, stop  # noqa: E402
 from drivers import ScpiFunctionGenerator, start_twins  # noqa: E402
 from sim.rig import RigModel, SimulatedRig  # noqa: E402
-from tests.bench.test_exit_paths import REPO, rig_toml_for  # noqa: E402
 
-FAST = """\
-    [plan.control]
-    settle_cycles = 4
-    min_settle_s = 0.0
-    measure_cycles = 4
-    control_cycles = 2
-    ramp_s = 0.0
-    """
+FAST = textwrap.indent(FAST_CONTROL, "    ")    # under the plans' indentation
 PLANS = {
     "stepped_sine": """\
         [plan]
@@ -103,10 +97,9 @@ SIGNALS = (signal.SIGHUP, signal.SIGQUIT, signal.SIGTERM, signal.SIGINT)
 
 def bench_run(tmp: Path, case: str, rig: Path | None, out: Path, **popen) -> subprocess.Popen:
     (tmp / "plan.toml").write_text(textwrap.dedent(PLANS[case]))
-    return subprocess.Popen([sys.executable, "-m", "bench.cli", "run", "--plan", str(tmp / "plan.toml"),
-                             *(["--rig", str(rig)] if rig else []), "--out", str(out),
-                             *([] if case == "report" else ["--no-report"])],
-                            cwd=REPO, env={**os.environ, "PYTHONUNBUFFERED": "1"}, **popen)
+    return bench_process("run", "--plan", str(tmp / "plan.toml"), *(["--rig", str(rig)] if rig else []),
+                         "--out", str(out), *([] if case == "report" else ["--no-report"]),
+                         env={**os.environ, "PYTHONUNBUFFERED": "1"}, **popen)
 
 
 def _wait(condition, proc, timeout_s: float = 300) -> str | None:
@@ -151,9 +144,7 @@ def one(tmp: Path, twins, case: str, signum: int, delay: float, closed: bool) ->
             _, err = proc.communicate(timeout=180)
             rc = proc.returncode
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+        stop(proc)
     store = RunStore(out)
     events = store.events()
     offs = [e.get("confirmed") for e in events if e["event"] == "output_off"]

@@ -2,7 +2,7 @@
 
 Each case is a generated source written as a foreign UFF58 file (no bench tags; one load
 case per step): ``masing`` from the independent solve_ivp simulator
-(tests/independent_masing.py, no code shared with sim/), every catalog cause and every
+(benchtools/independent_masing.py, no code shared with sim/), every catalog cause and every
 plant form beyond the catalog (cubic_spring, quadratic_damping, asymmetric_friction: the
 discovered terms) from the RK4 plant with that effect hidden in it (sim.discrepancy.cases,
 written as another program writes UFF58), ``line_interference`` a clean case with a 50 Hz
@@ -41,9 +41,9 @@ from bench.config import load_plan, load_rig  # noqa: E402
 from bench.session import run_plan  # noqa: E402
 from bench.sources import load_source  # noqa: E402
 from bench.twin import make_twin  # noqa: E402
+from benchtools.independent_masing import generate_uff  # noqa: E402
+from benchtools.twin_sources import shaker_plan, shaker_rig, write_foreign_uff  # noqa: E402
 from sim.discrepancy.cases import CATALOG, OUTSIDE, make_case  # noqa: E402
-from tests.bench.twin_sources import shaker_plan, shaker_rig, write_foreign_uff  # noqa: E402
-from tests.independent_masing import generate_uff  # noqa: E402
 
 KINDS = ("masing",) + CATALOG + OUTSIDE + ("line_interference", "shaker_run")
 BAR = 0.02

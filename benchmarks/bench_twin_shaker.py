@@ -1,4 +1,4 @@
-"""Benchmark of the twin's shaker fit (bench.twin.shaker_model, decision record 0032).
+"""Benchmark of the twin's shaker fit (sim.shaker_fit.shaker_model, decision record 0032).
 
 Per case: a random shaker (each of A, L/R, Bl^2/R, m_a, k_a, c_a the default of
 bench/defaults/sim_rig.toml times 0.5-2, log-uniform), 16 structures (10 kg on springs of
@@ -25,9 +25,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from bench.twin import SHAKER_PARAMS, shaker_defaults, shaker_model, shaker_ratio  # noqa: E402
+from bench.twin import shaker_defaults  # noqa: E402
 from sim.plant_effects import shaker_frf  # noqa: E402
 from sim.rig import RigModel  # noqa: E402
+from sim.shaker_fit import SHAKER_PARAMS, shaker_model, shaker_ratio  # noqa: E402
 
 
 def structures(rng, n: int, fmax: float):
@@ -59,7 +60,7 @@ def main() -> None:
         f, Zs = structures(rng, 16, a.fmax)
         ratio = np.abs(shaker_frf(model, f, Zs)) * (1 + a.noise * rng.standard_normal(f.size))
         t0 = time.perf_counter()
-        fit = shaker_model(f, ratio, Zs)
+        fit = shaker_model(f, ratio, Zs, d)
         times.append(time.perf_counter() - t0)
         if not fit.keys:
             print(f"case {seed}: no shaker fitted: {fit.note}")

@@ -9,17 +9,7 @@ import pytest
 
 from bench.config import DEFAULTS, load_plan, load_rig
 from bench.session import run_plan
-
-SMALL_PLAN = """
-[plan]
-name = "small test plan"
-levels_N = [1.0, 5.0]
-[plan.frequencies]
-start_Hz = 30.0
-stop_Hz = 300.0
-points = 5
-direction = "both"
-"""
+from benchtools.plans import SMALL_PLAN
 
 
 @pytest.fixture(scope="session")

@@ -8,9 +8,8 @@ import numpy as np
 import pytest
 
 from bench.cli import main
+from benchtools.twin_sources import write_foreign_uff
 from sim.discrepancy.cases import make_case
-
-from .twin_sources import write_foreign_uff
 
 
 def within_interval(truth: float, q: dict) -> None:

@@ -8,15 +8,13 @@ import json
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
 
 import bench
 from bench.config import DEFAULTS
-
-REPO = Path(__file__).resolve().parents[2]
+from benchtools.procs import bench_done, bench_process, step_files, stop, wait_for
 
 TINY = {"name": "api test", "levels_N": [0.5, 2.0],
         "frequencies": {"list_Hz": [40.0, 80.0, 160.0], "direction": "up"},
@@ -111,13 +109,7 @@ def script(tmp_path: Path, out: Path, raise_at: int = 0, levels=(0.5, 2.0)) -> P
 
 
 def wait_steps(out: Path, n: int, proc: subprocess.Popen, timeout_s: float = 180) -> None:
-    t_end = time.monotonic() + timeout_s
-    while time.monotonic() < t_end:
-        if (out / "steps").is_dir() and len(list((out / "steps").glob("*.json"))) >= n:
-            return
-        assert proc.poll() is None, "the script ended before the signal"
-        time.sleep(0.05)
-    raise AssertionError(f"no {n} steps within {timeout_s} s")
+    wait_for(lambda: len(step_files(out)) >= n, timeout_s, f"{n} steps", proc, poll_s=0.05)
 
 
 def test_ctrl_c_in_a_script_leaves_the_output_off_and_the_run_resumes_once_free(tmp_path):
@@ -131,8 +123,7 @@ def test_ctrl_c_in_a_script_leaves_the_output_off_and_the_run_resumes_once_free(
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=120)
     finally:
-        if proc.poll() is None:
-            proc.kill()
+        stop(proc)
     assert proc.returncode != 0 and "KeyboardInterrupt" in err
     run = bench.open_run(out)
     assert run.status == "interrupted"
@@ -235,8 +226,7 @@ labels = {{ lubricant = "ISO VG 68" }}
 
 def test_a_sequence_refuses_every_bad_entry_before_anything_runs(tmp_path):
     seq = write_sequence(tmp_path, second_levels="[-2.0]", extra='[[sequence.entry]]\nname = "oil-a"\nplan = "none.toml"\n')
-    proc = subprocess.run([sys.executable, "-m", "bench.cli", "sequence", str(seq), "--out", str(tmp_path / "out")],
-                          capture_output=True, text=True, timeout=120)
+    proc = bench_done("sequence", str(seq), "--out", str(tmp_path / "out"), timeout=120)
     assert proc.returncode == 2
     err = proc.stderr
     assert "[[sequence.entry]] 2: plan" in err and "levels_N" in err              # the bad level of entry 2
@@ -247,23 +237,21 @@ def test_a_sequence_refuses_every_bad_entry_before_anything_runs(tmp_path):
 
 def test_a_sequence_interrupted_in_its_second_entry_resumes_to_both_complete(tmp_path):
     seq, out = write_sequence(tmp_path), tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "bench.cli", "sequence", str(seq), "--out", str(out), "--no-report"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = bench_process("sequence", str(seq), "--out", str(out), "--no-report", stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
     try:
         wait_steps(out / "oil-b", 2, proc)
         proc.send_signal(signal.SIGINT)
         proc.communicate(timeout=120)
     finally:
-        if proc.poll() is None:
-            proc.kill()
+        stop(proc)
     assert proc.returncode == 130
     assert bench.open_run(out / "oil-a").status == "completed"
     assert bench.open_run(out / "oil-b").status == "interrupted"
     assert output_off_confirmed(out / "oil-b")
     report = (out / "report.md").read_text()
     assert "1 of 2 entries completed" in report and f"bench resume {out}" in report
-    again = subprocess.run([sys.executable, "-m", "bench.cli", "resume", str(out), "--no-report"],
-                           capture_output=True, text=True, timeout=300)
+    again = bench_done("resume", str(out), "--no-report", timeout=300)
     assert again.returncode == 0, again.stderr
     a, b = bench.open_run(out / "oil-a"), bench.open_run(out / "oil-b")
     assert (a.status, b.status) == ("completed", "completed")

@@ -12,15 +12,14 @@ from __future__ import annotations
 
 import argparse
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
 from bench.cli import ExitCode, build_parser, main
+from benchtools.procs import bench_process
 
-REPO = Path(__file__).resolve().parents[2]
 MISSING = "/nonexistent/guideway-bench/input"
 PATH_OPTIONS = {"--plan", "--rig", "--spec", "--source", "--run", "--config"}
 TIME_LIMIT_S = 120
@@ -70,8 +69,8 @@ def test_bad_paths_and_values_to_every_subcommand_are_one_line_without_traceback
         if args:
             cases.append((args, ExitCode.USAGE))
     cases += [(["frf", "--gamma0", "nan"], ExitCode.USAGE), (["paper", "--out", "/dev/null/x"], ExitCode.USAGE)]
-    procs = [(args, code, subprocess.Popen([sys.executable, "-m", "bench.cli", *args], cwd=REPO, text=True,
-                                           stdout=subprocess.PIPE, stderr=subprocess.PIPE))
+    procs = [(args, code, bench_process(*args, text=True, stdout=subprocess.PIPE,
+                                        stderr=subprocess.PIPE))
              for args, code in cases]
     deadline = time.monotonic() + TIME_LIMIT_S
     problems = []

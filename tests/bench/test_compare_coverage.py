@@ -11,8 +11,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from bench.cli import main
-
-from .twin_sources import write_foreign_uff
+from benchtools.twin_sources import write_foreign_uff
 
 
 def _bench(*args) -> int:

@@ -25,7 +25,7 @@ from bench.config import DEFAULTS, load_plan, load_rig
 from bench.export import export_run
 from bench.session import run_plan
 from bench.storage import RunStore
-from tests.bench.conftest import SMALL_PLAN
+from benchtools.plans import SMALL_PLAN
 
 
 def _flip_digit(path: Path) -> None:

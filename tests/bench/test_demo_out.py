@@ -19,8 +19,7 @@ import bench.cli
 from bench.cli import main
 from bench.config import DEFAULTS, load_plan, load_rig, parse_plan
 from bench.demo import MANIFEST
-
-from .test_exit_paths import REPO
+from benchtools import REPO
 
 DEMO_NAME = load_plan(DEFAULTS / "demo_plan.toml").name
 

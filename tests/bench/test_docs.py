@@ -9,14 +9,13 @@ import re
 import subprocess
 import sys
 import tomllib
-from pathlib import Path
 
 import pytest
 
 from bench.cli import build_parser
 from bench.config import KEYS, MODEL_SCHEMA
+from benchtools import REPO
 
-REPO = Path(__file__).resolve().parents[2]
 PAGES = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md")), *sorted((REPO / "docs" / "howto").glob("*.md")),
          REPO / "docs" / "reference" / "api.md", REPO / "examples" / "lab-ci" / "README.md"]
 

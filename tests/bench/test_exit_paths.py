@@ -13,52 +13,32 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
-import json
 import logging
 import os
 import re
 import signal
 import subprocess
-import sys
-import textwrap
 import time
 from pathlib import Path
 
 import pytest
 
 import bench.session
-from bench.config import DEFAULTS, load_rig, parse_plan, parse_rig
+from bench.config import DEFAULTS, load_rig, parse_rig
 from bench.session import run_plan
 from bench.storage import RunStore
+from benchtools.plans import FREQS, MANY_FREQS, fast_plan_toml, small_plan
+from benchtools.procs import bench_process, driving, event_kinds, meta, rig_toml_for, stop, wait_for
 from drivers import ScpiError, ScpiFunctionGenerator, start_twins
 from procedures.safety import LimitExceeded, SupervisedGenerator, Supervisor
 from procedures.stepped_sine import SteppedSine
 from sim.rig import RigModel, SimulatedRig
 
-REPO = Path(__file__).resolve().parents[2]
 SIM_RIG = load_rig(DEFAULTS / "sim_rig.toml")
-FAST = dict(settle_cycles=4, min_settle_s=0.0, measure_cycles=4, control_cycles=2, ramp_s=0.0)
-FREQS = (60.0, 80.0, 100.0, 120.0)
-
-
-def small_plan(levels=(1.0,), freqs=FREQS, limits=None):
-    plan = {"name": "exit paths", "levels_N": list(levels),
-            "frequencies": {"list_Hz": list(freqs), "direction": "up"}, "control": dict(FAST)}
-    if limits:
-        plan["limits"] = limits
-    return parse_plan({"plan": plan})
 
 
 def run(out, plan=None, rig=SIM_RIG, **kw):
     return run_plan(plan or small_plan(), rig, out, sim_seed=1, identify=False, **kw)
-
-
-def meta(out: Path) -> dict:
-    return json.loads((out / "run.json").read_text())
-
-
-def event_kinds(out: Path) -> list[str]:
-    return [e["event"] for e in RunStore(out).events()]
 
 
 def the(out: Path, kind: str) -> dict:
@@ -219,73 +199,23 @@ def test_a_target_out_of_the_probe_range_stops_before_the_output_goes_on(tmp_pat
 
 # --------------------------------------------------------------------------- SIGTERM
 
-def rig_toml_for(twins) -> str:
-    """A non-simulated rig whose instruments are the given twins (another process's view)."""
-    return textwrap.dedent(f"""\
-        [rig]
-        name = "twins held by the test"
-        simulated = false
-        [rig.instruments]
-        generator = "{twins.generator_url}"
-        sensor = "{twins.sensor_url}"
-        daq = "{twins.daq_bridge_url}"
-        [rig.calibration]
-        force_V_per_N = 0.0225
-        accel_V_per_m_s2 = 0.0102
-        disp_V_per_m = 8000.0
-        amp_gain_N_per_V = 20.0
-        [rig.limits]
-        drive_V = 7.0
-        force_N = 130.0
-        disp_m = 0.9e-3
-        accel_m_s2 = 20.0
-        """)
-
-
-def wait_for(condition, timeout_s: float, what: str, proc=None) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        if proc is not None and proc.poll() is not None:
-            pytest.fail(f"bench exited ({proc.returncode}) before {what}")
-        if time.monotonic() > deadline:
-            pytest.fail(f"timed out waiting for {what}")
-        time.sleep(0.01)
-
-
 @pytest.mark.timeout(120)
 def test_sigterm_to_bench_run_stops_cleanly_with_the_output_off(tmp_path):
     # the twins live in this process, so their output state can be read after the kill
     with start_twins(SimulatedRig(RigModel(seed=3))) as twins:
         (tmp_path / "rig.toml").write_text(rig_toml_for(twins))
-        freqs = [40.0 + 10 * k for k in range(30)]          # far more steps than it will get to
-        (tmp_path / "plan.toml").write_text(textwrap.dedent(f"""\
-            [plan]
-            levels_N = [1.0]
-            [plan.frequencies]
-            list_Hz = {freqs}
-            [plan.control]
-            settle_cycles = 4
-            min_settle_s = 0.0
-            measure_cycles = 4
-            control_cycles = 2
-            ramp_s = 0.0
-            """))
+        freqs = MANY_FREQS                                  # far more steps than it will get to
+        (tmp_path / "plan.toml").write_text(fast_plan_toml(freqs))
         out = tmp_path / "run"
         with open(tmp_path / "bench.out", "wb") as log:
-            proc = subprocess.Popen(
-                [sys.executable, "-m", "bench.cli", "run", "--plan", str(tmp_path / "plan.toml"),
-                 "--rig", str(tmp_path / "rig.toml"), "--out", str(out), "--no-report"],
-                cwd=REPO, stdout=log, stderr=subprocess.STDOUT)
+            proc = bench_process("run", "--plan", str(tmp_path / "plan.toml"), "--rig", str(tmp_path / "rig.toml"),
+                                 "--out", str(out), "--no-report", stdout=log, stderr=subprocess.STDOUT)
             try:
-                steps = out / "steps"
-                wait_for(lambda: steps.is_dir() and any(steps.glob("*.json")) and twins.generator.state.output_on,
-                         60, "the first step with the output on", proc)
+                wait_for(lambda: driving(out, twins), 60, "the first step with the output on", proc)
                 proc.send_signal(signal.SIGTERM)
                 rc = proc.wait(timeout=30)
             finally:
-                if proc.poll() is None:
-                    proc.kill()
-                    proc.wait()
+                stop(proc)
         output = (tmp_path / "bench.out").read_text()
         assert rc == 130, output
         assert not twins.generator.state.output_on, output

@@ -10,8 +10,6 @@ an instrument error: the block header counts at most 65535 data frames of 20 val
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import textwrap
 from dataclasses import replace
 
@@ -20,11 +18,10 @@ import pytest
 from bench.cli import main
 from bench.config import ConfigError, parse_plan, parse_rig, read_toml
 from bench.storage import RunStore
+from benchtools.procs import bench_done, rig_toml_for
 from drivers import MAX_BLOCK_SAMPLES, ScpiFunctionGenerator, plan_block, start_twins
 from drivers._scpi_twin_model import GeneratorState
 from sim.rig import RigModel, SimulatedRig
-
-from .test_exit_paths import REPO, rig_toml_for
 
 GRID = {"start_Hz": 30.0, "stop_Hz": 300.0, "points": 12}
 CONTROL = {"settle_cycles": 4, "min_settle_s": 0.0, "measure_cycles": 4, "control_cycles": 2, "ramp_s": 0.0}
@@ -138,8 +135,7 @@ def test_dry_run_run_and_resume_refuse_a_dwell_the_daq_cannot_record_before_swit
         out = tmp_path / "run"
 
         def bench(*args: str) -> tuple[int, list[str]]:
-            p = subprocess.run([sys.executable, "-m", "bench.cli", *args], cwd=REPO, capture_output=True, text=True,
-                               timeout=60)
+            p = bench_done(*args, timeout=60)
             return p.returncode, [ln for ln in p.stderr.splitlines() if ln.strip()]
 
         def said(err: list[str]) -> None:

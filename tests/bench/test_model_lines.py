@@ -4,7 +4,7 @@ Two pitching rigs standing in for two lubricants, both with speed-dependent fric
 bench/defaults/sim_rig_pitch.toml ("oil A") and a variant with viscous damping, a stiffer,
 rounder friction and a more damped pitch ("oil B").  The model lines are checked against
 what the bench measures (`bench modes`, the report's figure), and the model itself against
-an independent brute-force simulation (tests/independent_masing.py: scipy's DOP853, written
+an independent brute-force simulation (benchtools/independent_masing.py: scipy's DOP853, written
 from the physics notes, sharing no code with sim/)."""
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from matplotlib.colors import to_rgba
 from bench.cli import main
 from bench.config import DEFAULTS, load_rig, parse_plan
 from bench.session import run_plan
-from tests.independent_masing import simulate_level
+from benchtools.independent_masing import simulate_level
 
 OIL_B = dict(F_s_N=12.0, x_s_m=7e-6, n=1.2, viscous_N_s_per_m=60.0, pitch_damping_N_m_s_per_rad=25.0,
              friction_alpha=0.8)

@@ -16,22 +16,14 @@ import bench.session
 import bench.storage
 from bench.cli import main
 from bench.storage import RunStore
+from benchtools.plans import FREQS, small_plan
+from benchtools.procs import meta, rig_toml_for
 from drivers import start_twins
 from drivers._can_transport import CanTcpBridge, TcpCanBus
 from sim.errors import StorageError
 from sim.rig import RigModel, SimulatedRig
 
-from .test_exit_paths import (
-    FREQS,
-    SIM_RIG,
-    fail_on_call,
-    meta,
-    output_on,
-    rig_toml_for,
-    run,
-    small_plan,
-    the,
-)
+from .test_exit_paths import SIM_RIG, fail_on_call, output_on, run, the
 
 
 def plan_toml(tmp_path):

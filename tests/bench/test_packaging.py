@@ -7,14 +7,13 @@ import subprocess
 import sys
 import tomllib
 from importlib import metadata
-from pathlib import Path
 
 from setuptools import find_packages
 
 import bench
 from bench.cli import main
+from benchtools import REPO
 
-REPO = Path(__file__).resolve().parents[2]
 PACKAGES = ("bench", "drivers", "procedures", "sim")
 
 

@@ -12,23 +12,21 @@ import csv
 import json
 import re
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 from bench.config import DEFAULTS, parse_plan, parse_stored_plan
+from benchtools.procs import bench_done
 from procedures.kind import DISP, FORCE, PHASE, ProcedureKind, of_stored_plan
 
-REPO = Path(__file__).resolve().parents[2]
 RIG = str(DEFAULTS / "sim_rig.toml")
 RC_LEVELS = (1e-6, 3e-6)
 
 
 def bench(*args: str, timeout: float = 300.0) -> subprocess.CompletedProcess:
     """``bench ARGS`` in a process of its own, from the repository."""
-    return subprocess.run([sys.executable, "-m", "bench", *args], cwd=REPO, text=True, capture_output=True,
-                          timeout=timeout)
+    return bench_done(*args, timeout=timeout)
 
 
 def write_toml(path: Path, text: str) -> str:

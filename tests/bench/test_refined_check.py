@@ -12,36 +12,17 @@ import json
 import shutil
 import signal
 import subprocess
-import sys
-import textwrap
-import time
 from pathlib import Path
 
 import pytest
 
 from bench.cli import main
 from bench.storage import RunStore
+from benchtools.plans import fast_plan_toml
+from benchtools.procs import bench_process, stop, wait_for
 
-from .test_exit_paths import REPO
-
-PLAN = textwrap.dedent("""\
-    [plan]
-    name = "refined with a dwell"
-    levels_N = [1.0]
-    [plan.frequencies]
-    list_Hz = [45.0, 55.0, 65.0, 80.0, 100.0]
-    [plan.control]
-    settle_cycles = 4
-    min_settle_s = 0.0
-    measure_cycles = 4
-    control_cycles = 2
-    ramp_s = 0.0
-    [plan.resonance]
-    refine = true
-    modes = ["feed"]
-    max_steps = 2
-    dwell_cycles = 500
-    """)
+PLAN = fast_plan_toml([45.0, 55.0, 65.0, 80.0, 100.0], name="refined with a dwell",
+                      extra='[plan.resonance]\nrefine = true\nmodes = ["feed"]\nmax_steps = 2\ndwell_cycles = 500\n')
 DWELL = "00004-L00-WF000-up"
 
 
@@ -66,21 +47,16 @@ def test_check_names_the_dwell_and_the_refinement_a_run_still_owes_until_resume_
     again in this process."""
     (tmp_path / "plan.toml").write_text(PLAN)
     out = tmp_path / "run"
-    proc = subprocess.Popen([sys.executable, "-m", "bench.cli", "run", "--plan", str(tmp_path / "plan.toml"),
-                             "--out", str(out), "--no-report"], cwd=REPO,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = bench_process("run", "--plan", str(tmp_path / "plan.toml"), "--out", str(out), "--no-report",
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
-        deadline = time.monotonic() + 120
-        while not ((out / "events.jsonl").exists() and ends(out)):     # the refinement ended: the dwell starts
-            assert proc.poll() is None, f"bench exited ({proc.returncode}) before the dwell"
-            assert time.monotonic() < deadline, "timed out waiting for the end of the refinement"
-            time.sleep(0.05)
+        # the refinement ended: the dwell starts
+        wait_for(lambda: (out / "events.jsonl").exists() and ends(out), 120, "the end of the refinement", proc,
+                 poll_s=0.05)
         proc.send_signal(signal.SIGTERM)                                 # during the dwell
         assert proc.wait(timeout=60) == 130
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+        stop(proc)
     (end,) = ends(out)
     assert end["mode"] == "feed" and end["reason"] in ("converged", "budget_spent") and end["dwell_owed"] is True
     assert not (out / "steps" / f"{DWELL}.json").exists()

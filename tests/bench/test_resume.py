@@ -18,9 +18,7 @@ import math
 import random
 import signal
 import subprocess
-import sys
 import textwrap
-import time
 from pathlib import Path
 
 import numpy as np
@@ -29,8 +27,8 @@ import pytest
 from bench.config import DEFAULTS, load_plan, load_rig, parse_plan, parse_rig, plan_toml, rig_toml
 from bench.session import run_plan
 from bench.storage import RunStore
+from benchtools.procs import bench_process, step_files, stop, wait_for
 
-REPO = Path(__file__).resolve().parents[2]
 SEED = 7                      # the simulated rig's noise seed, same for every run
 KILL_SEED = 20261122          # where the kills land
 PLAN = textwrap.dedent("""\
@@ -70,22 +68,11 @@ PHASE_TOL_RAD = 0.005
 
 def bench(*args: str, log: Path) -> subprocess.Popen:
     with open(log, "ab") as fh:
-        return subprocess.Popen([sys.executable, "-m", "bench.cli", *args], cwd=REPO,
-                                stdout=fh, stderr=subprocess.STDOUT)
-
-
-def step_files(run: Path) -> list[Path]:
-    return sorted((run / "steps").glob("*.json")) if (run / "steps").is_dir() else []
+        return bench_process(*args, stdout=fh, stderr=subprocess.STDOUT)
 
 
 def wait_until(condition, proc: subprocess.Popen, timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        if proc.poll() is not None:
-            raise AssertionError(f"bench exited ({proc.returncode}) before {what}")
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.005)
+    wait_for(condition, timeout_s, what, proc, poll_s=0.005)      # a kill right after the event
 
 
 def identification_lines(run: Path) -> int:
@@ -157,9 +144,7 @@ def crash_run(tmp_path_factory):
             resumes += 1
         rc = proc.wait(timeout=180)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+        stop(proc)
     assert rc == 0, log.read_text()[-3000:]
     final = snapshot(run)
 

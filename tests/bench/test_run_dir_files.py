@@ -27,8 +27,8 @@ from bench.cli import ExitCode, main
 from bench.config import MAX_FREQUENCIES, MAX_STEPS
 from bench.files import MAX_BYTES, UnreadableFile, read_file
 from bench.storage import RunStore
+from benchtools import REPO
 
-REPO = Path(__file__).resolve().parents[2]
 ADDRESS_SPACE = 2 * 2**30
 
 

@@ -18,8 +18,7 @@ from bench.config import DEFAULTS, load_rig
 from bench.session import run_plan
 from bench.storage import RunDirError, RunStore
 from bench.watch.stop import request_stop
-
-from .test_exit_paths import small_plan
+from benchtools.plans import small_plan
 
 
 @pytest.fixture

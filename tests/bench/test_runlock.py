@@ -14,11 +14,20 @@ import pytest
 
 from bench import runlock
 from bench.storage import RunStore
+from benchtools import REPO
+from benchtools.procs import (
+    bench_process,
+    bench_run,
+    driving,
+    event_kinds,
+    finished,
+    meta,
+    stop,
+    wait_for,
+    write_inputs,
+)
 from drivers import start_twins
 from sim.rig import RigModel, SimulatedRig
-
-from .test_exit_paths import REPO, event_kinds, meta, wait_for
-from .test_signals import bench_run, driving, stop, write_inputs
 
 HOLD = """
 import sys, time
@@ -31,13 +40,7 @@ with runlock.run_dir(Path(sys.argv[1])):
 
 
 def bench(*args: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "bench.cli", *args], cwd=REPO, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
-
-
-def finished(proc: subprocess.Popen) -> subprocess.CompletedProcess:
-    out, err = proc.communicate(timeout=60)
-    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+    return bench_process(*args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
 @pytest.mark.timeout(150)

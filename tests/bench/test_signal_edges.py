@@ -13,35 +13,20 @@ from __future__ import annotations
 import json
 import signal
 import subprocess
-import sys
-import textwrap
 import time
 from pathlib import Path
 
 import pytest
 
 from bench.storage import RunStore
+from benchtools.plans import fast_plan_toml
+from benchtools.procs import bench_process, event_kinds, meta, rig_toml_for, wait_for
 from drivers import start_twins
 from sim.rig import RigModel, SimulatedRig
 
-from .test_exit_paths import REPO, event_kinds, meta, rig_toml_for, wait_for
-
 pytestmark = pytest.mark.skipif(not Path("/proc/self/status").is_file(), reason="reads /proc/PID/status")
 
-PLAN = textwrap.dedent("""\
-    [plan]
-    name = "signal edges"
-    levels_N = [1.0]
-    [plan.frequencies]
-    list_Hz = [60.0, 80.0]
-    direction = "up"
-    [plan.control]
-    settle_cycles = 4
-    min_settle_s = 0.0
-    measure_cycles = 4
-    control_cycles = 2
-    ramp_s = 0.0
-    """)
+PLAN = fast_plan_toml([60.0, 80.0], name="signal edges", direction="up")
 
 
 def catches(pid: int, signum: int) -> bool:
@@ -55,8 +40,7 @@ def catches(pid: int, signum: int) -> bool:
 
 
 def bench(*args: str, **popen) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "bench.cli", *args], cwd=REPO, text=True,
-                            env={**__import__("os").environ, "PYTHONUNBUFFERED": "1"}, **popen)
+    return bench_process(*args, text=True, env={**__import__("os").environ, "PYTHONUNBUFFERED": "1"}, **popen)
 
 
 def signal_when_caught(proc: subprocess.Popen, signum: int) -> None:

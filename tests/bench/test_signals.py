@@ -13,8 +13,6 @@ import pty
 import random
 import signal
 import subprocess
-import sys
-import textwrap
 import time
 from pathlib import Path
 
@@ -22,40 +20,11 @@ import pytest
 
 import bench.session as bench_session
 from bench.storage import RunStore
+from benchtools import REPO
+from benchtools.plans import small_plan
+from benchtools.procs import BENCH, bench_run, driving, event_kinds, meta, stop, wait_for, write_inputs
 from drivers import ScpiFunctionGenerator, start_twins
 from sim.rig import RigModel, SimulatedRig
-
-from .test_exit_paths import REPO, event_kinds, meta, rig_toml_for, wait_for
-
-FREQS = [40.0 + 10 * k for k in range(30)]          # far more steps than a test gets to
-
-
-def write_inputs(tmp: Path, twins) -> tuple[Path, Path]:
-    (tmp / "rig.toml").write_text(rig_toml_for(twins))
-    (tmp / "plan.toml").write_text(textwrap.dedent(f"""\
-        [plan]
-        levels_N = [1.0]
-        [plan.frequencies]
-        list_Hz = {FREQS}
-        [plan.control]
-        settle_cycles = 4
-        min_settle_s = 0.0
-        measure_cycles = 4
-        control_cycles = 2
-        ramp_s = 0.0
-        """))
-    return tmp / "plan.toml", tmp / "rig.toml"
-
-
-def bench_run(tmp: Path, twins, out: Path, **popen) -> subprocess.Popen:
-    plan, rig = write_inputs(tmp, twins)
-    return subprocess.Popen([sys.executable, "-m", "bench.cli", "run", "--plan", str(plan), "--rig", str(rig),
-                             "--out", str(out), "--no-report"], cwd=REPO, **popen)
-
-
-def driving(out: Path, twins) -> bool:
-    steps = out / "steps"
-    return steps.is_dir() and any(steps.glob("*.json")) and twins.generator.state.output_on
 
 
 def assert_safe_after(out: Path, twins, reason: str) -> None:
@@ -73,12 +42,6 @@ def assert_safe_after(out: Path, twins, reason: str) -> None:
     assert event_kinds(out)[-1] == "end"
 
 
-def stop(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        proc.kill()
-        proc.wait()
-
-
 @pytest.mark.timeout(120)
 def test_closing_the_terminal_switches_the_output_off(tmp_path):
     """bench runs on a pseudo-terminal it holds as its controlling terminal; the test closes
@@ -88,7 +51,7 @@ def test_closing_the_terminal_switches_the_output_off(tmp_path):
         master, slave = pty.openpty()
         out = tmp_path / "run"
         plan, rig = write_inputs(tmp_path, twins)
-        proc = subprocess.Popen(["setsid", "--ctty", sys.executable, "-m", "bench.cli", "run", "--plan", str(plan),
+        proc = subprocess.Popen(["setsid", "--ctty", *BENCH, "run", "--plan", str(plan),
                                  "--rig", str(rig), "--out", str(out), "--no-report"],
                                 cwd=REPO, stdin=slave, stdout=slave, stderr=slave)
         os.close(slave)
@@ -180,7 +143,7 @@ def test_a_signal_inside_a_generator_query_ends_with_the_output_off_confirmed(tm
     the ramp-down and the off command go over the same link, resynchronised."""
     from bench.session import run_plan
 
-    from .test_exit_paths import SIM_RIG, small_plan
+    from .test_exit_paths import SIM_RIG
     twins = mocker.spy(bench_session, "start_twins")
     real = ScpiFunctionGenerator._read_line
     sent = []
@@ -211,7 +174,7 @@ def test_a_signal_while_the_run_directory_is_set_up_does_not_leave_it_running(tm
     requests): latched, it acts once the path that records the end is entered."""
     from bench.session import run_plan
 
-    from .test_exit_paths import SIM_RIG, small_plan
+    from .test_exit_paths import SIM_RIG
     twins = mocker.spy(bench_session, "start_twins")
     real = bench_session.stop_request.clear
 

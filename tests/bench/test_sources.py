@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from bench.sources import load_source
-from tests.independent_masing import simulate_level
+from benchtools.independent_masing import simulate_level
 
 TRUTH = dict(F_s_N=10.0, x_s_m=10e-6, n=0.6, mass_kg=10.0)
 FS = 6211.0          # not a multiple of any step frequency

@@ -20,9 +20,10 @@ import pytest
 from bench.studies import Engine, MapSpec, Study, compliance_map, task_seed
 from bench.studies.batch import IDENTIFY, analyze_batch
 from bench.studies.maps import map_row
+from benchtools import REPO
 
 DASK = Path(sys.executable).with_name("dask")
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = REPO
 # the workers import the tree under test, not whatever checkout the venv's editable install
 # points at (a `dask worker` script's sys.path starts at the venv's bin/, not at its cwd)
 ENV = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
@@ -48,7 +49,7 @@ class DaskCluster:
         assert self.address.startswith("tcp://127.0.0.1:")
         self.workers = [subprocess.Popen(
             [str(DASK), "worker", "--scheduler-file", str(self.file), "--host", "127.0.0.1", "--nthreads", "1",
-             "--no-nanny", "--no-dashboard", "--name", f"w{i}"], env=ENV, cwd=Path(__file__).parents[2],
+             "--no-nanny", "--no-dashboard", "--name", f"w{i}"], env=ENV, cwd=ROOT,
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for i in range(workers)]
         self.procs += self.workers
         from distributed import Client

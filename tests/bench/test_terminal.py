@@ -18,8 +18,9 @@ import pytest
 
 from bench.cli import build_parser
 from bench.terminal import setup_logging
+from benchtools import REPO
+from benchtools.plans import fast_plan_toml
 
-REPO = Path(__file__).resolve().parents[2]
 TMUX = shutil.which("tmux")
 
 
@@ -110,18 +111,7 @@ from bench.cli import main            # then a real run, as `bench run` (same pr
 sys.exit(main(sys.argv[1:]))
 """
 
-PLAN = """\
-[plan]
-levels_N = [1.0]
-[plan.frequencies]
-list_Hz = [60.0, 80.0, 100.0]
-[plan.control]
-settle_cycles = 4
-min_settle_s = 0.0
-measure_cycles = 4
-control_cycles = 2
-ramp_s = 0.0
-"""
+PLAN = fast_plan_toml([60.0, 80.0, 100.0])
 
 
 def tmux_screen(tmp_path: Path, command: str, timeout_s: float = 90) -> list[str]:

@@ -127,7 +127,7 @@ def test_compare_fails_on_the_rig_with_friction_changed_by_ten_per_cent(pitch, t
 @pytest.mark.timeout(300)
 def test_the_twin_of_a_foreign_uff_file_reproduces_it(tmp_path):
     """Data the project's plant did not make (the independent simulator), no tags."""
-    from tests.independent_masing import generate_uff
+    from benchtools.independent_masing import generate_uff
     F_s, x_s, n, m = 12.0, 15e-6, 0.7, 6.0
     f_res = math.sqrt(F_s / (x_s * m)) / (2 * math.pi)
     src = tmp_path / "measured.uff"

@@ -3,7 +3,7 @@ fitted to a run's drive-voltage-to-force ratios, and the twin of a source with a
 discovered term or a measurement artefact reproducing that source.
 
 - shaker: a run on the simulated rig with a shaker unlike the defaults
-  (tests/bench/twin_sources.SHAKER).  Its fitted parameters must cover the truth, the
+  (benchtools/twin_sources.SHAKER).  Its fitted parameters must cover the truth, the
   fitted force per volt must reproduce each step's measured one, and the plan run on the
   twin must measure the same force per volt and need the same force-control iterations.
   The formula is checked on its own against sim.plant_effects.shaker_frf (the complex
@@ -26,18 +26,18 @@ from bench.config import load_plan, load_rig
 from bench.session import run_plan
 from bench.sources import load_source
 from bench.storage import RunStore
-from bench.twin import SHAKER_PARAMS, drive_ratio, make_twin, shaker_model, shaker_ratio
+from bench.twin import drive_ratio, make_twin, shaker_defaults
+from benchtools.twin_sources import SHAKER, shaker_plan, shaker_rig, write_foreign_uff
 from sim.discrepancy.cases import make_case
 from sim.plant_effects import shaker_frf
 from sim.rig import RigModel
-
-from .twin_sources import SHAKER, shaker_plan, shaker_rig, write_foreign_uff
+from sim.shaker_fit import SHAKER_PARAMS, shaker_model, shaker_ratio
 
 RATIO_TOL = 0.002         # the fitted and the twin run's force per volt, per step (observed: 1e-4)
 
 
 def _truth(shaker: dict) -> dict:
-    """The identifiable combinations of a shaker's keys (bench.twin.SHAKER_PARAMS)."""
+    """The identifiable combinations of a shaker's keys (sim.shaker_fit.SHAKER_PARAMS)."""
     R = shaker["shaker_resistance_ohm"]
     ce, ca = shaker["shaker_force_constant_N_per_A"] ** 2 / R, shaker["shaker_damping_N_s_per_m"]
     return dict(zip(SHAKER_PARAMS, (shaker["amp_gain_N_per_V"], shaker["shaker_inductance_H"] / R, ce + ca,
@@ -63,7 +63,7 @@ def test_the_ratio_formula_is_the_network_solution_and_its_fit_predicts_the_shak
     f, Zs = structures(16)
     exact = np.abs(shaker_frf(truth, f, Zs))
     np.testing.assert_allclose(shaker_ratio(th, f, Zs), exact, rtol=1e-12)
-    fit = shaker_model(f, exact * (1 + 1e-4 * rng.standard_normal(f.size)), Zs)
+    fit = shaker_model(f, exact * (1 + 1e-4 * rng.standard_normal(f.size)), Zs, shaker_defaults())
     assert fit.keys and fit.p_value < 1e-6 and fit.rms_residual < 3e-4
     q = {n: fit.parameters[n]["value"] for n in SHAKER_PARAMS}
     f2, Z2 = structures(16)
@@ -72,9 +72,9 @@ def test_the_ratio_formula_is_the_network_solution_and_its_fit_predicts_the_shak
     assert q["damping_total_N_s_per_m"] == pytest.approx(_truth(SHAKER)["damping_total_N_s_per_m"], rel=0.05)
     assert fit.keys["shaker_resistance_ohm"] == 1.5          # the documented default: R is not observable
     assert fit.keys["shaker_force_constant_N_per_A"] ** 2 / 1.5 == pytest.approx(q["back_emf_share"] * q["damping_total_N_s_per_m"])
-    flat = shaker_model(f, 20.0 * (1 + 1e-4 * rng.standard_normal(f.size)), Zs)
+    flat = shaker_model(f, 20.0 * (1 + 1e-4 * rng.standard_normal(f.size)), Zs, shaker_defaults())
     assert flat.keys == {} and "ideal amplifier" in flat.note
-    few = shaker_model(f[:5], exact[:5], Zs[:5])
+    few = shaker_model(f[:5], exact[:5], Zs[:5], shaker_defaults())
     assert few.keys == {} and "fewer than" in few.note
 
 

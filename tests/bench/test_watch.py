@@ -14,8 +14,6 @@ import re
 import signal
 import socket
 import subprocess
-import sys
-import textwrap
 import threading
 import urllib.error
 import urllib.request
@@ -31,13 +29,12 @@ from bench.storage import RunStore
 from bench.watch import WatchServer, serve
 from bench.watch.snapshot import RunReader
 from bench.watch.stop import STOP_FILE, request_stop
+from benchtools.plans import fast_plan_toml, small_plan
+from benchtools.procs import bench_process, rig_toml_for, wait_for
 from drivers import start_twins
 from sim.rig import RigModel, SimulatedRig
 
 from .chromium import CHROMIUM, Browser
-from .test_exit_paths import rig_toml_for, small_plan, wait_for
-
-REPO = Path(__file__).resolve().parents[2]
 
 
 def post_stop(server: WatchServer, token: str | None, host: str | None = None) -> tuple[int, dict]:
@@ -299,24 +296,11 @@ def test_the_page_shows_a_running_test_and_its_stop_button_stops_it_safely(tmp_p
         twins.generator.execute = lambda line: (rig.mark(line), execute(line))[1]
         (tmp_path / "rig.toml").write_text(rig_toml_for(twins))
         freqs = [40.0 + 10 * k for k in range(8)]
-        (tmp_path / "plan.toml").write_text(textwrap.dedent(f"""\
-            [plan]
-            levels_N = [1.0]
-            [plan.frequencies]
-            list_Hz = {freqs}
-            [plan.control]
-            settle_cycles = 4
-            min_settle_s = 0.0
-            measure_cycles = 4
-            control_cycles = 2
-            ramp_s = 0.0
-            """))
+        (tmp_path / "plan.toml").write_text(fast_plan_toml(freqs))
         out = tmp_path / "run"
         with Browser() as browser, open(tmp_path / "bench.out", "wb") as log:
-            proc = subprocess.Popen(
-                [sys.executable, "-m", "bench.cli", "run", "--plan", str(tmp_path / "plan.toml"),
-                 "--rig", str(tmp_path / "rig.toml"), "--out", str(out), "--no-report", "--watch"],
-                cwd=REPO, stdout=log, stderr=subprocess.STDOUT)
+            proc = bench_process("run", "--plan", str(tmp_path / "plan.toml"), "--rig", str(tmp_path / "rig.toml"),
+                                 "--out", str(out), "--no-report", "--watch", stdout=log, stderr=subprocess.STDOUT)
             try:
                 def url():
                     m = re.search(rb"watch: (http://\S+)", (tmp_path / "bench.out").read_bytes())
@@ -374,8 +358,7 @@ def test_the_page_shows_a_running_test_and_its_stop_button_stops_it_safely(tmp_p
 def test_bench_watch_follows_a_run_in_another_process_through_a_stop_and_a_resume(tmp_path):
     out = tmp_path / "run"               # not there yet: bench watch waits for the run to create it
     with open(tmp_path / "watch.out", "wb") as log:
-        proc = subprocess.Popen([sys.executable, "-m", "bench.cli", "watch", str(out)], cwd=REPO,
-                                stdout=log, stderr=subprocess.STDOUT)
+        proc = bench_process("watch", str(out), stdout=log, stderr=subprocess.STDOUT)
     try:
         def url():
             m = re.search(rb"watch: (http://\S+)", (tmp_path / "watch.out").read_bytes())

@@ -94,7 +94,8 @@ def test_a_stepped_sine_run_reaches_its_generator_through_visa(tmp_path):
     from bench.config import parse_rig, read_toml
     from bench.session import run_plan
     from bench.storage import RunStore
-    from tests.bench.test_exit_paths import rig_toml_for, small_plan
+    from benchtools.plans import small_plan
+    from benchtools.procs import rig_toml_for
 
     with start_twins(SimulatedRig(RigModel(seed=5))) as twins:
         rig_path = tmp_path / "rig.toml"

@@ -1,6 +1,6 @@
 """The single-harmonic-balance backbone of the Masing loop (sim.backbone) against facts it
 does not compute itself: the loop of the independent simulator's force law
-(tests/independent_masing.py), the small-amplitude limit (the virgin curve's initial
+(benchtools/independent_masing.py), the small-amplitude limit (the virgin curve's initial
 stiffness, no damping) and the gross-rolling limit (Coulomb friction's describing
 function 4 F_s / pi)."""
 
@@ -11,8 +11,8 @@ import math
 import numpy as np
 import pytest
 
+from benchtools.independent_masing import MasingCarriage
 from sim.backbone import backbone_at_force, backbone_point, loop_coefficients
-from tests.independent_masing import MasingCarriage
 
 F_S, X_S, MASS = 10.0, 10e-6, 10.0
 

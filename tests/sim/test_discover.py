@@ -2,7 +2,7 @@
 
 Each form (a cubic spring, quadratic damping, asymmetric friction) is hidden at a seeded
 random strength in a seeded random rig, once in data from the project's RK4 plant and once
-in data from the independent simulator of tests/independent_masing.py (solve_ivp on the
+in data from the independent simulator of benchtools/independent_masing.py (solve_ivp on the
 issue's definitions, written to UFF58 and read back by bench.sources: no code shared with
 the analysis' model functions), with n < 1 and n > 1 among them.  The form must be named
 by its library id, alone, with its coefficient's 95 % interval covering the truth.  Grids
@@ -61,7 +61,7 @@ INDEPENDENT = [("cubic_spring", 0.6, 0.3), ("quadratic_damping", 1.8, 0.06), ("a
 @pytest.mark.parametrize("effect,n,strength", INDEPENDENT)
 def test_a_form_hidden_in_independently_simulated_uff_is_named_by_form(effect, n, strength, tmp_path):
     from bench.sources import load_source
-    from tests.independent_masing import generate_uff
+    from benchtools.independent_masing import generate_uff
 
     rng = np.random.default_rng(int(100 * n))
     truth = dict(F_s_N=rng.uniform(5, 20), x_s_m=rng.uniform(10e-6, 40e-6), n=n, mass_kg=rng.uniform(4, 15))

@@ -55,8 +55,8 @@ def test_gross_sliding_beside_a_spring_is_analysed_and_the_spring_named(tmp_path
     interval's exp() ended the analysis in an OverflowError, and the candidates warm-started
     there could not find the spring."""
     from bench.sources import load_source
+    from benchtools.independent_masing import generate_uff
     from sim.discrepancy import analyze_steps
-    from tests.independent_masing import generate_uff
 
     rig = dict(F_s_N=10.0, x_s_m=20e-6, n=1.4, mass_kg=8.0)
     f_res = math.sqrt(rig["F_s_N"] / (rig["x_s_m"] * rig["mass_kg"])) / (2 * math.pi)

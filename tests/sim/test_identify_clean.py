@@ -4,7 +4,7 @@ Two sources the identification did not make:
 - the RK4 plant (sim.synthetic drives SimulatedRig per step) on the issue's grid: 5 force
   levels 0.1-0.85 F_s x 18 log-spaced frequencies 0.3-3 x the friction resonance, 25 settle
   / 8 measured periods, noise 0.3 % of F_s, 0.5 % of the rms acceleration, 0.2 % of x_s;
-- an independent simulator (tests/independent_masing.py: solve_ivp on the Masing model
+- an independent simulator (benchtools/independent_masing.py: solve_ivp on the Masing model
   written from physics.md) exported as UFF58 the way other software writes it (no tags,
   a sample rate that is no multiple of the frequency) and read back through
   bench.sources.load_source (3 levels 0.25-0.85 F_s x 8 frequencies 0.5-2.5 x, 12 settle /
@@ -13,7 +13,6 @@ Bar: every parameter within 1 %, reduced chi-square in [0.5, 2], the truth insid
 interval for at least 90 % of the parameters; 10 rigs, 5 with n < 1.  The campaign over
 40 rigs is benchmarks/bench_identification.py.
 """
-import math
 import multiprocessing
 import os
 from concurrent.futures import ProcessPoolExecutor
@@ -21,41 +20,11 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 import pytest
 
-from bench.sources import load_source
-from sim.identify import StepHarmonics, identify_results
-from sim.records import analyse_records
-from sim.synthetic import clean_model, generate, issue_grid, random_rig
+from benchtools.clean_cases import KEYS, plant_case, uff_case
 
-KEYS = ("F_s_N", "x_s_m", "n", "mass_kg")
 PLANT = [(11, (0.45, 0.95)), (12, (0.45, 0.95)), (13, (0.45, 0.95)), (14, (0.45, 0.95)),
          (15, (1.1, 3.0)), (16, (1.1, 3.0)), (17, (1.1, 3.0)), (18, (1.1, 3.0))]
 UFF = [(21, (0.35, 0.45)), (23, (1.5, 3.0))]
-
-
-def guess_of(truth, seed):
-    rng = np.random.default_rng(seed + 7)
-    return {k: v * rng.uniform(0.8, 1.2) for k, v in truth.items()}
-
-
-def plant_case(seed, n_range):
-    truth = random_rig(seed, n_range)
-    model = clean_model(**truth, seed=seed)
-    steps = generate(model, *issue_grid(model), seed=seed)
-    harm = [StepHarmonics.from_records(analyse_records(s.force_N, s.accel_m_s2, s.disp_m, s.fs_Hz, s.freq_Hz))
-            for s in steps]
-    return "plant", truth, identify_results(harm, guess_of(truth, seed), 9).estimate, 0
-
-
-def uff_case(seed, n_range, out):
-    from tests.independent_masing import generate_uff
-    truth = random_rig(seed, n_range)
-    f_s = math.sqrt(truth["F_s_N"] / (truth["x_s_m"] * truth["mass_kg"])) / (2 * math.pi)
-    path = out / f"rig{seed}.uff"
-    generate_uff(path, **truth, levels_N=np.array([0.25, 0.55, 0.85]) * truth["F_s_N"],
-                 freqs_Hz=np.geomspace(0.5 * f_s, 2.5 * f_s, 8), settle=12, measure=8, seed=seed)
-    src = load_source(path)
-    est = identify_results([s.harmonics for s in src.steps], guess_of(truth, seed), 9).estimate
-    return "uff58", truth, est, len(src.rejected)
 
 
 def run_case(args):

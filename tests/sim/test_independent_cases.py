@@ -1,7 +1,7 @@
 """Issue 16 on data this project did not make: a small seeded sample of the independent
 campaign (``benchmarks/bench_analysis.py --source independent``).
 
-Each case is simulated by tests/independent_masing.py (solve_ivp on the documented
+Each case is simulated by benchtools/independent_masing.py (solve_ivp on the documented
 equations, no code shared with sim/), written to an untagged UFF58 file and analysed as
 ``bench analyze FILE`` does: ``bench.sources.load_source`` (the step-quality check and its
 artefacts), then ``analyze_steps``.  A catalog effect must be named by its catalog id with
@@ -29,9 +29,9 @@ def w_res(rig):
 
 def analyse(tmp_path, seed, **effects):
     from bench.sources import load_source
+    from benchtools.independent_masing import generate_uff
     from sim.artefacts import artefact_causes
     from sim.discrepancy import analyze_steps
-    from tests.independent_masing import generate_uff
 
     rig = RIGS[seed]
     f_res = w_res(rig) / (2 * math.pi)
@@ -114,8 +114,8 @@ def test_a_strong_hum_beside_free_vibration_is_one_mains_cause(tmp_path):
     causes "from another source (a pump, a fan, a switching supply)".  One humming source is
     one cause; its leakage is its."""
     from bench.sources import load_source
+    from benchtools.independent_masing import generate_uff
     from sim.artefacts import artefact_causes
-    from tests.independent_masing import generate_uff
 
     path = tmp_path / "hum.uff"
     generate_uff(path, F_s_N=2.5, x_s_m=36e-6, n=1.5, mass_kg=4.3, levels_N=[0.25, 1.2, 2.1],

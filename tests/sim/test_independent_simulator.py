@@ -1,4 +1,4 @@
-"""The independent simulator's effects (tests/independent_masing.py) against facts derived
+"""The independent simulator's effects (benchtools/independent_masing.py) against facts derived
 another way, so that independent-data cases hide what they claim to hide.
 
 In pre-rolling with n > 1 and a tiny force the Masing curve is the linear spring
@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from tests.independent_masing import generate_uff, simulate_level
+from benchtools.independent_masing import generate_uff, simulate_level
 
 F_S, X_S, N, M = 10.0, 20e-6, 2.0, 5.0
 K0 = N * F_S / ((N - 1) * X_S)                 # 1e6 N/m

@@ -1,5 +1,5 @@
 """Identification with the model of the rig (decision 0042) on data the package did not
-make: tests/independent_masing.py's 2-DOF pitching column, as UFF58."""
+make: benchtools/independent_masing.py's 2-DOF pitching column, as UFF58."""
 
 from __future__ import annotations
 
@@ -45,7 +45,7 @@ def test_misfit_words_only_beyond_the_noise():
 
 @pytest.fixture(scope="module")
 def pitching_steps(tmp_path_factory):
-    from tests.independent_masing import generate_uff
+    from benchtools.independent_masing import generate_uff
     path = tmp_path_factory.mktemp("pitch") / "pitch.uff"
     f_s = math.sqrt(TRUTH["F_s_N"] / (TRUTH["x_s_m"] * TRUTH["mass_kg"])) / (2 * math.pi)   # 66 Hz
     generate_uff(path, **TRUTH, levels_N=[3.0, 7.0, 11.0], freqs_Hz=np.geomspace(0.5 * f_s, 4 * f_s, 7),

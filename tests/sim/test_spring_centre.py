@@ -4,7 +4,7 @@ A stiffness term acts about the springs' rest position; the analysis knows each 
 displacement only relative to the median step's, so the rest position on that scale is a
 parameter, shared by the stiffness terms and present only when one of them is.  The fact
 checked here is made without the analysis: the independent simulator
-(tests/independent_masing.py, solve_ivp) puts a cubic spring's rest position off the
+(benchtools/independent_masing.py, solve_ivp) puts a cubic spring's rest position off the
 probe's zero, where each level's carriage starts, and the truth of x_c is that position
 minus the median step's measured mean displacement.
 """
@@ -67,7 +67,7 @@ def test_a_stiffness_term_acts_about_the_rest_position(term, fn):
 
 def _uff_case(tmp_path, centre_over_x_s):
     from bench.sources import load_source
-    from tests.independent_masing import generate_uff
+    from benchtools.independent_masing import generate_uff
 
     rig = dict(F_s_N=9.0, x_s_m=20e-6, n=1.8, mass_kg=7.0)
     F_s, x_s = rig["F_s_N"], rig["x_s_m"]

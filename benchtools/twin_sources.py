@@ -1,4 +1,4 @@
-"""Generated sources for `bench twin` (tests/bench/test_twin*.py, benchmarks/bench_twin.py).
+"""Generated sources for `bench twin` (the twin tests, tests/bench/test_analyze.py, benchmarks/bench_twin.py).
 
 - foreign UFF58 files (another program's convention: no bench tags, one load case per
   step) of a case from :func:`sim.discrepancy.cases.make_case`, optionally with an
