@@ -211,7 +211,7 @@ def test_bench_paper_draws_each_rigs_model_in_its_runs_colour(runs, tmp_path):
         (b,) = [[float(x) for x in line.split(",")] for line in fh.read().splitlines()[1:]]
     for oil, (_, feed, pitch) in (("A", rows[0]), ("B", b)):
         got = {r["mode"]: r for m in measured if m["label"] == f"oil={oil}" for r in m["rows"]
-               if r["level_N"] == 3.0 and r["status"] == "ok"}
+               if r["level_N"] == 3.0 and r["status"] in ("ok", "not converged")}   # a value (decision 0056)
         assert feed == pytest.approx(got["feed"]["resonance_Hz"], rel=0.02), oil
         assert pitch == pytest.approx(got["pitch"]["resonance_Hz"], rel=0.02), oil
     ax_pitch = rep.fig.axes[2]
