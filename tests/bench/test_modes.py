@@ -271,7 +271,10 @@ def test_the_dwell_records_one_long_block_at_the_refined_resonance(tmp_path, cap
     assert feed.resonance_low_Hz < feed.resonance_Hz < feed.resonance_high_Hz
     half = (without.damping_ratio_high - without.damping_ratio_low) / 2
     assert abs(feed.damping_ratio - without.damping_ratio) < half / 3, (feed, without)
-    assert main(["resume", str(cut), "--no-report"]) == 0
+    from bench.verdict import promise
+    spent = bool(promise(store.metadata["plan"], results, store.metadata["rig"]).short)   # budget spent: exit 1
+    assert main(["resume", str(cut), "--no-report"]) == (1 if spent else 0)
+    assert RunStore.open(cut).metadata["status"] == "completed"
     (again,) = [r for r in RunStore.open(cut).results() if "-W" in r["key"]]
     assert again["key"] == dwell["key"] and again["freq_Hz"] == dwell["freq_Hz"]
     # dry-run: one dwell per mode and level, with its long block in the rig time
