@@ -23,8 +23,7 @@ SPLIT = {"tests/sim/test_discrepancy.py"}
 # Started first, longest first (figures of a full run), so that no long module is left for
 # the end while the other worker idles.
 FIRST = ("tests/procedures/test_identification.py", "tests/sim/test_discrepancy.py",
-         "tests/bench/test_model_lines.py", "tests/bench/test_twin_causes.py", "tests/bench/test_analyze.py",
-         "tests/bench/test_api.py", "tests/bench/test_twin.py", "tests/bench/test_modes.py",
+         "tests/bench/test_twin_causes.py", "tests/bench/test_analyze.py", "tests/bench/test_twin.py",
          "tests/sim/test_discover.py", "tests/bench/test_report.py", "tests/sim/test_identify_clean.py",
          "tests/sim/test_independent_cases.py")
 
