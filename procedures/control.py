@@ -13,7 +13,11 @@ the drive's reach" reads a code, not a message.
   fundamental at the level (response-controlled stepped sine, decision 0044); the force it
   needed is the measurement and the record carries a ``response_control`` record.
 
-Both iterate the drive with the same secant update (:func:`procedures.stepped_sine.next_drive`)
+- :class:`procedures.phase_resonance.PhaseLock`: the phase of the response against the
+  force (deg), moving the frequency while it holds the level's force (decision 0060), on
+  its schedule of levels (:class:`procedures.phase_resonance.LockSchedule`).
+
+The first two iterate the drive with the same secant update (:func:`procedures.stepped_sine.next_drive`)
 in :class:`AmplitudeControl`; another controller is a small class (a test adds a
 constant-voltage sweep in a few dozen lines).
 """
@@ -26,7 +30,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import NotRequired, Protocol, TypedDict
 
-from sim.step_result import ResponseControlRecord, StepMeasurement
+from sim.step_result import BackboneRecord, ResponseControlRecord, StepMeasurement
 
 from .analysis import fit_harmonics
 from .instruments import Block
@@ -62,6 +66,7 @@ def next_drive(vpp: float, force: float, target: float, prev: tuple[float, float
 
 
 class DriveNow(Protocol):
+    freq_Hz: float
     amplitude_Vpp: float
     gain_N_per_Vpp: float
 
@@ -73,6 +78,8 @@ class Loop(Protocol):
     gain_at: dict[float, float]
     history: list[tuple[float, float]]
     max_vpp: float
+    periods: float          # drive periods since the point started
+
 
     @property
     def drive(self) -> DriveNow: ...
@@ -80,6 +87,7 @@ class Loop(Protocol):
     def _wait(self, freq_Hz: float, seconds: float, min_periods: int = 0) -> None: ...
     def _acquire(self, freq_Hz: float, periods: int) -> Block: ...
     def _change(self, *, vpp: float | None = None, freq_Hz: float | None = None) -> None: ...
+    def glide(self, freq_Hz: float) -> None: ...
     def force_first_vpp(self, step: StepSpec, new_sweep: bool = False) -> float: ...
 
 
@@ -90,6 +98,7 @@ class ControlFields(TypedDict):
     force_error: float
     force_converged: bool
     response_control: NotRequired[ResponseControlRecord]
+    backbone: NotRequired[BackboneRecord]
 
 
 class Reason(StrEnum):
@@ -99,21 +108,32 @@ class Reason(StrEnum):
     NOT_CONVERGED = "not_converged"     # the iterations ran out
     UNREACHABLE = "unreachable"         # still short with the drive at its limit (plan: infeasible)
     NO_SIGNAL = "no_signal"             # nothing measured to control on
+    LOCKED = "locked"                   # phase resonance: the phase and the response settled in their bands
+    LOCK_LOST = "lock_lost"             # the phase error above lost_phase_deg and growing
+    WINDOW_LEFT = "window_left"         # the frequency would leave the plan's window
+    COLLAPSE = "collapse"               # the response fell below a share of its largest
+
+    @property
+    def lost(self) -> bool:
+        """The point is lost: the loop ramps down at once and records the control's last block."""
+        return self in (Reason.LOCK_LOST, Reason.WINDOW_LEFT, Reason.COLLAPSE)
 
 
 @dataclass(frozen=True)
 class Outcome:
-    """A control's end: the relative error of the controlled quantity, the iterations it
-    took, why it ended and, unless within, the words for a person."""
+    """A control's end: the error of the controlled quantity (relative; the phase's in
+    deg), the iterations it took, why it ended and, unless within, the words for a person;
+    ``freq_Hz``, the frequency it ended at when the control moves it (phase resonance)."""
 
     error: float
     iterations: int
     reason: Reason
     message: str = ""
+    freq_Hz: float | None = None
 
     @property
     def ok(self) -> bool:
-        return self.reason is Reason.WITHIN
+        return self.reason in (Reason.WITHIN, Reason.LOCKED)
 
 
 class Controller(Protocol):
@@ -179,7 +199,8 @@ class AmplitudeControl:
             prev = (vpp, value)
             proc._change(vpp=nxt)
         return Outcome(err, it, Reason.NOT_CONVERGED,
-                       f"not within {100 * proc.plan.force_tolerance:g} % after {it} iterations")
+                       f"{q.name} {q.format(target, '.3g')} not reached within {100 * proc.plan.force_tolerance:.1f} % "
+                       f"after {it} iterations (error {100 * err:+.1f} %)")
 
     def unreachable(self, proc: Loop, step: StepSpec, vpp: float, value: float) -> str:
         return (f"{self.quantity.name} {self.quantity.format(step.force_N)} unreachable at {step.freq_Hz:g} Hz within "
@@ -249,8 +270,8 @@ class ResponseControl(AmplitudeControl):
 
 
 def controller_for(plan: Plan, *, mass_kg: float) -> Controller:
-    """The controller a stepped-sine plan's kind asks for (phase resonance has a loop of
-    its own: :class:`procedures.phase_resonance.PhaseResonance`)."""
+    """The controller a stepped-sine plan's kind asks for (phase resonance's, with its
+    schedule: :func:`procedures.phase_resonance.phase_resonance`)."""
     if plan.procedure is ProcedureKind.RESPONSE_CONTROLLED:
         return ResponseControl(plan.response, mass_kg, plan.force_tolerance)
     return ForceControl()

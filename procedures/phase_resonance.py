@@ -1,5 +1,11 @@
 """Phase-resonance testing: a block-wise phase-locked loop traces a mode's backbone.
 
+Phase resonance is a controller and a schedule on the one stepped-sine loop
+(:class:`procedures.stepped_sine.SteppedSine`; decision 0060): :class:`PhaseLock` holds
+the phase (deg) and returns a typed outcome (locked, not converged, lock lost, window
+left, collapse), :class:`LockSchedule` walks the levels from the frequency locked last;
+ramps, limits, supervision, stop, storage and resume are the loop's.
+
 For each force level of the plan, in order, the generator's frequency is moved block by
 block until the fundamental of the response (displacement, or acceleration) is at the
 target phase against the force's (-90 degrees for displacement: the mode's nonlinear
@@ -25,7 +31,8 @@ keep the stepped sine's quarter-phase rule.
 Lock loss (the phase error above ``lost_phase_deg`` and growing over three blocks, the
 response amplitude below ``collapse`` x the level's largest, the frequency leaving the
 window) ramps the level down, switches the output off, is reported through ``on_event``
-with the reason and recorded as an unlocked point; the next level starts afresh.
+with the reason (and its code) and recorded as an unlocked point from the loop's last
+block; the next level starts afresh.
 Decision record 0044.
 """
 
@@ -34,27 +41,24 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable
-from dataclasses import replace
 
 import numpy as np
 
-from sim.step_result import BackboneRecord, ControlIteration, StepMeasurement, StepResult
+from sim.step_result import BackboneRecord, StepMeasurement, StepResult
 
 from .analysis import fit_harmonics
-from .instruments import Block, BlockSource, SineSource, StepMarker
+from .control import FIRST_DRIVE_MARGIN, ControlFields, Loop, Outcome, Reason, next_drive
+from .instruments import Block
+from .kind import PHASE, Quantity
 from .plan import Backbone, Plan, StepSpec
-from .stepped_sine import FIRST_DRIVE_MARGIN, Record, SteppedSine, next_drive
+from .stepped_sine import Schedule, SteppedSine
 
-__all__ = ["LockLost", "PhaseResonance", "damping_ratio", "phase_error_deg"]
+__all__ = ["LockSchedule", "PhaseLock", "damping_ratio", "phase_error_deg", "phase_resonance"]
 
 log = logging.getLogger(__name__)
 
 MAX_DRIVE_CHANGE = 2.0        # one force-control update changes the drive by at most this factor
 FALLBACK_ZETA = 0.05          # the slope a linear mode of this damping has, when the probe finds none
-
-
-class LockLost(Exception):
-    """The loop lost the resonance (the reason in words)."""
 
 
 def phase_error_deg(phase_deg: float, target_deg: float) -> float:
@@ -71,38 +75,28 @@ def damping_ratio(force_N: complex, disp_m: complex, freq_Hz: float, mass_kg: fl
     return float(abs(force_N) * math.sin(-lag) / (2 * mass_kg * w * w * abs(disp_m)))
 
 
-class PhaseResonance(SteppedSine):
-    """Runs a phase-resonance plan (``plan.procedure == "phase_resonance"``)."""
+class PhaseLock:
+    """The phase of the response's fundamental against the force's at ``bb.phase_deg``
+    (deg): the phase-resonance controller on the stepped-sine loop.  Its control moves the
+    frequency (a Newton step per block) while it holds the level's force with the drive;
+    its :class:`Outcome` is locked, not converged (``max_blocks`` spent), lock lost (the
+    phase error growing), window left or collapse (the response fallen), with ``freq_Hz``
+    the frequency it ended at."""
 
-    def __init__(self, plan: Plan, generator: SineSource, daq: BlockSource, *, amp_gain_N_per_V: float,
-                 mass_kg: float, sensor_check: Callable[[], object] | None = None,
-                 marker: StepMarker | None = None, drive_limit_V: float = math.inf,
-                 on_event: Callable[..., None] | None = None,
+    quantity = PHASE
+
+    def __init__(self, bb: Backbone, *, mass_kg: float, on_event: Callable[..., None] | None = None,
                  on_block: Callable[[dict], None] | None = None):
-        super().__init__(plan, generator, daq, amp_gain_N_per_V=amp_gain_N_per_V, sensor_check=sensor_check,
-                         marker=marker, drive_limit_V=drive_limit_V)
-        if plan.backbone is None:
-            raise ValueError("a phase-resonance plan needs [plan.backbone]")
-        self.bb: Backbone = plan.backbone.resolved()
+        self.bb = bb
         self.mass_kg = mass_kg
         self.on_event = on_event or (lambda kind, **fields: None)
         self.on_block = on_block              # the lock's state after each block (watch page)
         self.slope: float | None = None       # d phase / d f, degrees per Hz (< 0)
-        self.f_locked: float | None = None    # the last locked frequency
-        self.periods = 0.0                    # drive periods since the level started
-        self.last_block: Block | None = None  # the loop's latest block
+        self.loop: Loop | None = None         # the loop of the latest control (its periods, for the record)
 
-    # ------------------------------------------------------------------ bookkeeping
-    def _acquire(self, freq_Hz: float, periods: int) -> Block:
-        self.periods += max(1, periods)
-        return super()._acquire(freq_Hz, periods)
-
-    def preload(self, results: list) -> None:
-        """A resumed run goes on from the last frequency locked before (and its force per volt)."""
-        super().preload(results)
-        for r in sorted(results, key=lambda r: r["index"]):
-            if r.get("backbone", {}).get("locked"):
-                self.f_locked = r["freq_Hz"]
+    def first_vpp(self, proc: Loop, step: StepSpec, new_sweep: bool) -> float:
+        """FIRST_DRIVE_MARGIN below the level's force through the latest force per volt."""
+        return min(FIRST_DRIVE_MARGIN * step.force_N / proc.drive.gain_N_per_Vpp, proc.max_vpp)
 
     # ------------------------------------------------------------------ the phase
     def _phase(self, block: Block, f: float, last: int = 0) -> tuple[float, float, float, np.ndarray, np.ndarray]:
@@ -123,19 +117,15 @@ class PhaseResonance(SteppedSine):
             amps.append(Rk.amplitude[0])
         return phase, float(F.amplitude[0]), float(R.amplitude[0]), np.array(errs), np.array(amps)
 
-    def _set_frequency(self, f: float) -> None:
-        """Phase-continuous on the generator: sent at once, no alignment wait."""
-        self.drive.freq_Hz = self.gen.set_frequency(f)
-
-    def probe(self, f0: float) -> float:
+    def probe(self, proc: Loop, f0: float) -> float:
         """d phase / d f (deg/Hz) near ``f0`` from three blocks at f0 (1 - d), f0, f0 (1 + d);
         a slope that is not negative gives the one of a linear mode of 5 % damping."""
         fs, ps = [], []
         for f in (f0 * (1 - self.bb.probe_step), f0, f0 * (1 + self.bb.probe_step)):
-            self._set_frequency(f)
-            self._wait(f, 0.0, min_periods=self.bb.block_periods)
+            proc.glide(f)
+            proc._wait(f, 0.0, min_periods=self.bb.block_periods)
             fs.append(f)
-            ps.append(self._phase(self._acquire(f, self.bb.block_periods), f)[0])
+            ps.append(self._phase(proc._acquire(f, self.bb.block_periods), f)[0])
         ps = list(np.degrees(np.unwrap(np.radians(ps))))
         slope = float(np.polyfit(fs, ps, 1)[0])
         fallback = -math.degrees(1.0) / (FALLBACK_ZETA * f0)
@@ -145,47 +135,42 @@ class PhaseResonance(SteppedSine):
             slope = fallback
         self.on_event("backbone_probe", freq_Hz=f0, slope_deg_per_Hz=slope, phases_deg=ps)
         log.info("phase-resonance probe at %.4g Hz: %.3g deg/Hz", f0, slope)
-        self._set_frequency(f0)
+        proc.glide(f0)
         return slope
 
     # ------------------------------------------------------------------ one level
-    def _start_level(self, step: StepSpec, f: float) -> None:
-        gain = self.drive.gain_N_per_Vpp
-        vpp = min(FIRST_DRIVE_MARGIN * step.force_N / gain, self.max_vpp)
-        if not self.drive.on:
-            if self.sensor_check:
-                self.sensor_check()
-            self.ramp(vpp, f)
-        else:
-            self.ramp(vpp, self.drive.freq_Hz)
+    def _lost(self, proc: Loop, step: StepSpec, b: int, err: float, f: float, reason: Reason, why: str) -> Outcome:
+        """The lock given up: the next level probes again; the loop ramps down and records the last block."""
+        log.warning("level %g N: lock lost: %s; ramping down", step.force_N, why)
+        self.slope = None
+        self.on_event("lock_lost", key=step.key, level_N=step.force_N, freq_Hz=f, reason=why, code=reason.value)
+        return Outcome(err, b, reason, f"lock lost: {why}", freq_Hz=f)
 
-    def track(self, step: StepSpec) -> tuple[bool, str, int]:
-        """Lock the level's resonance: (locked, why not, controller blocks)."""
-        bb = self.bb
-        f = self.f_locked or bb.start_Hz
-        self._start_level(step, f)
-        f = self.drive.freq_Hz
+    def control(self, proc: Loop, step: StepSpec) -> Outcome:
+        """Lock the level's resonance (the drive is on at the level's first drive)."""
+        bb, self.loop = self.bb, proc
+        f = proc.drive.freq_Hz
         if self.slope is None:
-            self.slope = self.probe(f) if bb.slope_deg_per_Hz == 0 else bb.slope_deg_per_Hz
-        count = 0
+            self.slope = self.probe(proc, f) if bb.slope_deg_per_Hz == 0 else bb.slope_deg_per_Hz
+        count, err = 0, math.nan
         amps_in_run: list[float] = []
         errors: list[float] = []
         largest = 0.0
         prev_fp: tuple[float, float, float] | None = None     # (frequency, phase, drive) of the block before
         prev_drive: tuple[float, float] | None = None
         changed = True
-        self.history = []
+        proc.history = []
         for b in range(1, bb.max_blocks + 1):
             # the loop's estimate comes from the block's last block_periods; the periods
             # before let a change's transient decay (a linear mode's time constant is
             # |d phase / d f| / 360 s; two of them) and count for the settle rule
             wait = min(math.ceil(2 * abs(self.slope) / 360.0 * f), 5 * bb.block_periods) if changed else 0
-            block = self.last_block = self._acquire(f, wait + bb.block_periods)
+            block = proc._acquire(f, wait + bb.block_periods)
             phase, F1, R1, errs, amps = self._phase(block, f, bb.block_periods)
             changed = False
             err = phase_error_deg(phase, bb.phase_deg)
-            vpp = self.drive.amplitude_Vpp
-            self.history.append((vpp, F1))
+            vpp = proc.drive.amplitude_Vpp
+            proc.history.append((vpp, F1))
             # settle counter: each period in both bands, else restart
             for e, a in zip(errs, amps):
                 ref = float(np.mean(amps_in_run)) if amps_in_run else a
@@ -200,26 +185,27 @@ class PhaseResonance(SteppedSine):
                                "amplitude": R1, "force_N": F1, "settled_periods": count})
             log.debug("level %g N block %d: %.5g Hz phase error %+.2f deg, force %+.1f %%, settled %d periods",
                       step.force_N, b, f, err, 100 * force_err, count)
-            # lock loss
             errors.append(abs(err))
             largest = max(largest, R1)
             if len(errors) >= 3 and errors[-1] > bb.lost_phase_deg and errors[-1] > errors[-2] > errors[-3]:
-                raise LockLost(f"phase error {err:+.1f} deg above lost_phase_deg {bb.lost_phase_deg:g} and "
-                               f"growing for 3 blocks at {f:.4g} Hz")
+                return self._lost(proc, step, b, err, f, Reason.LOCK_LOST,
+                                  f"phase error {err:+.1f} deg above lost_phase_deg {bb.lost_phase_deg:g} and "
+                                  f"growing for 3 blocks at {f:.4g} Hz")
             if b > 2 and R1 < bb.collapse * largest:
-                raise LockLost(f"response amplitude {R1:.3g} fell below collapse {bb.collapse:g} x the "
-                               f"level's largest {largest:.3g} at {f:.4g} Hz")
-            if count >= bb.settle_periods and abs(force_err) <= self.plan.force_tolerance:
-                return True, "", b
+                return self._lost(proc, step, b, err, f, Reason.COLLAPSE,
+                                  f"response amplitude {R1:.3g} fell below collapse {bb.collapse:g} x the "
+                                  f"level's largest {largest:.3g} at {f:.4g} Hz")
+            if count >= bb.settle_periods and abs(force_err) <= proc.plan.force_tolerance:
+                return Outcome(err, b, Reason.LOCKED, freq_Hz=f)
             # force control: hold the level
             if F1 > 0:
-                self.drive.gain_N_per_Vpp = F1 / vpp
-            if abs(force_err) > self.plan.force_tolerance / 2 and F1 > 0:
+                proc.drive.gain_N_per_Vpp = F1 / vpp
+            if abs(force_err) > proc.plan.force_tolerance / 2 and F1 > 0:
                 nxt = next_drive(vpp, F1, step.force_N, prev_drive)
-                nxt = min(max(nxt, vpp / MAX_DRIVE_CHANGE), vpp * MAX_DRIVE_CHANGE, self.max_vpp)
+                nxt = min(max(nxt, vpp / MAX_DRIVE_CHANGE), vpp * MAX_DRIVE_CHANGE, proc.max_vpp)
                 prev_drive = (vpp, F1)
                 if nxt != vpp:
-                    self._change(vpp=nxt)
+                    proc._change(vpp=nxt)
                     changed = True
             # phase control: a Newton step on the error; the slope follows secants between
             # blocks at the same drive (an amplitude change moves a nonlinear mode's phase
@@ -228,21 +214,25 @@ class PhaseResonance(SteppedSine):
                 s = phase_error_deg(phase, prev_fp[1]) / (f - prev_fp[0])
                 if s < 0:
                     self.slope = -math.sqrt(self.slope * s)
-            prev_fp = (f, phase, self.drive.amplitude_Vpp)
+            prev_fp = (f, phase, proc.drive.amplitude_Vpp)
             df = -bb.gain * err / self.slope
             df = max(-bb.max_step_Hz, min(bb.max_step_Hz, df))
             nf = f + df
             if not bb.min_Hz <= nf <= bb.max_Hz:
-                raise LockLost(f"frequency {nf:.4g} Hz left the window {bb.min_Hz:g}-{bb.max_Hz:g} Hz "
-                               f"(phase error {err:+.1f} deg at {f:.4g} Hz)")
+                return self._lost(proc, step, b, err, f, Reason.WINDOW_LEFT,
+                                  f"frequency {nf:.4g} Hz left the window {bb.min_Hz:g}-{bb.max_Hz:g} Hz "
+                                  f"(phase error {err:+.1f} deg at {f:.4g} Hz)")
             if abs(err) > bb.phase_band_deg / 4:      # well inside the band: no change, no transient
-                self._set_frequency(nf)
-                f = self.drive.freq_Hz
+                proc.glide(nf)
+                f = proc.drive.freq_Hz
                 changed = True
-        return False, f"not settled within max_blocks = {bb.max_blocks} blocks", bb.max_blocks
+        why = f"not settled within max_blocks = {bb.max_blocks} blocks"
+        self.on_event("not_locked", key=step.key, level_N=step.force_N, freq_Hz=f, reason=why)
+        return Outcome(err, bb.max_blocks, Reason.NOT_CONVERGED, why, freq_Hz=f)
 
-    def _record(self, step: StepSpec, measured: StepMeasurement, raw: dict[str, np.ndarray], *, locked: bool,
-                why: str, blocks: int, record: Record) -> StepResult:
+    def fields(self, step: StepSpec, measured: StepMeasurement, outcome: Outcome) -> ControlFields:
+        """The force's fields (the level held) and the point's :class:`BackboneRecord`."""
+        assert self.loop is not None
         fits_F = measured["force"]
         F1 = fits_F["amplitude"][0] * np.exp(1j * fits_F["phase_rad"][0])
         d = measured["disp"]
@@ -255,58 +245,53 @@ class PhaseResonance(SteppedSine):
             R = a["amplitude"][0] * np.exp(1j * a["phase_rad"][0])
             X1 = -R / (2 * math.pi * f) ** 2
         phase = math.degrees(float(np.angle(R / F1)))
+        force_err = measured["force_N"] / step.force_N - 1.0
         bbrec = BackboneRecord(
             mode=self.bb.mode, response=self.bb.response, amplitude_m=float(abs(X1)), frequency_Hz=f, phase_deg=phase,
             phase_target_deg=self.bb.phase_deg, phase_error_deg=phase_error_deg(phase, self.bb.phase_deg),
-            damping_ratio=damping_ratio(F1, X1, f, self.mass_kg), mass_kg=self.mass_kg, locked=locked,
-            why=why, periods=int(round(self.periods)), blocks=blocks)
-        result = StepResult(**measured, key=step.key, index=step.index, level_index=step.level_index,
-                            freq_index=step.freq_index, direction=step.direction, target_force_N=step.force_N,
-                            control_iterations=blocks, force_converged=abs(measured["force_N"] / step.force_N - 1)
-                            <= self.plan.force_tolerance, force_error=measured["force_N"] / step.force_N - 1.0,
-                            control_history=[ControlIteration(drive_Vpp=v, force_N=F) for v, F in self.history],
-                            backbone=bbrec)
-        record(step, result, raw)
-        return result
+            damping_ratio=damping_ratio(F1, X1, f, self.mass_kg), mass_kg=self.mass_kg, locked=outcome.ok,
+            why=outcome.message, periods=int(round(self.loop.periods)), blocks=outcome.iterations)
+        return ControlFields(target_force_N=step.force_N, force_error=force_err,
+                             force_converged=abs(force_err) <= self.loop.plan.force_tolerance, backbone=bbrec)
 
-    def level(self, step: StepSpec, record: Record) -> StepResult:
-        """One backbone point: lock, measure, record; a lost lock ramps down (output off)."""
-        self.periods = 0.0
-        try:
-            locked, why, blocks = self.track(step)
-        except LockLost as e:
-            log.warning("level %g N: lock lost: %s; ramping down", step.force_N, e)
-            self.stop()                   # at once: the point keeps the loop's last block
-            block = self.last_block
-            assert block is not None          # LockLost comes after a block
-            f = self.drive.freq_Hz
-            measured, raw = self.block_result(block, self._measure_block(block, f))
-            self.slope = None             # the next level probes again
-            self.on_event("lock_lost", key=step.key, level_N=step.force_N, freq_Hz=f, reason=str(e))
-            return self._record(step, measured, raw, locked=False, why=f"lock lost: {e}",
-                                blocks=len(self.history), record=record)
-        f = self.drive.freq_Hz
-        if not locked:
-            log.warning("level %g N: %s; recorded as not locked", step.force_N, why)
-            self.on_event("not_locked", key=step.key, level_N=step.force_N, freq_Hz=f, reason=why)
-        measured, raw = self.measure(replace(step, freq_Hz=f))
-        if locked:
-            self.f_locked = f
-        return self._record(step, measured, raw, locked=locked, why=why, blocks=blocks, record=record)
 
-    # ------------------------------------------------------------------ the test
-    def run(self, done: set[str], record: Record,
-            progress: Callable[[int, int, str], None] | None = None, choose=None, refine=None) -> None:
-        steps = self.plan.schedule()
-        finished = len([s for s in steps if s.key in done])
-        for step in steps:
-            if step.key in done:
-                continue
-            res = self.level(step, record)
-            finished += 1
-            if progress:
-                bbr = res["backbone"]
-                progress(finished, len(steps), f"{step.force_N:g} N {bbr['frequency_Hz']:7.2f} Hz "
-                         f"phase {bbr['phase_deg']:+.1f} deg zeta {100 * bbr['damping_ratio']:.2f} % "
-                         + ("locked" if bbr["locked"] else "NOT locked") + f" ({bbr['periods']} periods)")
-        self.stop()
+class LockSchedule(Schedule):
+    """Phase resonance's walk over the plan's levels: each level starts where the drive is
+    (from the frequency locked last, or ``start_Hz``; no ramp down between levels), and the
+    frequency is the controller's, so there is no grid to choose from or refine."""
+
+    fixed_frequencies = False
+    restart_sweeps = False
+
+    def __init__(self, bb: Backbone):
+        self.bb = bb
+        self.f_locked: float | None = None    # the last locked frequency
+
+    def start_Hz(self, proc: SteppedSine, step: StepSpec) -> float:
+        return proc.drive.freq_Hz if proc.drive.on else (self.f_locked or self.bb.start_Hz)
+
+    def preload(self, results: list) -> None:
+        """A resumed run goes on from the last frequency locked before."""
+        for r in sorted(results, key=lambda r: r["index"]):
+            if r.get("backbone", {}).get("locked"):
+                self.f_locked = r["freq_Hz"]
+
+    def after(self, step: StepSpec, result: StepResult) -> None:
+        if result["backbone"]["locked"]:
+            self.f_locked = result["freq_Hz"]
+
+    def describe(self, quantity: Quantity, step: StepSpec, res: StepResult | None) -> str:
+        assert res is not None
+        b = res["backbone"]
+        return (f"{step.force_N:g} N {b['frequency_Hz']:7.2f} Hz phase {b['phase_deg']:+.1f} deg zeta "
+                f"{100 * b['damping_ratio']:.2f} % " + ("locked" if b["locked"] else "NOT locked")
+                + f" ({b['periods']} periods)")
+
+
+def phase_resonance(plan: Plan, *, mass_kg: float, on_event: Callable[..., None] | None = None,
+                    on_block: Callable[[dict], None] | None = None) -> tuple[PhaseLock, LockSchedule]:
+    """The controller and schedule of a phase-resonance plan (``[plan.backbone]``)."""
+    if plan.backbone is None:
+        raise ValueError("a phase-resonance plan needs [plan.backbone]")
+    bb = plan.backbone.resolved()
+    return PhaseLock(bb, mass_kg=mass_kg, on_event=on_event, on_block=on_block), LockSchedule(bb)

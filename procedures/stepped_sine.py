@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -24,11 +24,12 @@ from .analysis import fit_harmonics
 from .capacity import measure_periods
 from .control import FIRST_DRIVE_MARGIN, Controller, ForceControl, Outcome, Reason, next_drive
 from .instruments import Block, BlockSource, SineSource, StepMarker
+from .kind import Quantity
 from .plan import Plan, StepSpec
 from .safety import LimitExceeded
 
-__all__ = ["FIRST_DRIVE_MARGIN", "MIN_VPP", "DriveState", "ForceUnreachable", "SteppedSine", "StepResult", "Unsettled",
-           "next_drive", "unsettled"]
+__all__ = ["FIRST_DRIVE_MARGIN", "MIN_VPP", "DriveState", "ForceUnreachable", "Schedule", "SteppedSine", "StepResult",
+           "Unsettled", "next_drive", "unsettled"]
 
 Record = Callable[[StepSpec, StepResult, dict[str, np.ndarray]], None]
 
@@ -102,17 +103,46 @@ class DriveState:
     next_quarter: int = 1             # changes alternate between phase pi/2 and 3 pi/2
 
 
+class Schedule:
+    """How the loop walks a plan's points for its controller (this one: the stepped sine's).
+    Each point is at the plan's frequency, a new sweep starts from rest (ramp down, output
+    off, sensor check, ramp up) and the adaptive choice and the refinement may pick points.
+    A controller that moves the frequency (phase resonance) has a schedule of its own:
+    :class:`procedures.phase_resonance.LockSchedule`."""
+
+    fixed_frequencies = True      # False: the controller finds each point's frequency (no choose, no refine)
+    restart_sweeps = True         # False: a new sweep (level) goes on from the drive as it is
+
+    def start_Hz(self, proc: SteppedSine, step: StepSpec) -> float:
+        """The frequency a point's drive starts at."""
+        return step.freq_Hz
+
+    def preload(self, results: list) -> None:
+        """What a resumed run's stored points tell the schedule."""
+
+    def after(self, step: StepSpec, result: StepResult) -> None:
+        """A point recorded."""
+
+    def describe(self, quantity: Quantity, step: StepSpec, res: StepResult | None) -> str:
+        """The progress line's words for a point (None: skipped)."""
+        return (f"{quantity.format(step.force_N)} {step.freq_Hz:7.1f} Hz {step.direction:4s} "
+                + (f"err {100 * _control_error(res):+.1f}% THD(x) {100 * res['disp']['thd']:.1f}%"
+                   if res else f"skipped: {quantity.name} unreachable"))
+
+
 class SteppedSine:
     """Runs a :class:`~bench.config.Plan` on supervised instruments: the one loop over its
     points (level, frequency) with a :class:`procedures.control.Controller` that brings the
-    controlled quantity to each level (default: the force)."""
+    controlled quantity to each level (default: the force) and a :class:`Schedule` that
+    says where each point starts (default: the plan's frequencies)."""
 
     def __init__(self, plan: Plan, generator: SineSource, daq: BlockSource, *, amp_gain_N_per_V: float,
                  sensor_check: Callable[[], object] | None = None, marker: StepMarker | None = None,
                  drive_limit_V: float = math.inf, on_skip: Callable[[StepSpec, str], None] | None = None,
-                 controller: Controller | None = None):
+                 controller: Controller | None = None, schedule: Schedule | None = None):
         self.plan = plan
         self.controller: Controller = controller or ForceControl()
+        self.schedule = schedule or Schedule()
         self.gen = generator
         self.daq = daq
         self.sensor_check = sensor_check          # gap in range? called before each sweep
@@ -124,6 +154,8 @@ class SteppedSine:
         self.on_skip = on_skip                    # a step skipped (force unreachable) and why
         self.gain_at: dict[float, float] = {}     # frequency -> latest measured force per Vpp
         self.history: list[tuple[float, float]] = []   # (Vpp, force) of the last control
+        self.periods = 0.0                        # drive periods since the point started
+        self.last_block: Block | None = None      # the latest block acquired
 
     def preload(self, results: list) -> None:
         """A resumed run knows the force per volt its stored steps measured (the last control
@@ -134,6 +166,7 @@ class SteppedSine:
             if history and history[-1]["force_N"] > 0 and history[-1]["drive_Vpp"] > 0:
                 gain = history[-1]["force_N"] / history[-1]["drive_Vpp"]
                 self.drive.gain_N_per_Vpp = self.gain_at[r["freq_Hz"]] = gain
+        self.schedule.preload(results)
 
     def _first_vpp(self, step: StepSpec, new_sweep: bool = False) -> float:
         """First drive of a step, the controller's (within the drive limit)."""
@@ -160,7 +193,8 @@ class SteppedSine:
 
     # ------------------------------------------------------------------ primitives
     def _acquire(self, freq_Hz: float, periods: int) -> Block:
-        block = self.daq.acquire_periods(freq_Hz, max(1, periods), self.plan.min_sample_rate_Hz)
+        block = self.last_block = self.daq.acquire_periods(freq_Hz, max(1, periods), self.plan.min_sample_rate_Hz)
+        self.periods += max(1, periods)
         self._track_phase(block, freq_Hz)
         return block
 
@@ -197,6 +231,11 @@ class SteppedSine:
             self.drive.freq_Hz = self.gen.set_frequency(freq_Hz)
         if vpp is not None:
             self.drive.amplitude_Vpp = self.gen.set_amplitude(max(vpp, MIN_VPP))
+
+    def glide(self, freq_Hz: float) -> None:
+        """Change the frequency at once, no alignment wait: a 33500-series generator changes it
+        phase-continuously (a DDS: FREQ loads a new phase increment, the accumulator goes on)."""
+        self.drive.freq_Hz = self.gen.set_frequency(freq_Hz)
 
     def _wait(self, freq_Hz: float, seconds: float, min_periods: int = 0) -> None:
         """Let time pass with the output as it is: acquire (and so supervise) blocks."""
@@ -307,7 +346,12 @@ class SteppedSine:
         at the start of each sweep, the subset of its steps to measure.  ``refine``
         (resonance search, :class:`procedures.resonance.Refiner`) is asked after a level's
         last sweep for one more step at a time, until it says None; each starts from rest
-        like a new sweep (ramp, force control), since it jumps in frequency."""
+        like a new sweep (ramp, force control), since it jumps in frequency.  A schedule
+        whose controller finds the frequencies (phase resonance) has no grid to choose from or
+        refine: asking it to is a ValueError, before the drive is touched."""
+        if (choose or refine) and not self.schedule.fixed_frequencies:
+            raise ValueError(f"{self.plan.procedure.label}: the controller finds each point's frequency, so "
+                             f"there is no grid for {'adaptive choice' if choose else 'resonance refinement'}")
         sweeps: list[list[StepSpec]] = []
         for step in self.plan.schedule():
             if not sweeps or (step.level_index, step.direction) != (sweeps[-1][0].level_index,
@@ -335,9 +379,7 @@ class SteppedSine:
                 before = step
                 finished += 1
                 if progress:
-                    progress(finished, total, f"{q.format(step.force_N)} {step.freq_Hz:7.1f} Hz {step.direction:4s} "
-                             + (f"err {100 * _control_error(res):+.1f}% THD(x) {100 * res['disp']['thd']:.1f}%"
-                                if res else f"skipped: {q.name} unreachable"))
+                    progress(finished, total, self.schedule.describe(q, step, res))
                 prev = step
             if refine and (n_sweep == len(sweeps) - 1 or sweeps[n_sweep + 1][0].level_index != sweep[0].level_index):
                 tried: set[str] = set()
@@ -369,17 +411,21 @@ class SteppedSine:
         self._wait(step.freq_Hz, self.plan.min_settle_s, min_periods=self.plan.settle_cycles + periods)
 
     def step(self, step: StepSpec, *, new_sweep: bool, record: Record) -> StepResult | None:
-        """One step: drive, control the force, settle, measure, record.  A step whose force
-        the drive limit cannot reach is not measured: the plan's ``infeasible`` says whether
-        that stops the test (``refuse``: ramp down, output off, ForceUnreachable) or the step
-        is skipped (``skip``: ``on_skip`` is told why; returns None)."""
+        """One step: drive, control, settle, measure, record.  A step whose level the drive
+        limit cannot reach is not measured: the plan's ``infeasible`` says whether that
+        stops the test (``refuse``: ramp down, output off, ForceUnreachable) or the step is
+        skipped (``skip``: ``on_skip`` is told why; returns None).  A point the controller
+        lost (:attr:`Reason.lost`: phase resonance's lock) is ramped down at once and
+        recorded from the control's last block; a control that moved the frequency is
+        measured where it ended."""
+        self.periods = 0.0
         first_vpp = self._first_vpp(step, new_sweep)
         if new_sweep:
-            if self.drive.on:
+            if self.drive.on and self.schedule.restart_sweeps:
                 self.stop()
-            if self.sensor_check:
+            if not self.drive.on and self.sensor_check:
                 self.sensor_check()
-            self.ramp(first_vpp, step.freq_Hz)
+            self.ramp(first_vpp, self.schedule.start_Hz(self, step))
         else:
             self._change(freq_Hz=step.freq_Hz, vpp=first_vpp)
         outcome = self.control_force(step)
@@ -392,18 +438,23 @@ class SteppedSine:
             if self.on_skip:
                 self.on_skip(step, outcome.message)
             return None
-        if not outcome.ok:
-            q = self.controller.quantity
-            log.warning("step %s: %s %s not reached within %.1f %% after %d iterations "
-                        "(error %+.1f %%)", step.key, q.name, q.format(step.force_N, ".3g"),
-                        100 * self.plan.force_tolerance, outcome.iterations, 100 * outcome.error)
-        measured, raw = self.measure(step)
+        where = step if outcome.freq_Hz is None else replace(step, freq_Hz=outcome.freq_Hz)
+        if outcome.reason.lost:
+            block = self.last_block
+            assert block is not None              # a control is lost on a block
+            self.stop()
+            measured, raw = self.block_result(block, self._measure_block(block, where.freq_Hz))
+        else:
+            if not outcome.ok:
+                log.warning("step %s: %s", step.key, outcome.message)
+            measured, raw = self.measure(where)
         result = StepResult(**measured, key=step.key, index=step.index, level_index=step.level_index,
                             freq_index=step.freq_index, direction=step.direction,
                             control_iterations=outcome.iterations,
                             control_history=[ControlIteration(drive_Vpp=v, force_N=F) for v, F in self.history],
                             **self.controller.fields(step, measured, outcome))
         record(step, result, raw)
+        self.schedule.after(step, result)
         return result
 
 

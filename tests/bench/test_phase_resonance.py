@@ -178,13 +178,13 @@ def test_the_report_speaks_of_phase_resonance_and_its_locked_levels(bar_run):
 
 def test_ctrl_c_ends_with_the_output_off_and_resume_goes_on_at_the_next_level(tmp_path, mocker):
     from bench.storage import RunStore
-    from procedures.phase_resonance import PhaseResonance
+    from procedures.phase_resonance import PhaseLock
     from tests.bench.test_exit_paths import fail_on_call
 
     plan = parse_plan(backbone_plan(BAR_LEVELS))
     rig = load_rig(DEFAULTS / "sim_rig.toml")
     out = tmp_path / "run"
-    fail_on_call(mocker, PhaseResonance, "track", 3, KeyboardInterrupt())
+    fail_on_call(mocker, PhaseLock, "control", 3, KeyboardInterrupt())
     with pytest.raises(KeyboardInterrupt):
         run_plan(plan, rig, out)
     store = RunStore(out)

@@ -84,3 +84,25 @@ def test_the_response_controller_states_its_quantity_and_records_it():
     # the force controller's unreachable step names the drive limit as before
     results, skipped, _, _, _ = run([30.0], [1000.0], drive_V=0.5, infeasible="skip")
     assert not results and "unreachable" in skipped[0][1] and "drive limit" in skipped[0][1]
+
+
+@pytest.mark.parametrize("ask", ["choose", "refine"])
+def test_phase_resonance_is_the_same_loop_and_refuses_a_grid_it_does_not_have(ask):
+    """Phase resonance is the phase's controller and a schedule on the one loop (decision
+    0060), built by the one factory; the loop's adaptive choice and refinement pick points
+    of a frequency grid it has not got: asked for either, it says so before the drive is
+    touched, never ignores it."""
+    from bench.config import parse_plan
+    from procedures.factory import procedure_for
+    from procedures.kind import PHASE
+    plan = parse_plan({"plan": {"procedure": "phase_resonance", "levels_N": [0.1], "backbone": {"start_Hz": 80.0},
+                                "control": dict(DEMO["control"])}})
+    plant = SimulatedRig(RigModel.from_dict(RIG.model))
+    proc = procedure_for(plan, PlantGenerator(plant), PlantDaq(plant), amp_gain_N_per_V=RIG.amp_gain_N_per_V,
+                         mass_kg=10.0)
+    assert type(proc) is SteppedSine and proc.controller.quantity is PHASE
+    picks = {"choose": lambda sweep: sweep, "refine": lambda step: None}
+    with pytest.raises(ValueError, match=f"phase resonance: the controller finds each point's frequency.*"
+                                         f"{'adaptive choice' if ask == 'choose' else 'resonance refinement'}"):
+        proc.run(set(), lambda *a: None, **{ask: picks[ask]})
+    assert plant.gen.output_on is False and proc.drive.on is False
