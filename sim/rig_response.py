@@ -202,6 +202,78 @@ def level_response(model: RigModel | dict, level_N: float, freqs_Hz) -> LevelRes
     return _cached(m, float(level_N), tuple(float(x) for x in np.sort(np.asarray(freqs_Hz, float))))
 
 
+HELD_TOLERANCE = 1e-3          # a held response's force is solved until |R1| is this close to the level (relative)
+HELD_ITERATIONS = 10           # secant steps per frequency before the point is given up (not converged)
+
+
+@dataclass(frozen=True)
+class HeldResponse:
+    """The model's steady response with the response's fundamental held at one amplitude
+    (a response-controlled run's level), per frequency: the force the level needs and what
+    the bench stores per step at it, and d log|R1| / d log|F1| there (the last secant's)."""
+
+    amplitude: float                # the held |X1| (m) or |A1| (m/s^2)
+    response: str                   # "disp" or "accel"
+    freq_Hz: np.ndarray
+    force_N: np.ndarray             # |F1| the level needs
+    compliance_pp: np.ndarray       # m/N, seed Eq. 9, at that force
+    slope: np.ndarray               # d log|R1| / d log|F1|
+    converged: np.ndarray           # bool: a steady state with |R1| within HELD_TOLERANCE
+
+
+def one_mode_force_N(model: RigModel, X_m: float, freq_Hz: float) -> float:
+    """|P1| the Masing carriage with its linear spring and viscous damper needs for a
+    displacement fundamental ``X_m`` (single-harmonic balance; the held response's first guess)."""
+    from .backbone import loop_coefficients
+    w = 2 * math.pi * freq_Hz
+    a1, b1 = loop_coefficients(X_m, model.F_s_N, model.x_s_m, model.n)
+    return math.hypot(a1 + (model.spring_N_per_m - model.mass_kg * w * w) * X_m, b1 - model.viscous_N_s_per_m * w * X_m)
+
+
+def _held(model: RigModel, amplitude: float, response: str, freqs: tuple[float, ...]) -> HeldResponse:
+    f = np.array(freqs)
+    sweep = _Sweep(model, 1.0)
+    F_out, pp_out, s_out, ok_out = np.empty(f.size), np.empty(f.size), np.empty(f.size), np.zeros(f.size, bool)
+    F, s = math.nan, 1.0
+    for i, fi in enumerate(f):
+        if not math.isfinite(F):
+            w2 = (2 * math.pi * fi) ** 2
+            F = one_mode_force_N(model, amplitude if response == "disp" else amplitude / w2, float(fi))
+        prev: tuple[float, float] | None = None
+        pp, ok = math.nan, False
+        for _ in range(HELD_ITERATIONS):
+            sweep.true_N = F / (1.0 + model.force_gain_error)     # the measured force's fundamental is F
+            C, A, pp, steady = sweep.point(float(fi))
+            R = abs(C if response == "disp" else A) * F
+            if prev is not None and abs(math.log(F / prev[0])) > 1e-6 and R != prev[1]:
+                s = min(max(math.log(R / prev[1]) / math.log(F / prev[0]), 0.2), 5.0)
+            if steady and abs(R / amplitude - 1) <= HELD_TOLERANCE:
+                ok = True
+                break
+            prev = (F, R)
+            F *= (amplitude / R) ** (1.0 / s)
+        F_out[i], pp_out[i], s_out[i], ok_out[i] = F, pp, s, ok
+    if (~ok_out).any():
+        log.info("rig model at a held %s of %g: not within %g at %d of %d frequencies", response, amplitude,
+                 HELD_TOLERANCE, int((~ok_out).sum()), f.size)
+    return HeldResponse(amplitude, response, f, F_out, np.where(ok_out, pp_out, np.nan), s_out, ok_out)
+
+
+@lru_cache(maxsize=16)
+def _held_cached(model: RigModel, amplitude: float, response: str, freqs: tuple[float, ...]) -> HeldResponse:
+    return _held(model, amplitude, response, freqs)
+
+
+def held_response(model: RigModel | dict, amplitude: float, freqs_Hz, response: str = "disp") -> HeldResponse:
+    """The line of a response-controlled level from the one model of the rig (every
+    declared effect, the pitching mode; :func:`line_model`): along an upward sweep of the
+    compiled plant, at each frequency the force is found by a secant in log-log (started
+    from the previous frequency's, or the one-mode balance) until the steady |X1| (or the
+    drive point's |A1|) is within HELD_TOLERANCE of ``amplitude``."""
+    m = line_model(model)
+    return _held_cached(m, float(amplitude), response, tuple(float(x) for x in np.sort(np.asarray(freqs_Hz, float))))
+
+
 def _golden(fun, a: float, b: float, tol: float = GOLDEN_TOLERANCE) -> tuple[float, float]:
     """(x, fun(x)) at the maximum of ``fun`` on [a, b] (unimodal there), golden-section search in log x."""
     g = (math.sqrt(5) - 1) / 2

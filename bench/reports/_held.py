@@ -1,17 +1,13 @@
-"""The model at a held response: a response-controlled run's model comparison (decision 0052).
+"""The model at a held response: a response-controlled run's model comparison (decisions 0052, 0060).
 
-A response-controlled step holds the response's fundamental at its level, so the model
-needs no FRF engine: at amplitude X and frequency f the Masing loop's single-harmonic
-balance (:func:`sim.backbone.loop_coefficients`, with the rig's mass, linear spring and
-viscous damping) gives the force fundamental directly,
-
-    |P1| = |a1(X) + k X - m w^2 X + i (b1(X) - c w X)|,   model compliance_pp = X / |P1|,
-
-(an acceleration level A holds X = A / w^2).  Each step's difference compares the force
-the step needed with the model's at the amplitude it measured; a rig file that declares
-modes or effects compares with the model of the rig that declares them (decision 0042),
-as the force-level comparison does.  Milliseconds per level, where the FRF engine at a
-"force" made of metres took minutes and found no steady state.
+A response-controlled step holds the response's fundamental at its level, so the model is
+asked the same: at each frequency the force the rig's one model (every declared effect and
+the pitching mode, as every other line: :func:`sim.rig_response.held_response`, decision
+0054) needs for the held |X1| (or the drive point's |A1|), found by a secant on the
+compiled plant's steady states; the line is the compliance_pp there.  Each step's
+difference compares its compliance_pp with the model's at the amplitude it measured (the
+line's at the level, moved by the local slope d log|R1| / d log|F1|: the steps hold the
+level within the plan's tolerance).  No FRF engine at a "force" made of metres.
 """
 
 from __future__ import annotations
@@ -21,10 +17,8 @@ import math
 import numpy as np
 
 from procedures.kind import ProcedureKind, of_stored_plan
-from sim.backbone import loop_coefficients
 
 from ._model import (
-    MODEL_GRID_POINTS,
     LevelComparison,
     ModelComparison,
     _median,
@@ -34,53 +28,49 @@ from ._model import (
 )
 from ._steps import UNSETTLED_RESIDUAL, residual_ratio
 
-
-def held_force_N(X_m: float, freq_Hz: float, model) -> float:
-    """|P1| the rig model (one mode, its linear spring and viscous damping) needs to hold a
-    displacement fundamental ``X_m`` at ``freq_Hz``."""
-    w = 2 * math.pi * freq_Hz
-    a1, b1 = loop_coefficients(X_m, model.F_s_N, model.x_s_m, model.n)
-    re = a1 + model.spring_N_per_m * X_m - model.mass_kg * w * w * X_m
-    im = b1 - model.viscous_N_s_per_m * w * X_m
-    return math.hypot(re, im)
+HELD_GRID_POINTS = 40      # the held line's frequencies (each a secant of steady states), and the steps'
 
 
 def held_response_comparison(meta: dict, results: list[dict], flagged: set[str] | None,
                              quantity: str) -> ModelComparison:
     """The comparison of a response-controlled run whose levels hold ``quantity`` ("disp"
-    or "accel"), per level: the model's compliance_pp at the level on a dense grid (the
-    line) and at each step's measured amplitude (the difference)."""
+    or "accel"), per level: the model's compliance_pp at the held level (the line) and at
+    each step's measured amplitude (the difference)."""
     from sim.rig import RigModel
+    from sim.rig_response import held_response, line_model
     rig = meta["rig"]
-    model = RigModel.from_dict(rig["model"])
+    declared = RigModel.from_dict(rig["model"])
+    model = line_model(declared)
     levels = (meta.get("plan") or {}).get("levels_N") or []
     freqs = np.array(sorted({r["freq_Hz"] for r in results}))
-    dense = np.union1d(np.geomspace(freqs.min() / 1.1, freqs.max() * 1.1, MODEL_GRID_POINTS), freqs)
-
-    def disp(level: float, f: float) -> float:
-        return level if quantity == "disp" else level / (2 * math.pi * f) ** 2
-
-    left_out = [e for e in _model_effects(model) if not e.startswith(("viscous damping", "linear spring"))]
-    notes = [f"response-controlled: no FRF engine; the force fundamental the model needs at the held amplitude, by "
-             f"single-harmonic balance of the Masing loop (sim.backbone.loop_coefficients, n = {model.n:g}) with the "
-             f"mass {model.mass_kg:g} kg, spring {model.spring_N_per_m:g} N/m and viscous damping "
-             f"{model.viscous_N_s_per_m:g} N s/m: compliance_pp = X / |P1| (the loop's superharmonics left out)"]
-    if left_out:     # the held-response balance is one mode's: say what it leaves out (decision 0054's engine
-        # is at force levels; a held response's full-model line is not made yet)
-        notes.append("left out of the held-response model (one mode, the loop's fundamental): " + ", ".join(left_out))
+    grid = np.union1d(np.geomspace(freqs.min() / 1.1, freqs.max() * 1.1, HELD_GRID_POINTS), freqs)
+    unit = "m" if quantity == "disp" else "m/s^2"
+    effects = _model_effects(declared)
+    left_out = [e for e in effects if "shaker" in e or "interference" in e]
+    effects = [e for e in effects if e not in left_out]
+    notes = [f"response-controlled: the rig's model ({', '.join(effects) or 'the Masing carriage'}; decision 0054) at "
+             f"the held {'|X1|' if quantity == 'disp' else '|A1|'}: at each frequency the force that holds it, by a "
+             f"secant on the compiled plant's steady states (sim.rig_response.held_response), no FRF engine at a "
+             f"force level"]
+    if left_out:
+        notes.append("left out (an ideal sine force): " + ", ".join(left_out))
     curves, at_steps, out = {}, {}, []
     by_level: dict[int, list[dict]] = {}
     for r in results:
         by_level.setdefault(r["level_index"], []).append(r)
     for li, steps in sorted(by_level.items()):
         level = float(levels[li]) if li < len(levels) else float(steps[0]["response_control"]["target"])
-        C = np.array([disp(level, f) / held_force_N(disp(level, f), f, model) for f in dense])
-        curves[level] = (dense, C, np.zeros(dense.size, bool))
+        held = held_response(model, level, grid, quantity)
+        curves[level] = (held.freq_Hz, held.compliance_pp, ~held.converged)
+        if (~held.converged).any():
+            notes.append(f"{level:g} {unit}: the model's force not found at {int((~held.converged).sum())} of "
+                         f"{grid.size} frequencies (left out of the line)")
         diff = []
         for s in steps:
-            X = float(s["disp"]["amplitude"][0])
-            c_model = X / held_force_N(X, s["freq_Hz"], model) * s["compliance_pp_m_per_N"] \
-                / max(float(s["compliance_abs_m_per_N"]), 1e-300)     # the measured pp / |X1/F1| shape kept
+            k = int(np.argmin(np.abs(held.freq_Hz - s["freq_Hz"])))
+            got = float((s["disp"] if quantity == "disp" else s["accel"])["amplitude"][0]) / level
+            # compliance_pp ~ X1 / F1 with F1 ~ R1^(1 / slope): moved from the level to the step's amplitude
+            c_model = float(held.compliance_pp[k]) * got ** (1.0 - 1.0 / held.slope[k])
             at_steps[s["key"]] = c_model
             diff.append(s["compliance_pp_m_per_N"] / c_model - 1.0)
         bad = np.array([s["key"] in flagged if flagged is not None else residual_ratio(s) > UNSETTLED_RESIDUAL
