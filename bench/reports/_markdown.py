@@ -251,7 +251,8 @@ def _procedure_row(run: RunData) -> str:
     within = f"within {100 * tol:g} %" if isinstance(tol, (int, float)) else "within tolerance"
     if run.kind is ProcedureKind.PHASE_RESONANCE:
         bb = plan.get("backbone") or {}
-        return (f"phase resonance: at each force level the frequency moved until the {bb.get('response', '?')} "
+        response = {"disp": "displacement", "accel": "acceleration"}.get(bb.get("response", ""), "response")
+        return (f"phase resonance: at each force level the frequency moved until the {response} "
                 f"fundamental's phase against the force's was {bb.get('phase_deg', math.nan):g} deg "
                 f"(band +-{bb.get('phase_band_deg', math.nan):g} deg), then held and measured")
     if run.kind is ProcedureKind.RESPONSE_CONTROLLED:
@@ -366,8 +367,10 @@ def _write_figures(run: RunData, out: Path, others=()) -> list[tuple[str, str]]:
     files: list[tuple[str, str]] = []
     q = run.level_quantity
     save(figures.plot_compliance(series, colours, title, run.legacy, level=q), out / "compliance.png")
+    lines = ("each level's locked point, one marker per level (no sweep)" if run.kind is ProcedureKind.PHASE_RESONANCE
+             else "solid = up sweep, dashed = down sweep")
     files.append(("compliance.png", f"compliance vs frequency, log-log, one colour per {q.name} level ({q.unit}), "
-                  "solid = up sweep, dashed = down sweep. Top: |X1/F1| from the fundamentals of the harmonic "
+                  f"{lines}. Top: |X1/F1| from the fundamentals of the harmonic "
                   "fits; middle: compliance_pp = (x_max - x_min)/(2 F1), the seed's Eq. 9 in SI, from "
                   f"{pp_source(results)}; bottom: phase of X1/F1 in degrees (0 = spring-like, -180 = mass-like)."))
     save(figures.plot_accelerance(series, colours, title, run.rig.get("expected_mass_kg"), level=q),
@@ -403,12 +406,12 @@ def _write_figures(run: RunData, out: Path, others=()) -> list[tuple[str, str]]:
     if run.comparison:
         held = run.kind is ProcedureKind.RESPONSE_CONTROLLED
         save(figures.plot_model(series, colours, title, run.comparison, level=q,
-                                **({"lines": "model at the held response (single-harmonic balance, rig's true "
-                                             "parameters)"} if held else {})), out / "model_vs_measurement.png")
+                                **({"lines": "model at the held response (the rig's model, every declared "
+                                             "effect)"} if held else {})), out / "model_vs_measurement.png")
         files.append(("model_vs_measurement.png", "simulated rig only: the rig model's compliance_pp (its "
                       "file's values and every effect it declares; lines" + (", at each level's held response: "
-                                                                            "one mode, single-harmonic balance"
-                                                                            if held else "")
+                                                                            "the force that holds it, found on "
+                                                                            "the same model" if held else "")
                       + ") over the measured compliance_pp (markers), and the relative differences from the same "
                       "lines (flagged steps marked)."))
     ident = run.ident
