@@ -618,7 +618,11 @@ def cmd_modes(args) -> int:
     runs, files = write_modes([Path(r) for r in args.runs], Path(args.out), model=not args.no_model)
     for r in runs:
         for e in r.modes:
-            if e.ok:
+            if e.ok and r.kind == "phase_resonance":     # one locked point: its energy balance, no fit, no interval
+                print(f"{r.label}: {e.mode} at {r.level_quantity.format(e.level_N)}: {e.resonance_Hz:.5g} Hz "
+                      f"(phase resonance, locked), damping ratio (energy balance at the locked point) "
+                      f"{100 * e.damping_ratio:.3g} %")
+            elif e.ok:
                 eb = e.extra.get("energy_balance")
                 print(f"{r.label}: {e.mode} at {r.level_quantity.format(e.level_N)}: {e.resonance_Hz:.5g} Hz "
                       f"[{e.resonance_low_Hz:.5g}, {e.resonance_high_Hz:.5g}], damping ratio (single-mode fit) "

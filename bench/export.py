@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from procedures.kind import FORCE, QUANTITIES, of_stored_plan
+from procedures.kind import FORCE, QUANTITIES, ProcedureKind, of_stored_plan
 from sim.errors import ConfigurationError
 from sim.records import estimate_frequency
 
@@ -205,7 +205,13 @@ def export_run(run_dir: Path, out_dir: Path | None = None, *, time_records: bool
     out.mkdir(parents=True, exist_ok=True)
     paths = [write_csv(results, out / "steps.csv")]
     if results:
-        paths.append(_write_uff(out / "frf.uff", frf_datasets(meta, results)))
+        if of_stored_plan(meta.get("plan") or {})[0] is ProcedureKind.PHASE_RESONANCE:
+            log.warning("%s: phase resonance: one locked point per level, no FRF along frequency, so no frf.uff; "
+                        "the points are in steps.csv and modes.uff", run_dir)
+        elif dsets := frf_datasets(meta, results):
+            paths.append(_write_uff(out / "frf.uff", dsets))
+        else:
+            log.warning("%s: no level has two readable steps, so no frf.uff", run_dir)
         from .export_modes import export_modes
         paths += export_modes(store.path, out, _write_uff)
         if time_records:

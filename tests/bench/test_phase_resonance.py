@@ -176,6 +176,27 @@ def test_the_report_speaks_of_phase_resonance_and_its_locked_levels(bar_run):
     assert "controller blocks are progress, not interruptions" in listed
 
 
+def test_export_and_modes_speak_of_locked_points_not_of_sweeps(bar_run, tmp_path, capsys, caplog):
+    """`bench export` of a backbone (one point per level) writes its steps and modes and says
+    why there is no frf.uff (it stopped on "internal error (Exception: Nothing to write)",
+    after four "level ... has one readable step" warnings); `bench modes` names the
+    energy balance at the locked point, not a single-mode fit it did not make."""
+    from bench.cli import main
+    _, store = bar_run
+    assert main(["export", str(store.path), "--out", str(tmp_path / "x"), "--no-time"]) == 0
+    assert sorted(p.name for p in (tmp_path / "x").iterdir()) == ["modes.csv", "modes.uff", "steps.csv"]
+    with open(tmp_path / "x" / "steps.csv") as fh:
+        assert [float(r["level"]) for r in csv.DictReader(fh)] == BAR_LEVELS
+    said = [r.getMessage() for r in caplog.records]
+    assert any("phase resonance: one locked point per level" in m for m in said), said
+    assert not any("one readable step" in m for m in said), said
+    capsys.readouterr()
+    assert main(["modes", str(store.path), "--out", str(tmp_path / "m"), "--no-model"]) == 0
+    lines = [line for line in capsys.readouterr().out.splitlines() if " Hz" in line]
+    assert len(lines) == len(BAR_LEVELS) and all("energy balance at the locked point" in line and "single-mode" not in
+                                                  line for line in lines), lines
+
+
 def test_ctrl_c_ends_with_the_output_off_and_resume_goes_on_at_the_next_level(tmp_path, mocker):
     from bench.storage import RunStore
     from procedures.phase_resonance import PhaseLock
