@@ -72,14 +72,17 @@ class Frf:
 
 def match_steps(ref: list[MeasuredStep], other: list[MeasuredStep]) -> list[tuple[int, int]]:
     """Pairs (i_ref, i_other): each reference step with the nearest unused other step of the
-    same level, frequency and direction (directions are ignored when either is unknown)."""
+    same level, frequency and direction (directions are ignored when either is unknown).  The
+    level is the force, or, when both steps held a response in the same unit
+    (response control), that response's level."""
     pairs, used = [], set()
     for i, r in enumerate(ref):
         best, best_d = None, math.inf
         for j, o in enumerate(other):
             if j in used or (r.direction and o.direction and r.direction != o.direction):
                 continue
-            dl = abs(o.level_N / r.level_N - 1)
+            both = r.held and o.held and r.held[1] == o.held[1]
+            dl = abs(o.held[0] / r.held[0] - 1) if both and r.held and o.held else abs(o.level_N / r.level_N - 1)
             df = abs(o.freq_Hz / r.freq_Hz - 1)
             if dl <= LEVEL_TOL and df <= FREQ_TOL:
                 d = dl / LEVEL_TOL + df / FREQ_TOL
@@ -89,6 +92,14 @@ def match_steps(ref: list[MeasuredStep], other: list[MeasuredStep]) -> list[tupl
             used.add(best)
             pairs.append((i, best))
     return pairs
+
+
+def _matched_by(ref: list[MeasuredStep], other: list[MeasuredStep]) -> str:
+    """The level the steps were matched by, in words."""
+    units = {s.held[1] if s.held else "N" for s in ref + other}
+    if len(units) == 1 and units != {"N"}:
+        return f"the response both held ({units.pop()})"
+    return "the force (N)"
 
 
 def _ri(z: complex) -> list[float]:
@@ -119,13 +130,16 @@ def _describe(src: Source) -> dict:
 def resonance_keys(steps: list[MeasuredStep]) -> set[str]:
     """Keys of the steps at the resonance: within the half-power band (|X1/P1| at least
     1/sqrt(2) of the peak) of their force level's most compliant step."""
+    def level(s: MeasuredStep) -> float:       # the response a step held, else its force
+        return s.held[0] if s.held else s.level_N
+
     levels: list[float] = []
-    for lv in sorted(s.level_N for s in steps):
+    for lv in sorted(level(s) for s in steps):
         if not levels or lv > LEVEL_GROUP * levels[-1]:
             levels.append(lv)
     out: set[str] = set()
     for lv in levels:
-        group = [s for s in steps if max(x for x in levels if x <= s.level_N * (1 + 1e-9)) == lv]
+        group = [s for s in steps if max(x for x in levels if x <= level(s) * (1 + 1e-9)) == lv]
         mag = {s.key: abs(Frf.of(s).compliance) for s in group}
         peak = max(mag.values())
         out |= {k for k, m in mag.items() if m >= RESONANCE_BAND * peak}
@@ -148,7 +162,8 @@ def coverage(ref: Source, oth: Source, pairs: list[tuple[int, int]], min_coverag
     """How much of the reference the comparison covers, and what it does not (module doc)."""
     matched = {i for i, _ in pairs}
     res = resonance_keys(ref.steps)
-    missing = [dict(step=s.key, level_N=float(s.level_N), freq_Hz=float(s.freq_Hz), direction=s.direction,
+    missing = [dict(step=s.key, level_N=float(s.level_N), level=s.level_text(), freq_Hz=float(s.freq_Hz),
+                    direction=s.direction,
                     resonance=s.key in res, why=_why_unmatched(s, oth))
                for k, s in enumerate(ref.steps) if k not in matched]
     frac = len(matched) / len(ref.steps)
@@ -181,7 +196,8 @@ def compare_sources(reference, other, tolerance: float = 0.02, min_coverage: flo
             raise ConfigurationError(f"{s.path}: no usable steps to compare")
     pairs = match_steps(ref.steps, oth.steps)
     if not pairs:
-        raise ConfigurationError(f"no step of {ref.path} matches one of {oth.path} in force level (within "
+        raise ConfigurationError(f"no step of {ref.path} matches one of {oth.path} in level (the force, or the "
+                                 f"response both held; within "
                          f"{100 * LEVEL_TOL:g} %), frequency (within {100 * FREQ_TOL:g} %) and direction")
     steps = []
     for i, j in pairs:
@@ -207,7 +223,8 @@ def compare_sources(reference, other, tolerance: float = 0.02, min_coverage: flo
     cov = coverage(ref, oth, pairs, min_coverage)
     within = worst is not None and worst <= tolerance
     return dict(schema=SCHEMA, reference=_describe(ref), other=_describe(oth), tolerance=tolerance,
-                matching=dict(level_rel=LEVEL_TOL, freq_rel=FREQ_TOL), matched=len(pairs),
+                matching=dict(level_rel=LEVEL_TOL, freq_rel=FREQ_TOL, level=_matched_by(ref.steps, oth.steps)),
+                matched=len(pairs),
                 unmatched_reference=[s.key for k, s in enumerate(ref.steps) if k not in matched_r],
                 unmatched_other=[s.key for k, s in enumerate(oth.steps) if k not in matched_o],
                 coverage=cov,
@@ -230,7 +247,8 @@ def coverage_text(cov: dict) -> list[str]:
             lines.append(f"{len(res)} of the unmatched steps are at the resonance (within the half-power band of "
                          f"their level's peak compliance), where the rig differs most: {', '.join(res)}")
         for m in cov["unmatched"]:
-            lines.append(f"  unmatched {m['step']} ({m['level_N']:.3g} N, {m['freq_Hz']:.4g} Hz"
+            lines.append(f"  unmatched {m['step']} ({m.get('level') or format(m['level_N'], '.3g') + ' N'}, "
+                         f"{m['freq_Hz']:.4g} Hz"
                          f"{', ' + m['direction'] if m['direction'] else ''}"
                          f"{', resonance' if m['resonance'] else ''}): {m['why']}")
     return lines
@@ -239,8 +257,9 @@ def coverage_text(cov: dict) -> list[str]:
 def summary(result: dict) -> str:
     o = result["overall"]
     cov = result["coverage"]
-    lines = [f"{result['matched']} steps matched ({len(result['unmatched_reference'])} of the reference and "
-             f"{len(result['unmatched_other'])} of the other unmatched)"] + coverage_text(cov)
+    by = (result.get("matching") or {}).get("level")
+    lines = [f"{result['matched']} steps matched{' by ' + by if by else ''} ({len(result['unmatched_reference'])} of "
+             f"the reference and {len(result['unmatched_other'])} of the other unmatched)"] + coverage_text(cov)
     for q in QUANTITIES:
         x = o[q]
         lines.append(f"{q:>11}: rms difference {_pct(x['rms_rel_diff'])} over the {x['judged']} steps precise enough "

@@ -48,6 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
+from procedures.kind import QUANTITIES
 from sim.artefacts import StepQuality, assess_step, attribute_lines
 from sim.errors import ConfigurationError, RunDirectoryError
 from sim.identify import StepHarmonics
@@ -78,6 +79,12 @@ class MeasuredStep:
     periods: int = 0
     drift_sigma: float = 0.0
     quality: StepQuality = field(default_factory=StepQuality)
+    held: tuple[float, str] | None = None   # a response-controlled step: (its level, the level's unit, "m" or "m/s^2")
+
+    def level_text(self) -> str:
+        """The step's level in words: the force, and the response it held if it held one."""
+        return (f"{self.held[0]:g} {self.held[1]} held, {self.level_N:.3g} N" if self.held
+                else f"{self.level_N:.3g} N")
 
 
 @dataclass
@@ -150,6 +157,14 @@ def recorded_step(key: str, result: dict) -> MeasuredStep | None:
     return _step(key, rec, quality, result.get("target_force_N"), result.get("direction", ""))
 
 
+def _held_level(result: dict) -> tuple[float, str] | None:
+    """(level, unit) a response-controlled step held (its ``response_control`` record), else None."""
+    rc = result.get("response_control")
+    if not isinstance(rc, dict) or rc.get("quantity") not in QUANTITIES:
+        return None
+    return float(rc["target"]), QUANTITIES[rc["quantity"]].unit
+
+
 def _step(key: str, rec: PeriodicRecords, quality: StepQuality, level_N: float | None, direction: str) -> MeasuredStep:
     h = StepHarmonics.from_records(rec)
     c = rec.channels
@@ -181,6 +196,7 @@ def _load_run(path: Path) -> Source:
             src.rejected.append(Rejected(key, str(e), getattr(e, "quality", None)))
             continue
         if kept is not None:
+            kept.held = _held_level(r)
             src.steps.append(kept)
             continue
         try:
@@ -196,6 +212,7 @@ def _load_run(path: Path) -> Source:
             src.steps.append(measured_step(key, raw["force_N"], raw["accel_m_s2"], raw["disp_m"],
                                            float(raw["fs_Hz"]), float(r["freq_Hz"]),
                                            r.get("target_force_N"), r.get("direction", "")))
+            src.steps[-1].held = _held_level(r)
         except (ValueError, KeyError, TypeError) as e:
             src.rejected.append(Rejected(key, str(e), getattr(e, "quality", None)))
     _attribute_lines(src, order)

@@ -179,3 +179,23 @@ def test_a_backbone_that_never_locked_does_not_go_well_and_exits_1(tmp_path):
     assert "went well" not in overall and "**needs attention**" in overall
     assert "0 of 1 levels locked; not locked: 1 N: lock lost" in overall, overall
     assert "identified model" not in md
+
+
+def test_bench_compare_matches_response_controlled_steps_by_the_level_they_held(rc_run):
+    """Two runs holding the same displacements on rigs that need different forces (here the
+    same run, its other copy's forces 30 % higher, as on a stiffer rig) are compared step
+    for step: matched by the displacement held, in m; by the force (main) none matched."""
+    from dataclasses import replace
+
+    from bench.compare import coverage, match_steps
+    from bench.sources import load_source
+    run, _, _ = rc_run
+    ref = load_source(run)
+    other = replace(ref, steps=[replace(s, level_N=1.3 * s.level_N) for s in ref.steps])
+    pairs = match_steps(ref.steps, other.steps)
+    assert sorted(pairs) == [(i, i) for i in range(len(ref.steps))]
+    assert all(s.level_text().startswith(f"{lv:g} m held, ") for s, lv in zip(ref.steps, [s.held[0] for s in ref.steps]))
+    assert {s.held[0] for s in ref.steps} == set(RC_LEVELS)
+    cov = coverage(ref, other, pairs[:-1], 1.0)       # one left out: its words name the displacement held
+    (missing,) = cov["unmatched"]
+    assert re.match(r"(1e-06|3e-06) m held, [\d.e+-]+ N$", missing["level"]), missing
