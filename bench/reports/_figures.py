@@ -649,7 +649,9 @@ def plot_fig13(runs: list) -> Figure:
         if pts:
             model = True
             ax1.plot([p[0] for p in pts], [p[1][0] for p in pts], color=colour, ls="--", lw=1)
-            ax2.plot([p[0] for p in pts], [p[1][1] for p in pts], color=colour, ls="--", lw=1)
+            peaks = [p for p in pts if math.isfinite(p[1][1])]     # a backbone's model has no peak value
+            if peaks:
+                ax2.plot([p[0] for p in peaks], [p[1][1] for p in peaks], color=colour, ls="--", lw=1)
     ax1.set(xscale="log", xlabel=level_axis(runs), ylabel="resonance frequency (Hz)",
             title="(a) feed mode: peak of compliance_pp")
     ax2.set(xscale="log", yscale="log", xlabel=level_axis(runs), ylabel="compliance_pp at the resonance (m/N)",

@@ -160,12 +160,39 @@ def backbone_modes(results: list[dict]) -> list[ModeEstimate]:
     return out
 
 
+def backbone_model(meta: dict, results: list[dict]) -> tuple[dict, dict]:
+    """(feed, other modes): level -> (frequency, nan, note) of the rig model's phase
+    resonance at each locked point's force, searched from its measured frequency
+    (:func:`sim.rig_response.phase_point`: the one model, the line backbone.png draws);
+    empty unless the rig is simulated with a stored model."""
+    rig = meta.get("rig") or {}
+    feed: dict[float, tuple[float, float, str]] = {}
+    other: dict[float, tuple[float, float, str]] = {}
+    if not (rig.get("simulated") and rig.get("model")):
+        return feed, other
+    from sim.rig_response import phase_point
+    for r in results:
+        b = r.get("backbone")
+        if not b or not b["locked"]:
+            continue
+        level = float(r["target_force_N"])
+        p = phase_point(rig["model"], level, float(b["frequency_Hz"]), response=b["response"], mass_kg=b["mass_kg"])
+        (feed if b["mode"] == "feed" else other)[level] = (
+            p.frequency_Hz, math.nan, "model: the rig model's phase resonance at the level" if p.converged
+            else "model: no phase resonance near the locked frequency")
+    return feed, other
+
+
 def modes_of(path: Path, meta: dict, results: list[dict], cmp: ModelComparison | None) -> RunModes:
     """The modes of a run's stored steps (every level; tracked as sim.modal.track_modes
     does, the feed mode by the model's peak when ``cmp`` has one); a phase-resonance run's
-    are its locked points (:func:`backbone_modes`)."""
+    are its locked points (:func:`backbone_modes`), beside the model's phase resonance
+    when ``cmp`` is given (:func:`backbone_model`)."""
     if any(r.get("backbone") for r in results):
-        return RunModes(Path(path), run_label(meta, path), backbone_modes(results), kind="phase_resonance")
+        run = RunModes(Path(path), run_label(meta, path), backbone_modes(results), kind="phase_resonance")
+        if cmp is not None:         # the model asked for: its phase resonance beside each point
+            run.model_feed, run.model_pitch = backbone_model(meta, results)
+        return run
     plan, rig = meta.get("plan") or {}, meta.get("rig") or {}
     level = of_stored_plan(plan)[1]
     levels_N = plan.get("levels_N") or sorted({r["target_force_N"] for r in results})
@@ -203,7 +230,15 @@ def run_modes(path: Path, *, model: bool = True) -> RunModes:
     store = RunStore.open(Path(path))
     meta, results = store.metadata, store.results()
     cmp = None
-    if model and not any(r.get("backbone") for r in results):
+    if any(r.get("backbone") for r in results):
+        run = modes_of(Path(path), meta, results, None)
+        if model:
+            try:
+                run.model_feed, run.model_pitch = backbone_model(meta, results)
+            except Exception as e:  # noqa: BLE001 - the measured points come out without the model
+                log.warning("model phase resonance failed: %s", e)
+        return run
+    if model:
         try:
             cmp = comparison_of(meta, results)
         except Exception as e:  # noqa: BLE001 - the measured modes come out without the model

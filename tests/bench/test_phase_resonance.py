@@ -191,10 +191,16 @@ def test_export_and_modes_speak_of_locked_points_not_of_sweeps(bar_run, tmp_path
     assert any("phase resonance: one locked point per level" in m for m in said), said
     assert not any("one readable step" in m for m in said), said
     capsys.readouterr()
-    assert main(["modes", str(store.path), "--out", str(tmp_path / "m"), "--no-model"]) == 0
+    assert main(["modes", str(store.path), "--out", str(tmp_path / "m")]) == 0
     lines = [line for line in capsys.readouterr().out.splitlines() if " Hz" in line]
     assert len(lines) == len(BAR_LEVELS) and all("energy balance at the locked point" in line and "single-mode" not in
                                                   line for line in lines), lines
+    # issue 31's bar 3 for a backbone: the rig model's phase resonance at each level (it had none)
+    with open(tmp_path / "m" / "modes.csv") as fh:
+        got = list(csv.DictReader(fh))
+    assert len(got) == len(BAR_LEVELS)
+    for r in got:
+        assert float(r["model_resonance_Hz"]) == pytest.approx(float(r["resonance_Hz"]), rel=0.005), r
 
 
 def test_ctrl_c_ends_with_the_output_off_and_resume_goes_on_at_the_next_level(tmp_path, mocker):
