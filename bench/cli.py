@@ -548,7 +548,7 @@ def _not_yet_measured(store, acc) -> list:
     order = [s.key for s in plan.schedule()]
     present = {k for k in acc.intact} | {p.key for p in acc.damaged} | {p.key for p in acc.skipped}
     last = max((order.index(k) for k in present if k in order), default=-1)
-    tail = [p for p in acc.missing if p.reason.startswith("missing: neither") and p.key in order
+    tail = [p for p in acc.missing if p.files == (".json", ".npz") and p.key in order
             and order.index(p.key) > last]
     return tail if len(tail) > 1 else []
 

@@ -40,6 +40,7 @@ import io
 import json
 import logging
 import os
+import re
 import stat
 import tempfile
 import threading
@@ -213,6 +214,12 @@ class DamagedStep(RunDirectoryError):
         self.problem = problem
 
 
+# the words of a step's missing files (StepProblem.files), made here only: decisions read ``files``
+MISSING_WORDS = {(".json", ".npz"): "missing: neither .json nor .npz",
+                 (".json",): "missing: no .json (only the .npz)",
+                 (".npz",): "missing: no .npz (only the .json)"}
+
+
 @dataclass(frozen=True)
 class StepProblem:
     """One problem of a run directory, found by :meth:`RunStore.check` or a reader."""
@@ -222,6 +229,7 @@ class StepProblem:
     kind: str         # one of PROBLEM_KINDS
     reason: str       # plain language
     count: int = 1    # steps concerned (more than one: an adaptive sweep's shortfall)
+    files: tuple[str, ...] = ()    # "missing": the step's files absent (".json", ".npz"), when known
 
     def __str__(self) -> str:
         return f"{shown(self.path)}: {self.reason}"
@@ -574,10 +582,10 @@ class RunStore:
         def present_step(key: str) -> None:      # a step with at least one of its files
             if key not in have_json:
                 missing.append(StepProblem(key, self.steps_dir / f"{key}.json", "missing",
-                                           "missing: no .json (only the .npz)"))
+                                           MISSING_WORDS[(".json",)], files=(".json",)))
             elif bad.get(key) and bad[key].kind == "missing":
                 missing.append(StepProblem(key, self.steps_dir / f"{key}.npz", "missing",
-                                           "missing: no .npz (only the .json)"))
+                                           MISSING_WORDS[(".npz",)], files=(".npz",)))
             elif key in bad:
                 damaged.append(bad[key])
             else:
@@ -594,7 +602,8 @@ class RunStore:
                         present += 1
                         skipped.append(StepProblem(key, jp, "skipped", f"skipped at run time: {allowed[key]}"))
                     elif not k:
-                        missing.append(StepProblem(key, jp, "missing", "missing: neither .json nor .npz"))
+                        missing.append(StepProblem(key, jp, "missing", MISSING_WORDS[(".json", ".npz")],
+                                                   files=(".json", ".npz")))
                     continue
                 present += 1
                 present_step(key)
@@ -671,8 +680,17 @@ class RunStore:
         return damaged
 
 
+_OPEN_STRING = re.compile(r'"(?:[^"\\\x00-\x1f]|\\.)*\\?')     # a JSON string that runs to the end
+
+
+def _json_cut(e: json.JSONDecodeError) -> bool:
+    """The document ends where the parser stopped (at its last character, or inside a
+    string that never closes): cut short, not garbled."""
+    return e.pos >= len(e.doc.rstrip()) - 1 or _OPEN_STRING.fullmatch(e.doc, e.pos) is not None
+
+
 def _json_reason(e: json.JSONDecodeError) -> str:
-    cut = "truncated: " if e.pos >= len(e.doc.rstrip()) - 1 or e.msg.startswith("Unterminated") else ""
+    cut = "truncated: " if _json_cut(e) else ""
     return f"{cut}not valid JSON ({e.msg} at line {e.lineno} column {e.colno}, file of {len(e.doc)} characters)"
 
 
@@ -700,8 +718,7 @@ def _read_step_json(path: Path, key: str) -> tuple[StepResult, dict | None]:
     except UnicodeDecodeError as e:
         raise bad("corrupt", f"not text (byte {e.start} is not UTF-8)") from None
     except json.JSONDecodeError as e:
-        reason = _json_reason(e)
-        raise bad("truncated" if reason.startswith("truncated") else "corrupt", reason) from None
+        raise bad("truncated" if _json_cut(e) else "corrupt", _json_reason(e)) from None
     except RecursionError:
         raise bad("corrupt", "not a step result (nested too deeply)") from None
     if not isinstance(obj, dict):

@@ -60,7 +60,7 @@ def held_response_comparison(meta: dict, results: list[dict], flagged: set[str] 
     def disp(level: float, f: float) -> float:
         return level if quantity == "disp" else level / (2 * math.pi * f) ** 2
 
-    left_out = [e for e in _model_effects(model) if not e.startswith(("viscous damping", "linear spring"))]
+    left_out = [e for k, e in _model_effects(model).items() if k not in ("viscous_N_s_per_m", "spring_N_per_m")]
     notes = [f"response-controlled: no FRF engine; the force fundamental the model needs at the held amplitude, by "
              f"single-harmonic balance of the Masing loop (sim.backbone.loop_coefficients, n = {model.n:g}) with the "
              f"mass {model.mass_kg:g} kg, spring {model.spring_N_per_m:g} N/m and viscous damping "

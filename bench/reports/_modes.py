@@ -153,10 +153,11 @@ def backbone_modes(results: list[dict]) -> list[ModeEstimate]:
         if b["locked"]:
             out.append(ModeEstimate(b["mode"], level, "ok", f"phase resonance ({b['response']})",
                                     resonance_Hz=float(b["frequency_Hz"]), damping_ratio=float(b["damping_ratio"]),
-                                    n_points=1, note=BACKBONE_NOTE))
+                                    n_points=1, note=BACKBONE_NOTE, phase_resonance=True))
         else:
             out.append(ModeEstimate(b["mode"], level, "not locked", f"phase resonance ({b['response']})",
-                                    n_points=1, note=f"phase resonance: not locked ({b['why']})"))
+                                    n_points=1, note=f"phase resonance: not locked ({b['why']})",
+                                    phase_resonance=True))
     return out
 
 
