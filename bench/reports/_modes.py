@@ -226,11 +226,12 @@ def write_csv(runs: list[RunModes], path: Path) -> Path:
 def write_modes(sources: list[Path], out: Path, *, model: bool = True) -> tuple[list[RunModes], list[Path]]:
     """modes.csv, fig13_feed.png and fig17_modes.png of ``sources`` into ``out``."""
     from . import _figures as figures
+    from . import _figures_modes as mode_figures
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     runs = [run_modes(p, model=model) for p in sources]
     files = [write_csv(runs, out / "modes.csv")]
-    figures.save_png(figures.plot_fig13(runs), out / "fig13_feed.png")
-    figures.save_png(figures.plot_fig17(runs), out / "fig17_modes.png")
+    figures.save_png(mode_figures.plot_fig13(runs), out / "fig13_feed.png")
+    figures.save_png(mode_figures.plot_fig17(runs), out / "fig17_modes.png")
     files += [out / "fig13_feed.png", out / "fig17_modes.png"]
     return runs, files
