@@ -170,8 +170,12 @@ def _harmonic_system(N: int, step: float, K: int) -> tuple[np.ndarray, CZT]:
     return G, CZT(N, m=K + 1, w=np.exp(-1j * step), a=1.0)
 
 
-def _lsq_harmonics(x: np.ndarray, fs: float, f: float, K: int):
-    """Exact least-squares fit of offset + K harmonics; returns (C_k, offset, residual rms)."""
+def lsq_harmonics(x: np.ndarray, fs: float, f: float, K: int):
+    """Exact least-squares fit of offset + K harmonics of ``f`` to the ``x.size`` samples of
+    ``x`` (any length: whole periods or not); returns (C_k, offset, residual rms with
+    ``x.size - (2K + 1)`` degrees of freedom).  The one harmonic kernel: every fit of
+    harmonics to a record goes through it (procedures.analysis.fit_harmonics is its wrapper
+    for the controllers)."""
     N = x.size
     step = 2 * np.pi * f / fs
     G, transform = _harmonic_system(N, step, K)
@@ -203,7 +207,7 @@ def analyse_channel(x: np.ndarray, fs: float, f: float, periods: int, spp: int |
         return ChannelHarmonics(C, float(spec[0].real / 2), noise, noise * math.sqrt(2.0 / N), mean)
     N = int(round(periods * fs / f))
     K = max(1, min(max_harmonics, int(math.floor(0.5 * fs / f - 0.5))))
-    C, off, noise = _lsq_harmonics(x[:N], fs, f, K)
+    C, off, noise = lsq_harmonics(x[:N], fs, f, K)
     return ChannelHarmonics(C, off, noise, noise * math.sqrt(2.0 / N), synthesized_period(C, off, fs, f))
 
 
