@@ -1,7 +1,7 @@
 """The house's bars (issue 35, decisions 0057 and 0059), read from the source tree: no branch
 on the words of a message, one kernel that fits harmonics to a record, rooms of at most 600
 lines or a reason at their top, benchmarks that import no test module, one helper that
-starts `bench` in a process."""
+starts `bench` in a process, one UFF58 reader."""
 
 from __future__ import annotations
 
@@ -102,3 +102,8 @@ def test_one_helper_starts_bench_in_a_process():
     bad = [rel for rel, text in _sources("tests")
            if spawn.search(text) and rel.rsplit("/", 1)[-1] not in OWN_SPAWN]
     assert not bad, f"start bench with benchtools.procs (bench_process, bench_done, bench_main): {bad}"
+
+
+def test_one_uff58_reader():
+    readers = [rel for rel, text in _sources(*PRODUCT) if re.search(r"\.read_sets\(|\.get_set_types\(", text)]
+    assert readers == ["bench/sources.py"], f"UFF58 is read by bench.sources.load_source only: {readers}"
