@@ -19,12 +19,12 @@ from bench.storage import RunStore
 from procedures.stepped_sine import unsettled_in
 from sim.artefacts import artefact_causes, assess_step
 
-F, FS = 37.0, 10371.0
+F, FS = 37.0, 5120.0
 AMPS = {"force": [5.0, 0.0, 0.3], "accel": [20.0, 0.0, 3.0], "disp": [10e-6, 0.0, 1e-6]}
 NOISE = {"force": 0.003, "accel": 0.01, "disp": 2e-9}
 
 
-def _step(i: int, f: float = F, periods: int = 12, fs: float = FS) -> dict:
+def _step(i: int, f: float = F, periods: int = 8, fs: float = FS) -> dict:
     """One step's records (closed forms): a periodic response and noise, with per step: hum
     on the probe (0-3), a clipped force (4), a slow free vibration that leaves the record not
     periodic, with 50 Hz hum one resolution from the fundamental (5, at 53 Hz), a transient (6)."""
@@ -43,7 +43,7 @@ def _step(i: int, f: float = F, periods: int = 12, fs: float = FS) -> dict:
     return sig
 
 
-STEPS = [(_step(i), F, FS) if i != 5 else (_step(i, 53.0, 10, 25600.0), 53.0, 25600.0) for i in range(7)]
+STEPS = [(_step(i), F, FS) if i != 5 else (_step(i, 53.0, 10, 5120.0), 53.0, 5120.0) for i in range(7)]
 
 
 def _decisions() -> tuple:
