@@ -8,6 +8,9 @@ limit (a plan the rig's limits refuse, or a run aborted by the safety supervisor
 interrupted (Ctrl-C, SIGTERM, SIGHUP, SIGQUIT before the work was done: the measuring and
 the report; one after it leaves the code as it was, decision record 0051).  Errors are one
 line on stderr; `--debug` adds the traceback.
+
+Here: the parser, the exit codes' mapping and :func:`main`; each command is in
+:mod:`bench.commands` (``run``, ``results``, ``tools``), `bench study` in bench/studies/cli.py.
 """
 
 from __future__ import annotations
