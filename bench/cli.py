@@ -8,6 +8,9 @@ limit (a plan the rig's limits refuse, or a run aborted by the safety supervisor
 interrupted (Ctrl-C, SIGTERM, SIGHUP, SIGQUIT before the work was done: the measuring and
 the report; one after it leaves the code as it was, decision record 0051).  Errors are one
 line on stderr; `--debug` adds the traceback.
+
+Here: the parser, the exit codes' mapping and :func:`main`; each command is in
+:mod:`bench.commands` (``run``, ``results``, ``tools``), `bench study` in bench/studies/cli.py.
 """
 
 from __future__ import annotations
@@ -15,318 +18,59 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
-import time
-from enum import IntEnum
-from pathlib import Path
 
-from procedures.kind import ProcedureKind
 from sim.errors import BenchError, ConfigurationError, EnvelopeError, LimitError, RunDirectoryError
 
+from .commands import ExitCode
+from .commands.results import cmd_analyze, cmd_check, cmd_compare, cmd_export, cmd_identify, cmd_modes, cmd_report
+from .commands.run import (
+    cmd_demo,
+    cmd_dry_run,
+    cmd_resume,
+    cmd_run,
+    cmd_sequence,
+    cmd_watch,
+)
+from .commands.tools import cmd_frf, cmd_paper, cmd_twin, cmd_twins, cmd_warmup
 from .terminal import Progress, end_line, setup_logging, tolerant_streams
 
 log = logging.getLogger(__name__)
 
 
-class ExitCode(IntEnum):
-    OK = 0
-    FAILURE = 1          # runtime failure; `bench check` found problems
-    USAGE = 2            # bad argument, file or value
-    LIMIT = 3            # refused or aborted by a limit
-    INTERRUPTED = 130    # Ctrl-C, SIGTERM, SIGHUP (terminal closed), SIGQUIT
 
 
-def cmd_paper(args) -> int:
-    from sim.paper import reproduce
-
-    out = Path(args.out)
-    pitch_model, measured, name, others = None, None, "", []
-    if args.rig:
-        from .config import load_rig
-        from .rig_model import paper_model
-        models = [(Path(r).stem, paper_model(load_rig(Path(r)), r)) for r in args.rig]
-        (name, pitch_model), others = models[0], models[1:]
-    if args.runs:
-        from .reports import run_modes
-        measured = []
-        for r in args.runs:
-            rm = run_modes(Path(r), model=False)
-            measured.append({"label": rm.label, "rows": rm.rows()})
-    files = reproduce(out, quick=args.quick, progress=Progress("paper figures"), pitch_model=pitch_model,
-                      measured=measured, pitch_name=name, other_models=others)
-    print(f"wrote {len(files)} files to {out}/ (start with {out}/README.md)")
-    return 0
 
 
-def cmd_frf(args) -> int:
-    import numpy as np
-
-    from sim.frf import find_peaks, frf_rk4
-    from sim.shooting import frf_shooting
-
-    if args.points < 1:
-        raise ConfigurationError(f"--points must be >= 1, got {args.points}")
-    betas = np.linspace(args.beta_min, args.beta_max, args.points)
-    prog = Progress(f"FRF gamma0={args.gamma0} n={args.n} ({args.engine})")
-    if args.engine == "shooting":
-        fr, _ = frf_shooting(betas, args.gamma0, args.n, progress=prog)
-    else:
-        fr = frf_rk4(betas, args.gamma0, args.n, progress=prog)
-    print("beta,G,converged")
-    for b, G, c in zip(fr.beta, fr.G, fr.converged):
-        print(f"{b:.6g},{G:.6g},{int(c)}")
-    for p in find_peaks(fr):
-        print(f"# {p.kind} resonance: beta={p.beta:.4f} G={p.G:.4f}", file=sys.stderr)
-    return 0
 
 
-def _load_configs(args):
-    from .config import DEFAULTS, load_plan, load_rig
-
-    plan = load_plan(Path(args.plan) if args.plan else DEFAULTS / "demo_plan.toml")
-    rig = load_rig(Path(args.rig) if args.rig else DEFAULTS / "sim_rig.toml")
-    return plan, rig
 
 
-def cmd_dry_run(args) -> int:
-    from .plan_time import planned_step_list
-    from .session import EnvelopeError, check_envelope, envelope, envelope_report, planned_steps
-
-    plan, rig = _load_configs(args)
-    steps = plan.schedule()
-    if plan.backbone:
-        b = plan.backbone
-        print(f"plan '{plan.name}': phase resonance, {len(plan.levels_N)} force levels (N) from {b.start_Hz:g} Hz in the window "
-              f"{b.min_Hz:g}-{b.max_Hz:g} Hz (envelope at both ends); rig '{rig.name}'"
-              f"{' (simulated)' if rig.simulated else ''}")
-    else:
-        n, refined, seconds = planned_steps(plan)
-        runs = (f"{n} measured (adaptive: {plan.adaptive_per_sweep} per sweep, chosen online)"
-                if plan.adaptive_per_sweep and n != len(steps) else f"{n} measured")
-        if refined:
-            runs += (f" + at most {refined} refinement steps ([plan.resonance]: {plan.refine_steps} per mode and level, "
-                     f"modes {', '.join(plan.refine_modes)}, tolerance {100 * plan.refine_tolerance:g} %"
-                     + (f"; with a dwell of {plan.dwell_cycles} cycles at each mode's resonance per level"
-                        if plan.dwell_cycles else "") + ")")
-        q = plan.level_quantity
-        print(f"plan '{plan.name}': {plan.procedure.label}, {len(plan.levels_N)} levels x {len(plan.freqs_Hz)} frequencies "
-              f"({plan.direction}) = {len(steps)} steps, {runs}; rig '{rig.name}'{' (simulated)' if rig.simulated else ''}")
-        print(f"levels: {', '.join(q.format(v) for v in plan.levels_N)} ({q.name} amplitude"
-              + (", the response fundamental held at each frequency)" if q.key != "force" else ")"))
-        print(dry_run_time_line(plan, seconds, refined).replace("force control", f"{q.name} control"))
-        if getattr(args, "steps", False):
-            print("\n".join(["steps, in the order they run:"] + [p.line() for p in planned_step_list(plan)]))
-    print(envelope_report(envelope(plan, rig)))
-    from procedures.online_id import identifiability
-    try:
-        runnable = check_envelope(plan, rig)
-    except EnvelopeError as e:
-        print(f"REFUSED: {str(e).splitlines()[0]}")
-        return ExitCode.LIMIT
-    if runnable.skip:
-        print(f"envelope: {len(runnable.schedule())} steps run, {len(steps) - len(runnable.schedule())} "
-              f"skipped (infeasible = \"skip\")")
-    else:
-        print("envelope ok: the rig's limits hold every step")
-    for w in identifiability(runnable, rig) if plan.procedure is ProcedureKind.STEPPED_SINE else []:
-        print(f"identifiability warning: {w}")
-    return 0
 
 
-def dry_run_time_line(plan, typical_s: float, refined: int) -> str:
-    """dry-run's rig time: the upper bound (bench.plan_time) and the typical figure."""
-    from .plan_time import extra_block_seconds_max, rig_time_bound_s
-    return (f"expected rig time: at most {_duration(rig_time_bound_s(plan))} (every step's force control and extra "
-            f"settle blocks to the plan's limits, steps chosen online at the lowest frequency, refinement budget "
-            f"used up); without the extra settle blocks at most {_duration(rig_time_bound_s(plan, extra_settle=False))}, "
-            f"plus at most {extra_block_seconds_max(plan, min(plan.freqs_Hz)):.3g} s for each extra settle block a "
-            f"step needs (at most {plan.max_extra_settle_blocks} a step); typically about {_duration(typical_s)}"
-            + (" with the refinement budget used up" if refined else "")
-            + " (a simulated rig runs faster or slower than real time)")
 
 
-def _duration(seconds: float) -> str:
-    m, s = divmod(int(round(seconds)), 60)
-    h, m = divmod(m, 60)
-    return f"{h} h {m:02d} min" if h else f"{m} min {s:02d} s" if m else f"{s} s"
 
 
-def _latch():
-    """The program's signal latch (installed first thing in :func:`main`), or, when the
-    bench runs inside another program (a test), one of this command's own."""
-    from .signals import SignalLatch, process_latch
-    return process_latch() or SignalLatch()
 
 
-def _run(args, resume: bool) -> int:
-    latch = _latch()
-    with latch.installed():       # SIGHUP, SIGQUIT, SIGTERM as Ctrl-C from the start
-        return _session(args, resume, latch)
 
 
-def _session(args, resume: bool, latch) -> int:
-    from contextlib import ExitStack
-
-    with ExitStack() as held:
-        if resume:           # the run directory is ours before its steps are counted
-            from . import runlock
-            from .storage import RunStore
-            RunStore.open(Path(args.run))
-            held.enter_context(runlock.run_dir(Path(args.run)))
-        return _session_held(args, resume, latch)
 
 
-def _session_held(args, resume: bool, latch) -> int:
-    from .api import execute, stored_configs
-    from .storage import RunStatus, RunStore
-
-    if resume:
-        store = RunStore.open(Path(args.run))
-        meta, acc = store.metadata, store.account()
-        retry = bool(getattr(args, "retry_skipped", False)) and bool(acc.skipped)
-        if acc.complete and not retry and meta.get("status") == RunStatus.COMPLETED:
-            print("resume: nothing to do: the run completed and its steps are all there "
-                  + ("or were skipped at run time as the plan allows (--retry-skipped measures them again) "
-                     if acc.skipped else "") + f"({acc.summary()})")
-            return ExitCode.OK
-        print(f"resume: {acc.resume_text(retry)}" if acc.missing or acc.damaged or acc.owed or retry else
-              f"resume: every planned step is there{' or was skipped at run time' if acc.skipped else ''}; "
-              f"finishing the run (it ended '{meta.get('status', '?')}')",
-              flush=True)
-        plan, rig = stored_configs(meta, f"{args.run}/run.json")     # validated as account() did
-        out, seed = Path(args.run), meta.get("sim_seed")
-        labels = None
-    else:
-        plan, rig = _load_configs(args)
-        out, seed = Path(args.out), args.seed
-        labels = parse_labels(getattr(args, "label", None))
-    before = _event_count(out)
-    watch = _start_watch(out, args)
-    try:
-        store = execute(plan, rig, out, resume=resume, progress=Progress(plan.procedure.label), seed=seed,
-                        retry_skipped=bool(getattr(args, "retry_skipped", False)), labels=labels, latch=latch)
-    finally:
-        if watch:
-            watch.close()
-        end_line()                 # an interrupted run's progress line ends where it stood
-        _say_output_state(out, before)
-    meta = store.metadata
-    code = {RunStatus.COMPLETED: ExitCode.OK, RunStatus.ABORTED: ExitCode.LIMIT}.get(meta["status"], ExitCode.FAILURE)
-    wants_report = meta["status"] == RunStatus.COMPLETED and not getattr(args, "no_report", False)
-    begin_report = False
-    if wants_report:
-        latch.reopen()             # the report is work too; held: nothing raises inside it (0051)
-        latch.hold(doing=REPORTING)
-        begin_report = latch.reason is None    # decided before "run completed": a signal after it is one during the report
-    print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/", flush=True)
-    if wants_report:
-        if begin_report:
-            _report(out, latch)
-        else:
-            print(f"report not written: {latch.reason} before it began; `bench report {out}` writes it",
-                  file=sys.stderr)
-        latch.finish()
-    if meta["status"] == RunStatus.COMPLETED:
-        from .verdict import promise
-        kept = promise(meta.get("plan") or {}, store.results(warn=False), meta.get("rig"))
-        if kept.fatal:           # completed, but not what the procedure was run for (decision 0052)
-            print(f"the {kept.kind.label} did not measure what it promised: {'; '.join(kept.short)}", file=sys.stderr)
-            code = ExitCode.FAILURE
-    if latch.reason is not None and code == ExitCode.OK:
-        raise KeyboardInterrupt(latch.reason)     # a signal before the work was done: exit 130
-    return code
 
 
-REPORTING = "the report is written (the output is off)"
 
 
-def _report(run: Path, latch, with_runs=()) -> None:
-    """Write the run's report with ``latch`` held: a signal meanwhile is recorded, not
-    raised into the numba kernels or the figures' finalizers where it could be swallowed,
-    and is honoured once the report is complete (decision 0051)."""
-    latch.hold(doing=REPORTING)
-    from .api import open_run
-    path = open_run(run).report(with_runs=tuple(with_runs))
-    print(f"report: {path}" + (f" (complete; then {latch.reason})" if latch.reason else ""), flush=True)
 
 
-def _event_count(out: Path) -> int:
-    """Number of events a run directory holds now (0 when there is none yet)."""
-    from .storage import RunStore
-    try:
-        return len(RunStore.open(out).events())
-    except Exception:  # noqa: BLE001 - no run directory yet
-        return 0
 
 
-def _say_output_state(out: Path, since: int = 0) -> None:
-    """On every ending (done, Ctrl-C, limit, error) say how this session left the output:
-    the last ``output_off`` event among those written after the first ``since`` (the events
-    of earlier sessions of a resumed run say nothing about this one).  No such event: this
-    session never opened the generator far enough to switch the output on."""
-    from .storage import RunStore
-    try:
-        events = RunStore.open(out).events()[since:]
-    except Exception:  # noqa: BLE001 - no run directory: nothing was opened
-        events = []
-    offs = [e for e in events if e.get("event") == "output_off"]
-    if not offs:
-        print("output not switched on by this session (stopped before the generator was set up)",
-              file=sys.stderr, flush=True)
-    elif offs[-1].get("confirmed"):
-        print("output off, confirmed by the generator", file=sys.stderr, flush=True)
-    else:
-        print("WARNING: output off NOT confirmed by the generator: switch the amplifier off by hand "
-              "and check the generator", file=sys.stderr, flush=True)
 
 
-def _start_watch(run_dir: Path, args):
-    """The watch page beside the run (``--watch``), served from a thread of this process."""
-    if not getattr(args, "watch", False):
-        return None
-    server = _watch_server(run_dir, args.watch_host, args.watch_port).start()
-    print(f"watch: {server.url}", flush=True)
-    return server
 
 
-def _watch_server(run_dir: Path, host: str, port: int):
-    from .watch import WatchServer
-    try:
-        return WatchServer(run_dir, host, port)
-    except OSError as e:       # port taken, no such interface, privileged port
-        raise ConfigurationError(f"cannot serve the watch page on {host}:{port}: {e}") from e
 
 
-def cmd_watch(args) -> int:
-    """Serve the live page of a run directory until Ctrl-C."""
-    run_dir = Path(args.run)
-    if run_dir.exists() and not run_dir.is_dir():
-        raise ConfigurationError(f"{run_dir}: not a run directory (a file)")
-    absent = not run_dir.is_dir()
-    if absent and not run_dir.absolute().parent.is_dir():      # a mistyped path, not a run to come
-        raise ConfigurationError(f"{run_dir}: no such run directory, nor its parent {run_dir.absolute().parent} "
-                                 f"(bench watch waits for a run directory to appear inside an existing one)")
-    if absent:        # started before the run: the page shows "waiting" until the run creates it
-        print(f"waiting for {run_dir} to appear ... (Ctrl-C stops)", flush=True)
-    elif not (run_dir / "run.json").is_file():
-        log.warning("%s has no run.json yet: the page waits for the run to start", run_dir)
-    from .signals import ENDING, handling
-
-    server = _watch_server(run_dir, args.host, args.port)
-    # The page serves from its own thread; the ending signals only raise a flag (no lock
-    # the main thread might hold, no exception a finalizer could drop: bench/signals.py).
-    ended = []
-    with handling(lambda signum, frame: ended.append(signum), *ENDING):
-        server.start()
-        print(f"watch: {server.url}  (Ctrl-C ends the page, not the run)", flush=True)
-        try:
-            while not ended:
-                time.sleep(0.2)
-                if absent and run_dir.is_dir():
-                    absent = False
-                    print(f"{run_dir} appeared: the page follows the run", flush=True)
-        finally:
-            server.close()         # open pages get the last state and a goodbye
-    return 0
 
 
 def _add_watch_options(s) -> None:
@@ -336,314 +80,40 @@ def _add_watch_options(s) -> None:
                    help="interface of the page (default 127.0.0.1; others only when given)")
 
 
-def cmd_run(args) -> int:
-    return _run(args, resume=False)
 
 
-def cmd_resume(args) -> int:
-    from .sequence import is_sequence_dir
-    if is_sequence_dir(Path(args.run)):
-        return _sequence(args, resume=True)
-    return _run(args, resume=True)
 
 
-def cmd_sequence(args) -> int:
-    """Every entry of SEQ.toml checked, then run one after the other into OUT/<name>/."""
-    return _sequence(args, resume=False)
 
 
-def _sequence(args, resume: bool) -> int:
-    from .sequence import resume_sequence, run_sequence
-
-    def progress(entry: str):
-        return Progress(f"{entry}")
-    with _latch().installed():    # between entries; each entry's session has its own (0051)
-        res = (resume_sequence(Path(args.run), progress=progress, report=not args.no_report) if resume else
-               run_sequence(Path(args.sequence), Path(args.out), progress=progress, report=not args.no_report))
-    end_line()
-    for e in res.entries:
-        print(f"{e['name']}: {e['status']}" + (f" ({e['steps_done']}/{e['steps_total']} steps)"
-                                                if e["status"] != "not started" else ""))
-    print(f"sequence report: {res.path / 'report.md'}")
-    statuses = [e["status"] for e in res.entries]
-    if res.completed:
-        return ExitCode.OK
-    return ExitCode.LIMIT if "aborted" in statuses else ExitCode.FAILURE
 
 
-def cmd_demo(args) -> int:
-    """The main job: the default plan on the simulated rig, then its report."""
-    from contextlib import nullcontext
-
-    from . import runlock
-    from .demo import check_out_dir, clear_earlier_demo, write_manifest
-
-    args.plan = args.rig = None
-    args.seed = None
-    out = Path(args.out)
-    earlier = check_out_dir(out)     # refuses (deleting nothing) unless out holds only an earlier demo's files
-    with runlock.run_dir(out) if earlier else nullcontext():      # not while another session uses it
-        if earlier:
-            clear_earlier_demo(out)
-        try:
-            return _run(args, resume=False)
-        finally:
-            _latch().hold()          # the manifest is written whole (a signal is honoured after it)
-            write_manifest(out)      # what this demo wrote: what the next one may delete (0051)
 
 
-def cmd_report(args) -> int:
-    latch = _latch()
-    with latch.installed():
-        _report(Path(args.run), latch, [Path(p) for p in args.with_runs or ()])
-        latch.finish()
-    if latch.reason is not None:
-        raise KeyboardInterrupt(latch.reason)
-    return 0
 
 
-def cmd_export(args) -> int:
-    from .api import open_run
-    for p in open_run(args.run).export(args.out, time_records=not args.no_time):
-        print(p)
-    return 0
 
 
-def cmd_identify(args) -> int:
-    """Offline identification of a stored run (result written into its run.json) or of
-    UFF58 time records (guesses from --rig, default: the simulated rig's file), with the
-    model of the rig: the modes its file declares and, once `bench analyze` has run, the
-    causes it named (decision 0042)."""
-    import json
-
-    from procedures.online_id import MAX_HARMONICS, check_finite
-    from sim.discrepancy.rigfit import analysis_effects, identify_steps
-
-    from .analyze import default_out_dir
-    from .config import DEFAULTS, load_rig, parse_rig, rig_toml
-    from .numbers import number
-    from .sources import load_source
-    from .storage import RunStore
-
-    source = Path(args.source)
-    if not source.exists():
-        raise FileNotFoundError(2, "no such file or directory (expected a run directory or a UFF58 file)", str(source))
-    src = load_source(source)
-    if src.kind == "run":
-        rig = parse_rig({"rig": rig_toml(src.metadata["rig"])}, f"{source}/run.json")
-    else:
-        rig = load_rig(Path(args.rig) if args.rig else DEFAULTS / "sim_rig.toml")
-    for r in src.rejected:
-        print(f"step {r.step} rejected: {r.reason}")
-    if not src.steps:
-        raise ConfigurationError(f"{source}: no steps with force, acceleration and displacement to identify from")
-    guess = rig.guess()
-    analysis_json = default_out_dir(source) / "analysis.json"
-    extra: tuple[str, ...] = ()
-    if analysis_json.is_file():
-        try:
-            extra = analysis_effects(json.loads(analysis_json.read_text()))
-        except (OSError, ValueError) as e:
-            print(f"warning: {analysis_json} cannot be read ({e}); the analysis' causes are not in the model")
-    est = identify_steps(src.steps, guess, rig.model, extra, MAX_HARMONICS)
-    check_finite(est)
-    if src.kind == "run":
-        RunStore.open(source).update(identification=est)
-    effects = est.get("model", {}).get("effects") or []
-    print(f"model: Masing friction and the moving mass{' with ' + ', '.join(effects) if effects else ''} "
-          f"({est.get('source', 'final fit')})")
-    print(f"{'parameter':>10} {'estimate':>12} {'95 % interval':>28}")
-    for k, v in est["values"].items():
-        print(f"{k:>10} {number(v, fmt='.6g'):>12} [{number(est['low'][k], fmt='.6g'):>12}, "
-              f"{number(est['high'][k], fmt='.6g'):>12}]")
-    for k, p in (est.get("model", {}).get("parameters") or {}).items():
-        print(f"{k:>10} {number(p['value'], fmt='.6g'):>12} [{number(p['low'], fmt='.6g'):>12}, "
-              f"{number(p['high'], fmt='.6g'):>12}]")
-    print(f"{len(src.steps)} steps ({len(src.rejected)} rejected), reduced chi^2 {number(est['reduced_chi2'], fmt='.3g')}")
-    for w in est["warnings"]:
-        print(f"warning: {w}")
-    return 0
 
 
-def cmd_analyze(args) -> int:
-    """Where the Masing model is wrong in SOURCE, the cause, the extended model and its gain."""
-    from .analyze import analyze_source, default_out_dir
-    from .studies.cli import cmd_analyze_batch, is_batch
-    if is_batch(args):
-        return cmd_analyze_batch(args, Progress)
-    source = Path(args.sources[0])
-    result = analyze_source(source, Path(args.out) if args.out else None, Path(args.rig) if args.rig else None)
-    out = Path(args.out) if args.out else default_out_dir(source)
-    print(result["verdict"])
-    print(f"causes: {', '.join(c['id'] for c in result['causes']) or 'none'}; "
-          f"unexplained: {'yes' if result['unexplained'] else 'no'}; written to {out}")
-    return 0
 
 
-def cmd_check(args) -> int:
-    """Verify a run directory against its plan: every missing, damaged and orphan step on
-    one line, and what a refined run still owes (a refinement whose end is not recorded, a
-    dwell not measured: decision 0050), then the count; exit 1 if there is any problem.  A step skipped at run time
-    (force unreachable) as the plan allows (``infeasible = "skip"``) is listed and counted,
-    not a problem (exit 0 when it is the only gap) unless ``--strict`` (decision 0033)."""
-    from .storage import NewerFormat, RunDirError, RunStatus, RunStore
-
-    store = RunStore(Path(args.run))
-    if not store.path.is_dir():
-        RunStore.open(store.path)             # raises the one-line usage error
-    try:
-        acc = store.account()
-    except NewerFormat:
-        raise                                 # refused by name (exit 2), as report and resume do
-    except RunDirError:                       # run.json damaged or its plan not valid: the files alone
-        acc = None
-    problems = store.check() if acc is None else acc.missing + acc.damaged + acc.orphan + acc.owed
-    skipped = [] if acc is None else acc.skipped
-    for p in skipped:
-        print(f"{p.kind:>9}  {p.key}: {p.reason}")
-    tail = _not_yet_measured(store, acc) if acc is not None else []
-    for p in problems:
-        if p not in tail:
-            print(f"{p.kind:>9}  {p.key}: {p.reason}" if p.kind == "owed" else f"{p.kind:>9}  {p}")
-    if tail:
-        last = max((k for k in acc.intact), default=None)
-        print(f"{'missing':>9}  interrupted after step {last or '(none)'}; {len(tail)} not yet measured "
-              f"(the plan's steps after it; bench resume {store.path} measures them)")
-    if acc is None:
-        print(f"{store.path}: {len(store.step_files())} step result files; run.json unreadable or its plan not "
-              f"valid, so the steps cannot be counted against the plan; {len(problems)} "
-              f"problem{'s' if len(problems) != 1 else ''}")
-        return ExitCode.FAILURE
-    print(f"{store.path}: {acc.summary()}"
-          + (f" (bench resume {store.path} measures missing and damaged steps again, keeping damaged "
-             "files in damaged/)" if acc.missing or acc.damaged else "")
-          + (f" (bench resume {store.path} measures what the refinement still owes)" if acc.owed and not
-             (acc.missing or acc.damaged) else ""))
-    from .verdict import promise
-    meta = store.metadata
-    kept = promise(meta.get("plan") or {}, store.results(warn=False), meta.get("rig"),
-                   completed=meta.get("status") == RunStatus.COMPLETED)
-    if kept.short:        # the steps are intact; what they say against the procedure's promise (decision 0052)
-        print(f"{kept.kind.label}: {'; '.join(kept.short)}")
-    if skipped:
-        n = len(skipped)
-        print(f"{n} step{'s' * (n != 1)} skipped at run time as the plan allows (infeasible = \"skip\"): "
-              + ("counted as problems (--strict)" if args.strict else
-                 "not a problem (--strict counts them); bench resume --retry-skipped measures them again"))
-    return ExitCode.FAILURE if problems or (skipped and args.strict) else ExitCode.OK
 
 
-def _not_yet_measured(store, acc) -> list:
-    """The missing steps of a run that was stopped (not completed) that are simply the
-    plan's steps after the last one stored, with no file at all: one line says so instead
-    of one line each.  Any other missing step is listed by key."""
-    from .storage import RunStatus, stored_plan
-    try:
-        meta = store.metadata
-        plan = stored_plan(meta, store.path / "run.json")
-    except Exception:  # noqa: BLE001 - no plan to judge against: list every step
-        return []
-    if meta.get("status") == RunStatus.COMPLETED or plan.adaptive_per_sweep:
-        return []
-    order = [s.key for s in plan.schedule()]
-    present = {k for k in acc.intact} | {p.key for p in acc.damaged} | {p.key for p in acc.skipped}
-    last = max((order.index(k) for k in present if k in order), default=-1)
-    tail = [p for p in acc.missing if p.reason.startswith("missing: neither") and p.key in order
-            and order.index(p.key) > last]
-    return tail if len(tail) > 1 else []
 
 
-def cmd_warmup(args) -> int:
-    from .warmup import warm_up
-    if not args.verbose:
-        logging.getLogger().setLevel(logging.ERROR)     # the warm-up run's chatter is noise here
-    print("compiling the simulation kernels (once per machine and change of sim/) ...", flush=True)
-    print(f"kernels compiled and cached in {warm_up():.0f} s")
-    return 0
 
 
-def cmd_twins(args) -> int:
-    from drivers import run_standalone
-    from sim.rig import RigModel, SimulatedRig
-
-    from .config import DEFAULTS, load_rig
-    rig = load_rig(Path(args.rig) if args.rig else DEFAULTS / "sim_rig.toml")
-    if not rig.simulated:
-        raise ConfigurationError(f"{args.rig}: not a simulated rig (simulated = true is needed)")
-    import threading
-
-    from .signals import ENDING, handling
-    stop = threading.Event()          # serving until a signal is this command's work: it ends it, exit 0
-    with handling(lambda signum, frame: stop.set(), *ENDING):
-        run_standalone(SimulatedRig(RigModel.from_dict(rig.model)), args.host, serial_ports=args.serial, stop=stop)
-    print("stopping twins")
-    return 0
 
 
-# ---------------------------------------------------------------------------- twin and compare (0026)
 
 
-def cmd_twin(args) -> int:
-    """rig.toml and plan.toml of a simulated twin of the rig that measured SOURCE."""
-    from .twin import make_twin
-    twin, paths = make_twin(Path(args.source), Path(args.analysis) if args.analysis else None,
-                            Path(args.out) if args.out else None, plain=args.plain)
-    v = twin.parameters
-    print("twin: " + ", ".join(f"{k} {v[k]['value']:.4g}" for k in ("F_s_N", "x_s_m", "n", "m_kg")))
-    for cid, keys in twin.applied.items():
-        print(f"cause {cid} -> " + ", ".join(f"{k} = {x:.4g}" if isinstance(x, float) else f"{k} = {x}"
-                                             for k, x in keys.items()))
-    if twin.shaker.get("note"):
-        print(twin.shaker["note"])
-    for item in twin.not_in_plant:
-        print(f"not in the plant: {item['cause']}: {item['reason']}")
-    print(f"wrote {paths['rig']}, {paths['plan']} and {paths['twin']}")
-    print(f"run it: bench run --plan {paths['plan']} --rig {paths['rig']} --out RUN")
-    return ExitCode.OK
 
 
-def cmd_compare(args) -> int:
-    """Exit 0 when the two sources agree within the tolerance over enough of the reference, 1 when not."""
-    from .compare import summary, write_compare
-    result, out = write_compare(Path(args.reference), Path(args.other), Path(args.out) if args.out else None,
-                                args.tolerance, args.min_coverage)
-    print(summary(result), end="")
-    print(f"written to {out}/compare.json and compare.html")
-    return ExitCode.OK if result["overall"]["passed"] else ExitCode.FAILURE
 
 
-def cmd_modes(args) -> int:
-    """Each run's modes per level (in its quantity's unit) into OUT/modes.csv, with the seed's Figs. 13 and 17."""
-    from .reports import write_modes
-    runs, files = write_modes([Path(r) for r in args.runs], Path(args.out), model=not args.no_model)
-    for r in runs:
-        for e in r.modes:
-            if e.ok and r.kind == "phase_resonance":     # one locked point: its energy balance, no fit, no interval
-                print(f"{r.label}: {e.mode} at {r.level_quantity.format(e.level_N)}: {e.resonance_Hz:.5g} Hz "
-                      f"(phase resonance, locked), damping ratio (energy balance at the locked point) "
-                      f"{100 * e.damping_ratio:.3g} %")
-            elif e.ok:
-                eb = e.extra.get("energy_balance")
-                print(f"{r.label}: {e.mode} at {r.level_quantity.format(e.level_N)}: {e.resonance_Hz:.5g} Hz "
-                      f"[{e.resonance_low_Hz:.5g}, {e.resonance_high_Hz:.5g}], damping ratio (single-mode fit) "
-                      f"{100 * e.damping_ratio:.3g} % [{100 * e.damping_ratio_low:.3g}, {100 * e.damping_ratio_high:.3g}]"
-                      + (f", (energy balance at resonance) {100 * eb.value:.3g} % [{100 * eb.low:.3g}, "
-                         f"{100 * eb.high:.3g}]" if eb is not None else ""))
-            else:
-                print(f"{r.label}: {e.mode} at {r.level_quantity.format(e.level_N)}: {e.status}" + (f" ({e.note})" if e.note else ""))
-    print("wrote " + ", ".join(str(f) for f in files))
-    return ExitCode.OK
 
 
-def parse_labels(items: list[str] | None) -> dict[str, str]:
-    """``--label key=value`` (repeatable) -> {key: value}; a malformed one is a usage error."""
-    out: dict[str, str] = {}
-    for item in items or []:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip():
-            raise ConfigurationError(f"--label {item!r}: expected KEY=VALUE, e.g. --label lubricant=\"ISO VG 32\"")
-        out[key.strip()] = value.strip()
-    return out
 
 
 def _add_twin_parsers(sub) -> None:

@@ -1,4 +1,5 @@
-"""Export a run directory to CSV and universal files (UFF dataset 58), and read UFF 58 back.
+"""Export a run directory to CSV and universal files (UFF dataset 58).  UFF 58 is read
+back by one reader, :func:`bench.sources.load_source` (decision 0059).
 
     <out>/steps.csv      one row per step (columns: CSV_COLUMNS)
     <out>/frf.uff        dataset 58, function type 4 (FRF): complex compliance X1/F1 (m/N)
@@ -11,7 +12,7 @@
                          acceleration (m/s^2) and displacement (m) of every step's measured
                          block, abscissa spacing 1/fs
 
-UFF header conventions (so :func:`import_uff58` can rebuild step results): ID lines 4
+UFF header conventions (so :func:`bench.sources.load_source` finds each step's identity): ID lines 4
 and 5 carry ``key=value`` tags (``bench`` marks our files), e.g.
 ``bench step=00002-L00-F002-up ch=disp level=1 dir=up`` and
 ``bench f=94.8683 fs=25614.441 t0=4.42517 harmonics=5`` (t0: block start, s; the time
@@ -27,15 +28,11 @@ from __future__ import annotations
 import csv
 import logging
 import math
-import re
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from procedures.kind import FORCE, QUANTITIES, ProcedureKind, of_stored_plan
-from sim.errors import ConfigurationError
-from sim.records import estimate_frequency
 
 from .storage import RunStore
 
@@ -219,186 +216,3 @@ def export_run(run_dir: Path, out_dir: Path | None = None, *, time_records: bool
     else:
         log.warning("%s: no completed steps; only the CSV header was written", run_dir)
     return paths
-
-
-# ---------------------------------------------------------------------------- UFF reading
-
-
-def _parse_tags(line: str) -> dict[str, str]:
-    words = (line or "").split()
-    if not words or words[0] != TAG:
-        return {}
-    return dict(w.split("=", 1) for w in words[1:] if "=" in w)
-
-
-@dataclass
-class UffImport:
-    """Step results rebuilt from a UFF file, in the shape of ``steps/<key>.json``.
-
-    From FRFs (function type 4) only the compliance fields and the sweep identity are
-    known (``source`` = "uff58-frf"); from time records (type 1) a full result is computed
-    from the signals (``source`` = "uff58-time") and the signals are in ``raw``."""
-
-    steps: list[dict] = field(default_factory=list)
-    raw: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
-
-
-def is_accelerance(ds: dict) -> bool:
-    """An FRF record of acceleration per force (our tag q=A, else the ordinate's data type 12)."""
-    q = _parse_tags(ds.get("id4", "")).get("q")
-    return q == "A" if q else int(ds.get("ordinate_spec_data_type", 8) or 8) == 12
-
-
-def _add_accelerance(steps: list[dict], ds: dict, n_fn: int) -> list[dict]:
-    """The accelerance record's values into the steps of its level and direction (same
-    frequency); a frequency without a compliance step gets a step of its own."""
-    tags = _parse_tags(ds.get("id4", ""))
-    li, direction = int(tags.get("L", n_fn)), tags.get("dir", "up")
-    mine = {(s["level_index"], s["direction"], round(s["freq_Hz"], 9)): s for s in steps}
-    extra = []
-    for f, A in zip(np.asarray(ds["x"], float), np.asarray(ds["data"])):
-        A = complex(A)
-        s = mine.get((li, direction, round(float(f), 9)))
-        if s is None:
-            s = _frf_step(tags, n_fn, len(extra), float(f))
-            extra.append(s)
-        s.update(accelerance_abs_kg_inv=abs(A), accelerance_phase_rad=float(np.angle(A)))
-    return extra
-
-
-def _frf_step(tags: dict, n_fn: int, i: int, f: float) -> dict:
-    level = float(tags["level"]) if "level" in tags else math.nan
-    li, direction = int(tags.get("L", n_fn)), tags.get("dir", "up")
-    return dict(key=f"uff-L{li:02d}-F{i:03d}-{direction}", level_index=li, freq_index=i, direction=direction,
-                target_force_N=level, force_N=level, freq_Hz=f, source="uff58-frf")
-
-
-def _frf_steps(ds: dict, n_fn: int) -> list[dict]:
-    tags = _parse_tags(ds.get("id4", ""))
-    # a force level is the step's level; another quantity's (unit=m: a response-controlled
-    # run) is not a force: the steps' level then comes from their force fundamentals
-    level = float(tags["level"]) if "level" in tags and tags.get("unit", "N") == "N" else math.nan
-    li = int(tags.get("L", n_fn))
-    direction = tags.get("dir", "up")
-    out = []
-    for i, (f, H) in enumerate(zip(np.asarray(ds["x"], float), np.asarray(ds["data"]))):
-        H = complex(H)
-        out.append(dict(
-            key=f"uff-L{li:02d}-F{i:03d}-{direction}", level_index=li, freq_index=i, direction=direction,
-            target_force_N=level, force_N=level, freq_Hz=float(f),
-            compliance_m_per_N={"re": H.real, "im": H.imag}, compliance_abs_m_per_N=abs(H),
-            compliance_phase_rad=float(np.angle(H)), source="uff58-frf"))
-    return out
-
-
-def step_from_signals(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float, harmonics: int = 5) -> dict:
-    """The measured fields of a step result, made as procedures.stepped_sine makes them: by
-    the one analysis of the block (:func:`sim.step_record.measure_block`, decision 0047)."""
-    from sim.step_record import measure_block
-
-    return dict(measure_block(force_N, accel_m_s2, disp_m, fs_Hz, freq_Hz, harmonics).fields)
-
-
-def _time_step(tags: dict, chans: dict) -> tuple[float, dict, float, dict]:
-    """Sample rate, signals, frequency and step result of one step's three records."""
-    f0 = chans["force"]
-    x = np.asarray(f0["x"], float)
-    fs = float(tags["fs"]) if "fs" in tags else 1.0 / float(f0.get("abscissa_inc") or (x[1] - x[0]))
-    sig = {ch: np.asarray(chans[ch]["data"], float) for ch in CHANNELS}
-    if not (math.isfinite(fs) and fs > 0) or len({v.size for v in sig.values()}) != 1 or sig["force"].size < 8 \
-            or not all(np.all(np.isfinite(v)) for v in sig.values()):
-        raise ValueError(f"sample rate {fs!r} Hz, lengths {[v.size for v in sig.values()]}, or non-finite samples")
-    freq = float(tags["f"]) if "f" in tags else estimate_frequency(sig["force"], fs, sig["accel"], sig["disp"])
-    if not (math.isfinite(freq) and 0 < freq < fs / 2):
-        raise ValueError(f"frequency {freq!r} Hz not within (0, fs/2)")
-    step = step_from_signals(sig["force"], sig["accel"], sig["disp"], fs, freq, int(tags.get("harmonics", 5)))
-    return fs, sig, freq, step
-
-
-def _time_steps(records: list[dict]) -> UffImport:
-    """Group time records into steps (by our step tag, else consecutive force/accel/disp)."""
-    by_sdt = {v[0]: k for k, v in CHANNELS.items()}
-    groups: list[tuple[dict, dict[str, dict]]] = []
-    for ds in records:
-        tags = {**_parse_tags(ds.get("id4", "")), **_parse_tags(ds.get("id5", ""))}
-        ch = tags.get("ch") or by_sdt.get(int(ds.get("ordinate_spec_data_type", -1)))
-        if ch not in CHANNELS:
-            log.warning("skipping a time record of unknown channel (%s)", ds.get("id1", "").strip())
-            continue
-        key = tags.get("step")
-        last = groups[-1] if groups else None
-        if last is None or (key is not None and last[0].get("step") != key) or ch in last[1]:
-            groups.append((tags, {}))
-        groups[-1][1][ch] = ds
-    out = UffImport()
-    for n, (tags, chans) in enumerate(groups):
-        missing = set(CHANNELS) - set(chans)
-        if missing:
-            log.warning("time records %s: missing channel(s) %s; skipped", tags.get("step", n), sorted(missing))
-            continue
-        try:
-            fs, sig, freq, step = _time_step(tags, chans)
-        except (KeyError, ValueError, TypeError, IndexError, ZeroDivisionError, np.linalg.LinAlgError) as e:
-            log.warning("time records %s: unusable (%s: %s); skipped", tags.get("step", n), type(e).__name__, e)
-            continue
-        key = tags.get("step", f"uff-{n:05d}")
-        km = re.match(r"(\d+)-L(\d+)-F(\d+)-(\w+)$", key)
-        level = float(tags["level"]) if "level" in tags else step["force_N"]
-        step.update(key=key, source="uff58-time", direction=tags.get("dir", km.group(4) if km else "up"),
-                    target_force_N=level, force_error=step["force_N"] / level - 1.0,
-                    t0_s=float(tags.get("t0", 0.0)))
-        if km:
-            step.update(index=int(km.group(1)), level_index=int(km.group(2)), freq_index=int(km.group(3)))
-        out.steps.append(step)
-        out.raw[key] = dict(force_N=sig["force"], accel_m_s2=sig["accel"], disp_m=sig["disp"],
-                            fs_Hz=np.array(fs), t0_s=np.array(step["t0_s"]))
-    return out
-
-
-def import_uff58(path: Path) -> UffImport:
-    """Read FRFs (function type 4) and time records (type 1) of dataset 58 from ``path``
-    as step-result dicts (for reports).  Identification and analysis read time records
-    through :func:`bench.sources.load_source` (every harmonic, rejections with reasons)."""
-    import pyuff
-
-    try:
-        uff = pyuff.UFF(str(path))
-        types = list(uff.get_set_types())
-    except Exception as e:  # noqa: BLE001 - pyuff raises bare Exception and others
-        raise ConfigurationError(f"{path}: not a readable UFF file ({type(e).__name__}: {e})") from None
-    idx = [i for i, t in enumerate(types) if int(t) == 58]
-    if not idx:
-        raise ConfigurationError(f"{path}: no dataset 58 in the file (types: {sorted(set(int(t) for t in types))})")
-    sets = []
-    for i in idx:                     # one at a time: a damaged record costs only itself
-        try:
-            ds = uff.read_sets(i)
-            int(ds["func_type"])
-            sets.append(ds)
-        except Exception as e:  # noqa: BLE001
-            log.warning("%s: dataset #%d unreadable (%s: %s); skipped", path, i + 1, type(e).__name__, e)
-    if not sets:
-        raise ConfigurationError(f"{path}: none of the {len(idx)} dataset-58 records is readable")
-    out = UffImport()
-    frfs = [d for d in sets if int(d["func_type"]) == FUNC_FRF]
-    times = [d for d in sets if int(d["func_type"]) == FUNC_TIME]
-    for n, ds in enumerate(frfs):        # compliance first, then each accelerance into its steps
-        try:
-            if is_accelerance(ds):
-                continue
-            out.steps.extend(_frf_steps(ds, n))
-        except (KeyError, ValueError, TypeError, IndexError) as e:
-            log.warning("%s: FRF record %d unusable (%s: %s); skipped", path, n + 1, type(e).__name__, e)
-    for n, ds in enumerate(frfs):
-        try:
-            if is_accelerance(ds):
-                out.steps.extend(_add_accelerance(out.steps, ds, n))
-        except (KeyError, ValueError, TypeError, IndexError) as e:
-            log.warning("%s: FRF record %d unusable (%s: %s); skipped", path, n + 1, type(e).__name__, e)
-    t = _time_steps(times)
-    out.steps.extend(t.steps)
-    out.raw.update(t.raw)
-    ignored = len(sets) - len(frfs) - len(times)
-    if ignored:
-        log.info("%s: %d dataset-58 functions of other types ignored", path, ignored)
-    return out

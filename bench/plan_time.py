@@ -65,10 +65,11 @@ class PlannedStep:
     freq_Hz: float
     note: str = ""
     count: int = 1                       # steps this line stands for (at most)
+    online: str = ""                     # what chooses it online: "adaptive", "refined", "dwell" ("": the plan)
 
     def line(self) -> str:
         f = f"{self.freq_Hz:10.4g} Hz" if math.isfinite(self.freq_Hz) else "   refined, chosen online" \
-            if "refine" in self.note or "dwell" in self.note else "          chosen online"
+            if self.online in ("refined", "dwell") else "          chosen online"
         return f"{self.key:24s} {self.level_N:8g} N {f}" + (f"  ({self.note})" if self.note else "")
 
 
@@ -88,7 +89,7 @@ def planned_step_list(plan: Plan) -> list[PlannedStep]:
                 out.append(PlannedStep(f"{sw[0].key[:9]}F***-{d}", sw[0].force_N, math.nan,
                                        f"{plan.adaptive_per_sweep} of these {len(sw)} frequencies "
                                        f"{min(s.freq_Hz for s in sw):.4g}-{max(s.freq_Hz for s in sw):.4g} Hz, "
-                                       "chosen online", plan.adaptive_per_sweep))
+                                       "chosen online", plan.adaptive_per_sweep, online="adaptive"))
             else:
                 out += [PlannedStep(s.key, s.force_N, s.freq_Hz) for s in sw]
         if plan.refine and mine:
@@ -96,12 +97,14 @@ def planned_step_list(plan: Plan) -> list[PlannedStep]:
             for mode in plan.refine_modes:
                 out.append(PlannedStep(f"{last.index:05d}-L{li:02d}-R{mode[0].upper()}***-{last.direction}",
                                        last.force_N, math.nan, f"{mode} mode: up to {plan.refine_steps} refinement "
-                                       f"steps, tolerance {100 * plan.refine_tolerance:g} %", plan.refine_steps))
+                                       f"steps, tolerance {100 * plan.refine_tolerance:g} %", plan.refine_steps,
+                                       online="refined"))
             if plan.dwell_cycles:
                 for mode in plan.refine_modes:
                     out.append(PlannedStep(f"{last.index:05d}-L{li:02d}-W{mode[0].upper()}000-{last.direction}",
                                            last.force_N, math.nan, f"{mode} mode: dwell of {plan.dwell_cycles} "
-                                           "cycles at its refined resonance (none without a peak inside the grid)"))
+                                           "cycles at its refined resonance (none without a peak inside the grid)",
+                                           online="dwell"))
     return out
 
 
@@ -116,7 +119,7 @@ def rig_time_bound_s(plan: Plan, *, extra_settle: bool = True) -> float:
         online = not math.isfinite(p.freq_Hz)
         f = f_lo if online else p.freq_Hz
         from_rest = online or sweep != sweep_prev or p.count > 1
-        dwell = plan.dwell_cycles if "-W" in p.key else 0
+        dwell = plan.dwell_cycles if p.online == "dwell" else 0
         t += p.count * step_seconds_max(plan, f, from_rest=from_rest, dwell_cycles=dwell,
                                         f_before=f_lo if online or f_prev is None else f_prev,
                                         extra_settle=extra_settle)

@@ -448,7 +448,7 @@ def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Super
             est = online.update(res, raw)
             if est:
                 v = est["values"]
-                bound = [w.split()[0] for w in est.get("warnings", []) if "reached the bound" in w]
+                bound = est.get("at_bound", [])
                 progress_note[0] = (f"F_s {v['F_s_N']:.3g} N x_s {v['x_s_m'] * 1e6:.3g} um "
                                     f"n {v['n']:.3g} m {v['mass_kg']:.3g} kg"
                                     + (f" ({', '.join(bound)} at the search bound: not estimates)" if bound else "")

@@ -29,35 +29,50 @@ raises :class:`RunDirError` naming it, and appends open with ``O_NOFOLLOW``.  Ev
 a run writes gets the mode ``0o666 & ~umask`` and every directory ``0o777 & ~umask``,
 what ``touch`` and ``mkdir`` give (the temporary files of atomic writes are widened to
 it: ``mkstemp`` alone makes them 0o600).  See docs/decisions/0028-hardening.md.
+
+Here: :class:`RunStore`.  The crash-safe writing is in :mod:`bench.durable`, a step's two
+files read and checked in :mod:`bench.step_files`, the steps counted against the plan in
+:mod:`bench.accounting` (issue 35: one job each).
 """
 
 from __future__ import annotations
 
 import enum
-import errno
-import hashlib
 import io
 import json
 import logging
 import os
 import stat
-import tempfile
-import threading
 import zipfile
-from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
-from datetime import UTC, datetime
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from procedures.plan import Plan, StepSpec
-from sim.errors import ConfigurationError, RunDirectoryError, StorageError
-from sim.step_result import STEP_FORMAT_VERSION, StepResult, check_step_version, step_fields_problem
+from procedures.plan import StepSpec
+from sim.errors import RunDirectoryError, StorageError
+from sim.step_result import STEP_FORMAT_VERSION, StepResult
 
-from .config import parse_stored_plan
+from .accounting import Accounting, _sweeps, stored_plan
+from .accounting import planned_count as planned_count
+from .durable import (
+    _canonical,
+    _fsync_dir,
+    _json_default,
+    _sha256,
+    _writing,
+    atomic_write,
+    now_iso,
+    open_append,
+    real_dir,
+    write_json,
+)
+from .durable import file_mode as file_mode
 from .files import UnreadableFile, file_kind, read_file
 from .runlock import LOCK_NAME
+from .step_files import MISSING_WORDS, DamagedStep, StepProblem, _check_npz, _json_reason, _read_step_json, _utf8
+from .step_files import _json_cut as _json_cut
+from .step_files import shown as shown
 
 log = logging.getLogger(__name__)
 
@@ -78,124 +93,6 @@ class RunStatus(enum.StrEnum):
     FAILED = "failed"                      # any other error
 
 
-def now_iso() -> str:
-    return datetime.now(UTC).isoformat(timespec="milliseconds")
-
-
-def _fsync_dir(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
-_umask_lock = threading.Lock()
-
-
-def _umask() -> int:
-    with _umask_lock:          # os.umask can only be read by setting it
-        old = os.umask(0o022)
-        os.umask(old)
-    return old
-
-
-def file_mode() -> int:
-    """The mode of every file a run writes: what ``open(..., "w")`` gives."""
-    return 0o666 & ~_umask()
-
-
-def real_dir(path: Path, *, create: bool = False) -> Path:
-    """``path`` as a directory that is not a symbolic link (made if ``create``); a link or a
-    file in its place raises :class:`RunDirError` naming it."""
-    path = Path(path)
-    if create:
-        try:
-            path.mkdir()
-        except FileExistsError:
-            pass
-    try:
-        st = os.lstat(path)
-    except FileNotFoundError:
-        raise RunDirError(f"{path}: missing (expected a directory)") from None
-    if stat.S_ISLNK(st.st_mode):
-        raise RunDirError(f"{path}: is a symbolic link; a run writes nothing through links "
-                          f"(replace it with a real directory)")
-    if not stat.S_ISDIR(st.st_mode):
-        raise RunDirError(f"{path}: not a directory")
-    return path
-
-
-def open_append(path: Path):
-    """``path`` opened for appending text, never through a symbolic link (``O_NOFOLLOW``)."""
-    try:
-        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC,
-                     0o666)
-    except OSError as e:
-        if os.path.islink(path):
-            raise RunDirError(f"{path}: is a symbolic link; a run writes nothing through links "
-                              f"(remove it)") from None
-        if e.errno == errno.ENXIO:             # a FIFO nobody reads: never waited on
-            raise RunDirError(f"{path}: not a regular file (a FIFO)") from None
-        raise
-    if not stat.S_ISREG(os.fstat(fd).st_mode):
-        os.close(fd)
-        raise RunDirError(f"{path}: not a regular file")
-    return os.fdopen(fd, "a")
-
-
-def atomic_write(path: Path, write) -> None:
-    real_dir(path.parent)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        os.fchmod(fd, file_mode())
-        with os.fdopen(fd, "wb") as fh:
-            write(fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-        _fsync_dir(path.parent)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-
-
-@contextmanager
-def _writing(path: Path):
-    """An ``OSError`` while writing ``path`` becomes a :class:`StorageError` naming it and
-    the cause (a full disk, a directory deleted, a permission taken away)."""
-    try:
-        yield
-    except OSError as e:
-        raise StorageError(f"{path}: cannot write: {e.strerror or e}") from e
-
-
-def _json_default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, complex):
-        return {"re": o.real, "im": o.imag}
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
-
-
-def write_json(path: Path, obj) -> None:
-    data = json.dumps(obj, indent=1, default=_json_default).encode()
-    atomic_write(path, lambda fh: fh.write(data))
-
-
-def _sha256(data: bytes) -> str:
-    return hashlib.sha256(data).hexdigest()
-
-
-def _canonical(obj) -> bytes:
-    """The bytes a step's ``json_sha256`` covers: key order and spacing do not matter
-    (Python's float repr survives a JSON round trip exactly)."""
-    return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=_json_default).encode()
 
 
 RunDirError = RunDirectoryError    # not a readable run directory (missing, or run.json damaged)
@@ -203,43 +100,6 @@ RunDirError = RunDirectoryError    # not a readable run directory (missing, or r
 
 class NewerFormat(RunDirectoryError):
     """run.json was written by a newer guideway-bench: refused by name, never taken for damage."""
-
-
-class DamagedStep(RunDirectoryError):
-    """A completed step's files are missing, truncated or fail their checksum."""
-
-    def __init__(self, problem: StepProblem):
-        super().__init__(str(problem))
-        self.problem = problem
-
-
-@dataclass(frozen=True)
-class StepProblem:
-    """One problem of a run directory, found by :meth:`RunStore.check` or a reader."""
-
-    key: str          # the step key ("" for a file that is not a step)
-    path: Path        # the file concerned
-    kind: str         # one of PROBLEM_KINDS
-    reason: str       # plain language
-    count: int = 1    # steps concerned (more than one: an adaptive sweep's shortfall)
-
-    def __str__(self) -> str:
-        return f"{shown(self.path)}: {self.reason}"
-
-
-def _utf8(name: str) -> bool:
-    """A file name that is text (a name of bytes that are not UTF-8 is never a step's)."""
-    try:
-        name.encode("utf-8")
-    except UnicodeEncodeError:
-        return False
-    return True
-
-
-def shown(name) -> str:
-    """A file name as it can be printed: bytes that are not UTF-8 (a name made elsewhere)
-    as ``\\xff`` escapes, not an error on the terminal."""
-    return os.fsencode(str(name)).decode("utf-8", "backslashreplace")
 
 
 PROBLEM_KINDS = ("missing", "truncated", "corrupt", "checksum", "unknown", "skipped", "owed")
@@ -574,10 +434,10 @@ class RunStore:
         def present_step(key: str) -> None:      # a step with at least one of its files
             if key not in have_json:
                 missing.append(StepProblem(key, self.steps_dir / f"{key}.json", "missing",
-                                           "missing: no .json (only the .npz)"))
+                                           MISSING_WORDS[(".json",)], files=(".json",)))
             elif bad.get(key) and bad[key].kind == "missing":
                 missing.append(StepProblem(key, self.steps_dir / f"{key}.npz", "missing",
-                                           "missing: no .npz (only the .json)"))
+                                           MISSING_WORDS[(".npz",)], files=(".npz",)))
             elif key in bad:
                 damaged.append(bad[key])
             else:
@@ -594,7 +454,8 @@ class RunStore:
                         present += 1
                         skipped.append(StepProblem(key, jp, "skipped", f"skipped at run time: {allowed[key]}"))
                     elif not k:
-                        missing.append(StepProblem(key, jp, "missing", "missing: neither .json nor .npz"))
+                        missing.append(StepProblem(key, jp, "missing", MISSING_WORDS[(".json", ".npz")],
+                                                   files=(".json", ".npz")))
                     continue
                 present += 1
                 present_step(key)
@@ -671,175 +532,5 @@ class RunStore:
         return damaged
 
 
-def _json_reason(e: json.JSONDecodeError) -> str:
-    cut = "truncated: " if e.pos >= len(e.doc.rstrip()) - 1 or e.msg.startswith("Unterminated") else ""
-    return f"{cut}not valid JSON ({e.msg} at line {e.lineno} column {e.colno}, file of {len(e.doc)} characters)"
 
 
-def _read_step_file(path: Path, key: str, what: str) -> bytes:
-    """The bytes of one of a step's two files (``what``: which, for a missing one); a file
-    missing, not a regular file, over its bound or unreadable is a :class:`DamagedStep`."""
-    try:
-        return read_file(path)
-    except FileNotFoundError:
-        raise DamagedStep(StepProblem(key, path, "missing", f"missing ({what})")) from None
-    except UnreadableFile as e:
-        raise DamagedStep(StepProblem(key, path, "corrupt", str(e).split(": ", 1)[-1])) from None
-    except OSError as e:
-        raise DamagedStep(StepProblem(key, path, "corrupt", f"unreadable ({e.strerror})")) from None
-
-
-def _read_step_json(path: Path, key: str) -> tuple[StepResult, dict | None]:
-    def bad(kind, reason):
-        return DamagedStep(StepProblem(key, path, kind, reason))
-    data = _read_step_file(path, key, "the step's result file")
-    if not data.strip():
-        raise bad("truncated", "empty (truncated to 0 bytes)")
-    try:
-        obj = json.loads(data.decode())
-    except UnicodeDecodeError as e:
-        raise bad("corrupt", f"not text (byte {e.start} is not UTF-8)") from None
-    except json.JSONDecodeError as e:
-        reason = _json_reason(e)
-        raise bad("truncated" if reason.startswith("truncated") else "corrupt", reason) from None
-    except RecursionError:
-        raise bad("corrupt", "not a step result (nested too deeply)") from None
-    if not isinstance(obj, dict):
-        raise bad("corrupt", f"not a step result (a JSON object was expected, found {type(obj).__name__})")
-    integrity = obj.pop("integrity", None)
-    if integrity is not None:
-        want = integrity.get("json_sha256") if isinstance(integrity, dict) else None
-        if want != _sha256(_canonical(obj)):
-            raise bad("checksum", "checksum mismatch: the content differs from what was written")
-    if obj.get("key") != key:
-        raise bad("corrupt", f"the result inside is for step {obj.get('key')!r}, not {key!r}")
-    check_step_version(obj, str(path))       # a newer format is refused, not taken for damage
-    problem = step_fields_problem(obj)       # a step of the format before checksums, crafted by hand
-    if problem:
-        raise bad("corrupt", problem)
-    return obj, integrity
-
-
-def _check_npz(path: Path, key: str, integrity: dict | None) -> None:
-    def bad(kind, reason):
-        return DamagedStep(StepProblem(key, path, kind, reason))
-    data = _read_step_file(path, key, "the step's raw block; its result file is there")
-    size = len(data)
-    if integrity is None:                       # a step written before checksums existed
-        if not zipfile.is_zipfile(io.BytesIO(data)):
-            raise bad("corrupt", "not a readable .npz (truncated or overwritten?)")
-        return
-    want_bytes = integrity.get("npz_bytes")
-    if isinstance(want_bytes, int) and size != want_bytes:
-        kind = "truncated" if size < want_bytes else "corrupt"
-        raise bad(kind, f"{'truncated: ' if size < want_bytes else ''}{size} bytes, {want_bytes} were written")
-    if _sha256(data) != integrity.get("npz_sha256"):
-        raise bad("checksum", "checksum mismatch: the raw block differs from what was written")
-
-
-def stored_plan(meta: dict, source: Path | str = "run.json") -> Plan:
-    """The run's stored plan, checked by the validator of a plan file
-    (:func:`bench.config.parse_stored_plan`: ranges, the size bounds, the format); a
-    :class:`RunDirError` names ``source`` (its run.json) and the key."""
-    try:
-        return parse_stored_plan(meta.get("plan"), str(source))
-    except ConfigurationError as e:
-        raise RunDirError(f"{e} (the plan stored in run.json; nothing is counted against it)") from None
-
-
-def planned_keys(meta: dict, source: Path | str) -> set[str]:
-    """Keys of every step of the run's stored plan (:class:`RunDirError` if it is not valid)."""
-    return {s.key for s in stored_plan(meta, source).schedule()}
-
-
-# ---------------------------------------------------------------------------- accounting
-
-
-def _keys_text(keys: list[str], limit: int = 8) -> str:
-    return ", ".join(keys[:limit]) + (f" and {len(keys) - limit} more" if len(keys) > limit else "")
-
-
-@dataclass
-class Accounting:
-    """A run's steps counted against its plan (:meth:`RunStore.account`).
-
-    ``missing``: planned steps without a complete file pair (nothing, or only one of the
-    two files); in an adaptive plan, the steps a sweep still lacks of the number it
-    measures (their keys are chosen online, so the sweep is named).  ``damaged``: planned
-    steps whose files are both there but fail a check.  ``orphan``: files no planned step
-    owns.  ``skipped``: planned steps without files that the run skipped because their
-    force was unreachable within the drive limit, as the plan allows (``infeasible =
-    "skip"``; a ``step_skipped`` event names the reason): accounted for, neither missing
-    nor damaged (decision record 0033).  ``planned`` is None when run.json holds no plan
-    this version can rebuild."""
-
-    planned: int | None
-    intact: list[str]
-    missing: list[StepProblem]
-    damaged: list[StepProblem]
-    orphan: list[StepProblem]
-    skipped: list[StepProblem] = field(default_factory=list)
-    owed: list[StepProblem] = field(default_factory=list)     # a refined run's unended refinements, dwells
-
-    @property
-    def complete(self) -> bool:
-        """Every planned step is there and intact, or was skipped at run time as the plan
-        allows (nothing a resume would measure unless asked to retry the skipped ones), and
-        a refined run owes nothing (every refinement ended, every dwell it owes measured)."""
-        return self.planned is not None and not self.missing and not self.damaged and not self.owed
-
-    @property
-    def missing_count(self) -> int:
-        return sum(p.count for p in self.missing)
-
-    def resume_text(self, retry_skipped: bool = False) -> str:
-        """'measures again 3 of 30 planned steps; missing: K1, K2; damaged: K3 (truncated);
-        skipped at run time, not retried (--retry-skipped retries them): K4'."""
-        n = self.missing_count + len(self.damaged) + (len(self.skipped) if retry_skipped else 0)
-        parts = [f"measures again {n} of {'?' if self.planned is None else self.planned} planned "
-                 f"step{'s' * (self.planned != 1)}"]
-        if self.missing:
-            parts.append("missing: " + _keys_text([_missing_label(p) for p in self.missing], 12))
-        if self.damaged:
-            parts.append("damaged: " + _keys_text([f"{p.key} ({p.kind})" for p in self.damaged], 12))
-        if self.owed:
-            parts.append("owed: " + _keys_text([_owed_label(p) for p in self.owed], 12))
-        if self.skipped:
-            parts.append(("skipped at run time, retried: " if retry_skipped else
-                          "skipped at run time, not retried (--retry-skipped retries them): ")
-                         + _keys_text([p.key for p in self.skipped], 12))
-        return "; ".join(parts)
-
-    def summary(self) -> str:
-        """'28 intact / 30 planned; skipped at run time: K4; missing: K1; damaged: K2
-        (truncated); orphan: none' (the skipped part only when there is one)."""
-        missing = [_missing_label(p) for p in self.missing]
-        skipped = f"skipped at run time: {_keys_text([p.key for p in self.skipped])}; " if self.skipped else ""
-        return (f"{len(self.intact)} intact / {'?' if self.planned is None else self.planned} planned; {skipped}"
-                f"missing: {_keys_text(missing) or 'none'}; "
-                f"damaged: {_keys_text([f'{p.key} ({p.kind})' for p in self.damaged]) or 'none'}; "
-                f"orphan: {_keys_text([shown(p.path.name) for p in self.orphan]) or 'none'}"
-                + (f"; owed: {_keys_text([_owed_label(p) for p in self.owed])}" if self.owed else ""))
-
-
-def _owed_label(p: StepProblem) -> str:
-    """'L00-feed dwell' or 'L01-pitch refinement'."""
-    return f"{p.key} {'dwell' if p.path.suffix == '.json' else 'refinement'}"
-
-
-def _missing_label(p: StepProblem) -> str:
-    """A step's key, or an adaptive sweep with the number of steps it lacks: 'L01-up (2)'."""
-    return p.key if p.path.suffix in (".json", ".npz") else f"{p.key} ({p.count})"
-
-
-def _sweeps(plan) -> dict[tuple[int, str], list[str]]:
-    out: dict[tuple[int, str], list[str]] = {}
-    for s in plan.schedule():
-        out.setdefault((s.level_index, s.direction), []).append(s.key)
-    return out
-
-
-def planned_count(plan) -> int:
-    """Steps the plan measures: its schedule, or in adaptive mode the chosen number per sweep."""
-    k = plan.adaptive_per_sweep
-    return sum(min(len(keys), k) if k else len(keys) for keys in _sweeps(plan).values())

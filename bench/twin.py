@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.artefacts import REPEAT_STEPS, mains
+from sim.artefacts import REPEAT_STEPS, mains_line
 from sim.discrepancy.analysis import level_groups
 from sim.errors import ConfigurationError
 from sim.rig import RigModel
@@ -139,8 +139,8 @@ def _free_vibration(cause: dict) -> str:
         return ""
     f = cause.get("parameters", {}).get("frequency", {}).get("value")
     steps = cause.get("evidence", {}).get("steps", [])
-    src = mains(float(f)) if f is not None else ""
-    if f is None or len(steps) >= REPEAT_STEPS or (src and ("harmonic" not in src or len(steps) >= 2)):
+    src = mains_line(float(f)) if f is not None else None
+    if f is None or len(steps) >= REPEAT_STEPS or (src is not None and (src[1] == 1 or len(steps) >= 2)):
         return ""
     return (f"a {float(f):.4g} Hz line in {len(steps)} step(s) only, not mains: the measured rig's own "
             f"free vibration, not interference (decision 0045); not built into the twin")

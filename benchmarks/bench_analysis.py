@@ -1,5 +1,8 @@
 """Benchmark of the discrepancy analysis over generated cases (issue 9's and issue 16's bars).
 
+Longer than 600 lines: one campaign script, run as a program; its summaries (the rates per
+bar, the coverage and profile tables) are its output and read the rows it makes.
+
 Each case (``run_case(seed)``) is a seeded random rig with one catalog effect or one form
 outside the catalog (cubic spring, quadratic damping, asymmetric friction) hidden in it
 (or none: every tenth case is clean), measured through the RK4 plant on the issue's grid

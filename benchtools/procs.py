@@ -30,6 +30,12 @@ def bench_done(*args: str, **run) -> subprocess.CompletedProcess:
     return subprocess.run([*BENCH, *args], cwd=run.pop("cwd", REPO), capture_output=True, text=True, **run)
 
 
+def bench_main(*args) -> int:
+    """``bench ARGS`` in this process (:func:`bench.cli.main`; paths and numbers as text): its exit code."""
+    from bench.cli import main
+    return main([str(a) for a in args])
+
+
 def finished(proc: subprocess.Popen, timeout_s: float = 60) -> subprocess.CompletedProcess:
     """A process started with text pipes, waited for: its exit code and output."""
     out, err = proc.communicate(timeout=timeout_s)

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim.records import lsq_harmonics
+
 log = logging.getLogger(__name__)
 
 
@@ -55,18 +57,13 @@ def fit_harmonics(x: np.ndarray, fs_Hz: float, freq_Hz: float, n_harmonics: int 
                          f"frequency {fs_Hz / 2:g} Hz of the record (sample rate {fs_Hz:g} S/s)")
     if not np.all(np.isfinite(x)):
         raise ValueError("record contains NaN or inf")
-    t = np.arange(x.size) / fs_Hz
+    C, c, noise = lsq_harmonics(x, fs_Hz, freq_Hz, n_harmonics)     # C_k = a_k + i b_k
+    a, b = C.real, C.imag
     k = np.arange(1, n_harmonics + 1)
-    wt = 2 * np.pi * freq_Hz * np.outer(t, k)
-    A = np.column_stack([np.sin(wt), np.cos(wt), np.ones(x.size)])
-    coef, *_ = np.linalg.lstsq(A, x, rcond=None)
-    a, b, c = coef[:n_harmonics], coef[n_harmonics:2 * n_harmonics], coef[-1]
-    resid = x - A @ coef
-    dof = max(1, x.size - A.shape[1])
     # one period of the fitted signal, finely sampled: the steady periodic response
     wt1 = 2 * np.pi * np.outer(np.arange(1024) / 1024, k)
     periodic = np.sin(wt1) @ a + np.cos(wt1) @ b
-    return HarmonicFit(freq_Hz=float(freq_Hz), amplitude=np.hypot(a, b), phase_rad=np.arctan2(b, a),
-                       offset=float(c), noise_rms=float(np.sqrt(resid @ resid / dof)),
+    return HarmonicFit(freq_Hz=float(freq_Hz), amplitude=np.abs(C), phase_rad=np.angle(C),
+                       offset=float(c), noise_rms=float(noise),
                        peak_to_peak=float(periodic.max() - periodic.min()),
                        raw_peak_to_peak=float(x.max() - x.min()))

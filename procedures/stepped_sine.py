@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from drivers import plan_block
-from sim.artefacts import HARMONIC_GUARD, StepQuality, assess_step, si
+from sim.artefacts import HARMONIC_GUARD, Rejection, StepQuality, assess_step, si
 from sim.step_record import BlockRecord, measure_block
 from sim.step_result import ControlIteration, StepMeasurement, StepResult
 
@@ -82,7 +82,7 @@ def unsettled_in(q: StepQuality, fs_Hz: float, n_samples: int, ringing_at: tuple
     still = [a for a in q.artefacts if a.kind == "line_interference"
              and any(abs(a.freq_Hz - fr) <= guard for fr in ringing_at)]
     if q.status == "rejected":
-        if not q.reason.startswith("not periodic enough"):
+        if q.rejected_by is not Rejection.NOT_PERIODIC:
             return Unsettled()
         words = [q.reason]         # it names the transient it saw, if any
     else:

@@ -120,11 +120,13 @@ class Estimate:
     warnings: tuple[str, ...] = field(default=())
     misfit: bool = False               # reduced chi-square beyond what the noise explains (misfit_text)
     source: str = ""                   # where the estimate came from (online, final fit, ...)
+    at_bound: tuple[str, ...] = ()     # parameters at the bound of the search: not estimates (a warning says so)
 
     def as_dict(self) -> dict:
         return dict(values=self.values, low=self.low, high=self.high, rel_std=self.rel_std,
                     steps_used=self.steps_used, reduced_chi2=self.cost, warnings=list(self.warnings),
-                    misfit=self.misfit, **({"source": self.source} if self.source else {}))
+                    misfit=self.misfit, **({"source": self.source} if self.source else {}),
+                    **({"at_bound": list(self.at_bound)} if self.at_bound else {}))
 
 
 @njit(cache=True)
@@ -519,14 +521,15 @@ class Identifier:
                 rel[name] = float(std[i])
         warnings = tuple(f"{name} is poorly determined by these steps (relative standard error "
                          f"{100 * rel[name]:.0f} %)" for name in PARAMS if not rel[name] < 0.1)
+        at_bound: tuple[str, ...] = ()
         if self.bound_factor:   # (the e^50 reach is never an answer)
-            warnings = tuple(f"{PARAMS[i]} reached the bound of the search ({self.bound_factor:g}x the expected "
-                             f"value): not an estimate" for i in (0, 1, 3)
-                             if min(res.x[i] - lo[i], hi[i] - res.x[i]) < 1e-3) + warnings
+            at_bound = tuple(PARAMS[i] for i in (0, 1, 3) if min(res.x[i] - lo[i], hi[i] - res.x[i]) < 1e-3)
+            warnings = tuple(f"{name} reached the bound of the search ({self.bound_factor:g}x the expected "
+                             f"value): not an estimate" for name in at_bound) + warnings
         mis = misfit_text(chi2, dof)
         if mis:
             warnings = (mis,) + warnings
-        self.estimate = Estimate(vals, low, high, rel, len(self.steps), chi2, warnings, bool(mis))
+        self.estimate = Estimate(vals, low, high, rel, len(self.steps), chi2, warnings, bool(mis), at_bound=at_bound)
         self.history.append(dict(steps=len(self.steps), **self.estimate.as_dict()))
         return self.estimate
 

@@ -236,6 +236,7 @@ class ModeEstimate:
     note: str = ""
     window_Hz: tuple[float, float] = (math.nan, math.nan)
     extra: dict = field(default_factory=dict)
+    phase_resonance: bool = False           # one point of a phase-resonance run, not a fit to a curve (decision 0044)
 
     @property
     def ok(self) -> bool:

@@ -9,6 +9,10 @@ u = x/x_s, F/F_s, beta = omega/omega_s, tau = omega t, G = u_0/gamma0 (seed Eq. 
 
 Figures are drawn on :class:`matplotlib.figure.Figure` objects (Agg canvas), never through
 pyplot, so this module neither needs nor changes a global matplotlib backend.
+
+Longer than 600 lines: one job, the seed's figures; each ``figNN`` function computes its
+figure, draws it and hands its key numbers to the index, which :func:`write_index` writes
+from them, so a figure and the line of the index that checks it stay side by side.
 """
 
 from __future__ import annotations

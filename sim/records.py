@@ -58,7 +58,19 @@ class PeriodicRecords:
     samples: int
     channels: dict          # name -> ChannelHarmonics
     drift_sigma: float      # largest half-vs-half difference score over channels
-    drift_detail: str       # which channel and harmonic gave it
+    drift_detail: str       # which channel and harmonic gave it, in words ("accel harmonic 2"), as stored
+    drift_channel: str = ""     # that channel ("" when read back from a step file, which stores the words only)
+    drift_harmonic: int = -1    # that harmonic, 0 for the offset (-1: not known, as drift_channel)
+
+
+def harmonic_words(harmonic: int) -> str:
+    """"harmonic 2", or "offset" for harmonic 0."""
+    return f"harmonic {harmonic}" if harmonic else "offset"
+
+
+def drift_words(channel: str, harmonic: int) -> str:
+    """The stored words of a periodicity score's origin: "accel harmonic 2", "disp offset"."""
+    return f"{channel} {harmonic_words(harmonic)}"
 
 
 def _coarse_frequency(x: np.ndarray, fs_Hz: float) -> float:
@@ -158,8 +170,12 @@ def _harmonic_system(N: int, step: float, K: int) -> tuple[np.ndarray, CZT]:
     return G, CZT(N, m=K + 1, w=np.exp(-1j * step), a=1.0)
 
 
-def _lsq_harmonics(x: np.ndarray, fs: float, f: float, K: int):
-    """Exact least-squares fit of offset + K harmonics; returns (C_k, offset, residual rms)."""
+def lsq_harmonics(x: np.ndarray, fs: float, f: float, K: int):
+    """Exact least-squares fit of offset + K harmonics of ``f`` to the ``x.size`` samples of
+    ``x`` (any length: whole periods or not); returns (C_k, offset, residual rms with
+    ``x.size - (2K + 1)`` degrees of freedom).  The one harmonic kernel: every fit of
+    harmonics to a record goes through it (procedures.analysis.fit_harmonics is its wrapper
+    for the controllers)."""
     N = x.size
     step = 2 * np.pi * f / fs
     G, transform = _harmonic_system(N, step, K)
@@ -191,7 +207,7 @@ def analyse_channel(x: np.ndarray, fs: float, f: float, periods: int, spp: int |
         return ChannelHarmonics(C, float(spec[0].real / 2), noise, noise * math.sqrt(2.0 / N), mean)
     N = int(round(periods * fs / f))
     K = max(1, min(max_harmonics, int(math.floor(0.5 * fs / f - 0.5))))
-    C, off, noise = _lsq_harmonics(x[:N], fs, f, K)
+    C, off, noise = lsq_harmonics(x[:N], fs, f, K)
     return ChannelHarmonics(C, off, noise, noise * math.sqrt(2.0 / N), synthesized_period(C, off, fs, f))
 
 
@@ -241,7 +257,7 @@ def analyse_records(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | 
     chans = {k: analyse_channel(v, fs_Hz, f, periods, spp, max_harmonics) for k, v in sig.items()}
     # periodicity: the two halves of the window against each other
     half = periods // 2
-    drift, detail = 0.0, ""
+    drift, where = 0.0, ("", -1)
     for k, v in sig.items():
         n_half = int(round(half * ratio))
         a = analyse_channel(v[:n_half], fs_Hz, f, half, spp, DRIFT_HARMONICS) if half >= 1 else None
@@ -257,7 +273,9 @@ def analyse_records(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | 
         hb = b.harmonics[:DRIFT_HARMONICS] * np.exp(-2j * np.pi * kk * f * n_half / fs_Hz)
         dh = np.abs(a.harmonics[:DRIFT_HARMONICS] - hb) / s_h
         do = abs(a.offset - b.offset) / (s_h / math.sqrt(2.0))
-        for name, z in [(f"harmonic {i + 1}", float(v_)) for i, v_ in enumerate(dh)] + [("offset", do)]:
+        for h, z in [(i + 1, float(v_)) for i, v_ in enumerate(dh)] + [(0, do)]:
             if z > drift:
-                drift, detail = z, f"{k} {name}"
-    return PeriodicRecords(f, float(fs_Hz), periods, int(round(periods * ratio)), chans, float(drift), detail)
+                drift, where = z, (k, h)
+    detail = drift_words(*where) if where[0] else ""
+    return PeriodicRecords(f, float(fs_Hz), periods, int(round(periods * ratio)), chans, float(drift), detail,
+                           *where)

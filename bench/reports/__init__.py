@@ -2,8 +2,9 @@
 page (one HTML file each; the comparison's in ``_compare``, decision record 0026).
 
 The data are prepared once (``_run.load_run`` reads a run directory into a typed record,
-``_analysis.analysis_data`` reads an analysis dict), figures are drawn in one module
-(``_figures``) and rendered by one module per format (``_markdown``, ``_html``).
+``_analysis.analysis_data`` reads an analysis dict), figures are drawn by three
+modules (``_figures``: shared and the run report's; ``_figures_analysis``, ``_figures_modes``)
+and rendered by one module per format (``_markdown``, ``_html``).
 Decision record 0016.
 """
 

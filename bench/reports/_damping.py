@@ -113,7 +113,7 @@ DAMPING_COLUMNS = ("damping_fit_fraction", "damping_fit_low_fraction", "damping_
 def damping_row(e: ModeEstimate) -> dict:
     """modes.csv's DAMPING_COLUMNS of one estimate."""
     nan = math.nan
-    if e.curve.startswith("phase resonance"):      # a locked point's ratio is the energy balance (decision 0044)
+    if e.phase_resonance:      # a locked point's ratio is the energy balance (decision 0044)
         eb = EnergyBalance(e.damping_ratio, nan, nan, "", "phase resonance", e.resonance_Hz, nan,
                            "the phase-resonance run's mass (backbone.csv)")
         return dict(damping_row_empty(), damping_energy_balance_fraction=eb.value, energy_balance_mass=eb.mass_note)

@@ -19,6 +19,7 @@ import numpy as np
 from procedures.kind import ProcedureKind, of_stored_plan
 
 from ._model import (
+    LEFT_OUT,
     LevelComparison,
     ModelComparison,
     _median,
@@ -46,9 +47,9 @@ def held_response_comparison(meta: dict, results: list[dict], flagged: set[str] 
     grid = np.union1d(np.geomspace(freqs.min() / 1.1, freqs.max() * 1.1, HELD_GRID_POINTS), freqs)
     unit = "m" if quantity == "disp" else "m/s^2"
     effects = _model_effects(declared)
-    left_out = [e for e in effects if "shaker" in e or "interference" in e]
-    effects = [e for e in effects if e not in left_out]
-    notes = [f"response-controlled: the rig's model ({', '.join(effects) or 'the Masing carriage'}; decision 0054) at "
+    left_out = [e for k, e in effects.items() if k in LEFT_OUT]
+    effects = {k: e for k, e in effects.items() if k not in LEFT_OUT}
+    notes = [f"response-controlled: the rig's model ({', '.join(effects.values()) or 'the Masing carriage'}; decision 0054) at "
              f"the held {'|X1|' if quantity == 'disp' else '|A1|'}: at each frequency the force that holds it, by a "
              f"secant on the compiled plant's steady states (sim.rig_response.held_response), no FRF engine at a "
              f"force level"]

@@ -22,6 +22,7 @@ from pathlib import Path
 from sim.discrepancy.rounding import round_to_interval
 
 from . import _figures as figures
+from . import _figures_analysis as analysis_figures
 from ._analysis import AnalysisData, Interval, analysis_data
 
 log = logging.getLogger(__name__)
@@ -139,7 +140,7 @@ def _overview(a: AnalysisData) -> str:
     if not a.steps:
         return ""
     final = "the extended model (solid)" if a.causes else "no cause named: the base model is the final model"
-    return figure(figures.plot_analysis_overview(a.steps),
+    return figure(analysis_figures.plot_analysis_overview(a.steps),
                    f"Compliance magnitude against frequency for every force level on one axis ({len(a.steps)} "
                    f"steps): measured circles, base Masing model dashed, extended model solid.",
                    f"Measured compliance (circles) against the base Masing model (dashed) and {final}, colour "
@@ -152,7 +153,7 @@ def _restoring(a: AnalysisData) -> str:
     if rf is None or rf.x_m.size == 0:
         out.append("<p>No restoring-force samples in the analysis.</p>")
     else:
-        out.append(figure(figures.plot_restoring_force(rf),
+        out.append(figure(analysis_figures.plot_restoring_force(rf),
                            "Force the base model leaves out (N) against displacement and against velocity, "
                            "points coloured by force level.",
                            "What the base model leaves out, P - m a - F_Masing(x), against displacement (left) "
@@ -247,14 +248,14 @@ def _figures(a: AnalysisData) -> str:
         for q, what in (("compliance", "displacement over force, x/P"), ("accelerance", "acceleration over "
                                                                                          "force, a/P")):
             out.append(f"<h3>{q.capitalize()}</h3>")
-            out.append(figure(figures.plot_analysis_frf(a.steps, q),
+            out.append(figure(analysis_figures.plot_analysis_frf(a.steps, q),
                                f"{q.capitalize()} ({what}) magnitude and phase against frequency for each force "
                                f"level ({span}): measured points, base model dashed, final model solid.",
                                f"First-harmonic {q} ({what}), one row per force level: measured (circles), "
                                f"simulated with the base Masing model (dashed); {final}."))
     if a.loops:
         out.append("<h3>Hysteresis loops</h3>")
-        out.append(figure(figures.plot_analysis_loops(a.loops),
+        out.append(figure(analysis_figures.plot_analysis_loops(a.loops),
                            f"Friction force against displacement over one period at {len(a.loops)} chosen steps "
                            f"({', '.join(lp.key for lp in a.loops)}): measured, base model and final model.",
                            "Friction force P - m a against displacement over one period: measured (black), base "
@@ -263,7 +264,7 @@ def _figures(a: AnalysisData) -> str:
         out.append("<p>No hysteresis loops in the analysis.</p>")
     if a.steps:
         out.append("<h3>Residuals of the base model</h3>")
-        out.append(figure(figures.plot_analysis_residuals(a.steps),
+        out.append(figure(analysis_figures.plot_analysis_residuals(a.steps),
                            "Relative error of the base model's compliance and accelerance against frequency and "
                            "against force level, and the base model's residual per harmonic.",
                            "Where the base model misses: relative error of the first harmonic against frequency "

@@ -28,6 +28,7 @@ from ..numbers import number, percent
 from ..storage import shown
 from ..verdict import promise
 from . import _figures as figures
+from . import _figures_modes as mode_figures
 from ._analysis import analysis_data
 from ._damping import DAMPING_HEADS, DAMPING_KINDS, damping_notes, damping_row
 from ._identification import ID_PARAMS, IdentificationData, determined_from, finite, steps_of
@@ -384,7 +385,7 @@ def _write_figures(run: RunData, out: Path, others=()) -> list[tuple[str, str]]:
                   f"steps above {100 * UNSETTLED_RESIDUAL:g} % are flagged)."))
 
     if run.modes is not None:
-        save(figures.plot_fig17([run.modes], f"Modes per {q.name} level: {title}"), out / "modes.png")
+        save(mode_figures.plot_fig17([run.modes], f"Modes per {q.name} level: {title}"), out / "modes.png")
         if run.modes.kind == "phase_resonance":
             files.append(("modes.png", "each level's locked point (diamonds): frequency and damping ratio against "
                           "force, no interval."))

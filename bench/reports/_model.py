@@ -61,8 +61,12 @@ class ModelComparison:
         return float(f[i]), float(c[i])
 
 
-def _model_effects(model) -> list[str]:
-    """Rig effects the dimensionless engine leaves out, when switched on."""
+# effects the model lines leave out (an ideal force at the measured level): the shaker's and a line's
+LEFT_OUT = ("shaker_force_constant_N_per_A", "line_amplitude")
+
+
+def _model_effects(model) -> dict[str, str]:
+    """Rig effects the dimensionless engine leaves out, when switched on: key -> words."""
     names = {"viscous_N_s_per_m": "viscous damping", "spring_N_per_m": "linear spring",
              "disp_delay_s": "displacement-channel delay", "force_gain_error": "force gain error",
              "accel_gain_error": "acceleration gain error", "disp_gain_error": "displacement gain error",
@@ -72,7 +76,7 @@ def _model_effects(model) -> list[str]:
              "shaker_force_constant_N_per_A": "electrodynamic shaker (the force has harmonics)",
              "line_amplitude": f"interference line on the {model.line_channel or '?'} sensor at "
                                f"{model.line_freq_Hz:g} Hz"}
-    return [f"{label} ({k} = {getattr(model, k):g})" for k, label in names.items() if getattr(model, k, 0)]
+    return {k: f"{label} ({k} = {getattr(model, k):g})" for k, label in names.items() if getattr(model, k, 0)}
 
 
 def model_comparison(meta: dict, results: list[dict], flagged: set[str] | None = None) -> ModelComparison | None:
@@ -94,13 +98,13 @@ def model_comparison(meta: dict, results: list[dict], flagged: set[str] | None =
     dense = np.geomspace(freqs.min() / 1.1, freqs.max() * 1.1, MODEL_GRID_POINTS if plain else PLANT_GRID_POINTS)
     grid = np.union1d(dense, freqs)
     effects = _model_effects(model)
-    left_out = [e for e in effects if "shaker" in e or "interference" in e]
+    left_out = [e for k, e in effects.items() if k in LEFT_OUT]
     if plain:
         engine_notes = [f"omega_s = sqrt(F_s/(x_s m)) = {ws:.4g} rad/s ({ws / (2 * math.pi):.4g} Hz); "
                         f"compliance = G x_s/F_s with G from sim.shooting.frf_shooting (n = {model.n:g})"]
     else:
         engine_notes = ["the rig's model with every effect its file declares ("
-                        + ", ".join(e for e in effects if e not in left_out) + "; decision 0054): steady states "
+                        + ", ".join(e for k, e in effects.items() if k not in LEFT_OUT) + "; decision 0054): steady states "
                         "of the compiled plant (sim.rig_response), an upward sweep at each level"]
     engine_notes.append("lines and differences are one computation: each step's difference is measured / the line at "
                         "its frequency - 1")

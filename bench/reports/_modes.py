@@ -153,10 +153,11 @@ def backbone_modes(results: list[dict]) -> list[ModeEstimate]:
         if b["locked"]:
             out.append(ModeEstimate(b["mode"], level, "ok", f"phase resonance ({b['response']})",
                                     resonance_Hz=float(b["frequency_Hz"]), damping_ratio=float(b["damping_ratio"]),
-                                    n_points=1, note=BACKBONE_NOTE))
+                                    n_points=1, note=BACKBONE_NOTE, phase_resonance=True))
         else:
             out.append(ModeEstimate(b["mode"], level, "not locked", f"phase resonance ({b['response']})",
-                                    n_points=1, note=f"phase resonance: not locked ({b['why']})"))
+                                    n_points=1, note=f"phase resonance: not locked ({b['why']})",
+                                    phase_resonance=True))
     return out
 
 
@@ -260,11 +261,12 @@ def write_csv(runs: list[RunModes], path: Path) -> Path:
 def write_modes(sources: list[Path], out: Path, *, model: bool = True) -> tuple[list[RunModes], list[Path]]:
     """modes.csv, fig13_feed.png and fig17_modes.png of ``sources`` into ``out``."""
     from . import _figures as figures
+    from . import _figures_modes as mode_figures
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     runs = [run_modes(p, model=model) for p in sources]
     files = [write_csv(runs, out / "modes.csv")]
-    figures.save_png(figures.plot_fig13(runs), out / "fig13_feed.png")
-    figures.save_png(figures.plot_fig17(runs), out / "fig17_modes.png")
+    figures.save_png(mode_figures.plot_fig13(runs), out / "fig13_feed.png")
+    figures.save_png(mode_figures.plot_fig17(runs), out / "fig17_modes.png")
     files += [out / "fig13_feed.png", out / "fig17_modes.png"]
     return runs, files

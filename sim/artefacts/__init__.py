@@ -77,12 +77,12 @@ from .detectors import (
                      natural_run_chance,
                      quantisation_line_bound,
 )
-from .quality import KINDS, Artefact, Assessment, StepQuality
-from .sentences import FORMULAS, LABEL, LABELS, MAINS_HZ, UNIT, mains, si
+from .quality import KINDS, Artefact, Assessment, Rejection, StepQuality
+from .sentences import FORMULAS, LABEL, LABELS, MAINS_HZ, UNIT, mains, mains_line, si
 
 __all__ = ["DECAY_FRACTION", "DECAY_Z", "DRIFT_LIMIT", "DROPOUT_FALSE_ALARM", "DROPOUT_MIN_SAMPLES", "ENVELOPE_Z",
            "FORMULAS", "HARMONIC_GUARD", "KINDS", "LABEL", "LABELS", "LINE_CLUSTER_REL", "LINE_FALSE_ALARM",
            "MAINS_HZ", "MAX_LINES", "MIN_PERIODS", "MODE_REL", "MOTION_TOL", "MOTION_Z", "NOISY_RESIDUAL",
-           "REPEAT_STEPS", "TREND_Z", "UNIT", "Artefact", "Assessment", "StepQuality", "artefact_causes",
-           "assess_step", "attribute_lines", "find_clipping", "find_dropouts", "mains",
+           "REPEAT_STEPS", "TREND_Z", "UNIT", "Artefact", "Assessment", "Rejection", "StepQuality", "artefact_causes",
+           "assess_step", "attribute_lines", "find_clipping", "find_dropouts", "mains", "mains_line",
            "natural_run_chance", "quantisation_line_bound", "settle_cycles", "si"]

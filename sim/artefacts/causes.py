@@ -11,7 +11,7 @@ import numpy as np
 
 from .detectors import HARMONIC_GUARD
 from .quality import Artefact, StepQuality
-from .sentences import FORMULAS, LABEL, LABELS, UNIT, mains, si
+from .sentences import FORMULAS, LABEL, LABELS, UNIT, mains_family, mains_line, si
 
 
 def _span(values, unit: str, fmt: str = ".3g") -> str:
@@ -120,12 +120,12 @@ def attribute_lines(quality: list[tuple[str, StepQuality]],
                     parent[id(a)] = b
     lines = [(i, a) for i, (_, q) in enumerate(quality) for a in q.artefacts
              if a.kind == "line_interference" and id(a) not in parent]
-    groups: dict[tuple[str, str, int], list[tuple[int, float]]] = {}    # (mains base, channel, harmonic)
+    groups: dict[tuple[float, str, int], list[tuple[int, float]]] = {}    # (mains base, channel, harmonic)
     for i, a in lines:
-        src = mains(a.freq_Hz)
-        if src:
-            base = src.split(" (")[0]
-            groups.setdefault((base, a.channel, round(a.freq_Hz / float(base.split()[0]))), []).append((i, a.size))
+        src = mains_line(a.freq_Hz)
+        if src is not None:
+            base, m = src
+            groups.setdefault((base, a.channel, m), []).append((i, a.size))
     hum = {base for (base, _, _), g in groups.items()
            if _coherent([s for _, s in g]) >= REPEAT_STEPS and len({i for i, _ in g}) >= REPEAT_STEPS}
 
@@ -133,11 +133,11 @@ def attribute_lines(quality: list[tuple[str, StepQuality]],
         """At a mains frequency whose family comes back over the run (above): the line of the
         family that does, or another harmonic of it seen in 2 steps or in a step with that
         line (a window of 0.5 % that a stray line at a high frequency can fall into)."""
-        src = mains(a.freq_Hz)
-        if not src or src.split(" (")[0] not in hum:
+        src = mains_line(a.freq_Hz)
+        if src is None or src[0] not in hum:
             return False
-        base = src.split(" (")[0]
-        g = groups[(base, a.channel, round(a.freq_Hz / float(base.split()[0])))]
+        base, m = src
+        g = groups[(base, a.channel, m)]
         if _coherent([s for _, s in g]) >= REPEAT_STEPS or len({i2 for i2, _ in g}) >= 2:
             return True
         return any(key[0] == base and i in {i2 for i2, _ in g2} and _coherent([s for _, s in g2]) >= REPEAT_STEPS
@@ -160,7 +160,7 @@ def attribute_lines(quality: list[tuple[str, StepQuality]],
             k = round(F / q.freq_Hz)
             if k >= 1 and abs(F - k * q.freq_Hz) <= HARMONIC_GUARD / q.record_s:
                 for a in q.artefacts:
-                    if a.kind == "line_interference" and a.channel == ch and a.size <= A and not mains(a.freq_Hz):
+                    if a.kind == "line_interference" and a.channel == ch and a.size <= A and mains_line(a.freq_Hz) is None:
                         hidden[id(a)] = F
     lines = [(i, a) for i, a in lines if id(a) not in hidden]
 
@@ -216,7 +216,7 @@ def attribute_lines(quality: list[tuple[str, StepQuality]],
                 interference.add(id(a))
                 continue
             else:
-                why = (f"{'at a mains frequency in too few steps with one amplitude' if mains(a.freq_Hz) else 'at no mains frequency'}"
+                why = (f"{'at a mains frequency in too few steps with one amplitude' if mains_line(a.freq_Hz) else 'at no mains frequency'}"
                        f" and in fewer than {REPEAT_STEPS} steps at one frequency, drive frequencies and amplitude: "
                        f"the rig's own free vibration, not interference")
             arts.append(_as_vibration(a, q, why, decays))
@@ -301,21 +301,21 @@ def artefact_causes(quality: list[tuple[str, StepQuality]], total: int | None = 
             else:
                 hits.setdefault((a.kind, a.channel), []).append((key, q, a))
     out = []
-    families: dict[str, list] = {}
+    families: dict[tuple[float, float], list] = {}     # (mains base, 0) or (0, a steady line's first frequency)
 
     def source_Hz(a: Artefact) -> float:        # a component goes with the line it is a component of
         return a.part_of_Hz if math.isfinite(a.part_of_Hz) else a.freq_Hz
 
     for it in sorted(lines, key=lambda it: (source_Hz(it[2]), math.isfinite(it[2].part_of_Hz))):
         f_src = source_Hz(it[2])
-        src = mains(f_src)
-        fam = src.split(" (")[0] if src else None
+        src = mains_line(f_src)
+        fam = (src[0], 0.0) if src is not None else None
         if fam is None:               # a steady line of another source: its frequency cluster
-            fam = next((k for k, g in families.items() if not k.endswith("mains")
-                        and _same_line(source_Hz(g[-1][2]), f_src)), f"{f_src:.6g} Hz")
+            fam = next((k for k, g in families.items() if not k[0]
+                        and _same_line(source_Hz(g[-1][2]), f_src)), (0.0, f_src))
         families.setdefault(fam, []).append(it)
-    for fam, items in families.items():
-        out.append(_line_cause(fam, sorted(items, key=lambda it: order[it[0]]), total))
+    for (base, _), items in families.items():
+        out.append(_line_cause(base, sorted(items, key=lambda it: order[it[0]]), total))
     for (kind, *rest), items in hits.items():
         out.append(_other_cause(kind, rest[0] if rest else "", items, total))
     out.sort(key=lambda c: -len(c["evidence"]["steps"]))
@@ -332,13 +332,11 @@ def _entry(kind: str, channel: str, items, total: int, parameters: dict, sentenc
                               per_step=[dict(step=k, **a.as_dict()) for k, _, a in items]))
 
 
-def _line_cause(family: str, items, total: int) -> dict:
+def _line_cause(base: float, items, total: int) -> dict:
     """One interference family: the mains of one frequency (any harmonic, any channel) or
-    one other steady line.  Its parameters are those of its main line (the channel and
+    one other steady line (``base``: the mains frequency, 0 for another source).  Its parameters are those of its main line (the channel and
     harmonic in most steps), which a twin can rebuild; the others are in the sentence and
     the evidence."""
-    base = float(family.split()[0]) if family.endswith("mains") else 0.0
-
     def line_of(a: Artefact) -> tuple[str, int]:
         return a.channel, (round(a.freq_Hz / base) if base else 1)
 
@@ -352,7 +350,7 @@ def _line_cause(family: str, items, total: int) -> dict:
     f = [a.freq_Hz for _, _, a in items if line_of(a) == main]
     amp = [a.size for _, _, a in items if line_of(a) == main]
     n = len({k for k, _, a in items if not math.isfinite(a.part_of_Hz)})
-    what = (f"{family} interference" if base else "interference from another source (a pump, a fan, a switching supply)")
+    what = (f"{mains_family(base)} interference" if base else "interference from another source (a pump, a fan, a switching supply)")
     others = sorted(set(count) - {main})
     also = ("; also " + ", ".join((f"{m * base:g} Hz " if base else "") + f"on the {LABEL[c]} ({len(count[(c, m)])} steps)"
                                   for c, m in others)) if others else ""

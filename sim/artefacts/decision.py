@@ -8,11 +8,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..records import CHANNELS, analyse_records, checked_records
+from ..records import CHANNELS, analyse_records, checked_records, harmonic_words
 from .cleaning import _clean_channel, _motion_evidence, settle_cycles
 from .detectors import HARMONIC_GUARD, find_clipping, find_dropouts
 from .quality import Artefact, Assessment, StepQuality
-from .sentences import LABEL, MAINS_HZ, mains
+from .sentences import LABEL, MAINS_HZ, mains_line, not_periodic
 
 DRIFT_LIMIT = 10.0            # periodicity gate: standard errors between the halves of a record
 NOISY_RESIDUAL = 0.02         # displacement residual rms / fundamental amplitude above which a step is flagged
@@ -26,22 +26,21 @@ def _fundamental(x: np.ndarray, fs: float, f: float) -> float:
     return float(2.0 / n * abs(np.dot(x[:n] - x[:n].mean(), np.exp(-2j * np.pi * f * t))))
 
 
-def _mains_hint(f: float, periods: int, failed: str, lines: list[Artefact]) -> str:
+def _mains_hint(f: float, periods: int, k_failed: int, lines: list[Artefact]) -> str:
     """Mains (50/60 Hz, harmonics 1-3) too close to a drive harmonic to be separated in
     ``periods`` periods: what to do, or ''.  Named only when the records make it plausible
     (decision 0037): the periodicity gate failed on that very harmonic (``failed``, the
-    gate's "harmonic k"; a line within the guard of harmonic k beats with it, and the
+    gate's harmonic ``k_failed``, 0 for the offset; a line within the guard of harmonic k beats with it, and the
     halves differ there, not in the offset or another harmonic), or a line at a mains
     frequency was found elsewhere in the step (``lines``)."""
     guard = HARMONIC_GUARD * f / periods
-    found = [a for a in lines if a.kind == "line_interference" and mains(a.freq_Hz)]
-    k_failed = int(failed.split()[-1]) if failed.startswith("harmonic ") else 0
+    found = [(a, line) for a in lines if a.kind == "line_interference" and (line := mains_line(a.freq_Hz))]
     for base in MAINS_HZ:
         for m in (1, 2, 3):
             fm = m * base
             k = max(1, round(fm / f))
             gap = abs(fm - k * f)
-            seen = [a for a in found if mains(a.freq_Hz).startswith(f"{base:g} Hz")]
+            seen = [a for a, (b, _) in found if b == base]
             if 0 < gap <= guard and (k == k_failed or seen):
                 why = (f"a {seen[0].freq_Hz:.4g} Hz line was found on the {LABEL[seen[0].channel]}" if seen
                        else f"harmonic {k} is what changed")
@@ -113,12 +112,9 @@ def assess_step(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None
     q.artefacts += tr_arts
     rec = analyse_records(cleaned["force"], cleaned["accel"], cleaned["disp"], fs_Hz, f)
     if rec.drift_sigma > DRIFT_LIMIT:
-        ch, what = rec.drift_detail.split(" ", 1)
         q.status = "rejected"
-        q.reason = (f"not periodic enough on the {LABEL.get(ch, ch)} ({ch}): its {what} changes by "
-                    f"{rec.drift_sigma:.0f} standard errors between the two halves of the record "
-                    f"(limit {DRIFT_LIMIT:g})")
-        hint = _mains_hint(f, periods, what, q.artefacts)
+        q.reason = not_periodic(rec.drift_channel, harmonic_words(rec.drift_harmonic), rec.drift_sigma, DRIFT_LIMIT)
+        hint = _mains_hint(f, periods, rec.drift_harmonic, q.artefacts)
         if hint:
             q.reason += f"; {hint}"
         if tr_arts:

@@ -5,12 +5,21 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
+from enum import StrEnum
 from typing import Any
 
 from ..records import PeriodicRecords
 from .sentences import LABEL, UNIT, si
 
 KINDS = ("line_interference", "unsettled_transient", "clipping", "dropout", "offset_drift")
+RAW_FAULT_KINDS = ("clipping", "dropout")     # found in the raw samples: the step is rejected before cleaning
+
+
+class Rejection(StrEnum):
+    """Which check rejected a step (:attr:`StepQuality.rejected_by`)."""
+
+    RAW_FAULT = "raw_fault"          # clipping or drop-outs in the raw samples
+    NOT_PERIODIC = "not_periodic"    # the periodicity gate on the cleaned records (settling longer can cure it)
 
 
 @dataclass(frozen=True)
@@ -84,6 +93,17 @@ class StepQuality:
     freq_Hz: float = math.nan
     level_N: float = math.nan        # force fundamental amplitude, when it could be measured
     record_s: float = math.nan       # length of the record
+
+    @property
+    def rejected_by(self) -> Rejection | None:
+        """Which check rejected the step (None: not rejected): a raw-sample fault when the
+        step holds one (:func:`~sim.artefacts.assess_step` stops there), else the
+        periodicity gate.  From the artefacts, so a stored quality says it too."""
+        if self.status != "rejected":
+            return None
+        if any(a.kind in RAW_FAULT_KINDS for a in self.artefacts):
+            return Rejection.RAW_FAULT
+        return Rejection.NOT_PERIODIC
 
     @property
     def text(self) -> str:

@@ -30,10 +30,33 @@ FORMULAS = {"line_interference": "y_measured = y + a sin(2 pi f_l t + phi), f_l 
             "offset_drift": "y_measured = y + b t + c t^2"}
 
 
-def mains(freq_Hz: float) -> str:
-    """'50 Hz mains' when the frequency is a harmonic 1-10 of 50 or 60 Hz (within 0.5 %), else ''."""
+def mains_line(freq_Hz: float) -> tuple[float, int] | None:
+    """(mains frequency, harmonic) when the frequency is a harmonic 1-10 of 50 or 60 Hz
+    (within 0.5 %), else None."""
     for base in MAINS_HZ:
         m = round(freq_Hz / base)
         if 1 <= m <= 10 and abs(freq_Hz / (m * base) - 1) < 0.005:
-            return f"{base:g} Hz mains" + (f" (harmonic {m})" if m > 1 else "")
-    return ""
+            return base, m
+    return None
+
+
+def mains_family(base_Hz: float) -> str:
+    """'50 Hz mains': the words of a mains frequency."""
+    return f"{base_Hz:g} Hz mains"
+
+
+def mains(freq_Hz: float) -> str:
+    """'50 Hz mains (harmonic 3)' when :func:`mains_line` finds the frequency a mains
+    harmonic, else '' (the words; decisions use :func:`mains_line`)."""
+    line = mains_line(freq_Hz)
+    if line is None:
+        return ""
+    base, m = line
+    return mains_family(base) + (f" (harmonic {m})" if m > 1 else "")
+
+
+def not_periodic(channel: str, what: str, score: float, limit: float) -> str:
+    """Why the periodicity gate rejected a step: ``what`` (the offset or a harmonic) of
+    ``channel`` changed by ``score`` standard errors between the halves of the record."""
+    return (f"not periodic enough on the {LABEL.get(channel, channel)} ({channel}): its {what} changes by "
+            f"{score:.0f} standard errors between the two halves of the record (limit {limit:g})")

@@ -16,7 +16,7 @@ import pytest
 
 from bench.reports import write_analysis_html
 from bench.reports._analysis import analysis_data
-from bench.reports._figures import plot_analysis_frf, plot_analysis_loops
+from bench.reports._figures_analysis import plot_analysis_frf, plot_analysis_loops
 
 from .analysis_example import C_TRUE
 

@@ -10,12 +10,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from bench.cli import main
+from benchtools.procs import bench_main
 from benchtools.twin_sources import write_foreign_uff
-
-
-def _bench(*args) -> int:
-    return main([str(a) for a in args])
 
 
 def linear_rig(levels=(1.0, 3.0), freqs=(40.0, 55.0, 65.0, 72.0, 80.0, 90.0, 110.0, 150.0)):
@@ -43,12 +39,12 @@ def test_compare_fails_when_the_five_most_compliant_steps_are_missing_and_names_
     gappy = write_foreign_uff(SimpleNamespace(rig=case.rig, steps=[s for i, s in enumerate(case.steps) if i not in top5]),
                               tmp_path / "gappy.uff", seed=2)
 
-    assert _bench("compare", ref, full, "--out", tmp_path / "c-full") == 0
+    assert bench_main("compare", ref, full, "--out", tmp_path / "c-full") == 0
     c = json.loads((tmp_path / "c-full" / "compare.json").read_text())
     assert c["coverage"]["fraction"] == 1.0 and c["coverage"]["unmatched"] == []
 
     capsys.readouterr()
-    assert _bench("compare", ref, gappy, "--out", tmp_path / "c-gap") == 1
+    assert bench_main("compare", ref, gappy, "--out", tmp_path / "c-gap") == 1
     out = capsys.readouterr().out
     c = json.loads((tmp_path / "c-gap" / "compare.json").read_text())
     assert c["overall"]["within_tolerance"] and not c["overall"]["passed"]    # what was compared agrees
@@ -69,6 +65,6 @@ def test_compare_fails_when_the_five_most_compliant_steps_are_missing_and_names_
 
     # a coverage the user accepts: the same comparison passes
     share = (len(case.steps) - 5) / len(case.steps)
-    assert _bench("compare", ref, gappy, "--min-coverage", f"{share - 0.01:.3f}", "--out", tmp_path / "c-ok") == 0
-    assert _bench("compare", ref, gappy, "--min-coverage", "1.5", "--out", tmp_path / "c-bad") == 2
+    assert bench_main("compare", ref, gappy, "--min-coverage", f"{share - 0.01:.3f}", "--out", tmp_path / "c-ok") == 0
+    assert bench_main("compare", ref, gappy, "--min-coverage", "1.5", "--out", tmp_path / "c-bad") == 2
     assert "--min-coverage must be a fraction in (0, 1]" in capsys.readouterr().err

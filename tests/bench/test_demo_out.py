@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-import bench.cli
+import bench.commands.run
 from bench.cli import main
 from bench.config import DEFAULTS, load_plan, load_rig, parse_plan
 from bench.demo import MANIFEST
@@ -36,7 +36,7 @@ def small_demo(mocker):
                                 "frequencies": {"list_Hz": [60.0, 80.0], "direction": "up"},
                                 "control": {"settle_cycles": 4, "min_settle_s": 0.0, "measure_cycles": 4,
                                             "control_cycles": 2, "ramp_s": 0.0}}})
-    return mocker.patch.object(bench.cli, "_load_configs", return_value=(plan, load_rig(DEFAULTS / "sim_rig.toml")))
+    return mocker.patch.object(bench.commands.run, "_load_configs", return_value=(plan, load_rig(DEFAULTS / "sim_rig.toml")))
 
 
 def test_the_demo_refuses_a_directory_that_holds_other_files_and_deletes_nothing(tmp_path, small_run, capsys):
@@ -89,13 +89,14 @@ SMALL_DEMO = textwrap.dedent("""\
     import sys
 
     import bench.cli
+    import bench.commands.run
     from bench.config import DEFAULTS, load_rig, parse_plan
 
     plan = parse_plan({"plan": {"name": %r, "levels_N": [1.0],
                                 "frequencies": {"list_Hz": [60.0, 80.0], "direction": "up"},
                                 "control": {"settle_cycles": 4, "min_settle_s": 0.0, "measure_cycles": 4,
                                             "control_cycles": 2, "ramp_s": 0.0}}})
-    bench.cli._load_configs = lambda args: (plan, load_rig(DEFAULTS / "sim_rig.toml"))
+    bench.commands.run._load_configs = lambda args: (plan, load_rig(DEFAULTS / "sim_rig.toml"))
     sys.argv[0] = "bench"
     sys.exit(bench.cli.main())
     """) % DEMO_NAME

@@ -9,7 +9,8 @@ import pytest
 import pyuff
 
 from bench.cli import main
-from bench.export import CSV_COLUMNS, export_run, import_uff58
+from bench.export import CSV_COLUMNS, export_run
+from bench.sources import load_source
 
 
 @pytest.fixture(scope="module")
@@ -92,36 +93,23 @@ def test_time_uff_holds_force_acceleration_and_displacement_of_every_step(run, e
             np.testing.assert_allclose(ds["data"], raw[key], rtol=1e-10, atol=1e-12 * np.abs(raw[key]).max())
 
 
-def test_imported_frfs_give_the_stored_compliance(run, exported):
-    imp = import_uff58(exported["frf.uff"])
-    results = run.results()
-    assert len(imp.steps) == len(results)
-    for s in imp.steps:
-        assert s["source"] == "uff58-frf"
-        same = [r for r in results if (r["target_force_N"], r["direction"]) == (s["target_force_N"], s["direction"])]
-        r = min(same, key=lambda r: abs(r["freq_Hz"] - s["freq_Hz"]))
-        assert s["freq_Hz"] == pytest.approx(r["freq_Hz"], rel=1e-5)
-        assert s["compliance_abs_m_per_N"] == pytest.approx(r["compliance_abs_m_per_N"], rel=1e-9)
-        assert s["compliance_phase_rad"] == pytest.approx(r["compliance_phase_rad"], abs=1e-9)
-        assert s["accelerance_abs_kg_inv"] == pytest.approx(r["accelerance_abs_kg_inv"], rel=1e-9)
-        assert s["accelerance_phase_rad"] == pytest.approx(r["accelerance_phase_rad"], abs=1e-9)
-
-
-def test_imported_time_records_rebuild_the_step_results(run, exported):
-    imp = import_uff58(exported["time.uff"])
-    results = {r["key"]: r for r in run.results()}
-    assert [s["key"] for s in imp.steps] == list(results)
-    for s in imp.steps:
-        r = results[s["key"]]
-        assert s["source"] == "uff58-time"
-        assert (s["direction"], s["level_index"], s["target_force_N"]) == \
-            (r["direction"], r["level_index"], r["target_force_N"])
-        for k in ("freq_Hz", "force_N", "compliance_abs_m_per_N", "compliance_pp_m_per_N",
-                  "accelerance_abs_kg_inv", "fs_Hz"):
-            assert s[k] == pytest.approx(r[k], rel=1e-9), k
-        assert s["compliance_phase_rad"] == pytest.approx(r["compliance_phase_rad"], abs=1e-9)
-        assert s["disp"]["thd"] == pytest.approx(r["disp"]["thd"], rel=1e-6)
-        np.testing.assert_allclose(imp.raw[s["key"]]["disp_m"], run.raw(s["key"])["disp_m"], rtol=1e-10)
+def test_time_records_read_back_give_the_stored_steps(run, exported):
+    """time.uff read as `bench analyze` and `bench identify` read a UFF58 file
+    (bench.sources.load_source, the one UFF58 reader): every step, with its tags, and the
+    harmonics the run stored (the same analysis of the same samples)."""
+    src = load_source(exported["time.uff"])
+    results = {f"LC{case:04d}": r for case, r in enumerate(run.results(), start=1)}   # one load case a step
+    assert sorted([s.key for s in src.steps] + [r.step for r in src.rejected]) == sorted(results)
+    assert src.steps
+    for s in src.steps:
+        r = results[s.key]
+        assert (s.direction, s.level_N) == (r["direction"], r["target_force_N"])
+        assert s.freq_Hz == pytest.approx(r["freq_Hz"], rel=1e-9) and s.fs_Hz == r["fs_Hz"]
+        H = s.harmonics
+        assert H.disp[0] / H.force[0] == pytest.approx(complex(r["compliance_m_per_N"]["re"],
+                                                               r["compliance_m_per_N"]["im"]), rel=1e-9)
+        assert abs(H.accel[0] / H.force[0]) == pytest.approx(r["accelerance_abs_kg_inv"], rel=1e-9)
+        assert abs(H.force[0]) == pytest.approx(r["force_N"], rel=1e-9)
 
 
 def test_bench_export_command_writes_into_the_given_directory(run, tmp_path, capsys):
@@ -130,13 +118,13 @@ def test_bench_export_command_writes_into_the_given_directory(run, tmp_path, cap
     assert "frf.uff" in capsys.readouterr().out
 
 
-def test_import_of_a_file_without_dataset_58_says_so(tmp_path):
+def test_reading_a_file_without_dataset_58_says_so(tmp_path):
     path = tmp_path / "nodes.uff"
     pyuff.UFF(str(path)).write_sets([pyuff.prepare_15(node_nums=[1], def_cs=[0], disp_cs=[0], color=[0],
                                                       x=[0.0], y=[0.0], z=[0.0], return_full_dict=True)],
                                     mode="overwrite")
     with pytest.raises(ValueError, match="no dataset 58"):
-        import_uff58(path)
+        load_source(path)
 
 
 def test_the_modes_leave_as_csv_and_as_uff_dataset_55(run, exported):

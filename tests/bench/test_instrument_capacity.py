@@ -18,13 +18,14 @@ import pytest
 from bench.cli import main
 from bench.config import ConfigError, parse_plan, parse_rig, read_toml
 from bench.storage import RunStore
+from benchtools.plans import FAST
 from benchtools.procs import bench_done, rig_toml_for
 from drivers import MAX_BLOCK_SAMPLES, ScpiFunctionGenerator, plan_block, start_twins
 from drivers._scpi_twin_model import GeneratorState
 from sim.rig import RigModel, SimulatedRig
 
 GRID = {"start_Hz": 30.0, "stop_Hz": 300.0, "points": 12}
-CONTROL = {"settle_cycles": 4, "min_settle_s": 0.0, "measure_cycles": 4, "control_cycles": 2, "ramp_s": 0.0}
+CONTROL = FAST        # the fast steps of benchtools.plans
 
 
 def dwell_plan(dwell_cycles: int, **control) -> dict:

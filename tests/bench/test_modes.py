@@ -311,7 +311,7 @@ def test_bench_modes_reads_a_backbone_run_beside_a_stepped_sine(feed_run, backbo
     """Each locked point is a row (its mode, level, the locked frequency, the energy
     balance's damping ratio, no interval) and is drawn in Figs. 13 and 17 with its run's
     colour as a diamond, beside the stepped sine's circles (decision 0044)."""
-    from bench.reports._figures import RUN_COLOURS, plot_fig13, plot_fig17
+    from bench.reports._figures_modes import RUN_COLOURS, plot_fig13, plot_fig17
     assert main(["modes", str(feed_run.path), str(backbone_run.path), "--out", str(tmp_path / "m"),
                  "--no-model"]) == 0
     rows = [r for r in csv.DictReader(open(tmp_path / "m" / "modes.csv")) if r["label"] == "test=phase resonance"]

@@ -391,7 +391,7 @@ def test_every_plant_effect_the_engine_leaves_out_is_named_in_the_model_notes():
     assert len(effects) >= 9
     for name in effects:
         notes = _model_effects(RigModel(**{name: 0.01}, **companions.get(name, {})))
-        assert len(notes) == 1 and name in notes[0], name
+        assert list(notes) == [name] and name in notes[name], name
 
 
 def test_the_report_lists_the_same_rejected_and_flagged_steps_as_bench_analyze(run_dir, tmp_path):

@@ -13,9 +13,9 @@ import tomllib
 import numpy as np
 import pytest
 
-from bench.cli import main
 from bench.config import DEFAULTS, load_plan, load_rig
 from bench.twin import CAUSE_KEYS, apply_causes, source_sha256
+from benchtools.procs import bench_main
 from sim.artefacts import KINDS as ARTEFACTS
 from sim.discrepancy.cases import draw_effect, friction_resonance_Hz
 from sim.plant_effects import mass_matrix
@@ -36,23 +36,19 @@ direction = "up"
 KEYS = ("F_s_N", "x_s_m", "n", "m_kg")
 
 
-def _bench(*args) -> int:
-    return main([str(a) for a in args])
-
-
 @pytest.fixture(scope="module")
 def pitch(tmp_path_factory):
     """A run on the pitching rig, its twin (CLI), the twin's run, the comparison."""
     d = tmp_path_factory.mktemp("twin")
     (d / "plan.toml").write_text(PITCH_PLAN)
     src = d / "source"
-    assert _bench("run", "--plan", d / "plan.toml", "--rig", DEFAULTS / "sim_rig_pitch.toml", "--out", src,
+    assert bench_main("run", "--plan", d / "plan.toml", "--rig", DEFAULTS / "sim_rig_pitch.toml", "--out", src,
                   "--no-report") == 0
     digest = source_sha256(src)
-    assert _bench("twin", src, "--out", d / "twin") == 0
-    assert _bench("run", "--plan", d / "twin" / "plan.toml", "--rig", d / "twin" / "rig.toml", "--out", d / "run",
+    assert bench_main("twin", src, "--out", d / "twin") == 0
+    assert bench_main("run", "--plan", d / "twin" / "plan.toml", "--rig", d / "twin" / "rig.toml", "--out", d / "run",
                   "--no-report") == 0
-    rc = _bench("compare", src, d / "run", "--out", d / "cmp")
+    rc = bench_main("compare", src, d / "run", "--out", d / "cmp")
     return dict(dir=d, src=src, digest=digest, rc=rc, cmp=json.loads((d / "cmp" / "compare.json").read_text()),
                 twin=json.loads((d / "twin" / "twin.json").read_text()))
 
@@ -79,11 +75,11 @@ def test_the_twin_of_a_run_reproduces_its_compliance_and_a_plain_masing_twin_doe
     assert pitch["rc"] == 0 and c["overall"]["within_tolerance"]
     assert c["matched"] >= 12 and c["overall"]["compliance"]["rms_rel_diff"] < 0.02
     # the plain Masing twin (base parameters only) misses the pitch mode by far more
-    assert _bench("twin", pitch["src"], "--plain", "--analysis", d / "twin" / "analysis", "--out", d / "plain") == 0
+    assert bench_main("twin", pitch["src"], "--plain", "--analysis", d / "twin" / "analysis", "--out", d / "plain") == 0
     assert "pitch_inertia_kg_m2" not in load_rig(d / "plain" / "rig.toml").model
-    assert _bench("run", "--plan", d / "plain" / "plan.toml", "--rig", d / "plain" / "rig.toml", "--out",
+    assert bench_main("run", "--plan", d / "plain" / "plan.toml", "--rig", d / "plain" / "rig.toml", "--out",
                   d / "run-plain", "--no-report") == 0
-    assert _bench("compare", pitch["src"], d / "run-plain", "--out", d / "cmp-plain") == 1
+    assert bench_main("compare", pitch["src"], d / "run-plain", "--out", d / "cmp-plain") == 1
     plain = json.loads((d / "cmp-plain" / "compare.json").read_text())["overall"]["compliance"]["rms_rel_diff"]
     assert plain > 10 * c["overall"]["compliance"]["rms_rel_diff"] and plain > 0.05
 
@@ -92,7 +88,7 @@ def test_the_twin_of_a_run_reproduces_its_compliance_and_a_plain_masing_twin_doe
 def test_the_twin_of_a_twins_run_is_the_same_twin(pitch):
     """Parameters agree within their 95 % intervals (combined: two independent estimates)."""
     d = pitch["dir"]
-    assert _bench("twin", d / "run", "--out", d / "twin2") == 0
+    assert bench_main("twin", d / "run", "--out", d / "twin2") == 0
     t1, t2 = pitch["twin"], json.loads((d / "twin2" / "twin.json").read_text())
     for k in KEYS:
         p1, p2 = t1["parameters"][k], t2["parameters"][k]
@@ -116,9 +112,9 @@ def test_compare_fails_on_the_rig_with_friction_changed_by_ten_per_cent(pitch, t
     rig["rig"]["model"]["F_s_N"] *= 1.10
     from bench.twin import to_toml
     (tmp_path / "rig.toml").write_text(to_toml(rig))
-    assert _bench("run", "--plan", pitch["dir"] / "plan.toml", "--rig", tmp_path / "rig.toml", "--out",
+    assert bench_main("run", "--plan", pitch["dir"] / "plan.toml", "--rig", tmp_path / "rig.toml", "--out",
                   tmp_path / "run", "--no-report", "--seed", 5) == 0
-    assert _bench("compare", pitch["src"], tmp_path / "run", "--out", tmp_path / "cmp") == 1
+    assert bench_main("compare", pitch["src"], tmp_path / "run", "--out", tmp_path / "cmp") == 1
     c = json.loads((tmp_path / "cmp" / "compare.json").read_text())
     assert not c["overall"]["within_tolerance"] and c["overall"]["rms_rel_diff"] > 0.02
     assert c["overall"]["compliance"]["rms_noise_units"] > 10          # far outside the noise
@@ -133,7 +129,7 @@ def test_the_twin_of_a_foreign_uff_file_reproduces_it(tmp_path):
     src = tmp_path / "measured.uff"
     generate_uff(src, F_s, x_s, n, m, [0.3 * F_s, 0.7 * F_s], list(np.geomspace(0.5 * f_res, 2.0 * f_res, 4)))
     digest = hashlib.sha256(src.read_bytes()).hexdigest()
-    assert _bench("twin", src) == 0
+    assert bench_main("twin", src) == 0
     out = tmp_path / "measured_twin"
     twin = json.loads((out / "twin.json").read_text())
     for k, truth in zip(KEYS, (F_s, x_s, n, m)):
@@ -142,9 +138,9 @@ def test_the_twin_of_a_foreign_uff_file_reproduces_it(tmp_path):
     assert any("foreign file" in note for note in twin["notes"])       # the defaults used are said
     plan = load_plan(out / "plan.toml")
     assert plan.levels_N == pytest.approx((0.3 * F_s, 0.7 * F_s), rel=0.01) and len(plan.freqs_Hz) == 4
-    assert _bench("run", "--plan", out / "plan.toml", "--rig", out / "rig.toml", "--out", tmp_path / "run",
+    assert bench_main("run", "--plan", out / "plan.toml", "--rig", out / "rig.toml", "--out", tmp_path / "run",
                   "--no-report") == 0
-    assert _bench("compare", src, tmp_path / "run", "--out", tmp_path / "cmp") == 0
+    assert bench_main("compare", src, tmp_path / "run", "--out", tmp_path / "cmp") == 0
     c = json.loads((tmp_path / "cmp" / "compare.json").read_text())
     assert c["matched"] == 8 and c["overall"]["compliance"]["rms_rel_diff"] < 0.02
     assert hashlib.sha256(src.read_bytes()).hexdigest() == digest
@@ -268,11 +264,11 @@ def test_compare_page_renders_in_chromium(pitch, tmp_path):
 
 
 def test_compare_refuses_bad_input_with_a_clear_error(pitch, tmp_path, capsys):
-    assert _bench("compare", pitch["src"], tmp_path / "nope") == 2
+    assert bench_main("compare", pitch["src"], tmp_path / "nope") == 2
     assert "nope: no such run directory or file" in capsys.readouterr().err
-    assert _bench("compare", pitch["src"], pitch["dir"] / "run", "--tolerance", "0") == 2
+    assert bench_main("compare", pitch["src"], pitch["dir"] / "run", "--tolerance", "0") == 2
     assert "tolerance" in capsys.readouterr().err
-    assert _bench("twin", pitch["src"], "--analysis", tmp_path, "--out", tmp_path / "t") == 2
+    assert bench_main("twin", pitch["src"], "--analysis", tmp_path, "--out", tmp_path / "t") == 2
     assert "no analysis.json" in capsys.readouterr().err
 
 

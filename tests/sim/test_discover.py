@@ -118,7 +118,7 @@ def test_without_the_library_the_structure_is_unexplained_and_the_intervals_say_
 def test_the_page_opens_with_verdict_overview_causes_and_the_missing_force(combined, tmp_path):
     from bench.reports import write_analysis_html
     from bench.reports._analysis import analysis_data
-    from bench.reports._figures import plot_restoring_force
+    from bench.reports._figures_analysis import plot_restoring_force
     from tests.bench.test_analysis_page import _chromium, _render_check, _tags, needs_chromium  # noqa: F401
 
     case, a = combined

@@ -1,0 +1,209 @@
+"""`bench report`, `export`, `identify`, `analyze`, `check`, `compare` and `modes`: what a
+stored run says (argument handling and printing; the work is in the modules they call)."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+from sim.errors import ConfigurationError
+
+from ..terminal import Progress
+from . import ExitCode
+from .run import _latch, _report
+
+log = logging.getLogger(__name__)
+
+
+def cmd_report(args) -> int:
+    latch = _latch()
+    with latch.installed():
+        _report(Path(args.run), latch, [Path(p) for p in args.with_runs or ()])
+        latch.finish()
+    if latch.reason is not None:
+        raise KeyboardInterrupt(latch.reason)
+    return 0
+
+
+def cmd_export(args) -> int:
+    from ..api import open_run
+    for p in open_run(args.run).export(args.out, time_records=not args.no_time):
+        print(p)
+    return 0
+
+
+def cmd_identify(args) -> int:
+    """Offline identification of a stored run (result written into its run.json) or of
+    UFF58 time records (guesses from --rig, default: the simulated rig's file), with the
+    model of the rig: the modes its file declares and, once `bench analyze` has run, the
+    causes it named (decision 0042)."""
+    import json
+
+    from procedures.online_id import MAX_HARMONICS, check_finite
+    from sim.discrepancy.rigfit import analysis_effects, identify_steps
+
+    from ..analyze import default_out_dir
+    from ..config import DEFAULTS, load_rig, parse_rig, rig_toml
+    from ..numbers import number
+    from ..sources import load_source
+    from ..storage import RunStore
+
+    source = Path(args.source)
+    if not source.exists():
+        raise FileNotFoundError(2, "no such file or directory (expected a run directory or a UFF58 file)", str(source))
+    src = load_source(source)
+    if src.kind == "run":
+        rig = parse_rig({"rig": rig_toml(src.metadata["rig"])}, f"{source}/run.json")
+    else:
+        rig = load_rig(Path(args.rig) if args.rig else DEFAULTS / "sim_rig.toml")
+    for r in src.rejected:
+        print(f"step {r.step} rejected: {r.reason}")
+    if not src.steps:
+        raise ConfigurationError(f"{source}: no steps with force, acceleration and displacement to identify from")
+    guess = rig.guess()
+    analysis_json = default_out_dir(source) / "analysis.json"
+    extra: tuple[str, ...] = ()
+    if analysis_json.is_file():
+        try:
+            extra = analysis_effects(json.loads(analysis_json.read_text()))
+        except (OSError, ValueError) as e:
+            print(f"warning: {analysis_json} cannot be read ({e}); the analysis' causes are not in the model")
+    est = identify_steps(src.steps, guess, rig.model, extra, MAX_HARMONICS)
+    check_finite(est)
+    if src.kind == "run":
+        RunStore.open(source).update(identification=est)
+    effects = est.get("model", {}).get("effects") or []
+    print(f"model: Masing friction and the moving mass{' with ' + ', '.join(effects) if effects else ''} "
+          f"({est.get('source', 'final fit')})")
+    print(f"{'parameter':>10} {'estimate':>12} {'95 % interval':>28}")
+    for k, v in est["values"].items():
+        print(f"{k:>10} {number(v, fmt='.6g'):>12} [{number(est['low'][k], fmt='.6g'):>12}, "
+              f"{number(est['high'][k], fmt='.6g'):>12}]")
+    for k, p in (est.get("model", {}).get("parameters") or {}).items():
+        print(f"{k:>10} {number(p['value'], fmt='.6g'):>12} [{number(p['low'], fmt='.6g'):>12}, "
+              f"{number(p['high'], fmt='.6g'):>12}]")
+    print(f"{len(src.steps)} steps ({len(src.rejected)} rejected), reduced chi^2 {number(est['reduced_chi2'], fmt='.3g')}")
+    for w in est["warnings"]:
+        print(f"warning: {w}")
+    return 0
+
+
+def cmd_analyze(args) -> int:
+    """Where the Masing model is wrong in SOURCE, the cause, the extended model and its gain."""
+    from ..analyze import analyze_source, default_out_dir
+    from ..studies.cli import cmd_analyze_batch, is_batch
+    if is_batch(args):
+        return cmd_analyze_batch(args, Progress)
+    source = Path(args.sources[0])
+    result = analyze_source(source, Path(args.out) if args.out else None, Path(args.rig) if args.rig else None)
+    out = Path(args.out) if args.out else default_out_dir(source)
+    print(result["verdict"])
+    print(f"causes: {', '.join(c['id'] for c in result['causes']) or 'none'}; "
+          f"unexplained: {'yes' if result['unexplained'] else 'no'}; written to {out}")
+    return 0
+
+
+def cmd_check(args) -> int:
+    """Verify a run directory against its plan: every missing, damaged and orphan step on
+    one line, and what a refined run still owes (a refinement whose end is not recorded, a
+    dwell not measured: decision 0050), then the count; exit 1 if there is any problem.  A step skipped at run time
+    (force unreachable) as the plan allows (``infeasible = "skip"``) is listed and counted,
+    not a problem (exit 0 when it is the only gap) unless ``--strict`` (decision 0033)."""
+    from ..storage import NewerFormat, RunDirError, RunStatus, RunStore
+
+    store = RunStore(Path(args.run))
+    if not store.path.is_dir():
+        RunStore.open(store.path)             # raises the one-line usage error
+    try:
+        acc = store.account()
+    except NewerFormat:
+        raise                                 # refused by name (exit 2), as report and resume do
+    except RunDirError:                       # run.json damaged or its plan not valid: the files alone
+        acc = None
+    problems = store.check() if acc is None else acc.missing + acc.damaged + acc.orphan + acc.owed
+    skipped = [] if acc is None else acc.skipped
+    for p in skipped:
+        print(f"{p.kind:>9}  {p.key}: {p.reason}")
+    tail = _not_yet_measured(store, acc) if acc is not None else []
+    for p in problems:
+        if p not in tail:
+            print(f"{p.kind:>9}  {p.key}: {p.reason}" if p.kind == "owed" else f"{p.kind:>9}  {p}")
+    if tail:
+        last = max((k for k in acc.intact), default=None)
+        print(f"{'missing':>9}  interrupted after step {last or '(none)'}; {len(tail)} not yet measured "
+              f"(the plan's steps after it; bench resume {store.path} measures them)")
+    if acc is None:
+        print(f"{store.path}: {len(store.step_files())} step result files; run.json unreadable or its plan not "
+              f"valid, so the steps cannot be counted against the plan; {len(problems)} "
+              f"problem{'s' if len(problems) != 1 else ''}")
+        return ExitCode.FAILURE
+    print(f"{store.path}: {acc.summary()}"
+          + (f" (bench resume {store.path} measures missing and damaged steps again, keeping damaged "
+             "files in damaged/)" if acc.missing or acc.damaged else "")
+          + (f" (bench resume {store.path} measures what the refinement still owes)" if acc.owed and not
+             (acc.missing or acc.damaged) else ""))
+    from ..verdict import promise
+    meta = store.metadata
+    kept = promise(meta.get("plan") or {}, store.results(warn=False), meta.get("rig"),
+                   completed=meta.get("status") == RunStatus.COMPLETED)
+    if kept.short:        # the steps are intact; what they say against the procedure's promise (decision 0052)
+        print(f"{kept.kind.label}: {'; '.join(kept.short)}")
+    if skipped:
+        n = len(skipped)
+        print(f"{n} step{'s' * (n != 1)} skipped at run time as the plan allows (infeasible = \"skip\"): "
+              + ("counted as problems (--strict)" if args.strict else
+                 "not a problem (--strict counts them); bench resume --retry-skipped measures them again"))
+    return ExitCode.FAILURE if problems or (skipped and args.strict) else ExitCode.OK
+
+
+def _not_yet_measured(store, acc) -> list:
+    """The missing steps of a run that was stopped (not completed) that are simply the
+    plan's steps after the last one stored, with no file at all: one line says so instead
+    of one line each.  Any other missing step is listed by key."""
+    from ..storage import RunStatus, stored_plan
+    try:
+        meta = store.metadata
+        plan = stored_plan(meta, store.path / "run.json")
+    except Exception:  # noqa: BLE001 - no plan to judge against: list every step
+        return []
+    if meta.get("status") == RunStatus.COMPLETED or plan.adaptive_per_sweep:
+        return []
+    order = [s.key for s in plan.schedule()]
+    present = {k for k in acc.intact} | {p.key for p in acc.damaged} | {p.key for p in acc.skipped}
+    last = max((order.index(k) for k in present if k in order), default=-1)
+    tail = [p for p in acc.missing if p.files == (".json", ".npz") and p.key in order
+            and order.index(p.key) > last]
+    return tail if len(tail) > 1 else []
+
+
+def cmd_compare(args) -> int:
+    """Exit 0 when the two sources agree within the tolerance over enough of the reference, 1 when not."""
+    from ..compare import summary, write_compare
+    result, out = write_compare(Path(args.reference), Path(args.other), Path(args.out) if args.out else None,
+                                args.tolerance, args.min_coverage)
+    print(summary(result), end="")
+    print(f"written to {out}/compare.json and compare.html")
+    return ExitCode.OK if result["overall"]["passed"] else ExitCode.FAILURE
+
+
+def cmd_modes(args) -> int:
+    """Each run's modes per level (in its quantity's unit) into OUT/modes.csv, with the seed's Figs. 13 and 17."""
+    from ..reports import write_modes
+    runs, files = write_modes([Path(r) for r in args.runs], Path(args.out), model=not args.no_model)
+    for r in runs:
+        for e in r.modes:
+            if e.ok and e.phase_resonance:     # one locked point: its energy balance, no fit, no interval
+                print(f"{r.label}: {e.mode} at {r.level_quantity.format(e.level_N)}: {e.resonance_Hz:.5g} Hz "
+                      f"(phase resonance, locked), damping ratio (energy balance at the locked point) "
+                      f"{100 * e.damping_ratio:.3g} %")
+            elif e.ok:
+                eb = e.extra.get("energy_balance")
+                print(f"{r.label}: {e.mode} at {r.level_quantity.format(e.level_N)}: {e.resonance_Hz:.5g} Hz "
+                      f"[{e.resonance_low_Hz:.5g}, {e.resonance_high_Hz:.5g}], damping ratio (single-mode fit) "
+                      f"{100 * e.damping_ratio:.3g} % [{100 * e.damping_ratio_low:.3g}, {100 * e.damping_ratio_high:.3g}]"
+                      + (f", (energy balance at resonance) {100 * eb.value:.3g} % [{100 * eb.low:.3g}, "
+                         f"{100 * eb.high:.3g}]" if eb is not None else ""))
+            else:
+                print(f"{r.label}: {e.mode} at {r.level_quantity.format(e.level_N)}: {e.status}" + (f" ({e.note})" if e.note else ""))
+    print("wrote " + ", ".join(str(f) for f in files))
+    return ExitCode.OK

@@ -1,0 +1,334 @@
+"""`bench dry-run`, `run`, `resume`, `sequence`, `demo` and `watch`: plan, run and watch a test
+(argument handling and printing; the work is in bench.session, bench.api and bench.sequence)."""
+
+from __future__ import annotations
+
+import logging
+import sys
+import time
+from pathlib import Path
+
+from procedures.kind import ProcedureKind
+from sim.errors import ConfigurationError
+
+from ..terminal import Progress, end_line
+from . import ExitCode
+
+log = logging.getLogger(__name__)
+
+
+def _load_configs(args):
+    from ..config import DEFAULTS, load_plan, load_rig
+
+    plan = load_plan(Path(args.plan) if args.plan else DEFAULTS / "demo_plan.toml")
+    rig = load_rig(Path(args.rig) if args.rig else DEFAULTS / "sim_rig.toml")
+    return plan, rig
+
+
+def cmd_dry_run(args) -> int:
+    from ..plan_time import planned_step_list
+    from ..session import EnvelopeError, check_envelope, envelope, envelope_report, planned_steps
+
+    plan, rig = _load_configs(args)
+    steps = plan.schedule()
+    if plan.backbone:
+        b = plan.backbone
+        print(f"plan '{plan.name}': phase resonance, {len(plan.levels_N)} force levels (N) from {b.start_Hz:g} Hz in the window "
+              f"{b.min_Hz:g}-{b.max_Hz:g} Hz (envelope at both ends); rig '{rig.name}'"
+              f"{' (simulated)' if rig.simulated else ''}")
+    else:
+        n, refined, seconds = planned_steps(plan)
+        runs = (f"{n} measured (adaptive: {plan.adaptive_per_sweep} per sweep, chosen online)"
+                if plan.adaptive_per_sweep and n != len(steps) else f"{n} measured")
+        if refined:
+            runs += (f" + at most {refined} refinement steps ([plan.resonance]: {plan.refine_steps} per mode and level, "
+                     f"modes {', '.join(plan.refine_modes)}, tolerance {100 * plan.refine_tolerance:g} %"
+                     + (f"; with a dwell of {plan.dwell_cycles} cycles at each mode's resonance per level"
+                        if plan.dwell_cycles else "") + ")")
+        q = plan.level_quantity
+        print(f"plan '{plan.name}': {plan.procedure.label}, {len(plan.levels_N)} levels x {len(plan.freqs_Hz)} frequencies "
+              f"({plan.direction}) = {len(steps)} steps, {runs}; rig '{rig.name}'{' (simulated)' if rig.simulated else ''}")
+        print(f"levels: {', '.join(q.format(v) for v in plan.levels_N)} ({q.name} amplitude"
+              + (", the response fundamental held at each frequency)" if q.key != "force" else ")"))
+        print(dry_run_time_line(plan, seconds, refined).replace("force control", f"{q.name} control"))
+        if getattr(args, "steps", False):
+            print("\n".join(["steps, in the order they run:"] + [p.line() for p in planned_step_list(plan)]))
+    print(envelope_report(envelope(plan, rig)))
+    from procedures.online_id import identifiability
+    try:
+        runnable = check_envelope(plan, rig)
+    except EnvelopeError as e:
+        print(f"REFUSED: {str(e).splitlines()[0]}")
+        return ExitCode.LIMIT
+    if runnable.skip:
+        print(f"envelope: {len(runnable.schedule())} steps run, {len(steps) - len(runnable.schedule())} "
+              f"skipped (infeasible = \"skip\")")
+    else:
+        print("envelope ok: the rig's limits hold every step")
+    for w in identifiability(runnable, rig) if plan.procedure is ProcedureKind.STEPPED_SINE else []:
+        print(f"identifiability warning: {w}")
+    return 0
+
+
+def dry_run_time_line(plan, typical_s: float, refined: int) -> str:
+    """dry-run's rig time: the upper bound (bench.plan_time) and the typical figure."""
+    from ..plan_time import extra_block_seconds_max, rig_time_bound_s
+    return (f"expected rig time: at most {_duration(rig_time_bound_s(plan))} (every step's force control and extra "
+            f"settle blocks to the plan's limits, steps chosen online at the lowest frequency, refinement budget "
+            f"used up); without the extra settle blocks at most {_duration(rig_time_bound_s(plan, extra_settle=False))}, "
+            f"plus at most {extra_block_seconds_max(plan, min(plan.freqs_Hz)):.3g} s for each extra settle block a "
+            f"step needs (at most {plan.max_extra_settle_blocks} a step); typically about {_duration(typical_s)}"
+            + (" with the refinement budget used up" if refined else "")
+            + " (a simulated rig runs faster or slower than real time)")
+
+
+def _duration(seconds: float) -> str:
+    m, s = divmod(int(round(seconds)), 60)
+    h, m = divmod(m, 60)
+    return f"{h} h {m:02d} min" if h else f"{m} min {s:02d} s" if m else f"{s} s"
+
+
+def _latch():
+    """The program's signal latch (installed first thing in :func:`main`), or, when the
+    bench runs inside another program (a test), one of this command's own."""
+    from ..signals import SignalLatch, process_latch
+    return process_latch() or SignalLatch()
+
+
+def _run(args, resume: bool) -> int:
+    latch = _latch()
+    with latch.installed():       # SIGHUP, SIGQUIT, SIGTERM as Ctrl-C from the start
+        return _session(args, resume, latch)
+
+
+def _session(args, resume: bool, latch) -> int:
+    from contextlib import ExitStack
+
+    with ExitStack() as held:
+        if resume:           # the run directory is ours before its steps are counted
+            from .. import runlock
+            from ..storage import RunStore
+            RunStore.open(Path(args.run))
+            held.enter_context(runlock.run_dir(Path(args.run)))
+        return _session_held(args, resume, latch)
+
+
+def _session_held(args, resume: bool, latch) -> int:
+    from ..api import execute, stored_configs
+    from ..storage import RunStatus, RunStore
+
+    if resume:
+        store = RunStore.open(Path(args.run))
+        meta, acc = store.metadata, store.account()
+        retry = bool(getattr(args, "retry_skipped", False)) and bool(acc.skipped)
+        if acc.complete and not retry and meta.get("status") == RunStatus.COMPLETED:
+            print("resume: nothing to do: the run completed and its steps are all there "
+                  + ("or were skipped at run time as the plan allows (--retry-skipped measures them again) "
+                     if acc.skipped else "") + f"({acc.summary()})")
+            return ExitCode.OK
+        print(f"resume: {acc.resume_text(retry)}" if acc.missing or acc.damaged or acc.owed or retry else
+              f"resume: every planned step is there{' or was skipped at run time' if acc.skipped else ''}; "
+              f"finishing the run (it ended '{meta.get('status', '?')}')",
+              flush=True)
+        plan, rig = stored_configs(meta, f"{args.run}/run.json")     # validated as account() did
+        out, seed = Path(args.run), meta.get("sim_seed")
+        labels = None
+    else:
+        plan, rig = _load_configs(args)
+        out, seed = Path(args.out), args.seed
+        labels = parse_labels(getattr(args, "label", None))
+    before = _event_count(out)
+    watch = _start_watch(out, args)
+    try:
+        store = execute(plan, rig, out, resume=resume, progress=Progress(plan.procedure.label), seed=seed,
+                        retry_skipped=bool(getattr(args, "retry_skipped", False)), labels=labels, latch=latch)
+    finally:
+        if watch:
+            watch.close()
+        end_line()                 # an interrupted run's progress line ends where it stood
+        _say_output_state(out, before)
+    meta = store.metadata
+    code = {RunStatus.COMPLETED: ExitCode.OK, RunStatus.ABORTED: ExitCode.LIMIT}.get(meta["status"], ExitCode.FAILURE)
+    wants_report = meta["status"] == RunStatus.COMPLETED and not getattr(args, "no_report", False)
+    begin_report = False
+    if wants_report:
+        latch.reopen()             # the report is work too; held: nothing raises inside it (0051)
+        latch.hold(doing=REPORTING)
+        begin_report = latch.reason is None    # decided before "run completed": a signal after it is one during the report
+    print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/", flush=True)
+    if wants_report:
+        if begin_report:
+            _report(out, latch)
+        else:
+            print(f"report not written: {latch.reason} before it began; `bench report {out}` writes it",
+                  file=sys.stderr)
+        latch.finish()
+    if meta["status"] == RunStatus.COMPLETED:
+        from ..verdict import promise
+        kept = promise(meta.get("plan") or {}, store.results(warn=False), meta.get("rig"))
+        if kept.fatal:           # completed, but not what the procedure was run for (decision 0052)
+            print(f"the {kept.kind.label} did not measure what it promised: {'; '.join(kept.short)}", file=sys.stderr)
+            code = ExitCode.FAILURE
+    if latch.reason is not None and code == ExitCode.OK:
+        raise KeyboardInterrupt(latch.reason)     # a signal before the work was done: exit 130
+    return code
+
+
+REPORTING = "the report is written (the output is off)"
+
+
+def _report(run: Path, latch, with_runs=()) -> None:
+    """Write the run's report with ``latch`` held: a signal meanwhile is recorded, not
+    raised into the numba kernels or the figures' finalizers where it could be swallowed,
+    and is honoured once the report is complete (decision 0051)."""
+    latch.hold(doing=REPORTING)
+    from ..api import open_run
+    path = open_run(run).report(with_runs=tuple(with_runs))
+    print(f"report: {path}" + (f" (complete; then {latch.reason})" if latch.reason else ""), flush=True)
+
+
+def _event_count(out: Path) -> int:
+    """Number of events a run directory holds now (0 when there is none yet)."""
+    from ..storage import RunStore
+    try:
+        return len(RunStore.open(out).events())
+    except Exception:  # noqa: BLE001 - no run directory yet
+        return 0
+
+
+def _say_output_state(out: Path, since: int = 0) -> None:
+    """On every ending (done, Ctrl-C, limit, error) say how this session left the output:
+    the last ``output_off`` event among those written after the first ``since`` (the events
+    of earlier sessions of a resumed run say nothing about this one).  No such event: this
+    session never opened the generator far enough to switch the output on."""
+    from ..storage import RunStore
+    try:
+        events = RunStore.open(out).events()[since:]
+    except Exception:  # noqa: BLE001 - no run directory: nothing was opened
+        events = []
+    offs = [e for e in events if e.get("event") == "output_off"]
+    if not offs:
+        print("output not switched on by this session (stopped before the generator was set up)",
+              file=sys.stderr, flush=True)
+    elif offs[-1].get("confirmed"):
+        print("output off, confirmed by the generator", file=sys.stderr, flush=True)
+    else:
+        print("WARNING: output off NOT confirmed by the generator: switch the amplifier off by hand "
+              "and check the generator", file=sys.stderr, flush=True)
+
+
+def _start_watch(run_dir: Path, args):
+    """The watch page beside the run (``--watch``), served from a thread of this process."""
+    if not getattr(args, "watch", False):
+        return None
+    server = _watch_server(run_dir, args.watch_host, args.watch_port).start()
+    print(f"watch: {server.url}", flush=True)
+    return server
+
+
+def _watch_server(run_dir: Path, host: str, port: int):
+    from ..watch import WatchServer
+    try:
+        return WatchServer(run_dir, host, port)
+    except OSError as e:       # port taken, no such interface, privileged port
+        raise ConfigurationError(f"cannot serve the watch page on {host}:{port}: {e}") from e
+
+
+def cmd_watch(args) -> int:
+    """Serve the live page of a run directory until Ctrl-C."""
+    run_dir = Path(args.run)
+    if run_dir.exists() and not run_dir.is_dir():
+        raise ConfigurationError(f"{run_dir}: not a run directory (a file)")
+    absent = not run_dir.is_dir()
+    if absent and not run_dir.absolute().parent.is_dir():      # a mistyped path, not a run to come
+        raise ConfigurationError(f"{run_dir}: no such run directory, nor its parent {run_dir.absolute().parent} "
+                                 f"(bench watch waits for a run directory to appear inside an existing one)")
+    if absent:        # started before the run: the page shows "waiting" until the run creates it
+        print(f"waiting for {run_dir} to appear ... (Ctrl-C stops)", flush=True)
+    elif not (run_dir / "run.json").is_file():
+        log.warning("%s has no run.json yet: the page waits for the run to start", run_dir)
+    from ..signals import ENDING, handling
+
+    server = _watch_server(run_dir, args.host, args.port)
+    # The page serves from its own thread; the ending signals only raise a flag (no lock
+    # the main thread might hold, no exception a finalizer could drop: bench/signals.py).
+    ended = []
+    with handling(lambda signum, frame: ended.append(signum), *ENDING):
+        server.start()
+        print(f"watch: {server.url}  (Ctrl-C ends the page, not the run)", flush=True)
+        try:
+            while not ended:
+                time.sleep(0.2)
+                if absent and run_dir.is_dir():
+                    absent = False
+                    print(f"{run_dir} appeared: the page follows the run", flush=True)
+        finally:
+            server.close()         # open pages get the last state and a goodbye
+    return 0
+
+
+def cmd_run(args) -> int:
+    return _run(args, resume=False)
+
+
+def cmd_resume(args) -> int:
+    from ..sequence import is_sequence_dir
+    if is_sequence_dir(Path(args.run)):
+        return _sequence(args, resume=True)
+    return _run(args, resume=True)
+
+
+def cmd_sequence(args) -> int:
+    """Every entry of SEQ.toml checked, then run one after the other into OUT/<name>/."""
+    return _sequence(args, resume=False)
+
+
+def _sequence(args, resume: bool) -> int:
+    from ..sequence import resume_sequence, run_sequence
+
+    def progress(entry: str):
+        return Progress(f"{entry}")
+    with _latch().installed():    # between entries; each entry's session has its own (0051)
+        res = (resume_sequence(Path(args.run), progress=progress, report=not args.no_report) if resume else
+               run_sequence(Path(args.sequence), Path(args.out), progress=progress, report=not args.no_report))
+    end_line()
+    for e in res.entries:
+        print(f"{e['name']}: {e['status']}" + (f" ({e['steps_done']}/{e['steps_total']} steps)"
+                                                if e["status"] != "not started" else ""))
+    print(f"sequence report: {res.path / 'report.md'}")
+    statuses = [e["status"] for e in res.entries]
+    if res.completed:
+        return ExitCode.OK
+    return ExitCode.LIMIT if "aborted" in statuses else ExitCode.FAILURE
+
+
+def cmd_demo(args) -> int:
+    """The main job: the default plan on the simulated rig, then its report."""
+    from contextlib import nullcontext
+
+    from .. import runlock
+    from ..demo import check_out_dir, clear_earlier_demo, write_manifest
+
+    args.plan = args.rig = None
+    args.seed = None
+    out = Path(args.out)
+    earlier = check_out_dir(out)     # refuses (deleting nothing) unless out holds only an earlier demo's files
+    with runlock.run_dir(out) if earlier else nullcontext():      # not while another session uses it
+        if earlier:
+            clear_earlier_demo(out)
+        try:
+            return _run(args, resume=False)
+        finally:
+            _latch().hold()          # the manifest is written whole (a signal is honoured after it)
+            write_manifest(out)      # what this demo wrote: what the next one may delete (0051)
+
+
+def parse_labels(items: list[str] | None) -> dict[str, str]:
+    """``--label key=value`` (repeatable) -> {key: value}; a malformed one is a usage error."""
+    out: dict[str, str] = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigurationError(f"--label {item!r}: expected KEY=VALUE, e.g. --label lubricant=\"ISO VG 32\"")
+        out[key.strip()] = value.strip()
+    return out

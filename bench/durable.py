@@ -1,0 +1,144 @@
+"""Crash-safe writing of a run directory's files (moved from :mod:`bench.storage`): atomic
+writes (a temporary name, fsynced, renamed), appends that follow no link, the modes ``touch``
+and ``mkdir`` give, canonical JSON and its SHA-256 (decision 0028)."""
+
+from __future__ import annotations
+
+import errno
+import hashlib
+import json
+import logging
+import os
+import stat
+import tempfile
+import threading
+from contextlib import contextmanager
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+
+from sim.errors import RunDirectoryError as RunDirError
+from sim.errors import StorageError
+
+log = logging.getLogger(__name__)
+
+
+_umask_lock = threading.Lock()
+
+
+def now_iso() -> str:
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
+
+
+def _fsync_dir(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _umask() -> int:
+    with _umask_lock:          # os.umask can only be read by setting it
+        old = os.umask(0o022)
+        os.umask(old)
+    return old
+
+
+def file_mode() -> int:
+    """The mode of every file a run writes: what ``open(..., "w")`` gives."""
+    return 0o666 & ~_umask()
+
+
+def real_dir(path: Path, *, create: bool = False) -> Path:
+    """``path`` as a directory that is not a symbolic link (made if ``create``); a link or a
+    file in its place raises :class:`RunDirError` naming it."""
+    path = Path(path)
+    if create:
+        try:
+            path.mkdir()
+        except FileExistsError:
+            pass
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        raise RunDirError(f"{path}: missing (expected a directory)") from None
+    if stat.S_ISLNK(st.st_mode):
+        raise RunDirError(f"{path}: is a symbolic link; a run writes nothing through links "
+                          f"(replace it with a real directory)")
+    if not stat.S_ISDIR(st.st_mode):
+        raise RunDirError(f"{path}: not a directory")
+    return path
+
+
+def open_append(path: Path):
+    """``path`` opened for appending text, never through a symbolic link (``O_NOFOLLOW``)."""
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC,
+                     0o666)
+    except OSError as e:
+        if os.path.islink(path):
+            raise RunDirError(f"{path}: is a symbolic link; a run writes nothing through links "
+                              f"(remove it)") from None
+        if e.errno == errno.ENXIO:             # a FIFO nobody reads: never waited on
+            raise RunDirError(f"{path}: not a regular file (a FIFO)") from None
+        raise
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise RunDirError(f"{path}: not a regular file")
+    return os.fdopen(fd, "a")
+
+
+def atomic_write(path: Path, write) -> None:
+    real_dir(path.parent)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        os.fchmod(fd, file_mode())
+        with os.fdopen(fd, "wb") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+        _fsync_dir(path.parent)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+
+
+@contextmanager
+def _writing(path: Path):
+    """An ``OSError`` while writing ``path`` becomes a :class:`StorageError` naming it and
+    the cause (a full disk, a directory deleted, a permission taken away)."""
+    try:
+        yield
+    except OSError as e:
+        raise StorageError(f"{path}: cannot write: {e.strerror or e}") from e
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, complex):
+        return {"re": o.real, "im": o.imag}
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def write_json(path: Path, obj) -> None:
+    data = json.dumps(obj, indent=1, default=_json_default).encode()
+    atomic_write(path, lambda fh: fh.write(data))
+
+
+def _sha256(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def _canonical(obj) -> bytes:
+    """The bytes a step's ``json_sha256`` covers: key order and spacing do not matter
+    (Python's float repr survives a JSON round trip exactly)."""
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=_json_default).encode()
