@@ -50,9 +50,9 @@ def held_response_comparison(meta: dict, results: list[dict], flagged: set[str] 
     """The comparison of a response-controlled run whose levels hold ``quantity`` ("disp"
     or "accel"), per level: the model's compliance_pp at the level on a dense grid (the
     line) and at each step's measured amplitude (the difference)."""
-    from sim.rig import RigModel
-    rig = meta["rig"]
-    model = RigModel.from_dict(rig["model"])
+    from procedures.plan import stored_model
+    model = stored_model(meta["rig"])
+    assert model is not None                 # called for a simulated rig's run only
     levels = (meta.get("plan") or {}).get("levels_N") or []
     freqs = np.array(sorted({r["freq_Hz"] for r in results}))
     dense = np.union1d(np.geomspace(freqs.min() / 1.1, freqs.max() * 1.1, MODEL_GRID_POINTS), freqs)
@@ -88,7 +88,7 @@ def held_response_comparison(meta: dict, results: list[dict], flagged: set[str] 
         d = np.array(diff)
         out.append(LevelComparison(level, math.nan, len(steps), int(bad.sum()), _median(d), _signed_max(d),
                                    _signed_max(d[~bad]), []))
-    return ModelComparison(model.__dict__.copy(), model.omega_s, curves, at_steps, out, notes)
+    return ModelComparison(model, model.omega_s, curves, at_steps, out, notes)
 
 
 def comparison_of(meta: dict, results: list[dict], flagged: set[str] | None = None) -> ModelComparison | None:
