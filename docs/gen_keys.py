@@ -104,11 +104,11 @@ def model_rows() -> list[str]:
     rows = []
     for key, spec in config.model_schema().items():
         if spec.choices:
-            typ = "one of " + ", ".join(f"`{c!r}`" if c == "" else f"`{c}`" for c in spec.choices)
+            typ = "one of " + ", ".join(f"`{c}`" if c else '`""`' for c in spec.choices)
         else:
             typ = (f"{'integer' if spec.integer else 'number'} {'>' if spec.lo_open else '>='} {spec.lo:g} "
                    f"and <= {spec.hi:g}" + (f" ({spec.unit})" if spec.unit else ""))
-        meaning = spec.meaning + ("" if spec.in_plant else " (not in the plant yet)")
+        meaning = spec.meaning.replace("|", "\\|") + ("" if spec.in_plant else " (not in the plant yet)")
         rows.append(f"| `{key}` | {typ} | {default(dict(default=getattr(defaults, key)))} | {meaning} |")
     return rows
 
