@@ -12,6 +12,7 @@ import math
 import tomllib
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -22,6 +23,9 @@ from procedures.plan import Backbone, Limits, Plan, Rig
 from sim.errors import ConfigurationError
 
 from .files import TooLarge, UnreadableFile, read_file
+
+if TYPE_CHECKING:      # sim.rig compiles the plant's kernels: imported when a model is parsed
+    from sim.rig import RigModel
 
 log = logging.getLogger(__name__)
 
@@ -479,7 +483,6 @@ def _instrument_capacity(p: _Section, plan: Plan, source: str) -> None:
         p.problem(problem)
 
 
-# [rig.model] keys that take one of a few words, key -> allowed values
 def model_schema() -> dict:
     """[rig.model]: each key of sim.rig.RigModel as it declares itself (unit, range, choices;
     decision 0058), key -> sim.rig.ModelKey.  Ranges are what a real carriage rig can have;
@@ -489,7 +492,7 @@ def model_schema() -> dict:
     return model_keys()
 
 
-def _check_model(sec: _Section):
+def _check_model(sec: _Section) -> RigModel | None:
     """Each [rig.model] key against its unit and range, then the model's own rules: the
     parsed sim.rig.RigModel, or None when a key's problem was collected."""
     from sim import rig as sim_rig

@@ -10,10 +10,12 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
-
-from sim.rig import RigModel
+from typing import TYPE_CHECKING
 
 from .kind import ProcedureKind, Quantity, controlled_quantity, level_quantity
+
+if TYPE_CHECKING:      # sim.rig compiles the plant's kernels: imported where a model is made
+    from sim.rig import RigModel
 
 # the rig file's [rig.expected] values, as every identification names its starting guess
 GUESS_KEYS = ("F_s_N", "x_s_m", "n", "mass_kg")
@@ -204,4 +206,5 @@ def stored_model(rig: Mapping | None) -> RigModel | None:
     (the rest at their defaults), a newer one every key: both read alike."""
     if not (rig and rig.get("simulated") and rig.get("model")):
         return None
+    from sim.rig import RigModel
     return RigModel.from_dict(dict(rig["model"]))

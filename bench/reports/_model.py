@@ -15,12 +15,14 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from sim.rig import RigModel
-
 from ._steps import UNSETTLED_RESIDUAL, residual_ratio
+
+if TYPE_CHECKING:
+    from sim.rig import RigModel
 
 log = logging.getLogger(__name__)
 

@@ -25,16 +25,19 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from ..errors import ConfigurationError
 from ..identify import MISFIT_CHI2, PARAMS, PRIOR_SIGMA, StepHarmonics, misfit_text
-from ..rig import RigModel
 from .analysis import base_fit, data_from_steps
 from .fit import N_BOUNDS, Fit, Weights, fit
 from .models import EFFECTS, Data, Model
+
+if TYPE_CHECKING:
+    from ..rig import RigModel
 
 BOUND_FACTOR = 20.0        # online: F_s, x_s, m within this factor of the rig file's expected values
 
@@ -66,12 +69,11 @@ def rig_effects(model: RigModel | Mapping | None) -> dict[str, np.ndarray]:
     a rig's parsed model, or its keys (a key not given is 0)."""
     if not model:
         return {}
-    if isinstance(model, RigModel):
-        model = asdict(model)
+    keys: Mapping = model if isinstance(model, Mapping) else asdict(model)
 
     def g(k: str) -> float:
         try:
-            v = float(model.get(k) or 0.0)
+            v = float(keys.get(k) or 0.0)
         except (TypeError, ValueError):
             return 0.0
         return v if math.isfinite(v) else 0.0
