@@ -189,7 +189,7 @@ def identification_sample(inputs: dict, seed: int) -> list[dict]:
         rows.append(dict(sample=int(inputs["sample"]), plan=plan.name, parameter=p, truth=t, guess=expected[p],
                          estimate=float(v), low=float(lo), high=float(hi), rel_error=float(v / t - 1.0),
                          covered=bool(lo <= t <= hi), rel_std=float(est["rel_std"][p]),
-                         steps=len(results), reduced_chi2=float(est["reduced_chi2"]), noise_seed=model["seed"],
+                         steps=len(results), reduced_chi2=float(est["reduced_chi2"]), noise_seed=model.seed,
                          misfit=bool(est.get("misfit"))))
     return rows
 
