@@ -41,7 +41,7 @@ def _guess(source: Path, rig: Path | None) -> tuple[dict | None, float | None]:
         r = parse_rig({"rig": rig_toml(RunStore.open(source).metadata["rig"])}, f"{source}/run.json")
     else:
         return None, None     # a foreign file: start from the data themselves
-    v_ref = (r.model or {}).get("friction_v_ref_m_per_s")
+    v_ref = r.model.friction_v_ref_m_per_s if r.model else None
     return r.guess(), float(v_ref) if v_ref else None
 
 

@@ -14,7 +14,7 @@ import logging
 from pathlib import Path
 
 from procedures.factory import procedure_for
-from procedures.plan import Plan, StepSpec
+from procedures.plan import GUESS_KEYS, Plan, StepSpec
 from sim.backbone import backbone_point
 from sim.step_result import StepResult
 
@@ -59,12 +59,9 @@ def model_backbone(rig: Rig, amplitudes_m) -> list:
     """The single-harmonic-balance backbone of the rig's model (simulated rigs; the
     expected parameters otherwise) at the given amplitudes."""
     m = rig.model
-    F_s, x_s, n = (m.get("F_s_N", rig.expected_F_s_N), m.get("x_s_m", rig.expected_x_s_m),
-                   m.get("n", rig.expected_n)) if rig.simulated else (rig.expected_F_s_N, rig.expected_x_s_m,
-                                                                      rig.expected_n)
-    mass = m.get("mass_kg", rig.expected_mass_kg) if rig.simulated else rig.expected_mass_kg
-    linear = {"spring_N_per_m": m.get("spring_N_per_m", 0.0), "viscous_N_s_per_m": m.get("viscous_N_s_per_m", 0.0)}
-    return [backbone_point(X, mass, F_s, x_s, n, **linear) for X in amplitudes_m]
+    p = {k: getattr(m, k) for k in GUESS_KEYS} if m else rig.guess()
+    linear = dict(spring_N_per_m=m.spring_N_per_m, viscous_N_s_per_m=m.viscous_N_s_per_m) if m else {}
+    return [backbone_point(X, p["mass_kg"], p["F_s_N"], p["x_s_m"], p["n"], **linear) for X in amplitudes_m]
 
 
 def run_backbone(plan: Plan, rig: Rig, store: RunStore, gen, daq, sensor_check, *, marker, drive_limit_V: float,

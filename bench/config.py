@@ -12,6 +12,7 @@ import math
 import tomllib
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -22,6 +23,9 @@ from procedures.plan import Backbone, Limits, Plan, Rig
 from sim.errors import ConfigurationError
 
 from .files import TooLarge, UnreadableFile, read_file
+
+if TYPE_CHECKING:      # sim.rig compiles the plant's kernels: imported when a model is parsed
+    from sim.rig import RigModel
 
 log = logging.getLogger(__name__)
 
@@ -44,7 +48,7 @@ MAX_FILE_BYTES = 2**20        # a plan or rig TOML file (the demo's plan is 3 kB
 LIMIT_KEYS = ("drive_V", "force_N", "disp_m", "accel_m_s2")
 # Every key each table may hold (a table's path -> its keys); an unknown key is named, with
 # the close valid one, before any value is read (a misspelled required key is reported as
-# the misspelling, not as the key it was meant to be).  [rig.model]: MODEL_SCHEMA below.
+# the misspelling, not as the key it was meant to be).  [rig.model]: model_schema() below.
 KEYS = {
     "plan": ("name", "levels_N", "frequencies", "control", "limits", "infeasible", "adaptive_per_sweep",
              "resonance", "procedure", "backbone", "response"),
@@ -479,72 +483,33 @@ def _instrument_capacity(p: _Section, plan: Plan, source: str) -> None:
         p.problem(problem)
 
 
-# [rig.model] keys that take one of a few words, key -> allowed values
-MODEL_CHOICES = {"line_channel": ("", "disp", "force", "accel")}
-
-# [rig.model]: sim.rig.RigModel's parameters, key -> (unit, low, high, low open, integer).
-# Ranges are what a real carriage rig can have; cross-field rules (n != 1, J > m e^2, ...)
-# are the model's own and reach the user through the same error.
-MODEL_SCHEMA = {
-    "F_s_N": ("N", 0, 1e4, True, False),
-    "x_s_m": ("m", 0, 1e-2, True, False),
-    "n": ("1", 0, 10, True, False),
-    "mass_kg": ("kg", 0, 1e4, True, False),
-    "amp_gain_N_per_V": ("N/V", 0, 1e4, True, False),
-    "amp_force_limit_N": ("N", 0, 1e4, True, False),
-    "force_sens_V_per_N": ("V/N", 0, 100, True, False),
-    "accel_sens_V_per_m_s2": ("V/(m/s^2)", 0, 100, True, False),
-    "disp_sens_V_per_m": ("V/m", 0, 1e7, True, False),
-    "probe_standoff_m": ("m", 0, 0.1, False, False),
-    "force_noise_N": ("N", 0, 1e3, False, False),
-    "accel_noise_m_s2": ("m/s^2", 0, 1e4, False, False),
-    "disp_noise_m": ("m", 0, 1e-2, False, False),
-    "viscous_N_s_per_m": ("N s/m", 0, 1e6, False, False),
-    "spring_N_per_m": ("N/m", 0, 1e9, False, False),
-    "disp_delay_s": ("s", 0, 0.1, False, False),
-    "force_gain_error": ("relative", -0.5, 0.5, False, False),
-    "accel_gain_error": ("relative", -0.5, 0.5, False, False),
-    "disp_gain_error": ("relative", -0.5, 0.5, False, False),
-    "friction_alpha": ("1", 0, 100, False, False),
-    "friction_v_ref_m_per_s": ("m/s", 0, 10, False, False),
-    "pitch_inertia_kg_m2": ("kg m^2", 0, 1e3, False, False),
-    "pitch_stiffness_N_m_per_rad": ("N m/rad", 0, 1e9, False, False),
-    "pitch_damping_N_m_s_per_rad": ("N m s/rad", 0, 1e6, False, False),
-    "drive_height_m": ("m", 0, 10, False, False),
-    "cg_height_m": ("m", 0, 10, False, False),
-    "cubic_spring_N_per_m3": ("N/m^3", 0, 1e20, False, False),
-    "line_freq_Hz": ("Hz", 0, 1e5, False, False),
-    "line_amplitude": ("unit of line_channel: m, N or m/s^2", 0, 1e4, False, False),
-    "quadratic_damping_N_s2_per_m2": ("N s^2/m^2", 0, 1e9, False, False),
-    "friction_asymmetry": ("1", -0.5, 0.5, True, False),     # |a| < 0.5 (the model's own rule)
-    # electrodynamic shaker (decision 0025): on when the force constant Bl > 0; then
-    # amp_gain_N_per_V is the blocked force per generator volt at DC
-    "shaker_force_constant_N_per_A": ("N/A", 0, 1e3, False, False),
-    "shaker_resistance_ohm": ("ohm", 0, 1e3, False, False),
-    "shaker_inductance_H": ("H", 0, 1, False, False),
-    "shaker_armature_mass_kg": ("kg", 0, 100, False, False),
-    "shaker_suspension_N_per_m": ("N/m", 0, 1e8, False, False),
-    "shaker_damping_N_s_per_m": ("N s/m", 0, 1e5, False, False),
-    "steps_per_period": ("steps", 20, 1e5, False, True),
-    "seed": ("", 0, 2**63 - 1, False, True),
-}
+def model_schema() -> dict:
+    """[rig.model]: each key of sim.rig.RigModel as it declares itself (unit, range, choices;
+    decision 0058), key -> sim.rig.ModelKey.  Ranges are what a real carriage rig can have;
+    cross-field rules (n != 1, J > m e^2, ...) are the model's own and reach the user through
+    the same error."""
+    from sim.rig import model_keys
+    return model_keys()
 
 
-def _check_model(sec: _Section) -> None:
-    """Each [rig.model] key against its unit and range, then the model's own rules."""
-    from sim.rig import RigModel
+def _check_model(sec: _Section) -> RigModel | None:
+    """Each [rig.model] key against its unit and range, then the model's own rules: the
+    parsed sim.rig.RigModel, or None when a key's problem was collected."""
+    from sim import rig as sim_rig
 
-    sec.unknown(set(MODEL_SCHEMA) | set(MODEL_CHOICES))
+    schema = model_schema()
+    sec.unknown(set(schema))
     for key in sec.data:
-        if key in MODEL_CHOICES:
-            sec.choice(key, None, MODEL_CHOICES[key])
+        spec = schema[key]
+        if spec.choices:
+            sec.choice(key, None, spec.choices)
             continue
-        unit, lo, hi, lo_open, integer = MODEL_SCHEMA[key]
-        sec.number(key, None, lo, hi, lo_open=lo_open, integer=integer, suffix=f" (unit: {unit})" if unit else "")
+        sec.number(key, None, spec.lo, spec.hi, lo_open=spec.lo_open, integer=spec.integer,
+                   suffix=f" (unit: {spec.unit})" if spec.unit else "")
     if sec.errors:
-        return                   # the model's own rules once its values are right
+        return None              # the model's own rules once its values are right
     try:
-        RigModel.from_dict(sec.data)
+        return sim_rig.RigModel.from_dict(sec.data)
     except (TypeError, ValueError) as e:
         raise ConfigError(f"{sec.source}: [rig.model] {e}") from None
 
@@ -586,13 +551,12 @@ def _parse_rig(data: dict, source: str, errors: list[str]) -> Rig:
         expected_mass_kg=exp.number("mass_kg", 10.0, 0, 1e4, lo_open=True),
         expected_x_s_m=exp.number("x_s_m", 20e-6, 0, 1e-2, lo_open=True),
         expected_F_s_N=exp.number("F_s_N", 10.0, 0, 1e4, lo_open=True),
-        expected_n=exp.number("n", 1.5, 0.05, 10),
-        model=dict(r.data.get("model", {})))
+        expected_n=exp.number("n", 1.5, 0.05, 10))
     r.used.add("model")
-    if rig.model and not simulated:
+    if r.data.get("model") and not simulated:
         raise ConfigError(f"{source}: [rig.model] is only allowed with simulated = true")
     if simulated:
-        _check_model(r.table("model"))
+        rig = replace(rig, model=_check_model(r.table("model")))
     cal.done()
     exp.done()
     r.done()
@@ -656,6 +620,11 @@ def parse_stored_plan(p, source: str) -> Plan:
     return replace(plan, skip=tuple(tuple(s) for s in skip))
 
 
+def stored_rig(r: dict, source: str) -> Rig:
+    """The rig of a stored run (run.json's ``rig``), checked as its file was."""
+    return parse_rig({"rig": rig_toml(r)}, source)
+
+
 def rig_toml(r: dict) -> dict:
     """The stored rig (run.json) back into the TOML layout."""
     return {"name": r["name"], "notes": r["notes"], "simulated": r["simulated"],
@@ -665,4 +634,4 @@ def rig_toml(r: dict) -> dict:
             "limits": r["limits"],
             "expected": {"mass_kg": r["expected_mass_kg"], "x_s_m": r["expected_x_s_m"],
                          "F_s_N": r["expected_F_s_N"], "n": r["expected_n"]},
-            **({"model": r["model"]} if r["model"] else {})}
+            **({"model": dict(r["model"])} if r["model"] else {})}

@@ -248,10 +248,8 @@ def open_instruments(rig: Rig, stack: ExitStack, *, sim_seed: int | None = None,
     sim = None
     if rig.simulated:
         from sim.rig import RigModel, SimulatedRig
-        model = dict(rig.model)
-        if sim_seed is not None:
-            model["seed"] = sim_seed
-        sim = SimulatedRig(RigModel.from_dict(model))
+        model = rig.model or RigModel()
+        sim = SimulatedRig(model if sim_seed is None else replace(model, seed=sim_seed))
         twins = stack.enter_context(start_twins(sim))
         g_url, s_url, d_url = twins.generator_url, twins.sensor_url, twins.daq_url
     gen = ScpiFunctionGenerator(g_url, drive_limit_V=rig.limits.drive_V)
@@ -469,8 +467,7 @@ def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Super
         band = None
         if rig.simulated and rig.model:
             from sim.modal import pitch_band_Hz
-            from sim.rig import RigModel
-            band = pitch_band_Hz(RigModel.from_dict(rig.model))
+            band = pitch_band_Hz(rig.model)
         refiner = Refiner(plan, lambda: store.results(warn=False), band,
                           on_end=lambda **end: store.event("refinement_end", **end),       # decision 0050
                           no_pitch=bool(rig.simulated and rig.model) and band is None).next_step   # 0056

@@ -40,7 +40,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager, contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -49,6 +49,7 @@ import pytest
 if TYPE_CHECKING:
     from drivers import Twins
     from procedures.plan import Rig
+    from sim.rig import RigModel
 
 INSTRUMENTS = ("generator", "daq")      # what drop_out can take away
 
@@ -56,11 +57,11 @@ INSTRUMENTS = ("generator", "daq")      # what drop_out can take away
 @dataclass
 class SimServers:
     """A simulated rig served on loopback: ``rig`` (URLs set, ``simulated = false``), the
-    running ``twins``, and ``model`` (the ``[rig.model]`` keys the plant was built from)."""
+    running ``twins``, and ``model`` (the plant's sim.rig.RigModel)."""
 
     rig: Rig
     twins: Twins
-    model: dict[str, Any] = field(default_factory=dict)
+    model: RigModel
 
     def drop_out(self, instrument: str) -> None:
         """``"generator"``: the SCPI server drops its connections and stops listening (the
@@ -91,15 +92,15 @@ def start_sim_rig(rig_file: str | Path | None = None, *, seed: int | None = None
     base = load_rig(Path(rig_file) if rig_file else DEFAULTS / "sim_rig.toml")
     if not base.simulated:
         raise ValueError(f"{rig_file}: not a simulated rig (simulated = true is needed for its [rig.model])")
-    plant = {**base.model, **model}
+    plant = base.model or RigModel()
     if model:     # the same checks and named errors as the rig file's [rig.model]
         data = rig_toml(base.to_dict())
-        data["model"] = plant
-        parse_rig({"rig": data}, "sim_rig_factory(...)")
+        data["model"] = {**data.get("model", {}), **model}
+        plant = parse_rig({"rig": data}, "sim_rig_factory(...)").model or plant
     if seed is not None:
-        plant["seed"] = seed
-    twins = start_twins(SimulatedRig(RigModel.from_dict(plant)), host)
-    rig = replace(base, simulated=False, model={}, generator_url=twins.generator_url,
+        plant = replace(plant, seed=seed)
+    twins = start_twins(SimulatedRig(plant), host)
+    rig = replace(base, simulated=False, model=None, generator_url=twins.generator_url,
                   sensor_url=twins.sensor_url, daq_url=twins.daq_bridge_url)
     return SimServers(rig, twins, plant)
 

@@ -27,7 +27,7 @@ import json
 import logging
 import math
 import os
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +35,7 @@ import numpy as np
 from sim.artefacts import REPEAT_STEPS, mains_line
 from sim.discrepancy.analysis import level_groups
 from sim.errors import ConfigurationError
-from sim.rig import RigModel
+from sim.rig import RigModel, model_keys
 from sim.shaker_fit import documented_shaker, shaker_model
 
 from . import __version__
@@ -72,8 +72,8 @@ def _value(params: dict, name: str, scale: float = 1.0) -> float:
 # ---------------------------------------------------------------------------- causes -> [rig.model]
 # cause id -> function(cause parameters, context) -> {[rig.model] key: value}.  The context
 # holds the twin's mass (kg) and the source rig model's drive height (m) if it has one.  A
-# KeyError (a parameter the analysis does not give) lists the cause as not in the plant.
-# Adding a form is one line here (and its keys in bench.config.MODEL_SCHEMA/sim.rig.RigModel).
+# KeyError (a parameter the analysis does not give) lists the cause as not in the plant, as
+# does a key sim.rig.RigModel does not declare or declares as not in the plant (in_plant).
 
 
 def _second_mode(p: dict, ctx: dict) -> dict:
@@ -151,7 +151,7 @@ def apply_causes(model: dict, causes: list[dict], ctx: dict) -> tuple[dict, dict
     ``causes``) that the plant can represent: (new model, {cause id: keys written},
     [{cause, reason}] for the rest).  ``ctx``: the twin's ``mass_kg`` and the source rig's
     ``drive_height_m`` (or None)."""
-    known = {f.name for f in fields(RigModel)}
+    known = {k for k, key in model_keys().items() if key.in_plant}
     applied, missed = {}, []
     for c in causes:
         cid = c["id"]

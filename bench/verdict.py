@@ -44,12 +44,11 @@ def refinement(plan: dict, results: list[dict], rig: dict | None = None) -> tupl
         p = parse_stored_plan(plan, "run.json")
     except ConfigError:
         return "", ()
-    band = None
-    if rig and rig.get("simulated") and rig.get("model"):
-        from sim.modal import pitch_band_Hz
-        from sim.rig import RigModel
-        band = pitch_band_Hz(RigModel.from_dict(rig["model"]))
-    no_pitch = bool(rig and rig.get("simulated") and rig.get("model")) and band is None   # as the run (0056)
+    from procedures.plan import stored_model
+    from sim.modal import pitch_band_Hz
+    model = stored_model(rig)
+    band = pitch_band_Hz(model) if model else None
+    no_pitch = model is not None and band is None   # as the run (0056)
     refiner = Refiner(p, lambda: results, band, no_pitch=no_pitch)
     q = p.level_quantity
     ends = [(q.format(level), mode, how, n) for li, level in enumerate(p.levels_N)

@@ -15,6 +15,7 @@ import argparse
 import math
 import shutil
 import time
+from dataclasses import asdict
 from pathlib import Path
 
 from bench.backbone import backbone_rows
@@ -38,7 +39,7 @@ def main():
     ap.add_argument("--no-dense", action="store_true")
     a = ap.parse_args()
     rig = load_rig(DEFAULTS / "sim_rig.toml")
-    m = rig.model
+    m = asdict(rig.model)
     out = Path(a.out) / "phase_resonance"
     shutil.rmtree(out, ignore_errors=True)
     plan = parse_plan({"plan": {"procedure": "phase_resonance", "levels_N": LEVELS, "backbone": {"start_Hz": 80.0},

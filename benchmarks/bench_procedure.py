@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import shutil
 import time
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -53,7 +53,7 @@ def main():
             print(f"  identification update per step: median {np.median(ms):.0f} ms, "
                   f"p90 {np.percentile(ms, 90):.0f} ms, max {ms.max():.0f} ms (target median <= 100 ms)")
             final = store.metadata["identification"]
-            truth = rig.model
+            truth = asdict(rig.model)
             for k in ("F_s_N", "x_s_m", "n", "mass_kg"):
                 v, lo, hi = final["values"][k], final["low"][k], final["high"][k]
                 print(f"  {k:8s} {v:.5g} (truth {truth[k]:.5g}, error {100 * (v / truth[k] - 1):+.2f} %, "
@@ -75,7 +75,7 @@ def main():
     wall = time.perf_counter() - t
     histories["adaptive (6 per sweep)"] = (history(out), len(store.results()))
     print(f"adaptive plan: {len(store.results())} steps, {wall:.1f} s wall")
-    truth = rig.model
+    truth = asdict(rig.model)
     for tol in (0.01, 0.002):
         cells = []
         for name, (h, n_steps) in histories.items():

@@ -180,14 +180,14 @@ def main() -> None:
     from bench.config import DEFAULTS, load_rig
     from bench.session import run_plan
     from drivers import start_twins
-    from sim.rig import RigModel, SimulatedRig
+    from sim.rig import SimulatedRig
 
     out = Path(a.out)
     shutil.rmtree(out, ignore_errors=True)
     out.mkdir(parents=True)
     plan = soak_plan(PROFILES[a.profile])
     sim_rig = load_rig(DEFAULTS / "sim_rig.toml")
-    twins = start_twins(SimulatedRig(RigModel.from_dict(sim_rig.model)))
+    twins = start_twins(SimulatedRig(sim_rig.model))
     rig = replace(sim_rig, simulated=False, model={}, generator_url=twins.generator_url,
                   sensor_url=twins.sensor_url, daq_url=twins.daq_url)
     host, port = twins.generator_url.removeprefix("socket://").split(":")

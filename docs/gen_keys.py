@@ -1,6 +1,8 @@
 """Writes docs/reference/keys.md: every key of a plan and a rig file with its type, range and
-default, taken from the validators themselves (bench/config.py, MODEL_SCHEMA), and its
-meaning from the comment beside it in the annotated example files (bench/defaults/*.toml).
+default, taken from the validators themselves (bench/config.py), and its meaning from the
+comment beside it in the annotated example files (bench/defaults/*.toml).  The [rig.model]
+table is each sim.rig.RigModel field's own declaration (unit, range, default, meaning;
+decision 0058), as bench.config.model_schema() reads it.
 
 The parser is run on the example files with its accessors recording what they are asked
 (key, default, bounds, choices), so the reference cannot drift from what the bench
@@ -95,12 +97,19 @@ def default(info: dict) -> str:
     return f"`{d!r}`" if d != "" else "`\"\"`"
 
 
-def model_rows(notes: dict) -> list[str]:
+def model_rows() -> list[str]:
+    """One row per [rig.model] key, from the model's own declaration."""
+    from sim.rig import RigModel
+    defaults = RigModel()
     rows = []
-    for key, spec in config.MODEL_SCHEMA.items():
-        unit, lo, hi, lo_open, integer = spec[:5]
-        typ = f"{'integer' if integer else 'number'} {'>' if lo_open else '>='} {lo:g} and <= {hi:g}"
-        rows.append(f"| `{key}` | {typ} ({unit}) | - | {notes.get(('rig.model', key), '')} |")
+    for key, spec in config.model_schema().items():
+        if spec.choices:
+            typ = "one of " + ", ".join(f"`{c}`" if c else '`""`' for c in spec.choices)
+        else:
+            typ = (f"{'integer' if spec.integer else 'number'} {'>' if spec.lo_open else '>='} {spec.lo:g} "
+                   f"and <= {spec.hi:g}" + (f" ({spec.unit})" if spec.unit else ""))
+        meaning = spec.meaning.replace("|", "\\|") + ("" if spec.in_plant else " (not in the plant yet)")
+        rows.append(f"| `{key}` | {typ} | {default(dict(default=getattr(defaults, key)))} | {meaning} |")
     return rows
 
 
@@ -132,8 +141,9 @@ def main(out: Path) -> int:
             lines.append(f"| `{k}` | {typ} | {dflt} | {notes.get((table, k), '')} |")
         lines.append("")
     lines += ["## `[rig.model]` (simulated rigs)", "",
-              "All off (0) by default unless given; SI units; the equations are in decision record 0013.", "",
-              "| key | type and range | default | meaning (from the example files) |", "|---|---|---|---|", *model_rows(notes), ""]
+              "SI units; each key is a field of `sim.rig.RigModel`, which declares its unit, range, default and "
+              "meaning (decision record 0058); the equations are in decision record 0013.", "",
+              "| key | type and range | default | meaning |", "|---|---|---|---|", *model_rows(), ""]
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(lines) + "\n")
     missing = [(t, k) for t in config.KEYS for k in config.KEYS[t] if f"{t}.{k}" not in config.KEYS
@@ -141,7 +151,7 @@ def main(out: Path) -> int:
     if missing:
         print(f"error: keys no example reaches (their range unknown): {missing}", file=sys.stderr)
         return 1
-    print(f"wrote {out} ({sum(len(v) for v in config.KEYS.values())} keys, {len(config.MODEL_SCHEMA)} model keys)")
+    print(f"wrote {out} ({sum(len(v) for v in config.KEYS.values())} keys, {len(config.model_schema())} model keys)")
     return 0
 
 

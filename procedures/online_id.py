@@ -111,7 +111,7 @@ class OnlineIdentification:
     def __init__(self, run_dir, rig: Rig, harmonics: int = 5, budget: int = 25):
         self.path = run_dir / "identification.jsonl"
         self.guess = rig.guess()
-        self.rig_model = dict(rig.model or {})
+        self.rig_model = rig.model
         K = min(harmonics, MAX_HARMONICS)
         # the rig's declared modes: the analysis' model with them (else the Masing carriage)
         self.rigfit = OnlineRigFit(self.guess, self.rig_model, K) if rig_effects(self.rig_model) else None

@@ -8,9 +8,14 @@ produce them.
 from __future__ import annotations
 
 import re
-from dataclasses import asdict, dataclass, field
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING
 
 from .kind import ProcedureKind, Quantity, controlled_quantity, level_quantity
+
+if TYPE_CHECKING:      # sim.rig compiles the plant's kernels: imported where a model is made
+    from sim.rig import RigModel
 
 # the rig file's [rig.expected] values, as every identification names its starting guess
 GUESS_KEYS = ("F_s_N", "x_s_m", "n", "mass_kg")
@@ -184,11 +189,22 @@ class Rig:
     expected_x_s_m: float
     expected_F_s_N: float
     expected_n: float
-    model: dict = field(default_factory=dict)   # sim.rig.RigModel keys (simulated rigs)
+    model: RigModel | None = None        # the plant of a simulated rig (its [rig.model]); None otherwise
 
     def guess(self) -> dict[str, float]:
         """The expected F_s, x_s, n and m: every identification's starting point."""
         return {k: getattr(self, f"expected_{k}") for k in GUESS_KEYS}
 
     def to_dict(self) -> dict:
+        """The stored layout (run.json's ``rig``): the model as every one of its keys."""
         return asdict(self)
+
+
+def stored_model(rig: Mapping | None) -> RigModel | None:
+    """The plant model of a stored rig (run.json's ``rig``), or None when it was not simulated
+    or stored no model.  A run stored before decision 0058 holds only the keys its file gave
+    (the rest at their defaults), a newer one every key: both read alike."""
+    if not (rig and rig.get("simulated") and rig.get("model")):
+        return None
+    from sim.rig import RigModel
+    return RigModel.from_dict(dict(rig["model"]))

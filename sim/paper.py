@@ -23,6 +23,7 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -33,6 +34,9 @@ from .frf import FrequencyResponse, Peak, find_peaks
 from .masing import MasingFriction
 from .shooting import frf_shooting
 from .virgin import SakaiCurve
+
+if TYPE_CHECKING:
+    from .rig import RigModel
 
 log = logging.getLogger(__name__)
 
@@ -427,11 +431,10 @@ def pitch_resonances(model, level_N: float, freqs_Hz):
     return feed, pitch, resp.compliance_pp
 
 
-def _other_rig(rep: Report, grids: Grids, freqs, name: str, model_dict: dict, colour, ax_feed, ax_pitch, ax_z) -> None:
+def _other_rig(rep: Report, grids: Grids, freqs, name: str, model: RigModel, colour, ax_feed, ax_pitch,
+               ax_z) -> None:
     """A further rig's model (``bench paper --rig A --rig B``): its modes against force in
     its own colour and name, and its own peaks' CSV."""
-    from .rig import RigModel
-    model = RigModel.from_dict(model_dict)
     rows, damping = [], []
     for level in grids.pitch_levels_N:
         feed, pitch, _ = pitch_resonances(model, level, freqs)
@@ -449,17 +452,17 @@ def _other_rig(rep: Report, grids: Grids, freqs, name: str, model_dict: dict, co
     rep.table(stem, ["force [N]", "feed_resonance [Hz]", "pitch_resonance [Hz]"], rows)
 
 
-def fig15_17_pitch_resonance(rep: Report, grids: Grids, model_dict: dict | None = None,
-                             measured: list[dict] | None = None, others: list[tuple[str, dict]] | None = None,
+def fig15_17_pitch_resonance(rep: Report, grids: Grids, pitch_model: RigModel | None = None,
+                             measured: list[dict] | None = None, others: list[tuple[str, RigModel]] | None = None,
                              name: str = ""):
-    """Seed Figs. 15 and 17 from the pitching rig's model (``model_dict``: a rig file's
+    """Seed Figs. 15 and 17 from the pitching rig's model (``pitch_model``: a rig file's
     [rig.model], default PITCH_MODEL; ``name``: its name on the figure), with a damping
     panel; ``others``: further rigs' (name, [rig.model]), each drawn in the colour of the
     measured run of its position (:func:`_other_rig`); ``measured``: rows of `bench modes`
     (label, mode, level_N, status, resonance_Hz, ..._low/_high, damping_ratio,
     ..._low/_high) drawn over the model's."""
     from .rig import RigModel
-    model = RigModel.from_dict(model_dict or PITCH_MODEL)
+    model = pitch_model or RigModel.from_dict(PITCH_MODEL)
     freqs = grids.pitch_freqs_Hz if grids.pitch_freqs_Hz is not None else np.geomspace(40.0, 300.0, 24)
     f_s = model.omega_s / (2 * math.pi)
     fig = Figure(figsize=(18, 4.8), layout="constrained")
@@ -599,9 +602,9 @@ def write_index(rep: Report, checks: dict[float, str], quick: bool, seconds: flo
     rep.files += [readme, summary]
 
 
-def reproduce(out_dir: Path, *, quick: bool = False, progress=None, pitch_model: dict | None = None,
+def reproduce(out_dir: Path, *, quick: bool = False, progress=None, pitch_model: RigModel | None = None,
               measured: list[dict] | None = None, pitch_name: str = "",
-              other_models: list[tuple[str, dict]] | None = None) -> list[Path]:
+              other_models: list[tuple[str, RigModel]] | None = None) -> list[Path]:
     """Write the seed's numerical figures (PNG + CSV each) and an index into ``out_dir``.
 
     ``quick`` uses coarse grids (seconds instead of minutes). ``progress(done, total,

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import logging
 import math
+from dataclasses import fields
 
 import numpy as np
 
@@ -49,18 +50,12 @@ from .errors import ConfigurationError
 
 log = logging.getLogger(__name__)
 
-SHAKER_FIELDS = ("shaker_force_constant_N_per_A", "shaker_resistance_ohm", "shaker_inductance_H",
-                 "shaker_armature_mass_kg", "shaker_suspension_N_per_m", "shaker_damping_N_s_per_m")
-EFFECT_FIELDS = ("friction_alpha", "friction_v_ref_m_per_s", "pitch_inertia_kg_m2",
-                 "pitch_stiffness_N_m_per_rad", "pitch_damping_N_m_s_per_rad",
-                 "drive_height_m", "cg_height_m", "cubic_spring_N_per_m3",
-                 "quadratic_damping_N_s2_per_m2") + SHAKER_FIELDS
 ASYMMETRY_LIMIT = 0.5
 
 
 def validate(model) -> None:
     """Raise ValueError naming the field when an effect's parameters are not physical."""
-    for name in EFFECT_FIELDS:
+    for name in effect_fields(model):
         v = getattr(model, name)
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
             raise ConfigurationError(f"{name} must be finite and >= 0, got {v!r}")
@@ -81,6 +76,14 @@ def validate(model) -> None:
     if shaker_on(model) and model.shaker_resistance_ohm <= 0:
         raise ConfigurationError(f"shaker_resistance_ohm must be > 0 when the shaker model is on "
                          f"(shaker_force_constant_N_per_A > 0), got {model.shaker_resistance_ohm!r}")
+
+
+def effect_fields(model) -> tuple[str, ...]:
+    """The fields of ``model`` (a :class:`sim.rig.RigModel`) declared as an effect or the
+    shaker whose range starts at 0 (every one but the friction asymmetry's): each must be
+    finite and >= 0 in the model itself, whatever file it came from."""
+    return tuple(f.name for f in fields(model)
+                 if (k := f.metadata.get("key")) and k.group in ("effect", "shaker") and k.lo == 0)
 
 
 def shaker_on(model) -> bool:

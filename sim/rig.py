@@ -45,7 +45,8 @@ import hashlib
 import logging
 import math
 import threading
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
+from typing import Any
 
 import numpy as np
 
@@ -62,53 +63,135 @@ LINE_CHANNELS = ("", "disp", "force", "accel")
 REVERSAL_RESOLUTION = 16      # extra RK4 steps at small-force n < 1 reversals
 
 
+# ---------------------------------------------------------------------------- the model's keys
+# Each field of RigModel declares itself once (decision 0058): its unit, its range as a
+# [rig.model] key, what it means, its group and whether the plant implements it.  The TOML
+# schema (bench.config.model_schema), the key reference (docs/gen_keys.py), the twin's "not
+# in the plant" list, the plant-effect fields and what the drawn lines leave out are read
+# from here.
+GROUPS = {
+    "masing": "the Masing carriage",
+    "drive": "amplifier and shaker as a force source",
+    "sensor": "sensor sensitivities",
+    "noise": "sensor noise",
+    "linear": "linear damping and spring",
+    "sensor_error": "sensor errors",
+    "effect": "optional effects beyond the Masing model",
+    "line": "an interference line on one sensor",
+    "shaker": "the electrodynamic shaker (decision 0025)",
+    "numerics": "the simulation itself",
+}
+
+
+@dataclass(frozen=True)
+class ModelKey:
+    """One [rig.model] key: unit, range (``lo`` excluded when ``lo_open``; ``hi`` included),
+    meaning, group (:data:`GROUPS`), and whether the plant implements it (a key the plant
+    does not yet simulate is still parsed; the twin lists a cause that needs it as not in
+    the plant).  A text key is one of ``choices`` (its range unused)."""
+
+    unit: str
+    lo: float
+    hi: float
+    meaning: str
+    group: str
+    lo_open: bool = False
+    integer: bool = False
+    choices: tuple[str, ...] = ()
+    in_plant: bool = True
+
+    @property
+    def off(self) -> str | float:
+        """The value that turns this key's effect off ("" for a choice, else 0)."""
+        return "" if self.choices else 0.0
+
+
+def model_key(default, unit: str, lo: float, hi: float, meaning: str, group: str, **kw) -> Any:
+    """A RigModel field declaring its [rig.model] key (:class:`ModelKey`)."""
+    if group not in GROUPS:
+        raise ValueError(f"unknown group {group!r}; allowed: {sorted(GROUPS)}")
+    return field(default=default, metadata={"key": ModelKey(unit, lo, hi, meaning, group, **kw)})
+
+
+def model_keys(*groups: str, model: type | None = None) -> dict[str, ModelKey]:
+    """Every declared key of ``model`` (default: :class:`RigModel` as it is now), in field
+    order; only those of ``groups`` when given."""
+    return {f.name: f.metadata["key"] for f in fields(model or RigModel)
+            if "key" in f.metadata and (not groups or f.metadata["key"].group in groups)}
+
+
 @dataclass(frozen=True)
 class RigModel:
-    """Physical parameters of the simulated rig (SI units)."""
+    """Physical parameters of the simulated rig (SI units).  Each field is a [rig.model] key
+    declared with :func:`model_key`: adding an effect is one field here and its physics."""
 
-    F_s_N: float = 10.0
-    x_s_m: float = 10e-6
-    n: float = 1.5
-    mass_kg: float = 10.0
-    amp_gain_N_per_V: float = 20.0          # generator volt (amplitude) -> shaker force
-    amp_force_limit_N: float = 150.0
-    force_sens_V_per_N: float = 0.0225      # impedance head, 22.5 mV/N
-    accel_sens_V_per_m_s2: float = 0.0102   # 100 mV/g
-    disp_sens_V_per_m: float = 8000.0       # eddy-current probe, 8 V/mm
-    probe_standoff_m: float = 1.1e-3        # gap at x = 0, mid-range of a 0.1-2.1 mm probe
-    force_noise_N: float = 0.002
-    accel_noise_m_s2: float = 0.002
-    disp_noise_m: float = 2e-9
+    F_s_N: float = model_key(10.0, "N", 0, 1e4, "F_s, the friction force the Masing curve saturates at",
+                             "masing", lo_open=True)
+    x_s_m: float = model_key(10e-6, "m", 0, 1e-2, "x_s, the starting rolling displacement", "masing", lo_open=True)
+    n: float = model_key(1.5, "1", 0, 10, "n, the exponent of the virgin curve (not 1)", "masing", lo_open=True)
+    mass_kg: float = model_key(10.0, "kg", 0, 1e4, "m, the carriage mass", "masing", lo_open=True)
+    amp_gain_N_per_V: float = model_key(20.0, "N/V", 0, 1e4, "generator volt (amplitude) -> shaker force; the "
+                                        "blocked force per volt at DC when the shaker model is on", "drive",
+                                        lo_open=True)
+    amp_force_limit_N: float = model_key(150.0, "N", 0, 1e4, "the amplifier's largest force amplitude", "drive",
+                                         lo_open=True)
+    force_sens_V_per_N: float = model_key(0.0225, "V/N", 0, 100, "impedance head, 22.5 mV/N", "sensor", lo_open=True)
+    accel_sens_V_per_m_s2: float = model_key(0.0102, "V/(m/s^2)", 0, 100, "accelerometer, 100 mV/g", "sensor",
+                                             lo_open=True)
+    disp_sens_V_per_m: float = model_key(8000.0, "V/m", 0, 1e7, "eddy-current probe, 8 V/mm", "sensor", lo_open=True)
+    probe_standoff_m: float = model_key(1.1e-3, "m", 0, 0.1, "the probe's gap at x = 0, mid-range of a 0.1-2.1 mm "
+                                        "probe", "sensor")
+    force_noise_N: float = model_key(0.002, "N", 0, 1e3, "Gaussian noise of the force channel", "noise")
+    accel_noise_m_s2: float = model_key(0.002, "m/s^2", 0, 1e4, "Gaussian noise of the acceleration channel",
+                                        "noise")
+    disp_noise_m: float = model_key(2e-9, "m", 0, 1e-2, "Gaussian noise of the displacement channel", "noise")
     # optional effects, off by default
-    viscous_N_s_per_m: float = 0.0
-    spring_N_per_m: float = 0.0
-    disp_delay_s: float = 0.0
-    force_gain_error: float = 0.0           # relative, e.g. 0.02 = reads 2 % high
-    accel_gain_error: float = 0.0
-    disp_gain_error: float = 0.0
-    friction_alpha: float = 0.0             # F = F_Masing(x) (1 + alpha |v| / v_ref)
-    friction_v_ref_m_per_s: float = 0.0
-    pitch_inertia_kg_m2: float = 0.0        # J about the guideway contact line; 0 = no pitch
-    pitch_stiffness_N_m_per_rad: float = 0.0
-    pitch_damping_N_m_s_per_rad: float = 0.0
-    drive_height_m: float = 0.0             # h: shaker force and accelerometer above the guideway
-    cg_height_m: float = 0.0                # e: centre of gravity above the guideway
-    cubic_spring_N_per_m3: float = 0.0      # hardening spring k3 x^3
+    viscous_N_s_per_m: float = model_key(0.0, "N s/m", 0, 1e6, "c, viscous damping c x'", "linear")
+    spring_N_per_m: float = model_key(0.0, "N/m", 0, 1e9, "k, a linear spring k x", "linear")
+    disp_delay_s: float = model_key(0.0, "s", 0, 0.1, "a delay of the displacement channel", "sensor_error")
+    force_gain_error: float = model_key(0.0, "relative", -0.5, 0.5, "the force sensor reads (1 + this) x the "
+                                        "force, e.g. 0.02 = 2 % high", "sensor_error")
+    accel_gain_error: float = model_key(0.0, "relative", -0.5, 0.5, "the accelerometer's relative gain error",
+                                        "sensor_error")
+    disp_gain_error: float = model_key(0.0, "relative", -0.5, 0.5, "the displacement probe's relative gain error",
+                                       "sensor_error")
+    friction_alpha: float = model_key(0.0, "1", 0, 100, "alpha: F = F_Masing(x) (1 + alpha |v| / v_ref)", "effect")
+    friction_v_ref_m_per_s: float = model_key(0.0, "m/s", 0, 10, "v_ref of the speed-dependent friction, > 0 "
+                                              "when friction_alpha > 0", "effect")
+    pitch_inertia_kg_m2: float = model_key(0.0, "kg m^2", 0, 1e3, "J about the guideway contact line; must exceed "
+                                           "mass_kg * cg_height_m^2; 0 = no pitching mode", "effect")
+    pitch_stiffness_N_m_per_rad: float = model_key(0.0, "N m/rad", 0, 1e9, "k_th, > 0 when the pitch is on",
+                                                   "effect")
+    pitch_damping_N_m_s_per_rad: float = model_key(0.0, "N m s/rad", 0, 1e6, "c_th, the pitching mode's damping",
+                                                   "effect")
+    drive_height_m: float = model_key(0.0, "m", 0, 10, "h: shaker force and accelerometer above the guideway",
+                                      "effect")
+    cg_height_m: float = model_key(0.0, "m", 0, 10, "e: centre of gravity above the guideway", "effect")
+    cubic_spring_N_per_m3: float = model_key(0.0, "N/m^3", 0, 1e20, "k3, a hardening spring k3 x^3", "effect")
     # an interference line on one sensor (mains hum), not locked to the drive: off when ""
-    line_channel: str = ""                  # "disp" | "force" | "accel"
-    line_freq_Hz: float = 0.0
-    line_amplitude: float = 0.0             # SI unit of that channel (m, N, m/s^2)
-    quadratic_damping_N_s2_per_m2: float = 0.0  # c2 x'|x'| (oil, air)
-    friction_asymmetry: float = 0.0         # a: friction saturates at +F_s(1+a), -F_s(1-a); |a| < 0.5
-    # electrodynamic shaker (decision 0025); off (ideal force source) while Bl = 0
-    shaker_force_constant_N_per_A: float = 0.0   # Bl
-    shaker_resistance_ohm: float = 0.0           # R (coil + amplifier output), > 0 when on
-    shaker_inductance_H: float = 0.0             # L, electrical pole at R / (2 pi L)
-    shaker_armature_mass_kg: float = 0.0         # m_a, moves with the drive point
-    shaker_suspension_N_per_m: float = 0.0       # k_a, armature suspension to ground
-    shaker_damping_N_s_per_m: float = 0.0        # c_a
-    steps_per_period: int = 400             # RK4 resolution of the drive period (minimum)
-    seed: int = 0
+    line_channel: str = model_key("", "", 0, 0, "the sensor an interference line (mains hum) adds to; "
+                                  "\"\" = none", "line", choices=LINE_CHANNELS)
+    line_freq_Hz: float = model_key(0.0, "Hz", 0, 1e5, "the interference line's frequency, > 0 when "
+                                    "line_channel is set", "line")
+    line_amplitude: float = model_key(0.0, "unit of line_channel: m, N or m/s^2", 0, 1e4,
+                                      "the interference line's amplitude", "line")
+    quadratic_damping_N_s2_per_m2: float = model_key(0.0, "N s^2/m^2", 0, 1e9, "c2, quadratic damping c2 x'|x'| "
+                                                     "(oil, air)", "effect")
+    friction_asymmetry: float = model_key(0.0, "1", -0.5, 0.5, "a: friction saturates at +F_s(1+a), -F_s(1-a); "
+                                          "|a| < 0.5", "effect", lo_open=True)
+    # electrodynamic shaker (decision 0025): on when the force constant Bl > 0; then
+    # amp_gain_N_per_V is the blocked force per generator volt at DC
+    shaker_force_constant_N_per_A: float = model_key(0.0, "N/A", 0, 1e3, "Bl; 0 = an ideal force source", "shaker")
+    shaker_resistance_ohm: float = model_key(0.0, "ohm", 0, 1e3, "R (coil + amplifier output), > 0 when the "
+                                             "shaker is on", "shaker")
+    shaker_inductance_H: float = model_key(0.0, "H", 0, 1, "L, the electrical pole at R / (2 pi L)", "shaker")
+    shaker_armature_mass_kg: float = model_key(0.0, "kg", 0, 100, "m_a (armature + stinger), moves with the drive "
+                                               "point", "shaker")
+    shaker_suspension_N_per_m: float = model_key(0.0, "N/m", 0, 1e8, "k_a, armature suspension to ground", "shaker")
+    shaker_damping_N_s_per_m: float = model_key(0.0, "N s/m", 0, 1e5, "c_a, the armature's damping", "shaker")
+    steps_per_period: int = model_key(400, "steps", 20, 1e5, "RK4 steps per drive period (minimum)", "numerics",
+                                      integer=True)
+    seed: int = model_key(0, "", 0, 2**63 - 1, "seed of the sensor noise", "numerics", integer=True)
 
     def __post_init__(self):
         for name in ("F_s_N", "x_s_m", "mass_kg", "amp_gain_N_per_V", "amp_force_limit_N",

@@ -32,7 +32,7 @@ from functools import lru_cache
 import numpy as np
 
 from . import plant_effects
-from .rig import RigModel, SimulatedRig
+from .rig import RigModel, SimulatedRig, model_keys
 
 log = logging.getLogger(__name__)
 
@@ -46,10 +46,8 @@ GLIDE_STEPS, GLIDE_PERIODS = 16, 2   # from one frequency to the next: 16 phase-
 SPLIT = 0.8                    # feed mode below, pitching mode above SPLIT x the friction-free pitch frequency
 GOLDEN_TOLERANCE = 5e-4        # relative bracket width at which a peak search stops
 
-LEFT_OUT: dict = dict(force_noise_N=0.0, accel_noise_m_s2=0.0, disp_noise_m=0.0, line_channel="", line_freq_Hz=0.0,
-                line_amplitude=0.0, shaker_force_constant_N_per_A=0.0, shaker_resistance_ohm=0.0,
-                shaker_inductance_H=0.0, shaker_armature_mass_kg=0.0, shaker_suspension_N_per_m=0.0,
-                shaker_damping_N_s_per_m=0.0)
+# what the lines leave out: every key of the noise, the interference line and the shaker, off
+LEFT_OUT: dict = {k: key.off for k, key in model_keys("noise", "line", "shaker").items()}
 PLAIN = ("F_s_N", "x_s_m", "n", "mass_kg")
 
 

@@ -70,7 +70,7 @@ def cmd_warmup(args) -> int:
 
 def cmd_twins(args) -> int:
     from drivers import run_standalone
-    from sim.rig import RigModel, SimulatedRig
+    from sim.rig import SimulatedRig
 
     from ..config import DEFAULTS, load_rig
     rig = load_rig(Path(args.rig) if args.rig else DEFAULTS / "sim_rig.toml")
@@ -81,7 +81,7 @@ def cmd_twins(args) -> int:
     from ..signals import ENDING, handling
     stop = threading.Event()          # serving until a signal is this command's work: it ends it, exit 0
     with handling(lambda signum, frame: stop.set(), *ENDING):
-        run_standalone(SimulatedRig(RigModel.from_dict(rig.model)), args.host, serial_ports=args.serial, stop=stop)
+        run_standalone(SimulatedRig(rig.model), args.host, serial_ports=args.serial, stop=stop)
     print("stopping twins")
     return 0
 

@@ -39,12 +39,13 @@ def full_model_line(rig: dict, rows: list[dict], results: list[dict]) -> tuple[n
     """(amplitude, frequency, damping ratio, label) of the rig model's phase-resonance
     backbone when the run is on a simulated rig whose model the single-harmonic balance
     leaves something out of; None otherwise (the harmonic balance is that model)."""
-    if not (rig.get("simulated") and rig.get("model")) or not rows:
+    from procedures.plan import stored_model
+    stored = stored_model(rig)
+    if stored is None or not rows:
         return None
     from sim.modal import pitch_band_Hz
-    from sim.rig import RigModel
     from sim.rig_response import line_model, phase_backbone, single_mode
-    model = line_model(RigModel.from_dict(rig["model"]))
+    model = line_model(stored)
     band = pitch_band_Hz(model)
     if single_mode(model):
         return None

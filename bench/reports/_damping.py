@@ -63,13 +63,12 @@ def mode_masses(meta: dict):
     pitching mode's mass comes from the model at its resonance (:func:`add_damping`)."""
     rig = meta.get("rig") or {}
     model = None
-    if rig.get("model"):
-        from sim.rig import RigModel
-        try:
-            model = RigModel.from_dict(rig["model"])
-        except Exception as e:  # noqa: BLE001 - the ratios come out without the model's masses
-            log.warning("rig model unreadable for the energy balance's masses: %s", e)
-    if model is not None and rig.get("simulated"):
+    from procedures.plan import stored_model
+    try:
+        model = stored_model(rig)
+    except Exception as e:  # noqa: BLE001 - the ratios come out without the model's masses
+        log.warning("rig model unreadable for the energy balance's masses: %s", e)
+    if model is not None:
         feed = (float(model.mass_kg), "carriage mass (rig model)")
     else:
         feed = (float(rig.get("expected_mass_kg", math.nan)), "carriage mass ([rig.expected] mass_kg)")

@@ -26,14 +26,6 @@ MIN_TURN_DEG = 30.0
 MIN_TURN_OTHER_DEG = 10.0
 
 
-def has_pitch(model: dict) -> bool:
-    """Whether a stored rig model (run.json's rig.model) has a pitching mode."""
-    try:
-        return float(model.get("pitch_inertia_kg_m2", 0.0) or 0.0) > 0
-    except (TypeError, ValueError, AttributeError):
-        return False
-
-
 def _turn_deg(H: np.ndarray) -> float:
     """The largest minus the smallest unwrapped phase, in degrees."""
     ph = np.unwrap(np.angle(H))

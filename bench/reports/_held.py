@@ -37,10 +37,10 @@ def held_response_comparison(meta: dict, results: list[dict], flagged: set[str] 
     """The comparison of a response-controlled run whose levels hold ``quantity`` ("disp"
     or "accel"), per level: the model's compliance_pp at the held level (the line) and at
     each step's measured amplitude (the difference)."""
-    from sim.rig import RigModel
+    from procedures.plan import stored_model
     from sim.rig_response import held_response, line_model
-    rig = meta["rig"]
-    declared = RigModel.from_dict(rig["model"])
+    declared = stored_model(meta["rig"])
+    assert declared is not None                 # called for a simulated rig's run only
     model = line_model(declared)
     levels = (meta.get("plan") or {}).get("levels_N") or []
     freqs = np.array(sorted({r["freq_Hz"] for r in results}))
@@ -79,7 +79,7 @@ def held_response_comparison(meta: dict, results: list[dict], flagged: set[str] 
         d = np.array(diff)
         out.append(LevelComparison(level, math.nan, len(steps), int(bad.sum()), _median(d), _signed_max(d),
                                    _signed_max(d[~bad]), []))
-    return ModelComparison(model.__dict__.copy(), model.omega_s, curves, at_steps, out, notes)
+    return ModelComparison(model, model.omega_s, curves, at_steps, out, notes)
 
 
 def comparison_of(meta: dict, results: list[dict], flagged: set[str] | None = None) -> ModelComparison | None:

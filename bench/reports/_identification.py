@@ -113,13 +113,13 @@ def identification_data(run_dir: Path, meta: dict, analysis: dict | None = None)
     final = meta.get("identification")
     truth = None
     rig = meta.get("rig") or {}
-    if rig.get("simulated") and rig.get("model"):
-        from sim.rig import RigModel
-        try:
-            model = RigModel.from_dict(rig["model"])
+    from procedures.plan import stored_model
+    try:
+        model = stored_model(rig)
+        if model is not None:
             truth = {p.key: float(getattr(model, p.key)) for p in ID_PARAMS}
-        except Exception as e:          # the report must come out even with a bad model entry
-            log.warning("rig model unreadable: %s", e)
+    except Exception as e:          # the report must come out even with a bad model entry
+        log.warning("rig model unreadable: %s", e)
     return IdentificationData([h for h in RunStore(Path(run_dir)).identification_history() if _is_estimate(h)],
                               final if _is_estimate(final) else None, truth,
                               list(meta.get("identifiability_warnings") or []),

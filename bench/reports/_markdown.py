@@ -508,10 +508,10 @@ def _results_md(run: RunData, out: Path, files: list[tuple[str, str]]) -> list[s
 
     md += modes_md(run)
     if cmp:
-        p = cmp.params
+        p = cmp.model
         md += ["## Model vs measurement (simulated rig)", "",
-               f"Rig model (true parameters, defaults filled in): F_s = {p['F_s_N']:g} N, x_s = {p['x_s_m']:g} m, "
-               f"n = {p['n']:g}, m = {p['mass_kg']:g} kg.", ""]
+               f"Rig model (true parameters, defaults filled in): F_s = {p.F_s_N:g} N, x_s = {p.x_s_m:g} m, "
+               f"n = {p.n:g}, m = {p.mass_kg:g} kg.", ""]
         md += [f"- {n}" for n in cmp.engine_notes]
         md += ["- relative difference = measured / model - 1 of the stored compliance_pp (from "
                f"{pp_source(results)}), over all steps; max = the value of largest magnitude.",

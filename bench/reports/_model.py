@@ -15,10 +15,14 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ._steps import UNSETTLED_RESIDUAL, residual_ratio
+
+if TYPE_CHECKING:
+    from sim.rig import RigModel
 
 log = logging.getLogger(__name__)
 
@@ -44,7 +48,7 @@ class LevelComparison:
 class ModelComparison:
     """The sim/ engine's compliance_pp for the rig's true parameters, per level."""
 
-    params: dict                              # the RigModel used (defaults filled in)
+    model: RigModel                           # the rig model used (its defaults filled in)
     omega_s: float
     curves: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]]   # level -> (f, C_pp, flags)
     at_steps: dict[str, float]                # step key -> model compliance_pp (m/N)
@@ -83,13 +87,12 @@ def model_comparison(meta: dict, results: list[dict], flagged: set[str] | None =
     """None unless the run is on a simulated rig with a stored model.  ``flagged``: keys of
     the steps the step quality check (sim.artefacts) did not find simply usable; None
     flags by the stored displacement residual instead."""
-    rig = meta.get("rig") or {}
-    if not (rig.get("simulated") and rig.get("model")) or not results:
+    from procedures.plan import stored_model
+    model = stored_model(meta.get("rig"))
+    if model is None or not results:
         return None
-    from sim.rig import RigModel
     from sim.rig_response import line_model, plain_masing
 
-    model = RigModel.from_dict(rig["model"])
     ws = model.omega_s
     plan = meta.get("plan") or {}
     levels_N = plan.get("levels_N") or sorted({r["target_force_N"] for r in results})
@@ -141,7 +144,7 @@ def model_comparison(meta: dict, results: list[dict], flagged: set[str] | None =
         diff = np.array(diff)
         levels.append(LevelComparison(level, gamma0, len(steps), int(bad.sum()), _median(diff), _signed_max(diff),
                                       _signed_max(diff[~bad]), notes))
-    return ModelComparison(model.__dict__.copy(), ws, curves, at_steps, levels, engine_notes, responses)
+    return ModelComparison(model, ws, curves, at_steps, levels, engine_notes, responses)
 
 
 def _shooting_line(model, level: float, grid: np.ndarray, notes: list[str]):

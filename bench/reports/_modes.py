@@ -24,10 +24,11 @@ import numpy as np
 from procedures.kind import FORCE, Quantity, of_stored_plan
 from sim.modal import LevelData, ModeEstimate, pitch_band_Hz, track_modes
 from sim.modal_flat import mark_overdamped
+from sim.plant_effects import pitch_on
 
 from ..storage import RunStore
 from ._damping import DAMPING_COLUMNS, add_damping, damping_row
-from ._earned import earned_pitch, has_pitch
+from ._earned import earned_pitch
 from ._held import comparison_of
 from ._model import ModelComparison
 from ._refinement import mark_refinement
@@ -93,9 +94,8 @@ def model_peaks(cmp: ModelComparison | None) -> tuple[dict, dict]:
         return {}, {}
     if not cmp.responses:
         return model_feed_peaks(cmp), {}
-    from sim.rig import RigModel
     from sim.rig_response import mode_split_Hz, resonance_Hz
-    model = RigModel.from_dict(cmp.params)
+    model = cmp.model
     split = mode_split_Hz(model)
     band = math.isfinite(split)
     feed, pitch = {}, {}
@@ -203,14 +203,13 @@ def modes_of(path: Path, meta: dict, results: list[dict], cmp: ModelComparison |
     data = [LevelData.from_steps(float(levels_N[li]) if li < len(levels_N) else steps[0]["target_force_N"], steps)
             for li, steps in sorted(by_level.items()) if len(steps) >= 3]
     feed_model, pitch_model = model_peaks(cmp)
-    band = None
-    if rig.get("simulated") and rig.get("model"):
-        from sim.rig import RigModel
-        band = pitch_band_Hz(RigModel.from_dict(rig["model"]))
+    from procedures.plan import stored_model
+    model = stored_model(rig)
+    band = pitch_band_Hz(model) if model else None
     pred = {lv: v[0] for lv, v in feed_model.items()}
-    model_without_pitch = bool(rig.get("model")) and band is None and not has_pitch(rig["model"])
+    model_without_pitch = model is not None and band is None and not pitch_on(model)
     modes = track_modes(data, feed_predicted_Hz=pred, pitch=not model_without_pitch, pitch_band_Hz=band)
-    if band is None and not rig.get("model"):
+    if band is None and model is None:
         modes = earned_pitch(modes, data)                  # no model: a second peak must earn its place
     if band is None and not any(e.mode == "pitch" and e.ok for e in modes):
         modes = [e for e in modes if e.mode != "pitch"]    # no pitching mode in the data nor the model

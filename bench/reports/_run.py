@@ -55,9 +55,12 @@ def probe_resolution(meta: dict, results: list[dict], events: list[dict]) -> Pro
     for e in events:
         if e.get("event") == "probe_noise":
             rms, source = float(e.get("rms_m") or math.nan), "measured at rest before the run"
-    model = (meta.get("rig") or {}).get("model") or {}
-    if not (math.isfinite(rms) and rms > 0) and (meta.get("rig") or {}).get("simulated"):
-        rms, source = float(model.get("disp_noise_m", 2e-9)), "the simulated rig model's disp_noise_m"
+    rig = meta.get("rig") or {}
+    if not (math.isfinite(rms) and rms > 0) and rig.get("simulated"):
+        from procedures.plan import stored_model
+        from sim.rig import RigModel
+        model = stored_model(rig) or RigModel()          # a run that stored no model ran the default one
+        rms, source = float(model.disp_noise_m), "the simulated rig model's disp_noise_m"
     if not (math.isfinite(rms) and rms > 0):
         return None
     below = {}

@@ -25,7 +25,6 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 
-from procedures.plan import GUESS_KEYS
 from sim.errors import ConfigurationError
 
 from .engine import Engine, Outcome, Study
@@ -136,24 +135,18 @@ def identify_source(source: Path, out_dir: Path | None = None, rig: Path | None 
     (parameters, reduced_chi2, steps_used, steps_rejected): a cheap per-source function
     where the full analysis is not needed.  Guesses from the run's rig, else from ``rig``
     (default: the simulated rig's file); writes identification.json into ``out_dir``."""
-    from bench.config import DEFAULTS, load_rig
+    from bench.config import DEFAULTS, load_rig, stored_rig
     from bench.sources import load_source
     from bench.storage import write_json
     from procedures.online_id import MAX_HARMONICS
     from sim.discrepancy.rigfit import identify_steps
 
     src = load_source(source)
-    if src.kind == "run":
-        r = src.metadata["rig"]
-        guess = {k: r[f"expected_{k}"] for k in GUESS_KEYS}
-        rig_model = r.get("model") or {}
-    else:
-        rr = load_rig(rig or DEFAULTS / "sim_rig.toml")
-        guess = rr.guess()
-        rig_model = rr.model or {}
+    rr = (stored_rig(src.metadata["rig"], f"{source}/run.json") if src.kind == "run"
+          else load_rig(rig or DEFAULTS / "sim_rig.toml"))
     if not src.steps:
         raise ConfigurationError(f"{source}: no steps with force, acceleration and displacement to identify from")
-    est = identify_steps(src.steps, guess, rig_model, harmonics=MAX_HARMONICS)
+    est = identify_steps(src.steps, rr.guess(), rr.model, harmonics=MAX_HARMONICS)
     out = dict(schema="guideway-bench/identification/1", source=str(source), kind=src.kind,
                parameters={k: dict(value=est["values"][k], low=est["low"][k], high=est["high"][k])
                            for k in est["values"]},

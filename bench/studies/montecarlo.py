@@ -22,7 +22,7 @@ import numpy as np
 
 from drivers import plan_block
 from sim.errors import ConfigurationError
-from sim.rig import SimulatedRig
+from sim.rig import RigModel, SimulatedRig
 
 from .engine import Engine, Outcome, Study
 
@@ -150,15 +150,14 @@ def draw_rig(expected: dict, spread: float, n_spread: float, rng: np.random.Gene
     return truth
 
 
-def simulate_plan(plan, rig, model: dict) -> list[dict]:
-    """Run ``plan`` on the RK4 plant with ``model`` (RigModel keys); the step results."""
+def simulate_plan(plan, rig, model: RigModel) -> list[dict]:
+    """Run ``plan`` on the RK4 plant of ``model``; the step results."""
     from bench.session import check_envelope
     from procedures.factory import procedure_for
     from procedures.safety import tightest
-    from sim.rig import RigModel
 
     plan = check_envelope(plan, rig)
-    plant = SimulatedRig(RigModel.from_dict(model))
+    plant = SimulatedRig(model)
     daq = PlantDaq(plant)
     rest = daq.acquire_periods(100.0, 10).disp_m
     proc = procedure_for(plan, PlantGenerator(plant), daq, amp_gain_N_per_V=rig.amp_gain_N_per_V,
@@ -177,11 +176,9 @@ def identification_sample(inputs: dict, seed: int) -> list[dict]:
     rng = np.random.default_rng(seed)
     expected = rig.guess()
     truth = draw_rig(expected, inputs["spread"], inputs["n_spread"], rng)
-    model = dict(rig.model)
-    k = inputs["noise_scale"]
-    for name, default in (("force_noise_N", 0.002), ("accel_noise_m_s2", 0.002), ("disp_noise_m", 2e-9)):
-        model[name] = k * model.get(name, default)
-    model.update(truth, seed=int(rng.integers(2 ** 31)))
+    m, k = rig.model or RigModel(), inputs["noise_scale"]       # simulated (_configs): a model
+    model = replace(m, force_noise_N=k * m.force_noise_N, accel_noise_m_s2=k * m.accel_noise_m_s2,
+                    disp_noise_m=k * m.disp_noise_m, **truth, seed=int(rng.integers(2 ** 31)))
     results = simulate_plan(plan, rig, model)
     # the model of the rig: the effects its file declares (decision 0042)
     est = identify_steps(results, expected, model)
@@ -192,7 +189,7 @@ def identification_sample(inputs: dict, seed: int) -> list[dict]:
         rows.append(dict(sample=int(inputs["sample"]), plan=plan.name, parameter=p, truth=t, guess=expected[p],
                          estimate=float(v), low=float(lo), high=float(hi), rel_error=float(v / t - 1.0),
                          covered=bool(lo <= t <= hi), rel_std=float(est["rel_std"][p]),
-                         steps=len(results), reduced_chi2=float(est["reduced_chi2"]), noise_seed=model["seed"],
+                         steps=len(results), reduced_chi2=float(est["reduced_chi2"]), noise_seed=model.seed,
                          misfit=bool(est.get("misfit"))))
     return rows
 

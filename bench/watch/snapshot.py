@@ -27,6 +27,7 @@ from pathlib import Path
 from procedures.kind import ProcedureKind
 from procedures.plan import GUESS_KEYS, Plan
 
+from ..config import ConfigError, stored_rig
 from ..files import open_regular, read_file
 from ..storage import RunDirError, RunStatus, stored_plan
 from .stop import STOP_FILE
@@ -328,13 +329,11 @@ class RunReader:
             data = [LevelData.from_steps(plan.levels_N[li] if plan and li < len(plan.levels_N)
                                          else rs[0].get("target_force_N"), rs)
                     for li, rs in sorted(by_level.items()) if len(rs) >= 3]
-            rig = meta.get("rig") or {}
-            band = None
-            if rig.get("simulated") and rig.get("model"):
-                from sim.rig import RigModel
-                band = pitch_band_Hz(RigModel.from_dict(rig["model"]))
+            from procedures.plan import stored_model
+            model = stored_model(meta.get("rig"))
+            band = pitch_band_Hz(model) if model else None
             # a rig model without a pitching mode: no pitch rows (decision 0056)
-            modes = track_modes(data, pitch=not (rig.get("simulated") and rig.get("model") and band is None),
+            modes = track_modes(data, pitch=not (model is not None and band is None),
                                 pitch_band_Hz=band)
         except Exception as e:  # noqa: BLE001 - the page must come out; the rest of it is unaffected
             log.warning("modes could not be estimated: %s", e)
@@ -370,7 +369,10 @@ class RunReader:
             final = None if not isinstance(final, dict) else {"error": final.get("error", "unusable result")}
         if analysis is not None and ok(analysis):
             final = analysis
-        expected = {k: meta.get("rig", {}).get(f"expected_{k}") for k in GUESS_KEYS}
+        try:
+            expected: dict = stored_rig(meta["rig"], "run.json").guess()
+        except (KeyError, TypeError, ConfigError):    # a damaged rig entry: the page shows none
+            expected = dict.fromkeys(GUESS_KEYS)
         return dict(history=history, latest_warnings=latest_warnings, final=final, expected=expected)
 
     def _warnings(self, meta: dict, results: list[dict]) -> list[dict]:

@@ -23,7 +23,9 @@ by sqrt(reduced chi-square) and by the empirical floor.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -33,6 +35,9 @@ from ..identify import MISFIT_CHI2, PARAMS, PRIOR_SIGMA, StepHarmonics, misfit_t
 from .analysis import base_fit, data_from_steps
 from .fit import N_BOUNDS, Fit, Weights, fit
 from .models import EFFECTS, Data, Model
+
+if TYPE_CHECKING:
+    from ..rig import RigModel
 
 BOUND_FACTOR = 20.0        # online: F_s, x_s, m within this factor of the rig file's expected values
 
@@ -59,14 +64,16 @@ def as_steps(steps) -> list:
     return out
 
 
-def rig_effects(model: dict | None) -> dict[str, np.ndarray]:
-    """Effect id -> start values (the Model's fit units) of what ``[rig.model]`` declares."""
+def rig_effects(model: RigModel | Mapping | None) -> dict[str, np.ndarray]:
+    """Effect id -> start values (the Model's fit units) of what ``[rig.model]`` declares:
+    a rig's parsed model, or its keys (a key not given is 0)."""
     if not model:
         return {}
+    keys: Mapping = model if isinstance(model, Mapping) else asdict(model)
 
     def g(k: str) -> float:
         try:
-            v = float(model.get(k) or 0.0)
+            v = float(keys.get(k) or 0.0)
         except (TypeError, ValueError):
             return 0.0
         return v if math.isfinite(v) else 0.0
@@ -124,7 +131,7 @@ def estimate_dict(f: Fit, steps_used: int, source: str, extra_warnings: list[str
                 misfit=bool(mis), source=source)
 
 
-def identify_rig(steps, guess: dict, rig_model: dict | None = None, extra: tuple[str, ...] = (),
+def identify_rig(steps, guess: dict, rig_model: RigModel | Mapping | None = None, extra: tuple[str, ...] = (),
                  harmonics: int = 9, max_nfev: int = 100, source: str = "final fit with the rig's modes") -> dict:
     """F_s, x_s, n, m with the rig's declared effects (and ``extra`` ones, e.g. an analysis'
     causes) fitted alongside, in the noise of the model's own residuals; an estimate dict
@@ -188,7 +195,7 @@ class OnlineRigFit:
     prior of :mod:`sim.identify` at the expected values and bounds a factor
     :data:`BOUND_FACTOR` either side of them; an estimate on a bound is flagged."""
 
-    def __init__(self, guess: dict, rig_model: dict, harmonics: int = 5):
+    def __init__(self, guess: dict, rig_model: RigModel | Mapping | None, harmonics: int = 5):
         self.guess = dict(guess)
         self.K = harmonics
         self.model = Model((), harmonics)
@@ -256,7 +263,7 @@ class OnlineRigFit:
         return est
 
 
-def fixed_effects_note(rig_model: dict | None) -> str:
+def fixed_effects_note(rig_model: RigModel | Mapping | None) -> str:
     """Words for what the rig file declares (for reports)."""
     e = rig_effects(rig_model)
     return ", ".join(EFFECTS[k].label for k in e) if e else ""
@@ -264,7 +271,7 @@ def fixed_effects_note(rig_model: dict | None) -> str:
 
 
 
-def identify_steps(steps, guess: dict, rig_model: dict | None = None, extra: tuple[str, ...] = (),
+def identify_steps(steps, guess: dict, rig_model: RigModel | Mapping | None = None, extra: tuple[str, ...] = (),
                    harmonics: int = 9) -> dict:
     """The one identification of stored or measured steps every output uses (``bench
     identify``, the run's final fit, studies): the model of the rig when the rig file

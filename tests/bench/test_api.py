@@ -160,7 +160,7 @@ def test_the_factory_checks_model_keys_as_the_rig_file_does(sim_rig_factory):
     with pytest.raises(bench.ConfigurationError, match="viscous_N_s_per_m"):
         sim_rig_factory(viscous_N_s_per_m=-5.0)
     servers = sim_rig_factory(DEFAULTS / "sim_rig_pitch.toml", viscous_N_s_per_m=40.0)
-    assert servers.model["viscous_N_s_per_m"] == 40.0 and servers.model["pitch_inertia_kg_m2"] > 0
+    assert servers.model.viscous_N_s_per_m == 40.0 and servers.model.pitch_inertia_kg_m2 > 0
 
 
 def test_the_plugin_is_registered_with_pytest_by_the_installed_package():

@@ -88,13 +88,13 @@ def test_the_simulated_rig_parses_as_documented():
     assert (rig.limits.drive_V, rig.limits.force_N, rig.limits.disp_m, rig.limits.accel_m_s2) == \
         (7.0, 130.0, 0.9e-3, 20.0)
     assert rig.amp_gain_N_per_V == 20.0
-    assert rig.model["F_s_N"] == 10.0 and rig.model["n"] == 1.5
+    assert rig.model.F_s_N == 10.0 and rig.model.n == 1.5
 
 
 def test_a_non_simulated_rig_parses(tmp_path):
     rig = load_rig(write(tmp_path, "rig.toml", RIG))
     assert not rig.simulated and rig.generator_url == "socket://192.0.2.10:5025"
-    assert rig.model == {}
+    assert rig.model is None
 
 
 # --------------------------------------------------------------------------- plan errors

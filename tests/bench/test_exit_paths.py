@@ -190,7 +190,7 @@ def test_a_second_ctrl_c_during_switch_off_does_not_cut_it_short(tmp_path, mocke
 
 
 def test_a_target_out_of_the_probe_range_stops_before_the_output_goes_on(tmp_path, twins_of_run):
-    far = dict(SIM_RIG.model, probe_standoff_m=3.0e-3)       # beyond the 0.1-2.1 mm range
+    far = dataclasses.replace(SIM_RIG.model, probe_standoff_m=3.0e-3)       # beyond the 0.1-2.1 mm range
     run(tmp_path / "run", rig=dataclasses.replace(SIM_RIG, model=far))
     assert not output_on(twins_of_run)
     assert "target out of range" in the(tmp_path / "run", "abort")["reason"]
@@ -345,7 +345,7 @@ def _rig_dict(rig) -> dict:
     return {"name": rig.name, "simulated": True, "calibration": _calibration(rig),
             "limits": {"drive_V": rig.limits.drive_V, "force_N": rig.limits.force_N,
                        "disp_m": rig.limits.disp_m, "accel_m_s2": rig.limits.accel_m_s2},
-            "model": dict(rig.model)}
+            "model": dataclasses.asdict(rig.model)}
 
 
 def _calibration(rig) -> dict:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import math
+from dataclasses import asdict
 
 import numpy as np
 import pytest
@@ -29,7 +30,7 @@ LEVELS_N = [0.3, 3.0]
 def pitch_rig(oil: str):
     from dataclasses import replace
     rig = load_rig(DEFAULTS / "sim_rig_pitch.toml")
-    return rig if oil == "A" else replace(rig, model=dict(rig.model, **OIL_B))
+    return rig if oil == "A" else replace(rig, model=replace(rig.model, **OIL_B))
 
 
 @pytest.fixture(scope="module")
@@ -98,7 +99,7 @@ def test_each_model_line_agrees_with_its_difference_panel_and_the_markers(runs):
 def _independent_peak(oil: str, force_N: float, f0: float, channel: str, rel: float = 0.01) -> float:
     """The peak of compliance_pp (channel "pp") or of the drive point's |A1/P1| ("accel")
     of the independent simulation at f0 (1 - rel), f0, f0 (1 + rel): the parabola's vertex."""
-    m = pitch_rig(oil).model
+    m = asdict(pitch_rig(oil).model)
     F_s, x_s, mass = m["F_s_N"], m["x_s_m"], m["mass_kg"]
     ws = math.sqrt(F_s / (x_s * mass))
     J, h, e = m["pitch_inertia_kg_m2"], m["drive_height_m"], m["cg_height_m"]
@@ -128,13 +129,12 @@ def test_the_models_resonances_are_the_independent_simulations(runs):
     pitching mode by its own definition, the peak of |A1/F1| (oil A, 3 N), not of |X1/F1|
     (issue 32: `bench paper` drew 204.79 Hz against a true 206.17 Hz)."""
     from sim.paper import pitch_resonances
-    from sim.rig import RigModel
     from sim.rig_response import level_response, resonance_Hz
-    model_b = RigModel.from_dict(pitch_rig("B").model)
+    model_b = pitch_rig("B").model
     resp = level_response(model_b, 10.0, np.geomspace(40.0, 120.0, 12))
     feed, _, _ = resonance_Hz(resp, model_b, "compliance_pp")
     assert feed == pytest.approx(_independent_peak("B", 10.0, feed, "pp"), rel=0.003)
-    _, pitch, _ = pitch_resonances(RigModel.from_dict(pitch_rig("A").model), 3.0, np.geomspace(150.0, 260.0, 10))
+    _, pitch, _ = pitch_resonances(pitch_rig("A").model, 3.0, np.geomspace(150.0, 260.0, 10))
     assert pitch == pytest.approx(_independent_peak("A", 3.0, pitch, "accel", rel=0.004), rel=0.001)
 
 
@@ -167,7 +167,7 @@ def test_the_models_phase_resonance_is_at_minus_90_degrees_in_the_independent_si
     one-mode single-harmonic balance's frequency at the same force is not there."""
     from sim.backbone import backbone_at_force
     from sim.rig_response import phase_point
-    m = pitch_rig("A").model
+    m = asdict(pitch_rig("A").model)
     p = phase_point(m, 3.0, 60.0)
     one_mode = backbone_at_force(3.0, m["mass_kg"], m["F_s_N"], m["x_s_m"], m["n"]).frequency_Hz
     F_s, x_s = m["F_s_N"], m["x_s_m"]

@@ -229,12 +229,15 @@ def test_bench_paper_rig_needs_a_pitching_model(capsys):
 
 
 def test_paper_model_is_the_rig_files_without_noise_line_or_shaker():
-    from bench.rig_model import LEFT_OUT, paper_model
+    from bench.rig_model import paper_model
+    from sim.rig import RigModel
     rig = load_rig(DEFAULTS / "sim_rig_pitch.toml")
     model = paper_model(rig, "sim_rig_pitch.toml")
-    assert model["pitch_inertia_kg_m2"] == rig.model["pitch_inertia_kg_m2"] and model["friction_alpha"] == 0.5
-    assert not any(k in model for k in LEFT_OUT if not k.endswith("noise_N") and "noise" not in k)
-    assert model["disp_noise_m"] == model["force_noise_N"] == model["accel_noise_m_s2"] == 0.0
+    assert model.pitch_inertia_kg_m2 == rig.model.pitch_inertia_kg_m2 and model.friction_alpha == 0.5
+    off = RigModel()        # the line and the shaker at their defaults (off), as if the file had none
+    assert all(getattr(model, k) == getattr(off, k) for k in ("line_channel", "line_freq_Hz", "line_amplitude",
+                                                             "shaker_force_constant_N_per_A", "shaker_inductance_H"))
+    assert model.disp_noise_m == model.force_noise_N == model.accel_noise_m_s2 == 0.0
 
 
 def test_the_dwell_records_one_long_block_at_the_refined_resonance(tmp_path, capsys):

@@ -6,6 +6,7 @@ rig's analytic natural frequency and damping, and the lock-loss and exit paths."
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 import tomllib
@@ -48,7 +49,7 @@ def test_every_level_locks_on_the_harmonic_balance_backbone(bar_run):
     point within 2 % in frequency, 5 % in force, 10 % in damping ratio of the Masing
     backbone at its measured amplitude, phase within 2 degrees of -90."""
     rig, store = bar_run
-    m = rig.model
+    m = dataclasses.asdict(rig.model)
     got = rows(store)
     assert [float(r["level_N"]) for r in got] == BAR_LEVELS
     for r in got:
@@ -236,14 +237,13 @@ def test_the_pitching_mode_backbone_falls_between_its_linear_bounds(tmp_path):
     its frequency falls with amplitude (seed Fig. 17) from the linearised 2-DOF pitch
     resonance with the friction's initial stiffness n/(n-1) F_s/x_s towards the one with
     no feed stiffness at all (gross rolling)."""
-    from sim.rig import RigModel
     from tests.bench.test_pitch_rig import two_dof
 
     rig = load_rig(DEFAULTS / "sim_rig_pitch.toml")
     plan = parse_plan({"plan": {"procedure": "phase_resonance", "levels_N": [0.3, 1.0, 3.0, 10.0],
                                 "backbone": {"start_Hz": 200.0, "response": "accel", "mode": "pitch"}}})
     store = run_plan(plan, rig, tmp_path / "run")
-    model = RigModel.from_dict(rig.model)
+    model = rig.model
     top = two_dof(model, model.n / (model.n - 1) * model.F_s_N / model.x_s_m)[1]
     bottom = two_dof(model, 0.0)[1]
     got = rows(store)

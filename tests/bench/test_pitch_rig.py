@@ -35,7 +35,7 @@ def pitch_run(tmp_path_factory):
     rig = load_rig(DEFAULTS / "sim_rig_pitch.toml")
     store = run_plan(plan, rig, tmp_path_factory.mktemp("pitch") / "run", identify=False)
     assert store.metadata["status"] == "completed"
-    return RigModel.from_dict(rig.model), sorted(store.results(), key=lambda r: r["freq_Hz"])
+    return rig.model, sorted(store.results(), key=lambda r: r["freq_Hz"])
 
 
 def test_the_stored_accelerance_has_the_pitch_pair_where_2dof_theory_puts_it(pitch_run):

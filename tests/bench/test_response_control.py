@@ -6,6 +6,7 @@ against the independent simulator)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
@@ -27,7 +28,7 @@ def test_the_masing_rig_needs_the_harmonic_balance_force_at_a_held_amplitude(tmp
     rig = load_rig(DEFAULTS / "sim_rig.toml")
     store = run_plan(parse_plan(rc_plan([X], FREQS)), rig, tmp_path / "run")
     assert store.metadata["status"] == "completed"
-    m = rig.model
+    m = dataclasses.asdict(rig.model)
     results = sorted(store.results(), key=lambda r: r["index"])
     assert [r["freq_Hz"] for r in results] == FREQS
     for r in results:

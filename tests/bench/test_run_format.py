@@ -13,9 +13,12 @@ import typing
 import pytest
 
 from bench.cli import ExitCode, main
+from bench.config import DEFAULTS, load_rig, stored_rig
 from bench.sources import load_source
 from bench.storage import RUN_FORMAT_VERSION, RunStore
+from procedures.plan import stored_model
 from sim.errors import RunDirectoryError
+from sim.rig import RigModel
 from sim.step_result import STEP_FORMAT_VERSION, StepResult
 
 
@@ -61,6 +64,48 @@ def test_files_without_a_version_are_version_1_and_read_as_before(small_run, run
     assert old.results() == want
     assert len(load_source(run_copy).steps) == len(want)
     assert main(["check", str(run_copy)]) == ExitCode.OK
+
+
+# run.json's "rig" as main wrote it before decision 0058 (commit f857a23, `bench demo`): the
+# [rig.model] keys its file gave, not every key
+MAIN_RIG = {"name": "simulated guideway rig",
+            "notes": "twins on loopback; carriage + column 10 kg, F_s 10 N, x_s 10 um, n 1.5",
+            "simulated": True,
+            "generator_url": "",
+            "sensor_url": "",
+            "daq_url": "",
+            "force_V_per_N": 0.0225,
+            "accel_V_per_m_s2": 0.0102,
+            "disp_V_per_m": 8000.0,
+            "amp_gain_N_per_V": 20.0,
+            "limits": {"drive_V": 7.0, "force_N": 130.0, "disp_m": 0.0009, "accel_m_s2": 20.0},
+            "expected_mass_kg": 10.0,
+            "expected_x_s_m": 1e-05,
+            "expected_F_s_N": 8.0,
+            "expected_n": 2.0,
+            "model": {"F_s_N": 10.0,
+                      "x_s_m": 1e-05,
+                      "n": 1.5,
+                      "mass_kg": 10.0,
+                      "amp_gain_N_per_V": 20.0,
+                      "seed": 1,
+                      "shaker_force_constant_N_per_A": 15.0,
+                      "shaker_resistance_ohm": 1.5,
+                      "shaker_inductance_H": 0.0002,
+                      "shaker_armature_mass_kg": 0.3,
+                      "shaker_suspension_N_per_m": 20000.0,
+                      "shaker_damping_N_s_per_m": 20.0}}
+
+
+def test_a_run_that_stored_only_its_files_model_keys_reads_the_same_model(small_run, run_copy):
+    _rewrite_run_json(run_copy, lambda m: m.update(rig=MAIN_RIG))
+    meta = RunStore.open(run_copy).metadata
+    model = load_rig(DEFAULTS / "sim_rig.toml").model
+    assert stored_model(meta["rig"]) == model and stored_rig(meta["rig"], "run.json").model == model
+    assert main(["check", str(run_copy)]) == ExitCode.OK
+    # a run stores every key of its model now, and reads back as the same model
+    new = small_run.metadata["rig"]
+    assert set(new["model"]) == set(typing.get_type_hints(RigModel)) and stored_model(new) == model
 
 
 def test_a_newer_run_json_is_refused_naming_the_file_and_the_versions(run_copy, capsys):

@@ -224,7 +224,7 @@ def test_the_simulated_rig_has_no_interference_line_and_its_free_vibration_is_se
     rate are checked on records taken without the re-settle, tests/procedures/test_settle.py),
     and no step was recorded unsettled."""
     from bench.config import DEFAULTS, load_rig
-    assert "line_channel" not in load_rig(DEFAULTS / "sim_rig.toml").model
+    assert load_rig(DEFAULTS / "sim_rig.toml").model.line_channel == ""
     src = load_source(small_run.path)
     arts = [(s.key, a) for s in src.steps for a in s.quality.artefacts]
     assert not [(k, a.describe()) for k, a in arts if a.kind in ("line_interference", "unsettled_transient")]

@@ -392,7 +392,7 @@ def test_a_misfit_from_too_few_recorded_harmonics_says_so():
     from sim.discrepancy.rigfit import identify_steps
     raw = tomllib.loads((DEFAULTS / "sim_rig_pitch.toml").read_text())
     plan, rig = _configs({"plan": dict(PITCH_PLAN["plan"], frequencies={"list_Hz": [25.0, 35.0, 70.0, 150.0]})}, raw)
-    model = dict(rig.model)
+    model = rig.model
     for harmonics in (5, 9):
         est = identify_steps(simulate_plan(replace(plan, harmonics=harmonics), rig, model), rig.guess(), model)
         few = [w for w in est["warnings"] if "harmonics" in w]

@@ -25,8 +25,8 @@ FAST = dict(settle_cycles=20, min_settle_s=0.0, measure_cycles=8, control_cycles
 
 def pitch_rig():
     rig = load_rig(DEFAULTS / "sim_rig_pitch.toml")
-    return dataclasses.replace(rig, model=dict(rig.model, **TRUTH, viscous_N_s_per_m=60.0,
-                                               pitch_damping_N_m_s_per_rad=25.0))
+    return dataclasses.replace(rig, model=dataclasses.replace(rig.model, **TRUTH, viscous_N_s_per_m=60.0,
+                                                            pitch_damping_N_m_s_per_rad=25.0))
 
 
 def plan(levels, freqs):

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import math
+from dataclasses import asdict
 
 import numpy as np
 import pytest
@@ -91,7 +92,7 @@ def test_the_twins_shaker_is_fitted_to_the_runs_drive_ratio(shaker_source):
     d = shaker_source
     src = load_source(d / "source")
     twin, paths = make_twin(d / "source", None, d / "twin", src=src)
-    model = load_rig(paths["rig"]).model
+    model = asdict(load_rig(paths["rig"]).model)
     # the blocked force per volt and the total damping are the truth's (the rest is effective, given the share)
     fitted = {n: q["value"] for n, q in twin.shaker["parameters"].items() if q["fitted"]}
     assert {"amp_gain_N_per_V", "L_over_R_s", "damping_total_N_s_per_m", "shaker_armature_mass_kg",
@@ -130,7 +131,7 @@ def _twin_run(tmp_path, case, line=None) -> tuple[dict, object, dict]:
     src = load_source(src_path)
     twin, paths = make_twin(src_path, None, tmp_path / "twin", src=src)
     run_plan(load_plan(paths["plan"]), load_rig(paths["rig"]), tmp_path / "run", identify=False)
-    return compare_sources(src, tmp_path / "run", 0.02), twin, load_rig(paths["rig"]).model
+    return compare_sources(src, tmp_path / "run", 0.02), twin, asdict(load_rig(paths["rig"]).model)
 
 
 # plant form, case seed (friction resonance in the bench's range), analysis term, [rig.model] key

@@ -15,7 +15,7 @@ from procedures.control import ControlFields, Outcome, Reason, ResponseControl
 from procedures.kind import Quantity
 from procedures.safety import SupervisedDaq, SupervisedGenerator, Supervisor
 from procedures.stepped_sine import ForceUnreachable, SteppedSine
-from sim.rig import RigModel, SimulatedRig
+from sim.rig import SimulatedRig
 from tests.procedures.test_force_control import DEMO, RIG, Daq, Generator, run
 
 VOLTAGE = Quantity("drive", "drive amplitude", "V", "U")
@@ -42,7 +42,7 @@ def test_a_constant_voltage_sweep_is_a_controller_on_the_same_loop():
     from bench.config import parse_plan
     plan = parse_plan({"plan": {"levels_N": [0.1, 0.2], "control": dict(DEMO["control"]),
                                 "frequencies": {"list_Hz": [60.0, 200.0]}}})
-    plant = SimulatedRig(RigModel.from_dict(RIG.model))
+    plant = SimulatedRig(RIG.model)
     gen = Generator(plant)
     sup = Supervisor(RIG.limits, gen)
     proc = SteppedSine(plan, SupervisedGenerator(gen, sup), SupervisedDaq(Daq(plant), sup),
@@ -71,7 +71,7 @@ def test_an_unreachable_level_is_a_reason_code_not_a_word():
     from bench.config import parse_plan
     plan = parse_plan({"plan": {"levels_N": [0.1], "control": dict(DEMO["control"]),
                                 "frequencies": {"list_Hz": [60.0]}}})
-    plant = SimulatedRig(RigModel.from_dict(RIG.model))
+    plant = SimulatedRig(RIG.model)
     proc = SteppedSine(plan, PlantGenerator(plant), PlantDaq(plant), amp_gain_N_per_V=RIG.amp_gain_N_per_V,
                        controller=Short())
     with pytest.raises(ForceUnreachable, match="level beyond the amplifier"):

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -20,7 +21,7 @@ from bench.studies.montecarlo import PlantDaq, PlantGenerator
 from procedures.plan import Limits
 from procedures.safety import SupervisedDaq, SupervisedGenerator, Supervisor
 from procedures.stepped_sine import ForceUnreachable, SteppedSine, next_drive
-from sim.rig import RigModel, SimulatedRig
+from sim.rig import SimulatedRig
 
 RIG = parse_rig(tomllib.loads((DEFAULTS / "sim_rig.toml").read_text()))
 DEMO = tomllib.loads((DEFAULTS / "demo_plan.toml").read_text())["plan"]
@@ -60,7 +61,7 @@ def run(levels, freqs, *, gain_estimate=RIG.amp_gain_N_per_V, drive_V=RIG.limits
         control["max_iterations"] = max_iterations
     plan = parse_plan({"plan": {"levels_N": list(levels), "infeasible": infeasible, "control": control,
                                 "frequencies": {"list_Hz": list(freqs)}}})
-    plant = SimulatedRig(RigModel.from_dict({**RIG.model, **(model or {})}))
+    plant = SimulatedRig(replace(RIG.model, **(model or {})))
     gen = Generator(plant)
     limits = Limits(drive_V=drive_V, force_N=RIG.limits.force_N, disp_m=RIG.limits.disp_m,
                     accel_m_s2=RIG.limits.accel_m_s2)

@@ -31,7 +31,7 @@ from bench.config import DEFAULTS, parse_plan, parse_rig
 from bench.studies.montecarlo import PlantBlock, PlantDaq, PlantGenerator
 from procedures.stepped_sine import SteppedSine, unsettled
 from sim.artefacts import assess_step
-from sim.rig import RigModel, SimulatedRig
+from sim.rig import SimulatedRig
 
 RIG = parse_rig(tomllib.loads((DEFAULTS / "sim_rig.toml").read_text()))
 DEMO = tomllib.loads((DEFAULTS / "demo_plan.toml").read_text())["plan"]
@@ -63,7 +63,7 @@ def run(extra_blocks: int, levels=(10.0,), freqs=(154.0,), daq_class=None):
     control = dict(DEMO["control"], max_extra_settle_blocks=extra_blocks)
     plan = parse_plan({"plan": {"levels_N": list(levels), "control": control,
                                 "frequencies": {"list_Hz": list(freqs)}}})
-    plant = SimulatedRig(RigModel.from_dict(RIG.model))
+    plant = SimulatedRig(RIG.model)
     daq = (daq_class or PlantDaq)(plant)
     proc = SteppedSine(plan, PlantGenerator(plant), daq, amp_gain_N_per_V=RIG.amp_gain_N_per_V,
                        marker=daq if isinstance(daq, CreepingDaq) else None)
