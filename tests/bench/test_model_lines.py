@@ -231,7 +231,7 @@ def test_a_held_response_line_is_the_rigs_whole_model_in_the_independent_simulat
     from sim.rig import RigModel
     from sim.rig_response import held_response
 
-    m = pitch_rig("A").model
+    m = asdict(pitch_rig("A").model)
     X, freqs = 1e-6, [67.7, 83.3]
     held = held_response(RigModel.from_dict(m), X, freqs)
     assert held.converged.all()

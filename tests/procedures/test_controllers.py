@@ -97,7 +97,7 @@ def test_phase_resonance_is_the_same_loop_and_refuses_a_grid_it_does_not_have(as
     from procedures.kind import PHASE
     plan = parse_plan({"plan": {"procedure": "phase_resonance", "levels_N": [0.1], "backbone": {"start_Hz": 80.0},
                                 "control": dict(DEMO["control"])}})
-    plant = SimulatedRig(RigModel.from_dict(RIG.model))
+    plant = SimulatedRig(RIG.model)
     proc = procedure_for(plan, PlantGenerator(plant), PlantDaq(plant), amp_gain_N_per_V=RIG.amp_gain_N_per_V,
                          mass_kg=10.0)
     assert type(proc) is SteppedSine and proc.controller.quantity is PHASE
