@@ -2,7 +2,7 @@
 
 Each case is a seeded random rig (F_s 2-40 N, x_s 2-100 um, n 0.35-3, m 2-40 kg) measured
 through the RK4 plant (sim.rig.SimulatedRig) on the issue's grid (5 levels 0.1-0.85 F_s,
-18 frequencies 0.3-3 f_res; 3 x 10 where ``GRID`` says) with the issue's noise; the effect strength is drawn above the
+18 frequencies 0.3-3 f_res; here 3 x 10, ``GRID``) with the issue's noise; the effect strength is drawn above the
 required sensitivity.  The starting guess is the truth times 0.7-1.3, as a technician's.
 """
 
@@ -15,9 +15,9 @@ from sim.discrepancy.cases import make_case, truth_size
 # one seed per cause (the seeds only fix the random rig and strength; n below 1 and above 1)
 SEEDS = {"viscous_damping": 5, "linear_spring": 6, "sensor_delay": 7, "sensor_gain_error": 8,
          "second_mode": 21, "velocity_dependent_friction": 22}
-# 3 levels x 10 frequencies for the single causes and n below 1: each cause named alone with
-# its size covered, 3.2-8.5 s of CPU a case (n < 1: 19.7 s) against 24-53 s on the issue's
-# 5 x 18 grid (decision 0062)
+# 3 levels x 10 frequencies: each cause named alone with its size covered, 3.2-8.5 s of CPU a
+# case (clean 3.7-3.8, two causes 4.0, the cubic 7.9, n < 1 19.7) against 24-53 s on the
+# issue's 5 x 18 grid (decision 0062)
 GRID = dict(levels=3, freqs=10)
 
 
@@ -57,7 +57,7 @@ def test_each_hidden_cause_is_named_with_its_size(effect):
 @pytest.mark.timeout(300)
 @pytest.mark.parametrize("seed", [2, 4])       # n = 2.5 and 2.8
 def test_clean_data_gets_no_cause(seed):
-    case = make_case(seed, ())
+    case = make_case(seed, (), **GRID)
     a = analyse(case, seed)
     d = a.to_dict()
     assert d["causes"] == [] and not d["unexplained"], d["verdict"]
@@ -82,7 +82,7 @@ def test_clean_data_with_n_below_one_gets_no_cause():
 @pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_two_hidden_effects_are_both_named():
-    case = make_case(31, ("viscous_damping", "sensor_gain_error"))
+    case = make_case(31, ("viscous_damping", "sensor_gain_error"), **GRID)
     a = analyse(case, 31)
     assert sorted(a.causes) == ["sensor_gain_error", "viscous_damping"], a.verdict()
     assert not a.unexplained
@@ -92,7 +92,7 @@ def test_two_hidden_effects_are_both_named():
 @pytest.mark.timeout(300)
 def test_an_effect_outside_the_catalog_is_named_by_its_form_not_by_catalog_effects():
     # issue 16: this case used to come out as "linear spring + viscous damping", F_s -12 %
-    case = make_case(41, ("cubic_spring",))
+    case = make_case(41, ("cubic_spring",), **GRID)
     d = analyse(case, 41).to_dict()
     # the cubic first and no catalog effect (the carriage walked 4 um off centre in one step,
     # which can leave a small even term as well)
