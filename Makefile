@@ -36,9 +36,11 @@ paper: setup
 
 # Two workers (the machines have 2 cores); the scheduler of tests/conftest.py keeps a module's
 # tests, and so its module-scoped fixtures (a run made once and read by many tests), on one
-# worker and starts the longest modules first (decision 0046).
+# worker and starts the longest modules first (decision 0046).  One BLAS thread each: two
+# workers with OpenBLAS's two threads each oversubscribe the cores and its threads spin (the
+# analysis test's fixture took 59 s of CPU with them, 25.5 s with one; decision 0062).
 test: setup
-	$(PY) -m pytest -q -n 2 --dist loadscope --durations=15
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q -n 2 --dist loadscope --durations=15
 
 # A lab's CI from a fresh install (CI runs it after the tests): the package's wheel into a new
 # virtual environment, then examples/lab-ci's own tests, which use only `import bench` and the

@@ -14,8 +14,8 @@ from sim.discrepancy.cases import make_case
 
 def within_interval(truth: float, q: dict) -> None:
     """The true value within the analysis's own 95 % interval (widened to 2x its half-width,
-    about 4 standard errors): what the fit promises (observed: 0.07 % and 0.003 % off,
-    inside intervals of +-0.09 % and +-0.01 %; the tolerances were 5 % and 10 %)."""
+    about 4 standard errors): what the fit promises (observed: 0.15 % and 0.003 % off,
+    inside intervals of +-0.18 % and +-0.01 %; the tolerances were 5 % and 10 %)."""
     centre, half = (q["low"] + q["high"]) / 2, (q["high"] - q["low"]) / 2
     assert 0 < half < 0.01 * truth, q
     assert abs(truth - centre) <= 2 * half, (truth, q)
@@ -24,7 +24,9 @@ def within_interval(truth: float, q: dict) -> None:
 @pytest.fixture(scope="module")
 def analysed(tmp_path_factory):
     d = tmp_path_factory.mktemp("uff")
-    case = make_case(5, ("viscous_damping",))
+    # 3 levels x 8 frequencies: 1.4 s of plant and 6.6 s of `bench analyze` (the 5 x 18 grid
+    # took 25 s together; c then 0.15 % off inside +-0.18 %, decision 0062)
+    case = make_case(5, ("viscous_damping",), levels=3, freqs=8)
     src = write_foreign_uff(case, d / "measured.uff")
     digest = hashlib.sha256(src.read_bytes()).hexdigest()
     rc = main(["analyze", str(src)])
