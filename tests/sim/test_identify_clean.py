@@ -10,8 +10,9 @@ Two sources the identification did not make:
   bench.sources.load_source (3 levels 0.25-0.85 F_s x 8 frequencies 0.5-2.5 x, 12 settle /
   8 measured periods: its integrator is slow).
 Bar: every parameter within 1 %, reduced chi-square in [0.5, 2], the truth inside the 95 %
-interval for at least 90 % of the parameters; 10 rigs, 5 with n < 1.  The campaign over
-40 rigs is benchmarks/bench_identification.py.
+interval for at least 90 % of the parameters; a seeded sample of 6 rigs, 3 with n < 1 (10
+until the suite reached its 12-minute budget).  The campaign over 40 rigs is
+benchmarks/bench_identification.py.
 """
 import multiprocessing
 import os
@@ -22,8 +23,7 @@ import pytest
 
 from benchtools.clean_cases import KEYS, plant_case, uff_case
 
-PLANT = [(11, (0.45, 0.95)), (12, (0.45, 0.95)), (13, (0.45, 0.95)), (14, (0.45, 0.95)),
-         (15, (1.1, 3.0)), (16, (1.1, 3.0)), (17, (1.1, 3.0)), (18, (1.1, 3.0))]
+PLANT = [(11, (0.45, 0.95)), (12, (0.45, 0.95)), (15, (1.1, 3.0)), (16, (1.1, 3.0))]
 UFF = [(21, (0.35, 0.45)), (23, (1.5, 3.0))]
 
 
@@ -44,7 +44,7 @@ def outcomes(tmp_path_factory):
 @pytest.mark.slow
 @pytest.mark.timeout(900)
 def test_clean_data_parameters_within_one_percent(outcomes):
-    assert len(outcomes) >= 10 and sum(t["n"] < 1 for _, t, _, _ in outcomes) >= len(outcomes) / 2
+    assert len(outcomes) >= 6 and sum(t["n"] < 1 for _, t, _, _ in outcomes) >= len(outcomes) / 2
     misses = [f"{kind} n={t['n']:.2f}: {k} {100 * (e.values[k] / t[k] - 1):+.2f} %"
               for kind, t, e, _ in outcomes for k in KEYS if abs(e.values[k] / t[k] - 1) > 0.01]
     assert not misses, "\n".join(misses)
