@@ -423,6 +423,19 @@ def pitch_resonances(model, level_N: float, freqs_Hz):
     return feed, pitch, resp.compliance_pp
 
 
+HZ_TICKS = (10.0, 20.0, 30.0, 50.0, 100.0, 200.0, 300.0, 500.0, 1000.0)
+
+
+def _hz_ticks(ax, lo_Hz: float, hi_Hz: float) -> None:
+    """Plain-number frequency ticks (HZ_TICKS inside [lo_Hz, hi_Hz]) on a log axis, minor
+    ticks unlabelled: left to itself, a log axis spanning less than a decade labels its
+    minor ticks too ("3x10^1", "4x10^1", ...), which then overlap (issue 32 item 4)."""
+    from matplotlib.ticker import NullFormatter
+    ticks = [t for t in HZ_TICKS if lo_Hz <= t <= hi_Hz]
+    ax.set_xticks(ticks, [f"{t:g}" for t in ticks])
+    ax.xaxis.set_minor_formatter(NullFormatter())
+
+
 def _other_rig(rep: Report, grids: Grids, freqs, name: str, model_dict: dict, colour, ax_feed, ax_pitch, ax_z) -> None:
     """A further rig's model (``bench paper --rig A --rig B``): its modes against force in
     its own colour and name, and its own peaks' CSV."""
@@ -493,6 +506,7 @@ def fig15_17_pitch_resonance(rep: Report, grids: Grids, model_dict: dict | None 
         if k > 0:
             ax_feed.axhline(f_lin[0], color="grey", ls=ls, lw=0.9, label=f"linear 2-DOF, {text}")
         ax_pitch.axhline(f_lin[1], color="grey", ls=ls, lw=0.9, label=f"linear 2-DOF, {text}")
+    _hz_ticks(ax_G, float(np.min(freqs)), float(np.max(freqs)))
     ax_G.set_xlabel("frequency [Hz]")
     ax_G.set_ylabel("feed compliance_pp (seed Eq. 9) [m/N]")
     ax_G.set_title("Seed Fig. 15: FRF of the pitching rig per force")
