@@ -137,10 +137,28 @@ def oil_model(oil: str) -> dict:
     return dict(model, **OIL_B) if oil == "B" else model
 
 
-# (oil, mode, level N) -> (the brute-force peak in Hz, the energy balance's damping ratio there),
-# printed by ``python -m benchtools.masing_peaks`` (golden section to 0.02 %, then a parabola).
+# (oil, mode, level N) -> (the brute-force peak in Hz, the feed energy balance's ratio there:
+# a damping ratio of the feed mode only; the pitch rows' number is no ratio of the pitching
+# mode), printed by ``python -m benchtools.masing_peaks`` (golden section to 0.02 %, then a
+# parabola; about 80 s a feed value, 130 s a pitch value on a loaded core).
 # None: no peak inside the bounds (the curve rises to the grid's lowest frequency).
 REFERENCES: dict[tuple[str, str, float], tuple[float, float] | None] = {
+    ('A', 'feed', 0.3): (72.4656, 0.04454),   # peak 5.3889e-06
+    ('A', 'feed', 1.0): (68.5332, 0.07990),   # peak 3.4113e-06
+    ('A', 'feed', 3.0): (59.5208, 0.16573),   # peak 2.1811e-06
+    ('A', 'feed', 10.0): (40.8283, 0.49584),   # peak 1.5498e-06
+    ('B', 'feed', 0.3): (102.6016, 0.06216),   # peak 1.9341e-06
+    ('B', 'feed', 1.0): (94.3419, 0.09341),   # peak 1.5167e-06
+    ('B', 'feed', 3.0): (83.9633, 0.15767),   # peak 1.1378e-06
+    ('B', 'feed', 10.0): (70.4171, 0.34761),   # peak 7.5726e-07
+    ('A', 'pitch', 0.3): (206.1669, -0.04478),   # peak 0.79532
+    ('A', 'pitch', 1.0): (205.5479, -0.04762),   # peak 0.7733
+    ('A', 'pitch', 3.0): (204.8376, -0.05273),   # peak 0.73308
+    ('A', 'pitch', 10.0): (203.9368, -0.06493),   # peak 0.65273
+    ('B', 'pitch', 0.3): (237.4567, -0.22396),   # peak 0.23164
+    ('B', 'pitch', 1.0): (232.1001, -0.20578),   # peak 0.24271
+    ('B', 'pitch', 3.0): (226.5913, -0.19417),   # peak 0.25633
+    ('B', 'pitch', 10.0): (220.5698, -0.19314),   # peak 0.27294
 }
 
 

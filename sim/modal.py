@@ -51,7 +51,7 @@ MAX_POINTS = 15             # ... at most this many points nearest the peak
 MIN_IN_BAND = 3             # a resolved peak: at least this many measured points in its half-power band
 OTHER_MODE_GAP = 1.3        # a pitching peak lies at least this factor above the feed mode
 PEAK_SD_FLOOR = 0.5         # the peak's sd is at least this x the pole's natural frequency's sd
-MISFIT_WIDENING = True      # the intervals add the shift between fit windows (window_shift, decision 0061)
+MISFIT_WIDENING = True      # the shape's misfit widens the intervals (window_shift, the bracket; decision 0061)
 
 
 @dataclass(frozen=True)
@@ -416,10 +416,7 @@ def estimate_mode(f_Hz: ArrayLike, H: ArrayLike, *, mode: str, kind: str, level_
                     f"the interval is the bracket of the measured maximum (refine: [plan.resonance])")
         return est
     shift_f, shift_z = window_shift(f, Hfit, mag, sel, kind, fp, guess_zeta, fpk, z) if MISFIT_WIDENING else (0, 0)
-    if MISFIT_WIDENING == "quadrature":
-        hw_f, hw_z = math.hypot(t * sd_f, shift_f), math.hypot(t * sd_z, shift_z)
-    else:
-        hw_f, hw_z = t * sd_f + shift_f, t * sd_z + shift_z
+    hw_f, hw_z = t * sd_f + shift_f, t * sd_z + shift_z
     est.extra["window_shift_Hz"] = shift_f
     est.resonance_Hz, est.resonance_low_Hz, est.resonance_high_Hz = fpk, fpk - hw_f, fpk + hw_f
     lo_b, hi_b = float(f[ip - 1]), float(f[ip + 1])
