@@ -19,7 +19,10 @@ of band; x = w / w0 with w0 a scale):
 A and R complex: 6 real parameters, fitted by least squares to the real and imaginary
 parts of the points in a window around the peak (:func:`fit_single_mode`); the covariance
 is s^2 (J^T J)^-1 with s^2 the residual variance (so a misfit of the single-mode shape,
-the nonlinearity's skew included, widens the intervals); intervals are +-t(0.975, dof) sd.
+the nonlinearity's skew included, widens the intervals); intervals are +-t(0.975, dof) sd,
+plus how far the peak and zeta move between neighbouring fit windows (:func:`window_shift`;
+a skewed peak's misfit is systematic, decision 0061), and a fitted peak outside the measured
+maximum's neighbours is moved inside them, the interval holding both.
 The resonance is the peak of the fitted |H| inside the window (numerically), its interval
 by the delta method.  Half-power bandwidth (zeta ~ (f2 - f1) / (2 f_r), from the measured
 points) is the cross-check.

@@ -424,14 +424,15 @@ def pitch_resonances(model, level_N: float, freqs_Hz):
 
 
 HZ_TICKS = (10.0, 20.0, 30.0, 50.0, 100.0, 200.0, 300.0, 500.0, 1000.0)
+FORCE_TICKS = (0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0)
 
 
-def _hz_ticks(ax, lo_Hz: float, hi_Hz: float) -> None:
-    """Plain-number frequency ticks (HZ_TICKS inside [lo_Hz, hi_Hz]) on a log axis, minor
-    ticks unlabelled: left to itself, a log axis spanning less than a decade labels its
-    minor ticks too ("3x10^1", "4x10^1", ...), which then overlap (issue 32 item 4)."""
+def _log_ticks(ax, lo: float, hi: float, candidates=HZ_TICKS) -> None:
+    """Plain-number x ticks (``candidates`` inside [lo, hi]) on a log axis, minor ticks
+    unlabelled: left to itself, a log axis spanning about a decade or less labels its minor
+    ticks too ("3x10^1", "4x10^1", ...), which then overlap (issue 32 item 4)."""
     from matplotlib.ticker import NullFormatter
-    ticks = [t for t in HZ_TICKS if lo_Hz <= t <= hi_Hz]
+    ticks = [t for t in candidates if lo * (1 - 1e-9) <= t <= hi * (1 + 1e-9)]
     ax.set_xticks(ticks, [f"{t:g}" for t in ticks])
     ax.xaxis.set_minor_formatter(NullFormatter())
 
@@ -506,7 +507,7 @@ def fig15_17_pitch_resonance(rep: Report, grids: Grids, model_dict: dict | None 
         if k > 0:
             ax_feed.axhline(f_lin[0], color="grey", ls=ls, lw=0.9, label=f"linear 2-DOF, {text}")
         ax_pitch.axhline(f_lin[1], color="grey", ls=ls, lw=0.9, label=f"linear 2-DOF, {text}")
-    _hz_ticks(ax_G, float(np.min(freqs)), float(np.max(freqs)))
+    _log_ticks(ax_G, float(np.min(freqs)), float(np.max(freqs)))
     ax_G.set_xlabel("frequency [Hz]")
     ax_G.set_ylabel("feed compliance_pp (seed Eq. 9) [m/N]")
     ax_G.set_title("Seed Fig. 15: FRF of the pitching rig per force")
@@ -532,6 +533,8 @@ def fig15_17_pitch_resonance(rep: Report, grids: Grids, model_dict: dict | None 
     for k, m in enumerate(measured or []):
         _overlay(ax_feed, ax_pitch, ax_z, m, f"C{(k + 2) % 10}")
     ax_z.set_xscale("log")
+    for ax in (ax_feed, ax_pitch, ax_z):
+        _log_ticks(ax, float(levels.min()), float(levels.max()), FORCE_TICKS)
     ax_z.set_xlabel("force amplitude [N]")
     ax_z.set_ylabel("pitching mode damping ratio [%]")
     ax_z.set_title("Seed Fig. 17: pitching mode damping ratio")
