@@ -19,7 +19,10 @@ of band; x = w / w0 with w0 a scale):
 A and R complex: 6 real parameters, fitted by least squares to the real and imaginary
 parts of the points in a window around the peak (:func:`fit_single_mode`); the covariance
 is s^2 (J^T J)^-1 with s^2 the residual variance (so a misfit of the single-mode shape,
-the nonlinearity's skew included, widens the intervals); intervals are +-t(0.975, dof) sd.
+the nonlinearity's skew included, widens the intervals); intervals are +-t(0.975, dof) sd,
+plus how far the peak and zeta move between neighbouring fit windows (:func:`window_shift`;
+a skewed peak's misfit is systematic, decision 0061), and a fitted peak outside the measured
+maximum's neighbours is moved inside them, the interval holding both.
 The resonance is the peak of the fitted |H| inside the window (numerically), its interval
 by the delta method.  Half-power bandwidth (zeta ~ (f2 - f1) / (2 f_r), from the measured
 points) is the cross-check.
@@ -51,6 +54,7 @@ MAX_POINTS = 15             # ... at most this many points nearest the peak
 MIN_IN_BAND = 3             # a resolved peak: at least this many measured points in its half-power band
 OTHER_MODE_GAP = 1.3        # a pitching peak lies at least this factor above the feed mode
 PEAK_SD_FLOOR = 0.5         # the peak's sd is at least this x the pole's natural frequency's sd
+MISFIT_WIDENING = True      # the shape's misfit widens the intervals (window_shift, the bracket; decision 0061)
 
 
 @dataclass(frozen=True)
@@ -309,6 +313,35 @@ def _window(f: np.ndarray, mag: np.ndarray, ip: int) -> np.ndarray:
     return sel
 
 
+def window_shift(f: np.ndarray, H: np.ndarray, mag: np.ndarray, sel: np.ndarray, kind: str, guess_Hz: float,
+                 guess_zeta: float, f_peak: float, zeta: float) -> tuple[float, float]:
+    """How far the fitted peak and damping ratio move when the fit's window loses its
+    lowest or its highest point (windows of at least MIN_POINTS + 1 points) or gains the
+    next point on either side (while the curve keeps falling there): (largest |shift| of
+    the peak in Hz, of zeta).  A single-mode shape that fits moves by its noise; on a
+    skewed nonlinear peak its misfit is systematic, and the shift measures it (decision
+    0061).  Refits whose peak is pinned at their window's edge are not counted."""
+    windows = []
+    if sel.size >= MIN_POINTS + 2:
+        windows += [sel[1:], sel[:-1]]
+    if sel[0] > 0 and mag[sel[0] - 1] < mag[sel[0]]:
+        windows.append(np.concatenate([[sel[0] - 1], sel]))
+    if sel[-1] < f.size - 1 and mag[sel[-1] + 1] < mag[sel[-1]]:
+        windows.append(np.concatenate([sel, [sel[-1] + 1]]))
+    df = dz = 0.0
+    for w in windows:
+        try:
+            fit = fit_single_mode(f[w], H[w], kind, guess_Hz, guess_zeta)
+            fpk = fit.peak()[0]
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        cell = (f[w[-1]] - f[w[0]]) / 400
+        if not f[w[0]] + cell < fpk < f[w[-1]] - cell:
+            continue
+        df, dz = max(df, abs(fpk - f_peak)), max(dz, abs(fit.damping()[0] - zeta))
+    return df, dz
+
+
 def _nearest(f: np.ndarray, idx: list[int], target: float) -> int:
     return min(idx, key=lambda i: abs(math.log(f[i] / target)))
 
@@ -386,8 +419,20 @@ def estimate_mode(f_Hz: ArrayLike, H: ArrayLike, *, mode: str, kind: str, level_
         est.note = (f"{in_band} measured point(s) in the peak's half-power band: the grid does not resolve it; "
                     f"the interval is the bracket of the measured maximum (refine: [plan.resonance])")
         return est
-    est.resonance_Hz, est.resonance_low_Hz, est.resonance_high_Hz = fpk, fpk - t * sd_f, fpk + t * sd_f
-    est.damping_ratio, est.damping_ratio_low, est.damping_ratio_high = z, max(z - t * sd_z, 0.0), z + t * sd_z
+    shift_f, shift_z = window_shift(f, Hfit, mag, sel, kind, fp, guess_zeta, fpk, z) if MISFIT_WIDENING else (0, 0)
+    hw_f, hw_z = t * sd_f + shift_f, t * sd_z + shift_z
+    est.extra["window_shift_Hz"] = shift_f
+    est.resonance_Hz, est.resonance_low_Hz, est.resonance_high_Hz = fpk, fpk - hw_f, fpk + hw_f
+    lo_b, hi_b = float(f[ip - 1]), float(f[ip + 1])
+    if MISFIT_WIDENING and not lo_b <= fpk <= hi_b:
+        # the fitted peak lies outside the bracket of the measured maximum: the shape does not
+        # fit the peak (a skewed nonlinear peak; decision 0061).  The estimate stays inside
+        # the bracket, the interval holds both.
+        est.resonance_Hz = min(max(fpk, lo_b), hi_b)
+        est.resonance_low_Hz, est.resonance_high_Hz = min(fpk - hw_f, lo_b), max(fpk + hw_f, hi_b)
+        est.note = (f"the single-mode fit's peak {fpk:.4g} Hz lies outside the measured maximum's neighbours "
+                    f"{lo_b:.4g}-{hi_b:.4g} Hz: the shape misfits the peak; the interval holds both")
+    est.damping_ratio, est.damping_ratio_low, est.damping_ratio_high = z, max(z - hw_z, 0.0), z + hw_z
     est.peak, est.peak_low, est.peak_high = hpk, hpk - t * sd_h, hpk + t * sd_h
     est.natural_Hz = fit.natural_Hz()[0]
     est.half_power_damping_ratio = half_power_zeta(f, mag, fpk, hpk)

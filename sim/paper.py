@@ -431,6 +431,20 @@ def pitch_resonances(model, level_N: float, freqs_Hz):
     return feed, pitch, resp.compliance_pp
 
 
+HZ_TICKS = (10.0, 20.0, 30.0, 50.0, 100.0, 200.0, 300.0, 500.0, 1000.0)
+FORCE_TICKS = (0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0)
+
+
+def _log_ticks(ax, lo: float, hi: float, candidates=HZ_TICKS) -> None:
+    """Plain-number x ticks (``candidates`` inside [lo, hi]) on a log axis, minor ticks
+    unlabelled: left to itself, a log axis spanning about a decade or less labels its minor
+    ticks too ("3x10^1", "4x10^1", ...), which then overlap (issue 32 item 4)."""
+    from matplotlib.ticker import NullFormatter
+    ticks = [t for t in candidates if lo * (1 - 1e-9) <= t <= hi * (1 + 1e-9)]
+    ax.set_xticks(ticks, [f"{t:g}" for t in ticks])
+    ax.xaxis.set_minor_formatter(NullFormatter())
+
+
 def _other_rig(rep: Report, grids: Grids, freqs, name: str, model: RigModel, colour, ax_feed, ax_pitch,
                ax_z) -> None:
     """A further rig's model (``bench paper --rig A --rig B``): its modes against force in
@@ -500,6 +514,7 @@ def fig15_17_pitch_resonance(rep: Report, grids: Grids, pitch_model: RigModel | 
         if k > 0:
             ax_feed.axhline(f_lin[0], color="grey", ls=ls, lw=0.9, label=f"linear 2-DOF, {text}")
         ax_pitch.axhline(f_lin[1], color="grey", ls=ls, lw=0.9, label=f"linear 2-DOF, {text}")
+    _log_ticks(ax_G, float(np.min(freqs)), float(np.max(freqs)))
     ax_G.set_xlabel("frequency [Hz]")
     ax_G.set_ylabel("feed compliance_pp (seed Eq. 9) [m/N]")
     ax_G.set_title("Seed Fig. 15: FRF of the pitching rig per force")
@@ -525,6 +540,8 @@ def fig15_17_pitch_resonance(rep: Report, grids: Grids, pitch_model: RigModel | 
     for k, m in enumerate(measured or []):
         _overlay(ax_feed, ax_pitch, ax_z, m, f"C{(k + 2) % 10}")
     ax_z.set_xscale("log")
+    for ax in (ax_feed, ax_pitch, ax_z):
+        _log_ticks(ax, float(levels.min()), float(levels.max()), FORCE_TICKS)
     ax_z.set_xlabel("force amplitude [N]")
     ax_z.set_ylabel("pitching mode damping ratio [%]")
     ax_z.set_title("Seed Fig. 17: pitching mode damping ratio")
