@@ -34,6 +34,8 @@ maximum nearest to its predicted frequency (the rig model's, else the previous l
 else the lowest prominent maximum); the pitching mode is the accelerance maximum nearest
 to its prediction (else the previous level's, else the largest one well above the feed
 mode) - never simply the largest peak.
+Longer than 600 lines: the fit, its intervals, the status rules and the tracking are one
+estimator whose parts read each other's windows (decision 0061).
 """
 
 from __future__ import annotations
