@@ -19,7 +19,6 @@ import numpy as np
 from procedures.kind import ProcedureKind, of_stored_plan
 
 from ._model import (
-    LEFT_OUT,
     LevelComparison,
     ModelComparison,
     _median,
@@ -38,7 +37,7 @@ def held_response_comparison(meta: dict, results: list[dict], flagged: set[str] 
     or "accel"), per level: the model's compliance_pp at the held level (the line) and at
     each step's measured amplitude (the difference)."""
     from procedures.plan import stored_model
-    from sim.rig_response import held_response, line_model
+    from sim.rig_response import LEFT_OUT, held_response, line_model
     declared = stored_model(meta["rig"])
     assert declared is not None                 # called for a simulated rig's run only
     model = line_model(declared)

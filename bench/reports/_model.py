@@ -65,10 +65,6 @@ class ModelComparison:
         return float(f[i]), float(c[i])
 
 
-# effects the model lines leave out (an ideal force at the measured level): the shaker's and a line's
-LEFT_OUT = ("shaker_force_constant_N_per_A", "line_amplitude")
-
-
 def _model_effects(model) -> dict[str, str]:
     """Rig effects the dimensionless engine leaves out, when switched on: key -> words."""
     names = {"viscous_N_s_per_m": "viscous damping", "spring_N_per_m": "linear spring",
@@ -91,7 +87,7 @@ def model_comparison(meta: dict, results: list[dict], flagged: set[str] | None =
     model = stored_model(meta.get("rig"))
     if model is None or not results:
         return None
-    from sim.rig_response import line_model, plain_masing
+    from sim.rig_response import LEFT_OUT, line_model, plain_masing
 
     ws = model.omega_s
     plan = meta.get("plan") or {}
