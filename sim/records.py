@@ -149,10 +149,11 @@ def _solve_near_diagonal(G: np.ndarray, rhs: np.ndarray) -> np.ndarray:
 
 
 @lru_cache(maxsize=32)
-def _harmonic_system(N: int, step: float, K: int) -> tuple[np.ndarray, CZT]:
-    """The Gram matrix of offset + K harmonics over N samples at ``step`` rad per sample, and
-    the chirp-z transform giving their right-hand side: the same for every channel of a
-    step and every pass over it, so built once (read only)."""
+def _harmonic_system(N: int, step: float, K: int) -> tuple[np.ndarray, CZT, CZT]:
+    """The Gram matrix of offset + K harmonics over N samples at ``step`` rad per sample, the
+    chirp-z transform giving their right-hand side and the one synthesising the fitted
+    signal from them: the same for every channel of a step and every pass over it, so built
+    once (read only)."""
     d = np.arange(0, 2 * K + 1)
     z = np.exp(1j * d * step)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -167,24 +168,40 @@ def _harmonic_system(N: int, step: float, K: int) -> tuple[np.ndarray, CZT]:
     # unknowns: cos coefficients k = 0..K, sin coefficients k = 1..K
     G = np.block([[cc, cs[:, 1:]], [cs[:, 1:].T, ss[1:, 1:]]])
     G.flags.writeable = False
-    return G, CZT(N, m=K + 1, w=np.exp(-1j * step), a=1.0)
+    return G, CZT(N, m=K + 1, w=np.exp(-1j * step), a=1.0), CZT(K + 1, m=N, w=np.exp(1j * step), a=1.0)
+
+
+def noise_rms(residual: np.ndarray, params: int) -> float:
+    """The per-sample noise of a record: the rms of its residual about a fitted model of
+    ``params`` parameters, over ``residual.size - params`` degrees of freedom (the one noise
+    estimate, decision 0066)."""
+    return math.sqrt(float(np.sum(np.square(residual))) / max(1, residual.size - params))
+
+
+def harmonic_sigma(noise: float, samples: int) -> float:
+    """The standard error of one harmonic's real or imaginary part fitted to ``samples``
+    samples of white noise of rms ``noise``: noise sqrt(2 / samples)."""
+    return noise * math.sqrt(2.0 / max(samples, 1))
 
 
 def lsq_harmonics(x: np.ndarray, fs: float, f: float, K: int):
     """Exact least-squares fit of offset + K harmonics of ``f`` to the ``x.size`` samples of
     ``x`` (any length: whole periods or not); returns (C_k, offset, residual rms with
-    ``x.size - (2K + 1)`` degrees of freedom).  The one harmonic kernel: every fit of
-    harmonics to a record goes through it (procedures.analysis.fit_harmonics is its wrapper
-    for the controllers)."""
+    ``x.size - (2K + 1)`` degrees of freedom: :func:`noise_rms`).  The one harmonic kernel:
+    every fit of harmonics to a record goes through it (procedures.analysis.fit_harmonics is
+    its wrapper for the controllers).  The residual is the record minus the fitted signal
+    (synthesised by a second chirp-z transform), exact on a clean record where
+    x.x - coef.rhs would cancel to its last digits (decision 0066)."""
     N = x.size
     step = 2 * np.pi * f / fs
-    G, transform = _harmonic_system(N, step, K)
+    G, transform, synthesis = _harmonic_system(N, step, K)
     Z = transform(x)
     rhs = np.concatenate([Z.real, -Z.imag[1:]])
     coef = _solve_near_diagonal(G, rhs)
     a_cos, b_sin = coef[:K + 1], coef[K + 1:]
-    resid2 = max(float(x @ x - coef @ rhs), 0.0)
-    rms = math.sqrt(resid2 / max(1, N - coef.size))
+    # fitted = a_0 + sum_k a_k cos(k step n) + b_k sin(k step n) = Re(sum_k (a_k - i b_k) e^(i k step n))
+    fitted = synthesis(np.concatenate([a_cos[:1], a_cos[1:] - 1j * b_sin])).real
+    rms = noise_rms(x - fitted, coef.size)
     # A sin(kwt + phi) = A cos(phi) sin + A sin(phi) cos -> C = b_sin + i a_cos
     return b_sin + 1j * a_cos[1:], float(a_cos[0]), rms
 
@@ -200,15 +217,16 @@ def analyse_channel(x: np.ndarray, fs: float, f: float, periods: int, spp: int |
         blocks = x[:periods * spp].reshape(periods, spp)
         mean = blocks.mean(axis=0)
         N = periods * spp
-        noise = math.sqrt(float(np.sum((blocks - mean) ** 2)) / max(1, N - spp)) if periods > 1 else math.nan
+        # the mean period is the fit of every harmonic up to Nyquist: spp parameters
+        noise = noise_rms(blocks - mean, spp) if periods > 1 else math.nan
         spec = np.fft.rfft(mean) * (2.0 / spp)
         K = min(max_harmonics, (spp - 1) // 2)
         C = 1j * spec[1:K + 1]
-        return ChannelHarmonics(C, float(spec[0].real / 2), noise, noise * math.sqrt(2.0 / N), mean)
+        return ChannelHarmonics(C, float(spec[0].real / 2), noise, harmonic_sigma(noise, N), mean)
     N = int(round(periods * fs / f))
     K = max(1, min(max_harmonics, int(math.floor(0.5 * fs / f - 0.5))))
     C, off, noise = lsq_harmonics(x[:N], fs, f, K)
-    return ChannelHarmonics(C, off, noise, noise * math.sqrt(2.0 / N), synthesized_period(C, off, fs, f))
+    return ChannelHarmonics(C, off, noise, harmonic_sigma(noise, N), synthesized_period(C, off, fs, f))
 
 
 def synthesized_period(C: np.ndarray, offset: float, fs: float, f: float) -> np.ndarray:
