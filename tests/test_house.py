@@ -26,9 +26,6 @@ TEXT_BRANCH = re.compile(r'\.(reason|msg|message|why|note|text|curve|detail|warn
 # argparse's help formatter reads the help text it formats (the words themselves, not a decision)
 TEXT_ALLOWED = {("bench/cli.py", '"default" in text')}
 
-# a record's harmonics fitted outside the kernel (sim.records.lsq_harmonics); the ones left,
-# each to become a wrapper of the kernel (decision 0059: their figures would move)
-HARMONIC_DEBTS = {("sim/discrepancy/cases.py", "_harmonics"), ("sim/artefacts/decision.py", "_fundamental")}
 
 # modules that start `bench` in a process of their own on purpose (decision 0057)
 OWN_SPAWN = {"test_house.py", "test_packaging.py", "test_run_dir_files.py", "test_demo_out.py", "test_api.py", "test_terminal.py",
@@ -63,7 +60,7 @@ def _fits_harmonics(node: ast.FunctionDef, src: str) -> bool:
         return False                          # a line's or a transient's sinusoid, not the drive's harmonics
     body = ast.get_source_segment(src, node) or ""
     lsq = "lstsq" in body and "np.sin" in body and "np.cos" in body
-    dft = re.search(r"np\.dot\([^)]*np\.exp\(-2j", body) is not None or "np.fft.rfft(x)" in body
+    dft = re.search(r"np\.dot\(.*np\.exp\(-2j", body) is not None or "np.fft.rfft(x)" in body
     return lsq or dft
 
 
@@ -75,7 +72,7 @@ def test_one_kernel_fits_harmonics_to_a_record():
         for node in ast.walk(ast.parse(text)):
             if isinstance(node, ast.FunctionDef) and _fits_harmonics(node, text):
                 found.add((rel, node.name))
-    assert found <= HARMONIC_DEBTS, f"harmonics fitted outside sim.records.lsq_harmonics: {sorted(found - HARMONIC_DEBTS)}"
+    assert not found, f"harmonics fitted outside sim.records.lsq_harmonics: {sorted(found)}"
     src = (REPO / "procedures/analysis.py").read_text()
     assert "lsq_harmonics(" in src, "procedures.analysis.fit_harmonics is the kernel's wrapper"
 

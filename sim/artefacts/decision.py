@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..records import CHANNELS, analyse_records, checked_records, harmonic_words
+from ..records import CHANNELS, MAX_HARMONICS, analyse_records, checked_records, harmonic_words, lsq_harmonics
 from .cleaning import _clean_channel, _motion_evidence, settle_cycles
 from .detectors import HARMONIC_GUARD, find_clipping, find_dropouts
 from .quality import Artefact, Assessment, StepQuality
@@ -20,10 +20,11 @@ MIN_PERIODS = 4
 
 
 def _fundamental(x: np.ndarray, fs: float, f: float) -> float:
-    """Amplitude of the drive-frequency component over the whole periods of ``x``."""
+    """Amplitude of the drive-frequency component over the whole periods of ``x``: the first
+    of the kernel's harmonics (every one below Nyquist fitted, so none leaks into it)."""
     n = int(math.floor(x.size * f / fs + 1e-9) * fs / f)
-    t = np.arange(n) / fs
-    return float(2.0 / n * abs(np.dot(x[:n] - x[:n].mean(), np.exp(-2j * np.pi * f * t))))
+    K = max(1, min(MAX_HARMONICS, int(math.floor(0.5 * fs / f - 0.5))))
+    return float(abs(lsq_harmonics(x[:n], fs, f, K)[0][0]))
 
 
 def _mains_hint(f: float, periods: int, k_failed: int, lines: list[Artefact]) -> str:

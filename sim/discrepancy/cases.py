@@ -24,6 +24,7 @@ import numpy as np
 
 from ..errors import ConfigurationError
 from ..identify import StepHarmonics
+from ..records import harmonic_sigma, lsq_harmonics
 from ..rig import RigModel, SimulatedRig
 from ..synthetic import draw_rig, grid
 
@@ -181,18 +182,12 @@ def plan_grid(rig: dict, levels: int = 5, freqs: int = 18, top_level: float = 0.
 
 
 def _harmonics(x: np.ndarray, periods: int, K: int) -> tuple[np.ndarray, float, np.ndarray]:
-    """Complex harmonics C_k (of sin), their standard error and the one-period average."""
+    """Complex harmonics C_k (of sin), their standard error and the one-period average
+    (the kernel's fit over the ``periods`` whole periods of ``x``)."""
     N = x.size
-    spec = np.fft.rfft(x) * (2.0 / N)
-    C = 1j * spec[periods * np.arange(1, K + 1)]
-    kept = np.zeros(spec.size, bool)
-    kept[0] = True
-    kept[periods * np.arange(1, K + 1)] = True
-    fitted = np.fft.irfft(np.where(kept, np.fft.rfft(x), 0), n=N)
-    resid = x - fitted
-    noise_rms = math.sqrt(resid @ resid / max(1, N - (2 * K + 1)))
+    C, _offset, noise = lsq_harmonics(x, float(N), float(periods), K)     # time in records: f = periods
     one = x.reshape(periods, -1).mean(axis=0)
-    return C, noise_rms * math.sqrt(2.0 / N), one[::max(1, one.size // RECORD_POINTS)]
+    return C, harmonic_sigma(noise, N), one[::max(1, one.size // RECORD_POINTS)]
 
 
 def measure_steps(model: RigModel, levels_N, freqs_Hz, *, settle_periods: int = 150, measure_periods: int = 8,
