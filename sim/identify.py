@@ -43,6 +43,7 @@ from scipy.optimize import least_squares
 
 from .errors import ConfigurationError
 from .masing import LAMBDA_MASING, active_depth, branch_force
+from .records import harmonic_sigma
 from .step_result import StepResult
 from .virgin import CURVE_SAKAI, virgin_g
 
@@ -94,10 +95,11 @@ class StepHarmonics:
     def from_result(cls, r: StepResult) -> StepHarmonics:
         def c(fit):
             return np.asarray(fit["amplitude"]) * np.exp(1j * np.asarray(fit["phase_rad"]))
-        scale = math.sqrt(2.0 / max(r.get("n_samples", 1000), 1))
+        n = r.get("n_samples", 1000)
         return cls(freq_Hz=r["freq_Hz"], force=c(r["force"]), accel=c(r["accel"]), disp=c(r["disp"]),
-                   sigma_force=r["force"]["noise_rms"] * scale, sigma_accel=r["accel"]["noise_rms"] * scale,
-                   sigma_disp=r["disp"]["noise_rms"] * scale)
+                   sigma_force=harmonic_sigma(r["force"]["noise_rms"], n),
+                   sigma_accel=harmonic_sigma(r["accel"]["noise_rms"], n),
+                   sigma_disp=harmonic_sigma(r["disp"]["noise_rms"], n))
 
 
     @classmethod

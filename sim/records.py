@@ -283,7 +283,7 @@ def analyse_records(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | 
         if a is None or b is None:
             continue
         # the noise of the whole record sets the scale (a half alone can hold too few periods)
-        s_h = chans[k].noise_rms * math.sqrt(2.0 / n_half) * math.sqrt(2.0)
+        s_h = harmonic_sigma(chans[k].noise_rms, n_half) * math.sqrt(2.0)
         if not s_h > 0:
             continue
         # the second half's time origin is n_half samples later: refer it back to the first's
