@@ -81,6 +81,8 @@ GROUPS = {
     "shaker": "the electrodynamic shaker (decision 0025)",
     "numerics": "the simulation itself",
 }
+# groups whose keys the model checks with validators of their own (plant_effects.validate, the line's)
+OWN_CHECKS = ("effect", "shaker", "line")
 
 
 @dataclass(frozen=True)
@@ -194,15 +196,18 @@ class RigModel:
     seed: int = model_key(0, "", 0, 2**63 - 1, "seed of the sensor noise", "numerics", integer=True)
 
     def __post_init__(self):
-        for name in ("F_s_N", "x_s_m", "mass_kg", "amp_gain_N_per_V", "amp_force_limit_N",
-                     "force_sens_V_per_N", "accel_sens_V_per_m_s2", "disp_sens_V_per_m"):
-            check_positive_finite(name, getattr(self, name))
-        for name in ("force_noise_N", "accel_noise_m_s2", "disp_noise_m", "viscous_N_s_per_m",
-                     "spring_N_per_m", "disp_delay_s", "probe_standoff_m"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
-                raise ConfigurationError(f"{name} must be finite and >= 0, got {v!r}")
-        SakaiCurve(self.n)  # validates n
+        SakaiCurve(self.n)  # validates n (> 0 and not 1), with its own words
+        # from the declarations (decision 0066): a range open at 0 must be > 0, one closed at
+        # 0 >= 0; effect, shaker and line keys are checked by their own validators below
+        for f in fields(self):
+            key = f.metadata.get("key")
+            if key is None or key.lo != 0 or key.integer or key.choices or key.group in OWN_CHECKS:
+                continue
+            v = getattr(self, f.name)
+            if key.lo_open:
+                check_positive_finite(f.name, v)
+            elif isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
+                raise ConfigurationError(f"{f.name} must be finite and >= 0, got {v!r}")
         plant_effects.validate(self)
         self._validate_line()
 

@@ -68,6 +68,8 @@ class WithABrake(RigModel):
 
     brake_N: float = model_key(0.0, "N", 0, 50, "a test brake's friction", "effect")
     magnet_N_per_A: float = model_key(0.0, "N/A", 0, 10, "a test magnet", "effect", in_plant=False)
+    hum_noise_V: float = model_key(0.0, "V", 0, 1, "a test noise", "noise")
+    strain_sens_V_per_m: float = model_key(1.0, "V/m", 0, 1e3, "a test sensor", "sensor", lo_open=True)
 
 
 @pytest.fixture
@@ -96,6 +98,13 @@ def test_a_new_model_field_reaches_the_schema_and_the_key_reference_with_no_othe
     assert str(err.value) == "my_rig.toml: [rig.model] brake_N: must be >= 0 and <= 50, got 60.0 (unit: N)"
     with pytest.raises(ConfigError, match="brake_N must be finite and >= 0"):     # the plant's own check
         WithABrake(brake_N=-math.inf)
+    # the model's own checks read the declarations too (decision 0066): >= 0, or > 0 when open at 0
+    with pytest.raises(ConfigError, match="hum_noise_V must be finite and >= 0, got -1.0"):
+        WithABrake(hum_noise_V=-1.0)
+    with pytest.raises(ConfigError, match="strain_sens_V_per_m must be finite and > 0, got 0.0"):
+        WithABrake(strain_sens_V_per_m=0.0)
+    with pytest.raises(ConfigError, match="strain_sens_V_per_m must be finite and > 0, got nan"):
+        WithABrake(strain_sens_V_per_m=math.nan)
     rows = _gen_keys(monkeypatch).model_rows()
     assert "| `brake_N` | number >= 0 and <= 50 (N) | `0` | a test brake's friction |" in rows
     assert "| `magnet_N_per_A` | number >= 0 and <= 10 (N/A) | `0` | a test magnet (not in the plant yet) |" in rows
