@@ -1,4 +1,6 @@
-"""Test plan and rig configuration (TOML), validated before anything moves.
+"""Test plan and rig configuration (TOML), validated before anything moves: this module
+holds the plan (and the names everything else imports from here); the rig file is
+:mod:`bench.rig_config`, reading a file and checking its tables :mod:`bench.toml_tables`.
 
 Every error names the file, the key and the allowed values.  See ``bench/defaults/`` for
 annotated examples (the demo's plan and the simulated rig).
@@ -6,26 +8,23 @@ annotated examples (the demo's plan and the simulated rig).
 
 from __future__ import annotations
 
-import difflib
 import logging
 import math
-import tomllib
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drivers import check_daq_url, check_generator_url, check_sensor_url
 from procedures.capacity import block_problems, step_count_problems
 from procedures.kind import ProcedureKind
-from procedures.plan import Backbone, Limits, Plan, Rig
-from sim.errors import ConfigurationError
+from procedures.plan import Backbone, Plan, Rig
 
-from .files import TooLarge, UnreadableFile, read_file
+from .rig_config import LIMIT_KEYS, RIG_KEYS, _limits, load_rig, model_schema, parse_rig, rig_toml, stored_rig
+from .toml_tables import _REQUIRED, MAX_FILE_BYTES, ConfigError, _collecting, _load, _Section, _short, read_toml
 
-if TYPE_CHECKING:      # sim.rig compiles the plant's kernels: imported when a model is parsed
-    from sim.rig import RigModel
+__all__ = ["DEFAULTS", "KEYS", "MAX_FILE_BYTES", "MAX_FREQUENCIES", "MAX_LEVELS", "MAX_STEPS", "ConfigError",
+           "Plan", "Rig", "load_plan", "load_rig", "model_schema", "parse_plan", "parse_rig", "parse_stored_plan",
+           "plan_toml", "read_toml", "rig_toml", "stored_rig"]
 
 log = logging.getLogger(__name__)
 
@@ -43,12 +42,10 @@ DEFAULTS = Path(__file__).with_name("defaults")
 MAX_LEVELS = 1000
 MAX_FREQUENCIES = 10_000
 MAX_STEPS = 50_000
-MAX_FILE_BYTES = 2**20        # a plan or rig TOML file (the demo's plan is 3 kB)
 
-LIMIT_KEYS = ("drive_V", "force_N", "disp_m", "accel_m_s2")
 # Every key each table may hold (a table's path -> its keys); an unknown key is named, with
 # the close valid one, before any value is read (a misspelled required key is reported as
-# the misspelling, not as the key it was meant to be).  [rig.model]: model_schema() below.
+# the misspelling, not as the key it was meant to be).  [rig.model]: model_schema().
 KEYS = {
     "plan": ("name", "levels_N", "frequencies", "control", "limits", "infeasible", "adaptive_per_sweep",
              "resonance", "procedure", "backbone", "response"),
@@ -62,251 +59,8 @@ KEYS = {
                      "force_tolerance", "max_iterations", "harmonics", "ramp_s", "min_sample_rate_Hz",
                      "max_extra_settle_blocks"),
     "plan.limits": LIMIT_KEYS,
-    "rig": ("name", "notes", "simulated", "instruments", "calibration", "limits", "expected", "model"),
-    "rig.instruments": ("generator", "sensor", "daq"),
-    "rig.calibration": ("force_V_per_N", "accel_V_per_m_s2", "disp_V_per_m", "amp_gain_N_per_V"),
-    "rig.limits": LIMIT_KEYS,
-    "rig.expected": ("mass_kg", "x_s_m", "F_s_N", "n"),
+    **RIG_KEYS,
 }
-
-
-ConfigError = ConfigurationError     # a configuration value is missing, unknown or out of range
-
-
-class _Section:
-    """Typed access to one TOML table that remembers where it came from."""
-
-    def __init__(self, source: str, path: str, data: dict, keys=None, errors: list[str] | None = None):
-        # errors: the file's problems so far (collected: one ConfigError for them all at the
-        # end, see _collecting); None: each problem raises at once
-        self.source, self.path, self.used, self.errors = source, path, set(), errors
-        self.named: set[str] = set()
-        self.bad: set[str] = set()        # keys whose value was a problem (a stand-in was used)
-        if not isinstance(data, dict):
-            self.problem(f"{source}: [{path}] must be a table")
-            data = {}
-        self.data = data
-        if keys is not None:
-            self.unknown(keys)
-
-    def problem(self, message: str) -> None:
-        """A problem of this file: collected, or raised when nothing collects."""
-        if self.errors is None:
-            raise ConfigError(message)
-        self.errors.append(message)
-
-    def _or(self, get, fallback, suffix="", key=""):
-        """``get()``, or, if it finds a problem, the problem collected and ``fallback`` (a
-        value of the right type the rest of the file's checks can go on with; ``key`` is
-        then remembered as bad, see :meth:`rule`)."""
-        try:
-            return get()
-        except ConfigError as e:
-            if self.errors is None:
-                raise ConfigError(f"{e}{suffix}") from None
-            self.errors.extend(f"{line}{suffix}" for line in str(e).splitlines())
-            self.bad.add(key)
-            return fallback
-
-    def rule(self, message: str, *keys: tuple[_Section, str]) -> None:
-        """A problem across keys: collected, unless one of ``keys`` ((section, key) pairs)
-        already had its own problem (its value here was a stand-in; its own line names it)."""
-        if not any(key in sec.bad for sec, key in keys):
-            self.problem(message)
-
-    def unknown(self, keys) -> None:
-        """Name every key outside ``keys``, with the close valid one when there is one."""
-        problems = []
-        self.named = {k for k in self.data if k not in keys}      # named here, not again by done()
-        for key in [k for k in self.data if k not in keys]:
-            table = isinstance(self.data[key], dict)
-            near = difflib.get_close_matches(key, list(keys), n=1, cutoff=0.6)
-            full = lambda k: f"{self.path}.{k}" if self.path else k     # noqa: E731
-            if table:
-                hint = f"did you mean [{full(near[0])}]?" if near else f"allowed: {sorted(keys)}"
-                problems.append(f"[{full(key)}]: unknown table; {hint}")
-            else:
-                hint = f"did you mean {near[0]}?" if near else f"allowed: {sorted(keys)}"
-                problems.append(f"{'[' + self.path + '] ' if self.path else ''}{key}: unknown key; {hint}")
-        for problem in problems:
-            self.problem(f"{self.source}: {problem}")
-
-    def where(self, key: str) -> str:
-        return f"{self.source}: [{self.path}] {key}"
-
-    def _get(self, key, default):
-        self.used.add(key)
-        if key not in self.data:
-            if default is _REQUIRED:
-                raise ConfigError(f"{self.where(key)}: missing (required)")
-            return default
-        return self.data[key]
-
-    def _number(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, integer=False, note=""):
-        v = self._get(key, default)
-        kind = "an integer" if integer else "a number"
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not float(v).is_integer()):
-            raise ConfigError(f"{self.where(key)}: must be {kind}, got {v!r}")
-        ok = (v > lo if lo_open else v >= lo) and v <= hi and math.isfinite(v)
-        if not ok:
-            lo_s = f"> {lo:g}" if lo_open else f">= {lo:g}"
-            raise ConfigError(f"{self.where(key)}: must be {lo_s} and <= {hi:g}{note}, got {v!r}")
-        return int(v) if integer else float(v)
-
-    def _numbers(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, note="", most=None):
-        v = self._get(key, default)
-        if not isinstance(v, list) or not v:
-            raise ConfigError(f"{self.where(key)}: must be a non-empty list of numbers, got {_short(v)}")
-        if most is not None and len(v) > most:
-            raise ConfigError(f"{self.where(key)}: {len(v)} values; at most {most}")
-        # every bad element named, one line each
-        sub = _Section(self.source, self.path, {f"{key}[{i}]": x for i, x in enumerate(v)}, errors=[])
-        out = [sub.number(f"{key}[{i}]", lo=lo, hi=hi, lo_open=lo_open, note=note) for i in range(len(v))]
-        if sub.errors:
-            raise ConfigError("\n".join(sub.errors))
-        return out
-
-    def _choice(self, key, default, allowed):
-        v = self._get(key, default)
-        if v not in allowed:
-            raise ConfigError(f"{self.where(key)}: must be one of {list(allowed)}, got {v!r}")
-        return v
-
-    def _text(self, key, default=""):
-        v = self._get(key, default)
-        if not isinstance(v, str):
-            raise ConfigError(f"{self.where(key)}: must be a string, got {v!r}")
-        return v
-
-    def _flag(self, key, default=False):
-        v = self._get(key, default)
-        if not isinstance(v, bool):
-            raise ConfigError(f"{self.where(key)}: must be true or false, got {v!r}")
-        return v
-
-    # the accessors: a bad value is a problem of the file (collected), the rest goes on
-    def number(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, integer=False, note="",
-               suffix=""):
-        ok_default = isinstance(default, (int, float)) and not isinstance(default, bool)
-        fallback = default if ok_default else _inside(lo, hi, lo_open)
-        return self._or(lambda: self._number(key, default, lo, hi, lo_open=lo_open, integer=integer, note=note),
-                        int(fallback) if integer else float(fallback), suffix, key)
-
-    def numbers(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, note="", most=None):
-        return self._or(lambda: self._numbers(key, default, lo, hi, lo_open=lo_open, note=note, most=most),
-                        [_inside(lo, hi, lo_open)], key=key)
-
-    def choice(self, key, default, allowed):
-        return self._or(lambda: self._choice(key, default, allowed), default if default in allowed else allowed[0],
-                        key=key)
-
-    def text(self, key, default=""):
-        return self._or(lambda: self._text(key, default), default if isinstance(default, str) else "", key=key)
-
-    def flag(self, key, default=False):
-        return self._or(lambda: self._flag(key, default), default if isinstance(default, bool) else False, key=key)
-
-    def table(self, key) -> _Section:
-        self.used.add(key)
-        path = f"{self.path}.{key}" if self.path else key
-        return _Section(self.source, path, self.data.get(key, {}), KEYS.get(path), self.errors)
-
-    def done(self) -> None:
-        unknown = sorted(set(self.data) - self.used - self.named)
-        if unknown:
-            self.problem(f"{self.source}: [{self.path}] unknown key(s) {unknown}; allowed: {sorted(self.used)}")
-
-
-_REQUIRED = object()
-
-
-def _inside(lo: float, hi: float, lo_open: bool) -> float:
-    """A value within the bounds, for the checks after a bad one to go on with."""
-    if math.isfinite(lo) and not lo_open:
-        return float(lo)
-    if math.isfinite(lo) and math.isfinite(hi):
-        return (lo + hi) / 2
-    return float(hi) if math.isfinite(hi) else 1.0
-
-
-def _collecting(parse, data: dict, source: str):
-    """``parse(data, source, errors)`` with the file's problems collected: one ConfigError
-    naming each, one line per problem (each bad element of a list, each unknown key, each
-    bad value, each key a procedure does not use).  A rule across keys is collected too
-    (:meth:`_Section.rule`) unless one of its keys already had its own problem: it would
-    have seen a stand-in value; it waits for the next run, once that key is fixed."""
-    errors: list[str] = []
-    try:
-        out = parse(data, source, errors)
-    except Exception:
-        if not errors:
-            raise
-        out = None
-    if errors:
-        raise ConfigError("\n".join(dict.fromkeys(errors)))
-    return out
-
-
-def _short(v) -> str:
-    text = repr(v)
-    return text if len(text) <= 80 else f"{text[:60]}... ({type(v).__name__} of {len(v)})"
-
-
-def _load(path: Path) -> dict:
-    """A TOML file's tables.  The file is read as UTF-8 (TOML's encoding; a UTF-8 byte-order
-    mark is accepted), at most :data:`MAX_FILE_BYTES`; a file saved as UTF-16 or in a legacy
-    encoding, nested too deeply or too large is named with the problem."""
-    path = Path(path)
-    try:
-        data = read_file(path, MAX_FILE_BYTES)
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: file not found") from None
-    except TooLarge as e:
-        raise ConfigError(f"{path}: {e.size} bytes; a plan or rig file is at most {MAX_FILE_BYTES} bytes") from None
-    except UnreadableFile as e:
-        raise ConfigError(str(e)) from None
-    except IsADirectoryError:
-        raise ConfigError(f"{path}: a directory, not a TOML file") from None
-    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
-        raise ConfigError(f"{path}: saved as UTF-16; TOML files are UTF-8 (save it again as UTF-8)")
-    nul = data.find(b"\x00")
-    if nul >= 0:                  # never in TOML; every other byte of UTF-16 text without its mark
-        raise ConfigError(f"{path}: NUL bytes at offset {nul}: the file seems saved as UTF-16 "
-                          f"without a byte-order mark; TOML files are UTF-8 (save it again as UTF-8)")
-    if data.startswith(b"\xef\xbb\xbf"):
-        data = data[3:]
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as e:
-        line = data[:e.start].count(b"\n") + 1
-        raise ConfigError(f"{path}: not UTF-8: byte 0x{data[e.start]:02x} at line {line} "
-                          f"(offset {e.start}); the file seems saved in another encoding (Latin-1, "
-                          f"Windows-1252, ...); TOML files are UTF-8 "
-                          f"(save it again as UTF-8)") from None
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{path}: not valid TOML: {e}") from None
-    except RecursionError:
-        raise ConfigError(f"{path}: not a plan or rig: tables or arrays nested too deeply") from None
-
-
-def read_toml(path: Path) -> dict:
-    """A TOML file's tables; a missing or malformed file is a ConfigError naming it."""
-    return _load(path)
-
-
-def _limits(sec: _Section, required: bool = True) -> Limits:
-    """The rig's limits (all four required) or a plan's tighter ones (each optional: one
-    left out is the rig's, procedures.safety.tightest)."""
-    need = _REQUIRED if required else None
-
-    def one(key, hi):
-        return sec.number(key, need, 0, hi, lo_open=True) if required or key in sec.data else None
-    lim = Limits(drive_V=one("drive_V", 10), force_N=one("force_N", 1000), disp_m=one("disp_m", 0.01),
-                 accel_m_s2=one("accel_m_s2", 1e4))
-    sec.done()
-    return lim
 
 
 def _backbone(sec: _Section) -> Backbone:
@@ -366,7 +120,7 @@ def parse_plan(data: dict, source: str = "plan") -> Plan:
 
 
 def _parse_plan(data: dict, source: str, errors: list[str]) -> Plan:
-    top = _Section(source, "", data, ("plan",), errors)
+    top = _Section(source, "", data, ("plan",), errors, KEYS)
     p = top.table("plan")
     top.done()
     procedure = p.choice("procedure", "stepped_sine", ("stepped_sine", "phase_resonance", "response_controlled"))
@@ -483,85 +237,6 @@ def _instrument_capacity(p: _Section, plan: Plan, source: str) -> None:
         p.problem(problem)
 
 
-def model_schema() -> dict:
-    """[rig.model]: each key of sim.rig.RigModel as it declares itself (unit, range, choices;
-    decision 0058), key -> sim.rig.ModelKey.  Ranges are what a real carriage rig can have;
-    cross-field rules (n != 1, J > m e^2, ...) are the model's own and reach the user through
-    the same error."""
-    from sim.rig import model_keys
-    return model_keys()
-
-
-def _check_model(sec: _Section) -> RigModel | None:
-    """Each [rig.model] key against its unit and range, then the model's own rules: the
-    parsed sim.rig.RigModel, or None when a key's problem was collected."""
-    from sim import rig as sim_rig
-
-    schema = model_schema()
-    sec.unknown(set(schema))
-    for key in sec.data:
-        spec = schema[key]
-        if spec.choices:
-            sec.choice(key, None, spec.choices)
-            continue
-        sec.number(key, None, spec.lo, spec.hi, lo_open=spec.lo_open, integer=spec.integer,
-                   suffix=f" (unit: {spec.unit})" if spec.unit else "")
-    if sec.errors:
-        return None              # the model's own rules once its values are right
-    try:
-        return sim_rig.RigModel.from_dict(sec.data)
-    except (TypeError, ValueError) as e:
-        raise ConfigError(f"{sec.source}: [rig.model] {e}") from None
-
-
-def load_rig(path: Path) -> Rig:
-    return parse_rig(_load(path), str(path))
-
-
-def parse_rig(data: dict, source: str = "rig") -> Rig:
-    """The rig in ``data``; every independent problem of it named in one ConfigError."""
-    return _collecting(_parse_rig, data, source)
-
-
-def _parse_rig(data: dict, source: str, errors: list[str]) -> Rig:
-    top = _Section(source, "", data, ("rig",), errors)
-    r = top.table("rig")
-    top.done()
-    simulated = r.flag("simulated", False)
-    ins = r.table("instruments")
-    # a simulated rig starts its own twins and fills the URLs in at run time
-    urls = {k: ins.text(k, "" if simulated else _REQUIRED) for k in ("generator", "sensor", "daq")}
-    for key, check in (("generator", check_generator_url), ("sensor", check_sensor_url), ("daq", check_daq_url)):
-        if urls[key] or not simulated:         # only known schemes: pyserial's spy:// writes files
-            try:
-                check(urls[key])
-            except ValueError as e:
-                ins.problem(f"{ins.where(key)}: {e}")
-    ins.done()
-    cal = r.table("calibration")
-    exp = r.table("expected")
-    rig = Rig(
-        name=r.text("name", "rig"), notes=r.text("notes", ""), simulated=simulated,
-        generator_url=urls["generator"], sensor_url=urls["sensor"], daq_url=urls["daq"],
-        force_V_per_N=cal.number("force_V_per_N", _REQUIRED, 0, 100, lo_open=True),
-        accel_V_per_m_s2=cal.number("accel_V_per_m_s2", _REQUIRED, 0, 100, lo_open=True),
-        disp_V_per_m=cal.number("disp_V_per_m", _REQUIRED, 0, 1e7, lo_open=True),
-        amp_gain_N_per_V=cal.number("amp_gain_N_per_V", _REQUIRED, 0, 1e4, lo_open=True),
-        limits=_limits(r.table("limits")),
-        expected_mass_kg=exp.number("mass_kg", 10.0, 0, 1e4, lo_open=True),
-        expected_x_s_m=exp.number("x_s_m", 20e-6, 0, 1e-2, lo_open=True),
-        expected_F_s_N=exp.number("F_s_N", 10.0, 0, 1e4, lo_open=True),
-        expected_n=exp.number("n", 1.5, 0.05, 10))
-    r.used.add("model")
-    if r.data.get("model") and not simulated:
-        raise ConfigError(f"{source}: [rig.model] is only allowed with simulated = true")
-    if simulated:
-        rig = replace(rig, model=_check_model(r.table("model")))
-    cal.done()
-    exp.done()
-    r.done()
-    return rig
-
 
 def plan_toml(p: dict) -> dict:
     """The stored plan back into the TOML layout (the stored grid is used verbatim)."""
@@ -618,20 +293,3 @@ def parse_stored_plan(p, source: str) -> Plan:
         raise ConfigError(f"{source}: [plan] skip: must be a list of [level index, frequency index] pairs "
                           f"within the plan, got {_short(skip)}")
     return replace(plan, skip=tuple(tuple(s) for s in skip))
-
-
-def stored_rig(r: dict, source: str) -> Rig:
-    """The rig of a stored run (run.json's ``rig``), checked as its file was."""
-    return parse_rig({"rig": rig_toml(r)}, source)
-
-
-def rig_toml(r: dict) -> dict:
-    """The stored rig (run.json) back into the TOML layout."""
-    return {"name": r["name"], "notes": r["notes"], "simulated": r["simulated"],
-            "instruments": {"generator": r["generator_url"], "sensor": r["sensor_url"], "daq": r["daq_url"]},
-            "calibration": {k: r[k] for k in ("force_V_per_N", "accel_V_per_m_s2", "disp_V_per_m",
-                                              "amp_gain_N_per_V")},
-            "limits": r["limits"],
-            "expected": {"mass_kg": r["expected_mass_kg"], "x_s_m": r["expected_x_s_m"],
-                         "F_s_N": r["expected_F_s_N"], "n": r["expected_n"]},
-            **({"model": dict(r["model"])} if r["model"] else {})}

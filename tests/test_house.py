@@ -81,8 +81,6 @@ def test_a_module_over_600_lines_says_why_at_its_top():
     long = []
     for rel, text in _sources(*PRODUCT, "benchtools", "benchmarks"):
         lines = text.splitlines()
-        if rel == "bench/config.py":         # issue 35 item 2 (the rig model's declaration) reworks it
-            continue
         if len(lines) > MAX_LINES and REASON not in "\n".join(lines[:40]):
             long.append(f"{rel}: {len(lines)} lines")
     assert not long, f"split by job, or say why in the module docstring ({REASON!r}): {long}"
