@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from sim.artefacts import REPEAT_STEPS, mains_line
-from sim.discrepancy.analysis import level_groups
+from sim.discrepancy.analysis import level_groups, stored_analysis
 from sim.errors import ConfigurationError
 from sim.rig import RigModel, model_keys
 from sim.shaker_fit import documented_shaker, shaker_model
@@ -58,7 +58,7 @@ from .storage import write_json
 
 log = logging.getLogger(__name__)
 
-SCHEMA = "guideway-bench/twin/1"
+SCHEMA = "guideway-bench/twin/2"
 PITCH_DRIVE_HEIGHT_M = 0.1     # h of a foreign rig's pitching mode (only h^2/J, e/h, k_th/J, c_th/J are observable)
 FOREIGN_MIN_AMP_GAIN = 20.0    # N/V, the simulated rig's amplifier, raised if the largest level needs more than 5 V
 FOREIGN_SIGNAL_V = 5.0         # a foreign file's largest reading is put at this voltage (the DAQ clips at 10 V)
@@ -197,7 +197,7 @@ class Twin:
     rig: dict                    # the TOML layout of rig.toml (top table "rig")
     plan: dict                   # the TOML layout of plan.toml (top table "plan")
     provenance: dict
-    parameters: dict             # F_s_N, x_s_m, n, m_kg: {value, low, high}
+    parameters: dict             # F_s_N, x_s_m, n, mass_kg: {value, low, high}
     causes: list[str]
     applied: dict                # cause id -> {key: value} written to [rig.model]
     not_in_plant: list[dict] = field(default_factory=list)    # {cause, reason}
@@ -327,7 +327,7 @@ def _foreign_rig(src: Source, params: dict, noise: dict) -> tuple[dict, list[str
             for k in ("force_N", "accel_m_s2", "disp_m")}
     F_max = max(s.level_N for s in src.steps)
     f_min = min(s.freq_Hz for s in src.steps)
-    m, x_s = params["m_kg"]["value"], params["x_s_m"]["value"]
+    m, x_s = params["mass_kg"]["value"], params["x_s_m"]["value"]
     amp = max(FOREIGN_MIN_AMP_GAIN, 1.25 * F_max / 5.0)
     cal = dict(force_V_per_N=min(rig.force_V_per_N, FOREIGN_SIGNAL_V / peak["force_N"]),
                accel_V_per_m_s2=min(rig.accel_V_per_m_s2, FOREIGN_SIGNAL_V / peak["accel_m_s2"]),
@@ -360,7 +360,7 @@ def load_analysis(path: Path) -> dict:
         raise ConfigurationError(f"{f}: not an analysis.json (a JSON object was expected)")
     if not str(d.get("schema", "")).startswith("guideway-bench/analysis/"):
         raise ConfigurationError(f"{f}: not an analysis.json (schema {d.get('schema')!r})")
-    return d
+    return stored_analysis(d)
 
 
 def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source | None = None) -> Twin:
@@ -385,7 +385,7 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source
         rig["instruments"] = {}
     else:
         rig, n = _foreign_rig(src, params, noise)
-        rig.update(expected=dict(mass_kg=_sig(params["m_kg"]["value"]), x_s_m=_sig(params["x_s_m"]["value"]),
+        rig.update(expected=dict(mass_kg=_sig(params["mass_kg"]["value"]), x_s_m=_sig(params["x_s_m"]["value"]),
                                  F_s_N=_sig(params["F_s_N"]["value"]), n=_sig(min(10.0, max(0.05, params["n"]["value"])))))
         notes += n
     rig["name"] = f"twin of {source.name}" + (" (plain Masing)" if plain else "")
@@ -394,7 +394,7 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source
     cal = rig["calibration"]
 
     model = dict(F_s_N=params["F_s_N"]["value"], x_s_m=params["x_s_m"]["value"], n=params["n"]["value"],
-                 mass_kg=params["m_kg"]["value"], force_sens_V_per_N=cal["force_V_per_N"],
+                 mass_kg=params["mass_kg"]["value"], force_sens_V_per_N=cal["force_V_per_N"],
                  accel_sens_V_per_m_s2=cal["accel_V_per_m_s2"], disp_sens_V_per_m=cal["disp_V_per_m"], **noise)
     f_r, ratio, Zs = drive_ratio(src)
     shaker = shaker_model(f_r, ratio, Zs, shaker_defaults())
@@ -495,7 +495,7 @@ def _header(twin: Twin, what: str) -> str:
 def _rig_comments(twin: Twin) -> str:
     v = twin.parameters
     lines = ["# identified (95 %): " + ", ".join(
-        f"{k} {v[k]['value']:.5g} [{v[k]['low']:.5g}, {v[k]['high']:.5g}]" for k in ("F_s_N", "x_s_m", "n", "m_kg"))]
+        f"{k} {v[k]['value']:.5g} [{v[k]['low']:.5g}, {v[k]['high']:.5g}]" for k in ("F_s_N", "x_s_m", "n", "mass_kg"))]
     for cid, keys in twin.applied.items():
         lines.append(f"# cause {cid} -> " + ", ".join(f"{k} = {val:.5g}" if isinstance(val, float) else f"{k} = {val}"
                                                        for k, val in keys.items()))

@@ -92,7 +92,7 @@ def cmd_twin(args) -> int:
     twin, paths = make_twin(Path(args.source), Path(args.analysis) if args.analysis else None,
                             Path(args.out) if args.out else None, plain=args.plain)
     v = twin.parameters
-    print("twin: " + ", ".join(f"{k} {v[k]['value']:.4g}" for k in ("F_s_N", "x_s_m", "n", "m_kg")))
+    print("twin: " + ", ".join(f"{k} {v[k]['value']:.4g}" for k in ("F_s_N", "x_s_m", "n", "mass_kg")))
     for cid, keys in twin.applied.items():
         print(f"cause {cid} -> " + ", ".join(f"{k} = {x:.4g}" if isinstance(x, float) else f"{k} = {x}"
                                              for k, x in keys.items()))

@@ -1,5 +1,5 @@
-"""The analysis of a source (``analysis.json``, schema "guideway-bench/analysis/1", written by
-``bench analyze``), read once into typed records for the analysis page and the run report.
+"""The analysis of a source (``analysis.json``, schema "guideway-bench/analysis/2", written by
+``bench analyze``; a file of schema 1 is read as 2, decision 0066), read once into typed records for the analysis page and the run report.
 
 Reading is forgiving: every part but the dict itself is optional, and a part that is
 missing or malformed leaves an empty record and a line in :attr:`AnalysisData.problems`,
@@ -16,9 +16,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sim.discrepancy.analysis import SCHEMA, stored_analysis
+
 log = logging.getLogger(__name__)
 
-SCHEMA = "guideway-bench/analysis/1"
 FRF_QUANTITIES = ("compliance", "accelerance")
 MODELS = ("measured", "base", "final")
 
@@ -218,6 +219,7 @@ def analysis_data(d: dict) -> AnalysisData:
     """The typed view of an analysis dict (see the module docstring for what is optional)."""
     if not isinstance(d, dict):
         raise TypeError(f"an analysis must be a dict (analysis.json's object), got {type(d).__name__}")
+    d = stored_analysis(d)
     a = AnalysisData(source=str(d.get("source") or ""), software_version=str(d.get("software_version") or ""),
                      verdict=str(d.get("verdict") or ""), unexplained=bool(d.get("unexplained", False)))
     schema = d.get("schema")

@@ -29,7 +29,7 @@ log = logging.getLogger(__name__)
 
 # display units of the known parameters: SI key -> (label, unit, scale from SI)
 PARAM_DISPLAY = {"F_s_N": ("F_s", "N", 1.0), "x_s_m": ("x_s", "um", 1e6), "n": ("n", "", 1.0),
-                 "m_kg": ("m", "kg", 1.0), "mass_kg": ("m", "kg", 1.0)}
+                 "mass_kg": ("m", "kg", 1.0)}
 
 CSS = """
 body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, sans-serif; color: #1a1a1a;

@@ -80,10 +80,11 @@ def analysis_estimate(analysis: dict | None) -> dict | None:
     """analysis.json's final-model parameters in the estimate layout (None when absent or unusable)."""
     if not isinstance(analysis, dict) or not isinstance(analysis.get("parameters"), dict):
         return None
-    keys = dict(F_s_N="F_s_N", x_s_m="x_s_m", n="n", mass_kg="m_kg")
+    from sim.discrepancy.analysis import stored_analysis
+    analysis = stored_analysis(analysis)
     values, low, high, rel = {}, {}, {}, {}
-    for k, a in keys.items():
-        p = analysis["parameters"].get(a)
+    for k in ("F_s_N", "x_s_m", "n", "mass_kg"):
+        p = analysis["parameters"].get(k)
         if not isinstance(p, dict):
             return None
         values[k], low[k], high[k] = (finite(p.get(x)) for x in ("value", "low", "high"))

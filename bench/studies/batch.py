@@ -72,6 +72,8 @@ def _slug(path: str) -> str:
 
 def flatten(result: dict) -> dict:
     """One summary row from an analysis dict (analysis.json schema, or a subset of it)."""
+    from sim.discrepancy.analysis import stored_analysis
+    result = stored_analysis(result)
     row = dict(schema=result.get("schema", ""))
     for name, p in (result.get("parameters") or {}).items():
         for part in ("value", "low", "high"):

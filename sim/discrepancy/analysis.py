@@ -34,10 +34,26 @@ from .terms import accelerance_pair, second_mode_phrase, speed_friction, speed_f
 
 log = logging.getLogger(__name__)
 
-SCHEMA = "guideway-bench/analysis/1"
+SCHEMA = "guideway-bench/analysis/2"
 LEVEL_GAP = 1.15
 LOOPS = 4
-PARAM_KEYS = dict(F_s_N="F_s_N", x_s_m="x_s_m", n="n", mass_kg="m_kg")
+# analysis/1 named the mass m_kg; analysis/2 gives the parameters the rig model's names (decision 0066)
+OLD_NAMES = {"m_kg": "mass_kg"}
+
+
+def stored_analysis(d):
+    """An analysis dict (analysis.json's object) as this version writes it: one written as
+    analysis/1 has its parameters (final and base) renamed (``m_kg`` -> ``mass_kg``) and its
+    schema read as this one's; anything else is returned as it is."""
+    if not isinstance(d, dict) or d.get("schema") != "guideway-bench/analysis/1":
+        return d
+
+    def renamed(p):
+        return {OLD_NAMES.get(k, k): v for k, v in p.items()} if isinstance(p, dict) else p
+    out = dict(d, schema=SCHEMA, parameters=renamed(d.get("parameters")))
+    if isinstance(d.get("base"), dict):
+        out["base"] = dict(d["base"], parameters=renamed(d["base"].get("parameters")))
+    return out
 
 
 def level_groups(levels_N: np.ndarray) -> np.ndarray:
@@ -150,7 +166,7 @@ class Analysis:
         ``bounded: false`` (:meth:`Fit.unbounded`)."""
         iv = f.named_intervals()
         loose = set(f.unbounded())
-        return {PARAM_KEYS[k]: dict(value=iv[k][0], low=_end(iv[k][1]), high=_end(iv[k][2]),
+        return {k: dict(value=iv[k][0], low=_end(iv[k][1]), high=_end(iv[k][2]),
                                     **(dict(bounded=False) if k in loose else {})) for k in BASE_PARAMS}
 
     def cause_parameters(self, effect: str, f: Fit) -> dict:

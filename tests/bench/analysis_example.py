@@ -218,7 +218,7 @@ def build_example() -> dict:
                       "friction_base_N": synthesize(F_base[i:i + 1], LOOP_POINTS)[0].tolist(),
                       "friction_final_N": synthesize(F_final[i:i + 1], LOOP_POINTS)[0].tolist()})
 
-    base_params = {("m_kg" if k == "mass_kg" else k): {"value": est.values[k], "low": est.low[k], "high": est.high[k]}
+    base_params = {k: {"value": est.values[k], "low": est.low[k], "high": est.high[k]}
                    for k in ("F_s_N", "x_s_m", "n", "mass_kg")}
     se = fit(terms)[1] if terms else None
     params = base_params if not terms else {
@@ -226,7 +226,7 @@ def build_example() -> dict:
             ("F_s_N", F_s, F_s * math.exp(-Z95 * se[0]), F_s * math.exp(Z95 * se[0])),
             ("x_s_m", x_s, x_s * math.exp(-Z95 * se[1]), x_s * math.exp(Z95 * se[1])),
             ("n", n, n - Z95 * se[2], n + Z95 * se[2]),
-            ("m_kg", m, m * math.exp(-Z95 * se[3]), m * math.exp(Z95 * se[3])))}
+            ("mass_kg", m, m * math.exp(-Z95 * se[3]), m * math.exp(Z95 * se[3])))}
     if named:
         parts = [f"{c['label']} {next(iter(c['parameters']))} = {c['_theta']:.3g} "
                  f"{next(iter(c['parameters'].values())).get('unit', '')}".rstrip() for c in named]
@@ -239,7 +239,7 @@ def build_example() -> dict:
     if unexplained:
         verdict += " Structure remains in the residuals that no candidate explains."
     return {
-        "schema": "guideway-bench/analysis/1", "source": "simulated rig (test fixture)",
+        "schema": "guideway-bench/analysis/2", "source": "simulated rig (test fixture)",
         "software_version": "test",
         "parameters": params,
         "base": {"parameters": base_params, "reduced_chi2": est.cost,

@@ -39,7 +39,8 @@ def test_analyze_names_the_cause_in_a_foreign_uff_file_and_writes_the_schema(ana
     assert rc == 0
     out = src.parent / "measured_analysis" / "analysis.json"
     d = json.loads(out.read_text())
-    assert d["schema"] == "guideway-bench/analysis/1"
+    assert d["schema"] == "guideway-bench/analysis/2"
+    assert list(d["parameters"]) == list(d["base"]["parameters"]) == ["F_s_N", "x_s_m", "n", "mass_kg"]
     for key in ("source", "software_version", "parameters", "base", "causes", "unexplained", "verdict",
                 "candidates", "steps_used", "steps_rejected", "steps", "loops"):
         assert key in d

@@ -33,7 +33,7 @@ levels_N = [2.0, 6.0]
 list_Hz = [25.0, 40.0, 50.0, 65.0, 100.0, 190.0, 260.0]
 direction = "up"
 """
-KEYS = ("F_s_N", "x_s_m", "n", "m_kg")
+KEYS = ("F_s_N", "x_s_m", "n", "mass_kg")
 
 
 @pytest.fixture(scope="module")
