@@ -184,14 +184,15 @@ def harmonic_sigma(noise: float, samples: int) -> float:
     return noise * math.sqrt(2.0 / max(samples, 1))
 
 
-def lsq_harmonics(x: np.ndarray, fs: float, f: float, K: int):
+def lsq_harmonics(x: np.ndarray, fs: float, f: float, K: int, noise: bool = True):
     """Exact least-squares fit of offset + K harmonics of ``f`` to the ``x.size`` samples of
     ``x`` (any length: whole periods or not); returns (C_k, offset, residual rms with
     ``x.size - (2K + 1)`` degrees of freedom: :func:`noise_rms`).  The one harmonic kernel:
     every fit of harmonics to a record goes through it (procedures.analysis.fit_harmonics is
     its wrapper for the controllers).  The residual is the record minus the fitted signal
     (synthesised by a second chirp-z transform), exact on a clean record where
-    x.x - coef.rhs would cancel to its last digits (decision 0066)."""
+    x.x - coef.rhs would cancel to its last digits (decision 0066); ``noise=False`` skips it
+    (the rms is then NaN) for a caller that needs the harmonics only."""
     N = x.size
     step = 2 * np.pi * f / fs
     G, transform, synthesis = _harmonic_system(N, step, K)
@@ -199,34 +200,36 @@ def lsq_harmonics(x: np.ndarray, fs: float, f: float, K: int):
     rhs = np.concatenate([Z.real, -Z.imag[1:]])
     coef = _solve_near_diagonal(G, rhs)
     a_cos, b_sin = coef[:K + 1], coef[K + 1:]
-    # fitted = a_0 + sum_k a_k cos(k step n) + b_k sin(k step n) = Re(sum_k (a_k - i b_k) e^(i k step n))
-    fitted = synthesis(np.concatenate([a_cos[:1], a_cos[1:] - 1j * b_sin])).real
-    rms = noise_rms(x - fitted, coef.size)
+    rms = math.nan
+    if noise:   # fitted = a_0 + sum_k a_k cos(k step n) + b_k sin(k step n) = Re(sum_k (a_k - i b_k) e^(i k step n))
+        fitted = synthesis(np.concatenate([a_cos[:1], a_cos[1:] - 1j * b_sin])).real
+        rms = noise_rms(x - fitted, coef.size)
     # A sin(kwt + phi) = A cos(phi) sin + A sin(phi) cos -> C = b_sin + i a_cos
     return b_sin + 1j * a_cos[1:], float(a_cos[0]), rms
 
 
 def analyse_channel(x: np.ndarray, fs: float, f: float, periods: int, spp: int | None,
-                    max_harmonics: int) -> ChannelHarmonics:
+                    max_harmonics: int, noise: bool = True) -> ChannelHarmonics:
     """Harmonics 1..``max_harmonics`` of drive frequency ``f`` in one channel's record ``x``
     (``periods`` whole periods; ``spp`` samples per period when the sample rate is a multiple
     of the drive, else None): the period-averaged waveform's harmonics, the offset, the per-sample
     noise (scatter about the mean period, or the least-squares residual) and one harmonic's
-    standard error."""
+    standard error (NaN when ``noise`` is False and the least-squares fit is used: the
+    harmonics only)."""
     if spp is not None:
         blocks = x[:periods * spp].reshape(periods, spp)
         mean = blocks.mean(axis=0)
         N = periods * spp
         # the mean period is the fit of every harmonic up to Nyquist: spp parameters
-        noise = noise_rms(blocks - mean, spp) if periods > 1 else math.nan
+        rms = noise_rms(blocks - mean, spp) if periods > 1 else math.nan
         spec = np.fft.rfft(mean) * (2.0 / spp)
         K = min(max_harmonics, (spp - 1) // 2)
         C = 1j * spec[1:K + 1]
-        return ChannelHarmonics(C, float(spec[0].real / 2), noise, harmonic_sigma(noise, N), mean)
+        return ChannelHarmonics(C, float(spec[0].real / 2), rms, harmonic_sigma(rms, N), mean)
     N = int(round(periods * fs / f))
     K = max(1, min(max_harmonics, int(math.floor(0.5 * fs / f - 0.5))))
-    C, off, noise = lsq_harmonics(x[:N], fs, f, K)
-    return ChannelHarmonics(C, off, noise, harmonic_sigma(noise, N), synthesized_period(C, off, fs, f))
+    C, off, rms = lsq_harmonics(x[:N], fs, f, K, noise)
+    return ChannelHarmonics(C, off, rms, harmonic_sigma(rms, N), synthesized_period(C, off, fs, f))
 
 
 def synthesized_period(C: np.ndarray, offset: float, fs: float, f: float) -> np.ndarray:
@@ -278,8 +281,8 @@ def analyse_records(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | 
     drift, where = 0.0, ("", -1)
     for k, v in sig.items():
         n_half = int(round(half * ratio))
-        a = analyse_channel(v[:n_half], fs_Hz, f, half, spp, DRIFT_HARMONICS) if half >= 1 else None
-        b = analyse_channel(v[n_half:2 * n_half], fs_Hz, f, half, spp, DRIFT_HARMONICS) if half >= 1 else None
+        a = analyse_channel(v[:n_half], fs_Hz, f, half, spp, DRIFT_HARMONICS, False) if half >= 1 else None
+        b = analyse_channel(v[n_half:2 * n_half], fs_Hz, f, half, spp, DRIFT_HARMONICS, False) if half >= 1 else None
         if a is None or b is None:
             continue
         # the noise of the whole record sets the scale (a half alone can hold too few periods)

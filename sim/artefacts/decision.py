@@ -24,7 +24,7 @@ def _fundamental(x: np.ndarray, fs: float, f: float) -> float:
     of the kernel's harmonics (every one below Nyquist fitted, so none leaks into it)."""
     n = int(math.floor(x.size * f / fs + 1e-9) * fs / f)
     K = max(1, min(MAX_HARMONICS, int(math.floor(0.5 * fs / f - 0.5))))
-    return float(abs(lsq_harmonics(x[:n], fs, f, K)[0][0]))
+    return float(abs(lsq_harmonics(x[:n], fs, f, K, noise=False)[0][0]))
 
 
 def _mains_hint(f: float, periods: int, k_failed: int, lines: list[Artefact]) -> str:

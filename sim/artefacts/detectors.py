@@ -239,7 +239,7 @@ def _periodic_fit(x: np.ndarray, fs: float, f: float, fit_from: int = 0) -> tupl
     ratio = fs / f
     periods = int(math.floor((n - fit_from) / ratio + 1e-9))
     spp = int(round(ratio)) if abs(ratio - round(ratio)) * periods < 0.02 else None
-    ch = analyse_channel(x[fit_from:], fs, f, periods, spp, 200)
+    ch = analyse_channel(x[fit_from:], fs, f, periods, spp, 200, noise=False)
     if spp is not None:
         return ch.mean_period[(np.arange(n) - fit_from) % spp], ch.harmonics
     M = 1 << max(12, int(math.ceil(math.log2(16 * ch.harmonics.size + 1))))
