@@ -103,14 +103,14 @@ def refine(grid: list[float], max_steps: int = 10, tolerance: float = 0.002) -> 
 
 
 # the demo's log grid (20-1000 Hz, 24 points) where the shape is tabulated, and another
-# (6 log points 52-100 Hz; 9-log 56-110 and 60-100 Hz by 10 converge as well, in 8 and 7)
+# (6 log points 52-100 Hz; 9 log points 56-110 Hz and 60-100 Hz by 10 converge in 8 and 10)
 GRIDS = [[55.4932, 65.7821, 77.9787, 92.4367, 109.575], list(np.geomspace(52.0, 100.0, 6))]
 
 
 @pytest.mark.parametrize("grid", GRIDS, ids=["demo", "6-log"])
 def test_a_skewed_peak_is_bracketed_within_the_budget(grid):
     """Before: every grid spent the 10 steps ("budget_spent"); now each converges within
-    them (8 and 9 steps), the measured maximum's neighbours within 0.2 % and the brute-force
+    them (9 steps each), the measured maximum's neighbours within 0.2 % and the brute-force
     peak between them; and what `bench modes` reports from these steps (sim.modal's
     estimate on compliance_pp with the phase of X1/F1) is `ok` with an interval holding it."""
     ends, steps = refine(grid)
