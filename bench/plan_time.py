@@ -18,7 +18,7 @@ typical figure.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from procedures.plan import Plan
 from procedures.stepped_sine import MAX_SETTLE_WAIT_S
@@ -125,3 +125,20 @@ def rig_time_bound_s(plan: Plan, *, extra_settle: bool = True) -> float:
                                         extra_settle=extra_settle)
         f_prev, sweep_prev = (f_lo if online else f), (None if online else sweep)
     return t + _ramp_s(plan, f_prev or f_lo)       # the last ramp down
+
+
+def backbone_time_bound_s(plan: Plan) -> float:
+    """An upper bound on a phase-resonance plan's rig time (decision record 0063): each
+    point (one per level) from rest, as if every level probed its phase slope again (a lost
+    lock does) and spent ``max_blocks`` controller blocks, each after the longest wait the
+    loop allows (5 x ``block_periods``) and an alignment of a drive change, then settled,
+    measured and given its extra settle blocks; every period at the lowest frequency it may
+    have (the window's, less the probe's step below it)."""
+    bb = plan.backbone
+    assert bb is not None, "a phase-resonance plan"
+    bb = bb.resolved()
+    f_lo = bb.min_Hz * (1 - bb.probe_step)
+    probe = 3 * 2 * bb.block_periods / f_lo                 # three probe points: a wait and a block each
+    blocks = bb.max_blocks * (6 * bb.block_periods + 1) / f_lo
+    frame = step_seconds_max(replace(plan, max_iterations=0), f_lo, from_rest=True)
+    return REST_S + len(plan.schedule()) * (probe + blocks + frame)

@@ -33,6 +33,7 @@ def main():
     ap.add_argument("--out", default="/tmp/bench_procedure")
     a = ap.parse_args()
     plan, rig = load_plan(DEFAULTS / "demo_plan.toml"), load_rig(DEFAULTS / "sim_rig.toml")
+    plan = replace(plan, refine=False)       # the 7 x 24 grid (168 steps) the figures are of
     histories = {}
     for identify in (False, True):
         out = Path(a.out) / ("with_id" if identify else "no_id")

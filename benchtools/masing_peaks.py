@@ -29,6 +29,15 @@ def steady_response(model: Mapping, force_N: float, f_Hz: float, settle: int = 6
     steady state at ``f_Hz`` and force amplitude ``force_N``, from rest, after ``settle``
     periods.  The energy balance: |F1| sin(-phase) / (2 m w^2 |X1|) = -Im(H) / (2 m w^2 |H|^2)
     with H = X1/F1 and m the carriage's mass (the feed mode's definition, decision 0056)."""
+    pp, acc, H = steady_state(model, force_N, f_Hz, settle, measure, rtol)
+    w = 2 * math.pi * f_Hz
+    return pp, acc, float(-H.imag / (2 * model["mass_kg"] * w * w * abs(H) ** 2))
+
+
+def steady_state(model: Mapping, force_N: float, f_Hz: float, settle: int = 60, measure: int = 4,
+                 rtol: float = 1e-9) -> tuple[float, float, complex]:
+    """(compliance_pp in m/N, |A1/F1| in 1/kg, X1/F1 in m/N) of the steady state at ``f_Hz``
+    and force amplitude ``force_N``, from rest, after ``settle`` periods."""
     F_s, x_s, mass = model["F_s_N"], model["x_s_m"], model["mass_kg"]
     ws = math.sqrt(F_s / (x_s * mass))
     pitch = None
@@ -49,8 +58,7 @@ def steady_response(model: Mapping, force_N: float, f_Hz: float, settle: int = 6
     pp = 0.5 * (_extremum(u, 1) - _extremum(u, -1)) * x_s / force_N      # the force is an exact sine
     acc = abs(a @ e1) / p1 / mass                     # dimensionless a = x'' / (F_s / m), P = F / F_s
     H = (u @ e1) * x_s / ((P @ e1) * F_s)
-    w = 2 * math.pi * f_Hz
-    return pp, float(acc), float(-H.imag / (2 * mass * w * w * abs(H) ** 2))
+    return pp, float(acc), complex(H)
 
 
 def _extremum(u: np.ndarray, sign: int) -> float:
@@ -135,6 +143,17 @@ def oil_model(oil: str) -> dict:
         model = tomllib.load(fh)["rig"]["model"]
     model = {k: v for k, v in model.items() if k not in SHAKER_KEYS}
     return dict(model, **OIL_B) if oil == "B" else model
+
+
+def plain_model() -> dict:
+    """The ``[rig.model]`` of bench/defaults/sim_rig.toml (the demo's plain rig: no pitching
+    mode, no viscous or speed-dependent effects), without the shaker."""
+    import tomllib
+    from pathlib import Path
+    path = Path(__file__).resolve().parents[1] / "bench" / "defaults" / "sim_rig.toml"
+    with open(path, "rb") as fh:
+        model = tomllib.load(fh)["rig"]["model"]
+    return {k: v for k, v in model.items() if k not in SHAKER_KEYS}
 
 
 # (oil, mode, level N) -> (the brute-force peak in Hz, the feed energy balance's ratio there:

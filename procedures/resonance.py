@@ -92,11 +92,12 @@ class Refiner:
         for mode in self.modes:
             done = sum(1 for r in steps if f"-R{mode[0].upper()}" in r["key"])
             found = self._resonance(mode, d)
-            why = refinement_end(self, mode, d, done)
+            prev = last_refined_Hz(steps, mode)
+            why = refinement_end(self, mode, d, done, prev)
             if why is not None:
                 self._end(last, mode, why, done, found)
                 continue
-            f = float(f"{self._next_from(found, d):.6g}")      # type: ignore[arg-type]  # found: why is None
+            f = float(f"{self._next_from(found, d, prev):.6g}")      # type: ignore[arg-type]  # found: why is None
             step = StepSpec(last.index, li, -1, last.direction, last.force_N, f, refined=done, refined_mode=mode)
             if step.key in self._asked and step.key not in stored:      # asked for before, not measured
                 self._end(last, mode, "not_measured", done, found)
@@ -130,7 +131,7 @@ class Refiner:
         out = []
         for mode in self.modes:
             done = sum(1 for r in steps if f"-R{mode[0].upper()}" in r["key"])
-            why = refinement_end(self, mode, d, done) or "converged"
+            why = refinement_end(self, mode, d, done, last_refined_Hz(steps, mode)) or "converged"
             out.append((mode, {"no_peak": "no peak", "budget_spent": "budget spent"}.get(why, "converged"), done))
         return out
 
@@ -150,9 +151,11 @@ class Refiner:
         fr = est.resonance_Hz if est.ok else self._parabola(d.f_Hz, mag, i)
         return fr, est.damping_ratio, i, mag
 
-    def _next_from(self, found: tuple[float, float, int, np.ndarray], d: LevelData) -> float | None:
+    def _next_from(self, found: tuple[float, float, int, np.ndarray], d: LevelData,
+                   last_Hz: float | None = None) -> float | None:
         fr, zeta, i, mag = found
-        return next_refinement_Hz(d.f_Hz, mag, i, fr, zeta, self.plan.refine_tolerance, self.f_min, self.f_max)
+        return next_refinement_Hz(d.f_Hz, mag, i, fr, zeta, self.plan.refine_tolerance, self.f_min, self.f_max,
+                                  last_Hz)
 
     @staticmethod
     def _parabola(f: np.ndarray, mag: np.ndarray, i: int) -> float:
@@ -165,7 +168,16 @@ class Refiner:
 NOT_CONVERGED = ("budget_spent", "no_progress")
 
 
-def refinement_end(refiner: Refiner, mode: str, d: LevelData, done: int) -> str | None:
+def last_refined_Hz(steps: list[dict], mode: str) -> float | None:
+    """The frequency of the level's latest refinement step of ``mode`` (the highest number
+    in its key), or None before the first: the line search's memory (decision 0063), read
+    from the stored steps like everything else the refiner decides on."""
+    tag = f"-R{mode[0].upper()}"
+    refined = [r for r in steps if tag in r["key"]]
+    return float(max(refined, key=lambda r: r["key"].split(tag)[1])["freq_Hz"]) if refined else None
+
+
+def refinement_end(refiner: Refiner, mode: str, d: LevelData, done: int, last_Hz: float | None = None) -> str | None:
     """Why a level's refinement of ``mode`` is over, from its stored steps ``d`` (sweep and
     ``done`` refinement steps of that mode), or None while it goes on: "converged" (the
     peak known within the tolerance), "no_peak" (none inside the grid), "budget_spent"
@@ -174,7 +186,7 @@ def refinement_end(refiner: Refiner, mode: str, d: LevelData, done: int) -> str 
     found = refiner._resonance(mode, d)
     if found is None:
         return "no_peak"
-    f = refiner._next_from(found, d)
+    f = refiner._next_from(found, d, last_Hz)
     if f is None:
         return "converged"
     if done >= refiner.plan.refine_steps:
@@ -201,5 +213,5 @@ def refinement_outcomes(plan: Plan, results: list[dict], pitch_band_Hz: tuple[fl
         d = LevelData.from_steps(level_N, steps)
         for mode in refiner.modes:
             done = sum(1 for r in steps if f"-R{mode[0].upper()}" in r["key"])
-            out[(li, mode)] = refinement_end(refiner, mode, d, done) or "not finished"
+            out[(li, mode)] = refinement_end(refiner, mode, d, done, last_refined_Hz(steps, mode)) or "not finished"
     return out

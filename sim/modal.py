@@ -573,38 +573,53 @@ def pitch_band_Hz(model) -> tuple[float, float] | None:
 
 
 def next_refinement_Hz(f_Hz: ArrayLike, mag: ArrayLike, peak_index: int, estimate_Hz: float,
-                       zeta: float, tolerance: float, f_min: float, f_max: float) -> float | None:
+                       zeta: float, tolerance: float, f_min: float, f_max: float,
+                       last_Hz: float | None = None) -> float | None:
     """The next frequency to measure to know a peak within ``tolerance`` (relative), or
     None when it is known: the measured maximum has measured neighbours within
-    ``tolerance`` on both sides (the peak lies between them), and the points below are
-    there.  In order: the estimate (``estimate_Hz``: the fit's, else a parabola's), when no
-    point lies within tolerance/2 of it; the half-power points (estimate x (1 -+ zeta),
-    the fit's window) when none lies within zeta/3; the estimate x (1 -+ tolerance); then
-    the wider gap beside the measured maximum, halved (a bracket that shrinks whatever the
-    estimate says)."""
+    ``tolerance`` on both sides (the peak lies between them; decision record 0063).  A
+    safeguarded line search on the bracket of the measured maximum, like Brent's:
+
+    1. the half-power points (estimate x (1 -+ zeta), the fit's window), when none lies
+       within zeta/2;
+    2. a tolerance step beside the measured maximum, towards the wider of its open gaps
+       (a gap wider than the tolerance), when the model's vertex (``estimate_Hz``: the
+       fit's, else a parabola's) is at the maximum (within tolerance/2) or in no open gap
+       (in a closed one, or outside the bracket), unless that maximum is the last step (``last_Hz``) and was
+       itself such a step (then the vertex lags the data: a crawl by tolerance steps);
+    3. the vertex, when it lies inside an open gap, at least a fifth of the gap (log) from
+       either end (the gap shrinks to at most 0.8 of itself);
+    4. else the wider open gap, halved.
+
+    Every step lands inside an open gap of the measured maximum, so the bracket shrinks
+    whatever the vertex says: a skewed peak whose fitted vertex drifts towards it step by
+    step no longer spends the budget re-measuring the moving estimate (decision 0063)."""
     f = np.asarray(f_Hz, float)
-    m = np.asarray(mag, float)
     o = np.argsort(f)
-    f, m = f[o], m[o]
+    f = f[o]
     ip = int(np.nonzero(o == peak_index)[0][0])
     fp = f[ip]
-
-    def missing(x, tol):
-        return f_min <= x <= f_max and not np.any(np.abs(f / x - 1) <= tol)
-    centre = estimate_Hz if math.isfinite(estimate_Hz) and f[max(ip - 1, 0)] < estimate_Hz < f[min(ip + 1, f.size - 1)] \
-        else fp
+    if ip in (0, f.size - 1):
+        return None                       # not a peak inside the grid (the caller's case)
+    lo, hi = float(f[ip - 1]), float(f[ip + 1])
+    v = estimate_Hz if math.isfinite(estimate_Hz) and lo < estimate_Hz < hi else fp
     z = zeta if math.isfinite(zeta) and 2 * tolerance < zeta < 0.3 else None
-    todo = [(centre, tolerance / 2)]
     if z is not None:
-        todo += [(centre * (1 - z), z / 3), (centre * (1 + z), z / 3)]
-    todo += [(centre * (1 - tolerance), tolerance / 2), (centre * (1 + tolerance), tolerance / 2)]
-    for x, tol in todo:
-        if missing(x, tol):
-            return float(x)
-    gaps = []
-    if ip > 0:
-        gaps.append((fp / f[ip - 1] - 1, math.sqrt(f[ip - 1] * fp)))
-    if ip < f.size - 1:
-        gaps.append((f[ip + 1] / fp - 1, math.sqrt(f[ip + 1] * fp)))
-    gap, mid = max(gaps) if gaps else (0.0, fp)
-    return float(mid) if gap > 1.01 * tolerance else None
+        for x in (v * (1 - z), v * (1 + z)):
+            if f_min <= x <= f_max and not np.any(np.abs(f / x - 1) <= z / 2):
+                return float(x)
+    closed = math.log1p(1.01 * tolerance)
+    gaps = [(g, a, b) for g, a, b in ((math.log(fp / lo), lo, fp), (math.log(hi / fp), fp, hi)) if g > closed]
+    if not gaps:
+        return None
+    _, a, b = max(gaps)
+    moved = last_Hz is not None and abs(last_Hz / fp - 1) < 1e-9      # the last step became the maximum
+    crawl = moved and min(fp / lo, hi / fp) - 1 <= 1.01 * tolerance
+    if (abs(v / fp - 1) <= tolerance / 2 or not any(a_v < v < b_v for _, a_v, b_v in gaps)) and not crawl:
+        return float(fp * (1 - tolerance) if a < fp else fp * (1 + tolerance))
+    margin = math.log1p(tolerance / 2)
+    for g, a_v, b_v in gaps:
+        if a_v < v < b_v and min(math.log(v / a_v), math.log(b_v / v)) >= margin \
+                and (not moved or 0.2 <= math.log(v / a_v) / g <= 0.8):
+            return float(v)
+    return float(math.sqrt(a * b))

@@ -36,6 +36,10 @@ def cmd_dry_run(args) -> int:
         print(f"plan '{plan.name}': phase resonance, {len(plan.levels_N)} force levels (N) from {b.start_Hz:g} Hz in the window "
               f"{b.min_Hz:g}-{b.max_Hz:g} Hz (envelope at both ends); rig '{rig.name}'"
               f"{' (simulated)' if rig.simulated else ''}")
+        from ..plan_time import backbone_time_bound_s
+        print(f"expected rig time: at most {_duration(backbone_time_bound_s(plan))} (every level probing its phase "
+              f"slope and spending max_blocks = {b.max_blocks} controller blocks at the window's lowest frequency, "
+              f"then settled, measured and re-measured to the plan's limits; a level that locks takes a few blocks)")
     else:
         n, refined, seconds = planned_steps(plan)
         runs = (f"{n} measured (adaptive: {plan.adaptive_per_sweep} per sweep, chosen online)"

@@ -77,6 +77,28 @@ def test_points_are_steps_with_backbone_records_and_the_output_ends_off(bar_run)
     assert len(probe) == 1 and probe[0]["slope_deg_per_Hz"] < 0
 
 
+def test_dry_run_bounds_a_phase_resonance_plans_rig_time(bar_run, tmp_path, capsys):
+    """dry-run gave a phase-resonance plan no rig time (issue 32 item 3); its bound holds
+    the run's rig time (decision 0063; measured: the bar's 4 levels 12.0 s of rig time, 6-8
+    controller blocks each; the bound 426 s counts every level probing and spending all its
+    60 blocks at the window's lowest frequency, the plan's limits)."""
+    from bench.cli import main
+    from bench.plan_time import backbone_time_bound_s
+    from bench.storage import stored_plan
+    _, store = bar_run
+    res = store.results()
+    last = max(res, key=lambda r: r["t0_s"])
+    actual = last["t0_s"] + last["n_samples"] / last["fs_Hz"]
+    bound = backbone_time_bound_s(stored_plan(store.metadata))
+    assert actual <= bound, (actual, bound)
+    plan_file = tmp_path / "bb.toml"
+    plan_file.write_text('[plan]\nprocedure = "phase_resonance"\nlevels_N = [0.1, 0.3, 1.0, 3.0]\n'
+                         '[plan.backbone]\nstart_Hz = 80.0\n[plan.control]\nsettle_cycles = 10\nmeasure_cycles = 10\n')
+    assert main(["dry-run", "--plan", str(plan_file)]) == 0
+    out = capsys.readouterr().out
+    assert "expected rig time: at most" in out
+
+
 LINEAR_K, LINEAR_C = 4.0e5, 80.0          # f_n = 31.83 Hz, zeta = 2 %
 
 
