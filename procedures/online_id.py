@@ -175,10 +175,10 @@ class OnlineIdentification:
         """The full fit over all steps; a failure is reported, never raised (the test's
         data are complete and safe whatever happens here)."""
         try:
-            if self.rigfit is not None:
-                est = identify_steps(self.steps, self.guess, self.rig_model, harmonics=MAX_HARMONICS)
-            else:
-                est = dict(self.ident.fit(max_nfev=300).as_dict(), source="final fit")
+            # the one identification `bench identify` gives too: the plain carriage's in the
+            # noise of its own residuals (the online Identifier's intervals ignore their
+            # correlation: the demo's x_s and n 2.4-2.7 standard errors out, decision 0064)
+            est = identify_steps(self.steps, self.guess, self.rig_model, harmonics=MAX_HARMONICS)
             check_finite(est)
         except Exception as e:  # noqa: BLE001
             log.error("final identification failed: %s", e)

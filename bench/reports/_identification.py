@@ -149,3 +149,21 @@ def determined_from(history: list[dict]) -> int | None:
     while i > 0 and not history[i - 1].get("warnings"):
         i -= 1
     return int(steps_of(history)[i])
+
+
+def truth_misses(ident: IdentificationData, est: dict | None) -> list[tuple[str, float]]:
+    """(label, standard errors out) of each parameter whose 95 % interval excludes the
+    simulated rig's truth (the report's "truth in interval: no"); [] for a real rig."""
+    if not ident.truth or not est:
+        return []
+    out = []
+    for p in ID_PARAMS:
+        t = ident.truth.get(p.key)
+        v, lo, hi = (finite((est.get(k) or {}).get(p.key)) for k in ("values", "low", "high"))
+        if t is None or not all(math.isfinite(x) for x in (v, lo, hi)) or lo <= t <= hi:
+            continue
+        if p.log_y and min(t, v, lo, hi) > 0:
+            out.append((p.label, abs(math.log(t / v)) / (math.log(hi / lo) / (2 * 1.959964)) if hi > lo else math.inf))
+        else:
+            out.append((p.label, abs(t - v) / ((hi - lo) / (2 * 1.959964)) if hi > lo else math.inf))
+    return out

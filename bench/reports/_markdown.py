@@ -31,7 +31,7 @@ from . import _figures as figures
 from . import _figures_modes as mode_figures
 from ._analysis import analysis_data
 from ._damping import DAMPING_HEADS, DAMPING_KINDS, damping_notes, damping_row
-from ._identification import ID_PARAMS, IdentificationData, determined_from, finite, steps_of
+from ._identification import ID_PARAMS, IdentificationData, determined_from, finite, steps_of, truth_misses
 from ._refinement import refinement_lines
 from ._run import ANALYSIS_HTML, RunData, load_run
 from ._steps import UNSETTLED_RESIDUAL, control_error, pp_source
@@ -272,6 +272,27 @@ def _frequency_row(run: RunData) -> list[str]:
                            f"{max(plan.get('freqs_Hz', [math.nan])):g} Hz, direction {plan.get('direction', '?')}"]
 
 
+FLAG_REASONS = (("noisy displacement", r"noisy: displacement residual"),
+                ("unsettled vibration", r"an unsettled (?:[\d.]+ Hz )?vibration"),
+                ("unsettled transient", r"an unsettled (?:[\d.]+ Hz )?transient"),
+                ("interference line", r"Hz line of .*not locked to the drive"),
+                ("offset drift", r"an offset drift"))
+
+
+def flagged_reasons(attention: list[tuple[str, str, str]]) -> list[tuple[str, int]]:
+    """(reason, steps) of the flagged steps, most frequent first; a step with two reasons
+    counts under both, one with none of :data:`FLAG_REASONS` under "other"."""
+    import re
+    counts: dict[str, int] = {}
+    for _, status, why in attention:
+        if status != "flagged":
+            continue
+        hits = [name for name, pattern in FLAG_REASONS if re.search(pattern, why)] or ["other"]
+        for name in hits:
+            counts[name] = counts.get(name, 0) + 1
+    return sorted(counts.items(), key=lambda kv: -kv[1])
+
+
 def accounting_md(run: RunData) -> list[str]:
     """The report's first lines: steps used against the plan, what was skipped and why,
     and one overall line (went well / needs attention, and why).  Used = intact and not
@@ -338,6 +359,16 @@ def accounting_md(run: RunData) -> list[str]:
         why.append(f"the identified model does not fit the data beyond the noise (reduced chi^2 "
                    f"{number(est.get('reduced_chi2'), fmt='.3g')}): its parameters are biased"
                    + ("" if run.analysis is not None else "; `bench analyze` names what is missing"))
+    flagged = flagged_reasons(run.attention)
+    if flagged:
+        total = sum(1 for _, status, _ in run.attention if status == "flagged")
+        notes.append(f"{total} step{'s' * (total != 1)} flagged by the step-quality check, used with their noise as "
+                     f"weight ({', '.join(f'{k} {why}' for why, k in flagged)}; see Steps needing attention)")
+    misses = truth_misses(ident, est)
+    if misses:
+        notes.append("the simulated rig's truth lies outside the 95 % interval of "
+                     + ", ".join(f"{label} ({k:.2g} standard errors out)" for label, k in misses)
+                     + ": the estimate misses it by more than its interval allows")
     below = run.below_resolution
     if below and run.probe:
         notes.append(f"{len(below)} step{'s' * (len(below) != 1)} move{'s' * (len(below) == 1)} less than the "

@@ -7,7 +7,8 @@ from 1), a noise seed and the sensor noise of the rig scaled by ``noise_scale``;
 the plan on the RK4 plant :class:`sim.rig.SimulatedRig` with the real stepped-sine
 procedure (force control, ramps, settling; the plant is called in-process instead of
 through the instrument twins' wire protocols, which change nothing in the data); and
-identifies with :func:`sim.identify.identify_results` started from the expected values.
+identifies with :func:`sim.discrepancy.rigfit.identify_steps` (every harmonic each step's
+record holds, decision 0064) started from the expected values.
 A row per parameter gives truth, estimate, 95 % interval, relative error and whether the
 interval covers the truth.
 """
@@ -31,10 +32,10 @@ log = logging.getLogger(__name__)
 PARAMS = ("F_s_N", "x_s_m", "n", "mass_kg")
 # Harmonics a sample's steps record (the DAQ sampling fast enough to keep them below Nyquist
 # at the plan's top frequency, up to MAX_SAMPLE_RATE_HZ).  The identification rebuilds the displacement path, and the friction and
-# |v| along it, from every recorded harmonic: with the plans' default 5, a large-slip step
-# at a low frequency loses the sharp reversals, the residual at the TRUE parameters is a
-# deterministic misfit (reduced chi-square 5-190 on noise-free data) and F_s, x_s are biased
-# by 1-2 standard errors (issue 25, decision 0049); with 25 the residual at the truth is noise.
+# |v| along it, from every harmonic the step's record holds (decision 0064), so the plan's
+# count no longer decides it; fitted from the plans' default 5 alone, a large-slip step at a
+# low frequency lost the sharp reversals and F_s, x_s were biased by 1-2 standard errors
+# (issue 25, decision 0049).  The sampling rate this sets still bounds what the record holds.
 RECORD_HARMONICS = 25
 MAX_SAMPLE_RATE_HZ = 204_800.0     # the plans' own upper limit of min_sample_rate_Hz
 

@@ -78,7 +78,9 @@ def test_report_names_plan_rig_status_and_each_level(report, run_dir):
 def test_report_opens_with_the_steps_used_against_the_plan_and_an_overall_line(report):
     head = report.read_text().split("## Instruments")[0]
     assert "**20 used / 20 planned**; skipped: none" in head
-    assert "Overall: **went well**" in head and "needs attention" not in head
+    assert "Overall: **went well" in head and "needs attention" not in head
+    # flagged steps (used) are notes of a run that went well, counted per reason (issue 33)
+    assert "with notes" not in head or "flagged by the step-quality check" in head
 
 
 def _modes_rows(report):

@@ -17,7 +17,6 @@ from bench.reports import write_report
 from bench.session import run_plan
 from bench.storage import RunStore
 from bench.watch.snapshot import RunReader
-from sim.identify import Identifier
 
 TRUTH = dict(F_s_N=12.0, x_s_m=7e-6, n=1.2, mass_kg=10.0)
 FAST = dict(settle_cycles=20, min_settle_s=0.0, measure_cycles=8, control_cycles=2, ramp_s=0.0)
@@ -98,13 +97,8 @@ def test_steps_below_the_probes_resolution_are_named_with_what_they_are_still_go
 
 def test_a_failed_final_fit_is_reported_as_failed_with_its_reason_and_no_absurd_number(tmp_path, mocker):
     out = tmp_path / "run"
-    real_fit = Identifier.fit
-
-    def overflowing(self, max_nfev=60, **kw):
-        if max_nfev == 300:                 # the final fit
-            raise OverflowError("math range error")
-        return real_fit(self, max_nfev=max_nfev, **kw)
-    mocker.patch.object(Identifier, "fit", overflowing)
+    # the final fit (the one identification of the stored steps) overflows
+    mocker.patch("procedures.online_id.identify_steps", side_effect=OverflowError("math range error"))
     run_plan(plan((1.0, 3.0), (60.0, 100.0)), load_rig(DEFAULTS / "sim_rig.toml"), out, sim_seed=1)
     meta = RunStore.open(out).metadata
     assert meta["status"] == "completed" and "OverflowError" in meta["identification"]["error"]
