@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 
 from sim.errors import BenchError, ConfigurationError, EnvelopeError, LimitError, RunDirectoryError
@@ -377,12 +378,27 @@ def _one_line(e: BaseException) -> str:
     return named
 
 
+# the thread pools of numpy's BLAS and of OpenMP: one thread each, unless the user set them.  No
+# problem of the bench is large enough to gain from more, and on cores busy with other work their
+# threads spin: with OpenBLAS's two threads the frequency refinement of `bench analyze` took 16 x
+# the CPU (decision 0062; the tests and benchmarks already ran with one, decision 0065)
+BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def one_blas_thread() -> None:
+    """One BLAS/OpenMP thread for the ``bench`` program and the processes it starts (read
+    when numpy is first imported: here, before any command imports it)."""
+    for name in BLAS_THREADS:
+        os.environ.setdefault(name, "1")
+
+
 def main(argv: list[str] | None = None) -> int:
     """`bench ARGS`.  As the program (``argv`` None: the command line) the ending signals
     are caught from here, before the heavy imports, until the process is gone: a signal
     before the command's work is done gives 130, one after it changes nothing (0051)."""
     if argv is not None:                  # inside another program (a test): its signals stay its own
         return _parse_and_run(argv)
+    one_blas_thread()
     from .signals import for_process, ignore_at_exit
     latch = for_process()
     with tolerant_streams():              # these lines too may meet a terminal that is gone

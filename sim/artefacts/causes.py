@@ -347,8 +347,10 @@ def _line_cause(base: float, items, total: int) -> dict:
             count.setdefault(line_of(a), set()).add(k)
     main = max(count, key=lambda c: len(count[c]))
     ch = main[0]
-    f = [a.freq_Hz for _, _, a in items if line_of(a) == main]
-    amp = [a.size for _, _, a in items if line_of(a) == main]
+    # the line's own figures: its components (leakage and sidebands at other frequencies, which can
+    # round to the same harmonic) are counted in the sentence, not in its frequency and amplitude
+    f = [a.freq_Hz for _, _, a in items if line_of(a) == main and not math.isfinite(a.part_of_Hz)]
+    amp = [a.size for _, _, a in items if line_of(a) == main and not math.isfinite(a.part_of_Hz)]
     n = len({k for k, _, a in items if not math.isfinite(a.part_of_Hz)})
     what = (f"{mains_family(base)} interference" if base else "interference from another source (a pump, a fan, a switching supply)")
     others = sorted(set(count) - {main})

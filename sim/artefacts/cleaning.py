@@ -24,6 +24,8 @@ from .quality import Artefact
 from .sentences import si
 
 TREND_Z = 6.0                 # offset drift: sqrt(chi-square, 2 dof) of the trend coefficients
+SETTLED_Z = 0.5               # cleaning passes: settled when a pass moves what it removes by less (harmonic standard errors)
+SLOW_PASS = 0.25              # ... not settling when a pass moves it by more than this share of the pass before
 ENVELOPE_Z = 10.0             # first block's residual power above the noise, in standard errors
 
 
@@ -39,6 +41,8 @@ def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
     # harmonics back as tiny steady lines: neither is the rig's (decision 0039)
     q = _quantum(x)
     floor = q / math.sqrt(12.0)
+    trend = zero                  # the trend of the pass before (lines are searched beside it)
+    moved = math.inf
     for _pass in range(4):        # a trend converges more slowly than lines: more passes only for it
         periodic, C = _periodic_fit(x - removed, fs, f)
         r = x - periodic
@@ -46,23 +50,41 @@ def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
         noise = max(seen, floor)
         below = quantisation_line_bound(q, math.sqrt(max(seen * seen - floor * floor, 0.0)))
         aliases = _aliases(C, noise * math.sqrt(2.0 / n), f, fs)
-        lines, transients = _find_lines(r, fs, f, aliases)
-        lines = [ln for ln in lines if ln.amp > below]
-        removed_part = sum((ln.model for ln in lines + transients), zero)
-        trend, change, z = _trend(r - removed_part, noise)
-        if not z > TREND_Z:
-            trend, change, z = zero, 0.0, 0.0
-        elif lines or transients:     # what the trend's low-frequency leakage made look like a line goes
-            lines, transients = _find_lines(r - trend, fs, f, aliases)
+        for beside in ((trend, zero) if trend is not zero else (zero,)):
+            # after a pass that found a trend, the lines are searched beside it first (what the
+            # trend's low-frequency leakage would make look like a line stays out); if the trend
+            # is gone, or on the first pass, in the residual itself, and beside the trend found then
+            lines, transients = _find_lines(r - beside, fs, f, aliases)
             lines = [ln for ln in lines if ln.amp > below]
             removed_part = sum((ln.model for ln in lines + transients), zero)
             trend, change, z = _trend(r - removed_part, noise)
             if not z > TREND_Z:
                 trend, change, z = zero, 0.0, 0.0
+            elif beside is zero and (lines or transients):
+                lines, transients = _find_lines(r - trend, fs, f, aliases)
+                lines = [ln for ln in lines if ln.amp > below]
+                removed_part = sum((ln.model for ln in lines + transients), zero)
+                trend, change, z = _trend(r - removed_part, noise)
+                if not z > TREND_Z:
+                    trend, change, z = zero, 0.0, 0.0
+            if z > 0 or beside is zero:
+                break
         new = trend + sum((ln.model for ln in lines + transients), zero)
         if (_pass == 0 and not lines and not transients and z == 0.0) or (_pass == 1 and z == 0.0):
             break
+        # what this pass changes in the part removed, at its largest frequency component, in
+        # standard errors of a harmonic (decision 0065): below SETTLED_Z the passes have settled
+        # (each moves it by a tenth or less of the one before: the next would move the harmonics by
+        # a fraction of a standard error); by more than SLOW_PASS of the pass before, they do not
+        # settle within the passes left (a strong line within the guard of a drive harmonic: they
+        # move it by 50-900 standard errors, back and forth): more passes only cost time
+        change_m = float(np.abs(np.fft.rfft(new - removed)).max()) * 2.0 / n
+        se = noise * math.sqrt(2.0 / n)
+        step = change_m / se if se > 0 else (math.inf if change_m > 0 else 0.0)
         removed = new
+        if _pass >= 1 and (step < SETTLED_Z or step > SLOW_PASS * moved):
+            break
+        moved = step
     cleaned = x - new
     rest = (r - new)[n // 2:]          # what is left, in the second half (after any transient): the noise
     noise = max(min(float(1.4826 * np.median(np.abs(rest - np.median(rest)))) or noise, noise), floor)

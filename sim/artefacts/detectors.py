@@ -340,9 +340,13 @@ def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Lin
         key = p.tobytes()
         if last[0] != key:
             w = w0 + p[0] / T
-            sig = p[1] / T if with_decay else 0.0
-            e = np.exp(-sig * t)
-            last[:] = key, (w, sig, e * np.sin(w * t), e * np.cos(w * t))
+            wt = w * t
+            if with_decay:
+                sig = p[1] / T
+                e = np.exp(-sig * t)
+                last[:] = key, (w, sig, e * np.sin(wt), e * np.cos(wt))
+            else:                          # e^0 = 1: the same numbers without the exponential
+                last[:] = key, (w, 0.0, np.sin(wt), np.cos(wt))
         return last[1]
 
     def resid(p):

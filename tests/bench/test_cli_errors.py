@@ -126,3 +126,20 @@ def test_unexpected_errors_and_interruptions_have_their_codes(mocker, capsys, ex
     assert len(err) == 1 and "Traceback" not in err[0]
     if isinstance(exc, PermissionError):
         assert "/x/run.json: Permission denied" in err[0]
+
+
+@pytest.mark.parametrize("given, blas", [(None, "1"), ("2", "2")])
+def test_the_bench_program_gives_numpy_one_blas_thread_unless_the_user_chose(given, blas):
+    """Decisions 0062, 0065: OpenBLAS's default threads spin on busy cores (16 x the CPU in
+    `bench analyze`'s frequency refinement); the program sets one BLAS and OpenMP thread before
+    any command imports numpy, and a number the user set stays."""
+    import os
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}
+    if given:
+        env["OPENBLAS_NUM_THREADS"] = given
+    code = ("import os, sys\nimport bench.cli as cli\nbefore = 'numpy' in sys.modules\nsys.argv = ['bench', 'dry-run', '--help']\n"
+            "cli.main()\nprint(before, os.environ['OPENBLAS_NUM_THREADS'], os.environ['OMP_NUM_THREADS'])")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    assert out.stdout.split()[-3:] == ["False", blas, "1"], out.stdout[-300:] + out.stderr[-300:]

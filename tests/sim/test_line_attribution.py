@@ -184,3 +184,24 @@ def test_a_stray_line_in_one_step_near_a_high_mains_harmonic_is_not_mains():
     causes = artefact_causes(attribute_lines(quality))
     (hum,) = [c for c in causes if c["id"] == "line_interference"]
     assert hum["evidence"]["steps"] == ["s0", "s1", "s5"] and "50 Hz mains interference" in hum["sentence"]
+
+
+def test_a_mains_cause_states_its_lines_amplitude_not_its_components():
+    """Issue 33: a fresh 8.2 um 60 Hz hum case (independent seed 22) was reported "a 60 Hz line
+    of 4.65 um ... frequency 37.3-90.0 Hz": the line's parameters took the median over the
+    line and its 92 components (leakage, sidebands at 37-90 Hz, which round to harmonic 1 of
+    60 Hz).  Three steps with an 8.2 um 60 Hz line on the probe and, in each, two 0.5 um
+    sidebands with the 8 Hz drive: the cause is the 8.2 um line at 60 Hz, the sidebands named
+    its components."""
+    from sim.artefacts import Artefact, StepQuality
+
+    def q(i):
+        arts = [Artefact("line_interference", "disp", 8.2e-6, "removed", freq_Hz=60.0 + 0.001 * i)]
+        arts += [Artefact("line_interference", "disp", 0.5e-6, "removed", freq_Hz=60.0 + s * 8.0) for s in (-1, 1)]
+        return (f"s{i}", StepQuality(status="flagged", artefacts=arts, freq_Hz=8.0, level_N=1.0, record_s=1.0))
+
+    (cause,) = artefact_causes(attribute_lines([q(i) for i in range(3)]))
+    p = cause["parameters"]
+    assert p["amplitude"]["value"] == pytest.approx(8.2e-6) and p["amplitude"]["low"] == pytest.approx(8.2e-6)
+    assert 59.99 < p["frequency"]["low"] <= p["frequency"]["high"] < 60.01
+    assert "of 8.2 um" in cause["sentence"] and "6 component(s)" in cause["sentence"]
