@@ -1,0 +1,62 @@
+"""The terminal's words (decision 0067): what ``bench`` prints and logs, by code.
+
+``PROBLEM``: a run directory's problems (:class:`bench.step_files.Problem`, the fields of a
+:class:`~bench.step_files.StepProblem`); ``bench check`` prints them, a damaged step's error
+says them.  ``detail`` fields hold the words of a reader below (a file too large, a step's
+fields, run.json's own error), made where that reader decides.
+"""
+
+from __future__ import annotations
+
+from . import Words, say
+
+# which of a step's two files are absent (StepProblem.files)
+_PAIR = {(".json", ".npz"): "neither .json nor .npz", (".json",): "no .json (only the .npz)",
+         (".npz",): "no .npz (only the .json)"}
+_FILE = {".json": "the step's result file", ".npz": "the step's raw block; its result file is there"}
+
+
+def _owed_refinement(mode: str, force_N: float, done: int, most: int, swept: bool, dwell: bool) -> str:
+    return (f"the {mode} refinement at {force_N:g} N has not ended"
+            + (f" ({done} of at most {most} steps measured)" if swept else " (after the level's sweep)")
+            + (", nor its dwell" if dwell else ""))
+
+
+PROBLEM: Words = {
+    "missing_pair": lambda files: f"missing: {_PAIR[tuple(files)]}",
+    "missing_file": lambda file: f"missing ({_FILE[file]})",
+    "unreadable": lambda detail: detail,
+    "os_error": lambda strerror: f"unreadable ({strerror})",
+    "empty": lambda: "empty (truncated to 0 bytes)",
+    "not_utf8": lambda byte: f"not text (byte {byte} is not UTF-8)",
+    "not_json": lambda cut, msg, line, column, chars: (f"{'truncated: ' if cut else ''}not valid JSON ({msg} at line "
+                                                       f"{line} column {column}, file of {chars} characters)"),
+    "too_deep": lambda: "not a step result (nested too deeply)",
+    "not_object": lambda found: f"not a step result (a JSON object was expected, found {found})",
+    "json_checksum": lambda: "checksum mismatch: the content differs from what was written",
+    "wrong_key": lambda inside, key: f"the result inside is for step {inside!r}, not {key!r}",
+    "bad_fields": lambda detail: detail,
+    "not_npz": lambda: "not a readable .npz (truncated or overwritten?)",
+    "npz_size": lambda size, written: f"{'truncated: ' if size < written else ''}{size} bytes, {written} were written",
+    "npz_checksum": lambda: "checksum mismatch: the raw block differs from what was written",
+    "npz_unreadable": lambda error, detail: f"unreadable ({error}: {detail})",
+    "run_json": lambda detail: detail,
+    "steps_link": lambda: "is a symbolic link; a run's steps are read only inside the run directory",
+    "no_steps_dir": lambda: "no steps/ directory",
+    "raw_lacks": lambda channels: f"raw block lacks {sorted(channels)}",
+    "not_in_plan": lambda: "a step the run's plan does not know",
+    "name_not_utf8": lambda: "not a step file (its name is not UTF-8)",
+    "not_a_step_file": lambda: "not a step file",
+    "skipped": lambda why: f"skipped at run time: {why}",
+    "sweep_short": lambda short, planned: (f"missing: {short} of the {planned} steps this sweep measures "
+                                           "(adaptive plan: chosen online, so not named by key)"),
+    "refinement_open": _owed_refinement,
+    "dwell_owed": lambda cycles, mode, force_N, dwell, end: (f"the dwell of {cycles} cycles at the {mode} resonance "
+                                                             f"at {force_N:g} N ({dwell}) not measured (the "
+                                                             f"refinement ended: {end})"),
+}
+
+
+def problem(code: str, fields) -> str:
+    """A run directory's problem in words (no file name: the caller shows it)."""
+    return say(PROBLEM, code, fields)
