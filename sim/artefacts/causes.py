@@ -9,9 +9,10 @@ from dataclasses import replace
 
 import numpy as np
 
+from . import sentences
 from .detectors import HARMONIC_GUARD
 from .quality import Artefact, StepQuality
-from .sentences import FORMULAS, LABEL, LABELS, UNIT, mains_family, mains_line, si
+from .sentences import FORMULAS, LABEL, LABELS, UNIT, mains_line, si
 
 
 def _span(values, unit: str, fmt: str = ".3g") -> str:
@@ -350,7 +351,7 @@ def _line_cause(base: float, items, total: int) -> dict:
     f = [a.freq_Hz for _, _, a in items if line_of(a) == main]
     amp = [a.size for _, _, a in items if line_of(a) == main]
     n = len({k for k, _, a in items if not math.isfinite(a.part_of_Hz)})
-    what = (f"{mains_family(base)} interference" if base else "interference from another source (a pump, a fan, a switching supply)")
+    what = (f"{sentences.mains_family(base)} interference" if base else "interference from another source (a pump, a fan, a switching supply)")
     others = sorted(set(count) - {main})
     also = ("; also " + ", ".join((f"{m * base:g} Hz " if base else "") + f"on the {LABEL[c]} ({len(count[(c, m)])} steps)"
                                   for c, m in others)) if others else ""

@@ -1,5 +1,13 @@
-"""The words of the artefact check: channel names and units, sizes with SI prefixes, the
-mains frequencies and the formulas ``analysis.json`` names (:mod:`sim.artefacts`)."""
+"""The words of the artefact check (:mod:`sim.artefacts`), made here only (decisions 0059 and
+0067): channel names and units, sizes with SI prefixes, the mains frequencies, the formulas
+``analysis.json`` names, an artefact's description, a rejection's reason and a step's notes.
+
+They stay in sim/ because they are data, not only output: a step file stores them (``reason``,
+``notes``, each artefact's ``text``; docs/run-format.md), written when the step is measured,
+and a report of an earlier run reads them as stored.  The decisions read the values
+(:class:`~sim.artefacts.quality.Artefact`'s kind and fields, ``StepQuality.rejected_by``);
+tests/bench/test_decisions_are_values.py makes every function here say codes only and checks
+that they stay the same."""
 
 from __future__ import annotations
 
@@ -60,3 +68,60 @@ def not_periodic(channel: str, what: str, score: float, limit: float) -> str:
     ``channel`` changed by ``score`` standard errors between the halves of the record."""
     return (f"not periodic enough on the {LABEL.get(channel, channel)} ({channel}): its {what} changes by "
             f"{score:.0f} standard errors between the two halves of the record (limit {limit:g})")
+
+
+def artefact(a) -> str:
+    """The words of one :class:`~sim.artefacts.quality.Artefact` ``a`` (its ``describe``)."""
+    where = f"on the {LABEL[a.channel]} ({a.channel})"
+    size = si(a.size, UNIT[a.channel])
+    if a.kind == "line_interference":
+        return f"a {a.freq_Hz:.4g} Hz line of {size} {where}, not locked to the drive ({a.evidence}); removed"
+    if a.kind == "unsettled_transient":
+        what = f"{a.freq_Hz:.4g} Hz " if math.isfinite(a.freq_Hz) else ""
+        done = {"removed": "; removed", "trimmed": "; the first periods were dropped"}.get(a.action, "")
+        if not a.decay_per_s > 0:
+            advice = (f"settle {'at least' if a.settle_at_least else 'about'} {a.settle_cycles} more cycles"
+                      if a.settle_cycles else "settle longer")
+            return (f"an unsettled {what}vibration of {size} {where} ({a.evidence}), "
+                    f"not decaying measurably within the record: {advice}{done}")
+        return (f"an unsettled {what}transient of {size} {where} at the record start, "
+                f"decaying at {a.decay_per_s:.3g} /s (time constant {1e3 / a.decay_per_s:.3g} ms; "
+                f"{a.evidence}): settle {a.settle_cycles} more cycles{done}")
+    if a.kind == "clipping":
+        return (f"clipping {where}: flat at {size} for {1e3 * a.duration_s:.3g} ms "
+                f"from t = {a.time_s:.4g} s ({a.evidence})")
+    if a.kind == "dropout":
+        return (f"a drop-out {where}: the value {size} held for {1e3 * a.duration_s:.3g} ms "
+                f"from t = {a.time_s:.4g} s ({a.evidence})")
+    if a.kind == "offset_drift":
+        return f"an offset drift {where} of {size} over the record ({a.evidence}); removed"
+    return f"{a.kind} {where}"
+
+
+def mains_hint(fm_Hz: float, gap_Hz: float, k: int, drive_Hz: float, periods: int, line_Hz: float,
+               line_channel: str, periods_needed: int) -> str:
+    """Mains at ``fm_Hz`` too close to drive harmonic ``k`` to be separated in ``periods``
+    periods: why it is named (a line seen at ``line_Hz`` on ``line_channel``, or, when that
+    is '', the gate failed on harmonic ``k``) and the periods needed."""
+    why = (f"a {line_Hz:.4g} Hz line was found on the {LABEL[line_channel]}" if line_channel
+           else f"harmonic {k} is what changed")
+    return (f"mains hum, if present, at {fm_Hz:g} Hz lies {gap_Hz:.2g} Hz from drive harmonic {k} "
+            f"({k * drive_Hz:.4g} Hz) and cannot be separated from the response in {periods} periods "
+            f"({why}): measure at least {periods_needed} periods")
+
+
+def same_vibration(decaying: bool, channel: str) -> str:
+    """The evidence of a line that is the transient (``decaying``) or the free vibration seen
+    on another ``channel`` at its frequency."""
+    return f"at the frequency of the {'transient' if decaying else 'free vibration'} on the {LABEL[channel]}"
+
+
+def periods_dropped(dropped: int, periods: int) -> str:
+    """The note of a step whose first periods were dropped for an unsettled transient."""
+    return f"first {dropped} of {periods} periods dropped (unsettled transient)"
+
+
+def noisy(ratio: float, limit: float) -> str:
+    """The note of a step whose displacement residual is ``ratio`` of its fundamental (over ``limit``)."""
+    return (f"noisy: displacement residual {100 * ratio:.3g} % of the fundamental "
+            f"(limit {100 * limit:g} %; used with its noise as weight)")
