@@ -1,5 +1,6 @@
-"""The house's bars (issue 35, decisions 0057 and 0059), read from the source tree: no branch
-on the words of a message, one kernel that fits harmonics to a record, rooms of at most 600
+"""The house's bars (issue 35, decisions 0057, 0059 and 0067), read from the source tree: no
+branch on the words of a message, the values converted to codes carry no sentence (their words
+are made in bench/words/), one kernel that fits harmonics to a record, rooms of at most 600
 lines or a reason at their top, benchmarks that import no test module, one helper that
 starts `bench` in a process, one UFF58 reader."""
 
@@ -25,6 +26,12 @@ TEXT_BRANCH = re.compile(r'\.(reason|msg|message|why|note|text|curve|detail|warn
                          r'|"[^"]*" (not )?in (str\(e\)|[a-z_.]*(reason|msg|message|note|warning|why|text)s?\b)')
 # argparse's help formatter reads the help text it formats (the words themselves, not a decision)
 TEXT_ALLOWED = {("bench/cli.py", '"default" in text')}
+
+# the values whose words are made by the renderers of bench/words/ (decision 0067): their
+# codes' enum, the modules that make them, and each constructor (or helper that builds one)
+# with the position of its code argument
+CODED = {"Problem": (("bench/step_files.py", "bench/storage.py", "bench/accounting.py", "bench/commands/results.py"),
+                     {"StepProblem": 3, "bad": 1})}
 
 # a record's harmonics fitted outside the kernel (sim.records.lsq_harmonics); the ones left,
 # each to become a wrapper of the kernel (decision 0059: their figures would move)
@@ -53,6 +60,42 @@ def test_no_branch_reads_the_words_of_a_message():
                 hits.append(m.group(0))
             found += [f"{rel}:{i}: {h}" for h in hits]
     assert not found, "branches on a message's words (make the decision a value, decision 0059):\n" + "\n".join(found)
+
+
+def _sentence(node: ast.AST) -> str | None:
+    """A string literal or f-string whose literal text holds a space between words: words for
+    a person (a file name such as ``f"{key}.json"`` is not)."""
+    if isinstance(node, ast.Constant) and isinstance(node.value, str):
+        text = node.value
+    elif isinstance(node, ast.JoinedStr):
+        text = "".join(v.value for v in node.values if isinstance(v, ast.Constant) and isinstance(v.value, str))
+    else:
+        return None
+    return text if re.search(r"[A-Za-z]\w* [A-Za-z(]", text) else None
+
+
+def test_a_coded_value_carries_no_sentence():
+    """Where a value's words moved to the renderers, its constructor gets a code of its enum
+    and fields, never words: a new problem is a new code and its words in bench/words/."""
+    found = []
+    for enum, (modules, makers) in CODED.items():
+        for rel in modules:
+            text = (REPO / rel).read_text()
+            for node in ast.walk(ast.parse(text)):
+                cls = getattr(node.func, "id", None) if isinstance(node, ast.Call) else None
+                if cls not in makers:
+                    continue
+                at = makers[cls]
+                code = node.args[at] if len(node.args) > at else next((k.value for k in node.keywords
+                                                                       if k.arg == "code"), None)
+                if not (isinstance(code, ast.Attribute) and getattr(code.value, "id", None) == enum
+                        or isinstance(code, ast.Name)):
+                    found.append(f"{rel}:{node.lineno}: {cls}(...) without a {enum} code")
+                parts = {id(v) for sub in ast.walk(node) if isinstance(sub, ast.JoinedStr) for v in sub.values}
+                for sub in ast.walk(node):
+                    if id(sub) not in parts and (said := _sentence(sub)) is not None:
+                        found.append(f"{rel}:{sub.lineno}: {cls}(...) given words {said!r}")
+    assert not found, "a coded value carries words (give it a code and its words in bench/words/):\n" + "\n".join(found)
 
 
 def _fits_harmonics(node: ast.FunctionDef, src: str) -> bool:

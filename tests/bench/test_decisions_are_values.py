@@ -2,8 +2,11 @@
 function that makes the words a decision used to read is made to say something else (codes
 only), and the decisions stay the same: a step's verdict, why it was rejected, what settling
 longer cures, the causes of a run's artefacts, which missing steps are the run's unmeasured
-tail, whether a step file was cut short."""
+tail, whether a step file was cut short.  The renderers of :mod:`bench.words` (decision 0067)
+are made to say each code alone, and ``bench check`` and ``bench report`` on a damaged run
+decide, exit and write the same."""
 
+import inspect
 import json
 import shutil
 
@@ -11,10 +14,14 @@ import numpy as np
 import pytest
 
 import bench.storage as storage
-import sim.artefacts.causes as causes
-import sim.artefacts.decision as decision
-import sim.artefacts.quality as quality
+import bench.words.report as report_words
+import bench.words.terminal as terminal_words
+import sim.artefacts.sentences as sentences
+import sim.records as records
 from bench.cli import ExitCode, main
+from bench.reports._markdown import accounting_md
+from bench.reports._run import load_run
+from bench.step_files import Problem
 from bench.storage import RunStore
 from procedures.stepped_sine import unsettled_in
 from sim.artefacts import artefact_causes, assess_step
@@ -59,21 +66,27 @@ def _decisions() -> tuple:
     return tuple(out), found, qs[5][1].reason
 
 
+# the functions of sim.artefacts.sentences that are not words: a size's format, a decision's value
+NOT_WORDS = {"si", "mains_line"}
+
+
 def test_rewording_the_artefact_checks_messages_changes_no_decision(monkeypatch):
     """The verdicts, the rejection's cause, the settle advice's cycles and the causes of 7
     steps (hum, clipping, not periodic with a mains hint, a transient) are the same when every
-    word-maker the checks' decisions once read says codes only."""
+    word-maker of the artefact check (each function of sim.artefacts.sentences) says codes only."""
     before, found, reason = _decisions()
     assert [d[0] for d in before] == ["flagged"] * 4 + ["rejected", "rejected", "flagged"]
     assert [str(d[1]) for d in before[4:6]] == ["raw_fault", "not_periodic"]
     assert before[5][5] and not before[4][5]        # settling longer may cure step 5, never step 4
     assert "mains hum" in reason and {"line_interference", "clipping", "unsettled_transient"} <= {c[0] for c in found}
-    monkeypatch.setattr(decision, "not_periodic", lambda ch, what, score, limit: f"P:{ch}:{what}")
-    monkeypatch.setattr(decision, "harmonic_words", lambda k: f"H{k}")
-    monkeypatch.setattr(causes, "mains_family", lambda base: f"M{base:g}")
-    monkeypatch.setattr(quality.Artefact, "describe", lambda self: f"A:{self.kind}:{self.channel}")
+    makers = [name for name, fn in vars(sentences).items() if inspect.isfunction(fn)
+              and fn.__module__ == sentences.__name__ and name not in NOT_WORDS]
+    assert {"artefact", "not_periodic", "mains_hint", "mains_family", "noisy"} <= set(makers)
+    for name in makers:
+        monkeypatch.setattr(sentences, name, (lambda n: lambda *a, **k: f"<{n}>")(name))
+    monkeypatch.setattr(records, "harmonic_words", lambda k: f"H{k}")
     after, found_after, reason_after = _decisions()
-    assert reason_after.startswith("P:disp:") and "mains hum" in reason_after      # reworded, the hint kept
+    assert reason_after.startswith("<not_periodic>; <mains_hint>"), reason_after     # reworded, the hint kept
     assert after == before and found_after == found
 
 
@@ -88,11 +101,80 @@ def test_rewording_a_missing_steps_words_keeps_the_interrupted_tail_one_line(sma
         for ext in (".json", ".npz"):
             (run / "steps" / f"{key}{ext}").unlink()
     RunStore.open(run).update(status="interrupted")
-    monkeypatch.setattr(storage, "MISSING_WORDS", {k: "|".join(k) for k in storage.MISSING_WORDS})
+    _codes_only(monkeypatch)
     assert main(["check", str(run)]) == ExitCode.FAILURE
     lines = capsys.readouterr().out.splitlines()
     assert any(f"interrupted after step {keys[11]}; {len(keys) - 12} not yet measured" in ln for ln in lines), lines
-    assert not any(".json|.npz" in ln for ln in lines), lines
+    assert not any("<missing_pair>" in ln for ln in lines), lines
+
+
+RENDERERS = (terminal_words, report_words)
+
+
+def _codes_only(monkeypatch) -> None:
+    """Every renderer of bench.words says a code alone: ``<code>``."""
+    for module in RENDERERS:
+        for name, words in vars(module).items():
+            if name.isupper() and isinstance(words, dict):
+                monkeypatch.setattr(module, name, {code: (lambda c: lambda **_: f"<{c}>")(code) for code in words})
+
+
+def test_every_problem_code_has_words_in_every_renderer():
+    for module in RENDERERS:
+        assert set(module.PROBLEM) == {str(c) for c in Problem}, module.__name__
+
+
+def _damaged_run(small_run, tmp_path):
+    """The small run with a step cut short, one emptied, one rewritten, a raw block cut short,
+    one flipped, one gone, a stray file, and the plan's last three steps never measured."""
+    run = tmp_path / "run"
+    shutil.copytree(small_run.path, run, ignore=shutil.ignore_patterns("report", "export", "analysis"))
+    steps = run / "steps"
+    keys = sorted(p.stem for p in steps.glob("*.json"))
+    j = lambda i: steps / f"{keys[i]}.json"      # noqa: E731
+    z = lambda i: steps / f"{keys[i]}.npz"       # noqa: E731
+    j(1).write_bytes(j(1).read_bytes()[:200])
+    j(2).write_bytes(b"")
+    j(3).write_text(j(3).read_text().replace('"force_N": ', '"force_N": 1', 1))
+    z(4).write_bytes(z(4).read_bytes()[:-100])
+    data = bytearray(z(5).read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    z(5).write_bytes(bytes(data))
+    z(6).unlink()
+    (steps / "notes.txt").write_text("a note")
+    for key in keys[-3:]:
+        for ext in (".json", ".npz"):
+            (steps / f"{key}{ext}").unlink()
+    RunStore.open(run).update(status="interrupted")
+    return run
+
+
+def _check_and_account(run, capsys) -> tuple:
+    """``bench check``'s exit status and lines; the report's first lines (what it used and
+    skipped, and why; the report's only words of a run directory's problems)."""
+    code = main(["check", str(run)])
+    return code, capsys.readouterr().out.splitlines(), accounting_md(load_run(run))
+
+
+def test_rewording_every_storage_problem_changes_no_decision(small_run, tmp_path, capsys, monkeypatch):
+    """``bench check`` and the report on a damaged run: the same exit status, the same
+    problems (kind, step, file) in the same order and the same overall verdict, when the
+    terminal's and the report's renderers say codes only; the words were theirs (the codes show)."""
+    run = _damaged_run(small_run, tmp_path)
+    before = _check_and_account(run, capsys)
+    _codes_only(monkeypatch)
+    after = _check_and_account(run, capsys)
+    head = lambda lines: [ln.split(": ", 1)[0] for ln in lines]     # noqa: E731 - what precedes the words
+    assert after[0] == before[0] == ExitCode.FAILURE
+    assert head(after[1]) == head(before[1]) and len(before[1]) == 9, before[1]
+    assert any("not yet measured" in ln for ln in after[1])       # the unmeasured tail: one line
+    said = [f"<{c}>" for c in ("not_json", "empty", "json_checksum", "npz_size", "npz_checksum", "missing_pair",
+                               "not_a_step_file")]
+    assert all(any(w in ln for ln in after[1]) for w in said), after[1]
+    assert not any("<" in ln for ln in before[1])
+    overall = lambda md: [ln for ln in md if ln.startswith("Overall")]     # noqa: E731
+    assert overall(after[2]) == overall(before[2]) and overall(before[2])
+    assert "(damaged: <npz_size>)" in after[2][0] and "<" not in before[2][0]
 
 
 @pytest.mark.parametrize("text, kind", [('{"key": "00001", "status": "ok', "truncated"),
