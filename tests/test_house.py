@@ -33,6 +33,10 @@ TEXT_ALLOWED = {("bench/cli.py", '"default" in text')}
 CODED = {"Problem": (("bench/step_files.py", "bench/storage.py", "bench/accounting.py", "bench/commands/results.py"),
                      {"StepProblem": 3, "bad": 1})}
 
+# modules converted whole: they decide and make no sentence (docstrings aside); their words are
+# made by a renderer (bench/words/, or sim/artefacts/sentences.py for the words a step file stores)
+WORDLESS = ("bench/step_files.py", "sim/artefacts/decision.py", "sim/artefacts/quality.py")
+
 # a record's harmonics fitted outside the kernel (sim.records.lsq_harmonics); the ones left,
 # each to become a wrapper of the kernel (decision 0059: their figures would move)
 HARMONIC_DEBTS = {("sim/discrepancy/cases.py", "_harmonics"), ("sim/artefacts/decision.py", "_fundamental")}
@@ -96,6 +100,20 @@ def test_a_coded_value_carries_no_sentence():
                     if id(sub) not in parts and (said := _sentence(sub)) is not None:
                         found.append(f"{rel}:{sub.lineno}: {cls}(...) given words {said!r}")
     assert not found, "a coded value carries words (give it a code and its words in bench/words/):\n" + "\n".join(found)
+
+
+def test_a_converted_module_makes_no_sentence():
+    found = []
+    for rel in WORDLESS:
+        tree = ast.parse((REPO / rel).read_text())
+        docs = {id(n.body[0].value) for n in ast.walk(tree)
+                if isinstance(n, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+                and n.body and isinstance(n.body[0], ast.Expr)}
+        parts = {id(v) for n in ast.walk(tree) if isinstance(n, ast.JoinedStr) for v in n.values}
+        found += [f"{rel}:{n.lineno}: {said!r}" for n in ast.walk(tree)
+                  if id(n) not in docs | parts and (said := _sentence(n)) is not None]
+    assert not found, "words made outside the renderers (move them to bench/words/ or the module's sentences):\n" + \
+        "\n".join(found)
 
 
 def _fits_harmonics(node: ast.FunctionDef, src: str) -> bool:
