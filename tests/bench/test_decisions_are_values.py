@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import bench.storage as storage
+import bench.words.page as page_words
 import bench.words.report as report_words
 import bench.words.terminal as terminal_words
 import sim.artefacts.sentences as sentences
@@ -23,6 +24,7 @@ from bench.reports._markdown import accounting_md
 from bench.reports._run import load_run
 from bench.step_files import Problem
 from bench.storage import RunStore
+from bench.watch.snapshot import PageWarning, RunReader
 from procedures.stepped_sine import unsettled_in
 from sim.artefacts import artefact_causes, assess_step
 
@@ -108,7 +110,7 @@ def test_rewording_a_missing_steps_words_keeps_the_interrupted_tail_one_line(sma
     assert not any("<missing_pair>" in ln for ln in lines), lines
 
 
-RENDERERS = (terminal_words, report_words)
+RENDERERS = (terminal_words, report_words, page_words)
 
 
 def _codes_only(monkeypatch) -> None:
@@ -119,9 +121,26 @@ def _codes_only(monkeypatch) -> None:
                 monkeypatch.setattr(module, name, {code: (lambda c: lambda **_: f"<{c}>")(code) for code in words})
 
 
-def test_every_problem_code_has_words_in_every_renderer():
-    for module in RENDERERS:
+def test_every_code_has_words_in_its_renderers():
+    for module in (terminal_words, report_words):
         assert set(module.PROBLEM) == {str(c) for c in Problem}, module.__name__
+    assert set(page_words.WARNING) == {str(c) for c in PageWarning}
+
+
+def test_the_pages_warnings_are_the_renderers_words(small_run, monkeypatch):
+    """The live page warns of a step whose force was not reached in the words it always
+    used, made by bench.words.page; said as codes, the same warnings in the same order."""
+    reader = RunReader(small_run.path)
+    results = [dict(key="00003-L00-F003-up", force_converged=False, target_force_N=2.0, force_error=-0.052,
+                    control_iterations=7), dict(key="00004-L00-F004-up", force_converged=True)]
+    meta = {"identifiability_warnings": ["F_s: no level above it"]}
+    before = reader._warnings(meta, results)
+    assert before[:2] == [dict(source="plan", text="F_s: no level above it"),
+                          dict(source="step", text="00003-L00-F003-up: force 2 N not reached (error -5.2 %, 7 iterations)")]
+    _codes_only(monkeypatch)
+    after = reader._warnings(meta, results)
+    assert after[1]["text"] == "<force_not_reached>"
+    assert [w["source"] for w in after] == [w["source"] for w in before]
 
 
 def _damaged_run(small_run, tmp_path):
