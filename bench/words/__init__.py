@@ -8,8 +8,8 @@ output, each a mapping from a code to a function of the fields that returns the 
   damaged step's one-line error);
 - :mod:`bench.words.report`: the report's markdown (the same words as the terminal's where
   the report names the same thing; the module says which);
-- :mod:`bench.words.page`: the live page's and the html report's words (none of the values
-  converted so far is shown there apart from the report's markdown, which the page renders).
+- :mod:`bench.words.page`: the live page's words (``bench watch``: the warnings it makes of
+  the stored steps).
 
 A renderer is keyed by the code's string, so the modules that decide import no renderer's
 module and the renderers import no deciding module (no cycle between bench's modules).  Code
