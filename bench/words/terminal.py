@@ -4,11 +4,19 @@
 :class:`~bench.step_files.StepProblem`); ``bench check`` prints them, a damaged step's error
 says them.  ``detail`` fields hold the words of a reader below (a file too large, a step's
 fields, run.json's own error), made where that reader decides.
+
+``REFUSAL``: the one-line errors of a refusal (:class:`bench.runlock.LockRefusal`,
+:class:`bench.demo.OutDirRefusal`), made by :func:`refused` into the exception the command
+raises; the exception keeps the code and the fields.
 """
 
 from __future__ import annotations
 
+from typing import TypeVar
+
 from . import Words, say
+
+E = TypeVar("E", bound=Exception)
 
 # which of a step's two files are absent (StepProblem.files)
 _PAIR = {(".json", ".npz"): "neither .json nor .npz", (".json",): "no .json (only the .npz)",
@@ -55,6 +63,42 @@ PROBLEM: Words = {
                                                              f"at {force_N:g} N ({dwell}) not measured (the "
                                                              f"refinement ended: {end})"),
 }
+
+
+def _holder(pid: int | None = None, host: str = "", since: str = "", command: str = "bench", run: str = "") -> str:
+    if pid is None:
+        return "another process (it has not said which yet)"
+    return f"process {pid} on {host} since {since} ({command}{', run directory ' + run if run else ''})"
+
+
+_HELD = {"run_dir": "run directory", "instrument": "instrument"}
+_DEMO_HOW = "bench demo --out: choose a new or empty directory, or remove"
+
+REFUSAL: Words = {
+    "lock_link": lambda path: f"{path}: is a symbolic link; a lock is never taken through links (remove it)",
+    "lock_not_a_file": lambda path, held, name: f"{path}: not a regular file (expected the lock file of {_HELD[held]} {name})",
+    "in_use": lambda held, name, holder: (f"{_HELD[held]} {name} is in use by {_holder(**holder)}; one session at a "
+                                          "time: wait for it to end or stop it (Ctrl-C in its terminal, or its watch "
+                                          "page's stop)"),
+    "lock_dir": lambda path, uid: (f"{path}: the instruments' lock directory must be a real directory of user {uid} "
+                                   "(set GUIDEWAY_LOCK_DIR to another)"),
+    "demo_not_a_dir": lambda out: f"{out}: not a directory; {_DEMO_HOW} it",
+    "demo_not_a_demo": lambda out, manifest: (f"{out} is not empty and holds no earlier demo run (no readable "
+                                              f"{manifest} listing the files a demo wrote there); the demo deletes "
+                                              f"nothing else: {_DEMO_HOW} its contents"),
+    "demo_foreign": lambda out, foreign: (f"{out} holds an earlier demo run and files the demo did not write ("
+                                          + ", ".join(foreign[:6]) + (f" (+{len(foreign) - 6} more)" if len(foreign) > 6
+                                                                      else "")
+                                          + f"); the demo deletes nothing it did not write: {_DEMO_HOW} them"),
+}
+
+
+def refused(exc: type[E], code: str, **fields) -> E:
+    """The exception ``exc`` of a refusal: its message the words of ``code`` with ``fields``,
+    and ``code`` and ``fields`` kept on it (what a caller decides by)."""
+    e = exc(say(REFUSAL, code, fields))
+    e.code, e.fields = code, fields         # type: ignore[attr-defined]
+    return e
 
 
 def problem(code: str, fields) -> str:

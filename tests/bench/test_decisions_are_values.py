@@ -6,8 +6,10 @@ tail, whether a step file was cut short.  The renderers of :mod:`bench.words` (d
 are made to say each code alone, and ``bench check`` and ``bench report`` on a damaged run
 decide, exit and write the same."""
 
+import fcntl
 import inspect
 import json
+import os
 import shutil
 
 import numpy as np
@@ -20,8 +22,10 @@ import bench.words.terminal as terminal_words
 import sim.artefacts.sentences as sentences
 import sim.records as records
 from bench.cli import ExitCode, main
+from bench.demo import MANIFEST, OutDirRefusal
 from bench.reports._markdown import accounting_md
 from bench.reports._run import load_run
+from bench.runlock import LOCK_NAME, LockRefusal
 from bench.step_files import Problem
 from bench.storage import RunStore
 from bench.watch.snapshot import PageWarning, RunReader
@@ -125,6 +129,52 @@ def test_every_code_has_words_in_its_renderers():
     for module in (terminal_words, report_words):
         assert set(module.PROBLEM) == {str(c) for c in Problem}, module.__name__
     assert set(page_words.WARNING) == {str(c) for c in PageWarning}
+    assert set(terminal_words.REFUSAL) == {str(c) for c in (*LockRefusal, *OutDirRefusal)}
+
+
+def _refusals(run, outs, capsys) -> list:
+    """Each refusal's exit status, what it said on stderr and the files it left: ``bench
+    resume`` of a run whose lock another session holds, ``bench demo --out`` into a file,
+    a foreign directory and an earlier demo's directory with a file the demo did not write."""
+    snap = lambda d: sorted((p.relative_to(d).as_posix(), p.stat().st_size) for p in d.rglob("*"))   # noqa: E731
+    got = []
+    fd = os.open(run / LOCK_NAME, os.O_RDWR | os.O_CREAT)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)           # another open file: another session's lock
+        before = snap(run)
+        got.append((main(["resume", str(run), "--no-report"]), capsys.readouterr().err, snap(run) == before))
+    finally:
+        os.close(fd)
+    for out in outs:
+        before = snap(out.parent)
+        got.append((main(["demo", "--out", str(out)]), capsys.readouterr().err, snap(out.parent) == before))
+    return got
+
+
+def test_rewording_every_refusal_changes_no_exit_status_and_no_file(small_run, tmp_path, capsys, monkeypatch):
+    """A session refused because the run is in use, and the demo refusing three directories:
+    the same exit statuses, nothing written, when the terminal says codes only."""
+    run = tmp_path / "run"
+    shutil.copytree(small_run.path, run, ignore=shutil.ignore_patterns("report", "export", "analysis"))
+    RunStore.open(run).update(status="interrupted")
+    outs = [tmp_path / d / "out" for d in ("file", "foreign", "demo")]
+    for out in outs:
+        out.parent.mkdir()
+    outs[0].write_text("a file")
+    (outs[1] / "thesis").mkdir(parents=True)
+    (outs[1] / "thesis" / "ch1.tex").write_text("x")
+    outs[2].mkdir()
+    (outs[2] / MANIFEST).write_text(json.dumps({"files": {}, "dirs": []}))
+    (outs[2] / "ch1.tex").write_text("x")
+    before = _refusals(run, outs, capsys)
+    assert [(code, kept) for code, _, kept in before] == [(ExitCode.FAILURE, True)] + [(ExitCode.USAGE, True)] * 3
+    assert f"run directory {run} is in use by another process" in before[0][1]
+    _codes_only(monkeypatch)
+    after = _refusals(run, outs, capsys)
+    assert [(code, kept) for code, _, kept in after] == [(code, kept) for code, _, kept in before]
+    said = [err for _, err, _ in after]
+    for err, code in zip(said, ("in_use", "demo_not_a_dir", "demo_not_a_demo", "demo_foreign")):
+        assert f"<{code}>" in err, said
 
 
 def test_the_pages_warnings_are_the_renderers_words(small_run, monkeypatch):
