@@ -73,7 +73,7 @@ from .runlock import LOCK_NAME
 from .step_files import DamagedStep, Problem, StepProblem, _check_npz, _json_fields, _read_step_json, _utf8
 from .step_files import _json_cut as _json_cut
 from .step_files import shown as shown
-from .words import terminal
+from .words.terminal import refused
 
 log = logging.getLogger(__name__)
 
@@ -97,6 +97,24 @@ class RunStatus(enum.StrEnum):
 
 
 RunDirError = RunDirectoryError    # not a readable run directory (missing, or run.json damaged)
+
+
+class RunDirRefusal(enum.StrEnum):
+    """Why a run directory was refused (the error's ``code``; its words: :mod:`bench.words.terminal`)."""
+
+    NOT_EMPTY = "run_dir_not_empty"                 # path (a new run's --out)
+    NO_DIR = "run_dir_missing"                      # path
+    NO_RUN_JSON = "run_dir_no_run_json"             # path
+    LINK = "run_dir_link"                           # path, kind ("directory" | "file")
+    NOT_REGULAR = "run_dir_not_regular"             # path, kind, found (bench.files.file_kind)
+    RUN_JSON_MISSING = "run_json_missing"           # path
+    RUN_JSON_UNREADABLE = "run_json_unreadable"     # detail: the file reader's words
+    RUN_JSON_NOT_JSON = "run_json_not_json"         # path, json (Problem.NOT_JSON's fields)
+    RUN_JSON_NOT_UTF8 = "run_json_not_utf8"         # path, byte
+    RUN_JSON_TOO_DEEP = "run_json_too_deep"         # path
+    RUN_JSON_NOT_OBJECT = "run_json_not_object"     # path, found
+    NEWER_FORMAT = "run_json_newer"                 # path, version, reads (the newest this version reads)
+    STEPS_GONE = "steps_gone"                       # path: steps/ deleted while the run used it
 
 
 class NewerFormat(RunDirectoryError):
@@ -124,8 +142,7 @@ class RunStore:
         or empty but for the session lock the new session holds: bench.runlock)."""
         path = Path(path)
         if path.exists() and any(p.name != LOCK_NAME for p in path.iterdir()):
-            raise FileExistsError(f"run directory {path} exists and is not empty; "
-                                  f"use 'bench resume {path}' or choose another --out")
+            raise refused(FileExistsError, RunDirRefusal.NOT_EMPTY, path=path)
 
     @classmethod
     def create(cls, path: Path, metadata: dict) -> RunStore:
@@ -143,9 +160,9 @@ class RunStore:
     def open(cls, path: Path) -> RunStore:
         store = cls(path)
         if not store.path.exists():
-            raise RunDirError(f"{path}: no such directory (expected a run directory made by 'bench run')")
+            raise refused(RunDirError, RunDirRefusal.NO_DIR, path=path)
         if not (store.path / "run.json").is_file():
-            raise RunDirError(f"{path}: not a run directory (no run.json; expected a directory made by 'bench run')")
+            raise refused(RunDirError, RunDirRefusal.NO_RUN_JSON, path=path)
         _ = store.metadata          # a damaged run.json or a newer format is named now, not deep inside a reader
         store.refuse_links()
         return store
@@ -158,8 +175,7 @@ class RunStore:
         for name in WRITTEN:
             kind = "directory" if name in ("steps", "damaged") else "file"
             if (self.path / name).is_symlink():
-                raise RunDirError(f"{self.path / name}: is a symbolic link; a run writes nothing "
-                                  f"through links (replace it with a real {kind})")
+                raise refused(RunDirError, RunDirRefusal.LINK, path=self.path / name, kind=kind)
             if not writing:
                 continue
             try:
@@ -167,8 +183,8 @@ class RunStore:
             except FileNotFoundError:
                 continue
             if not (stat.S_ISDIR(mode) if kind == "directory" else stat.S_ISREG(mode)):
-                raise RunDirError(f"{self.path / name}: not a {'directory' if kind == 'directory' else 'regular file'} "
-                                  f"({file_kind(mode)}); a run writes only regular files (replace or remove it)")
+                raise refused(RunDirError, RunDirRefusal.NOT_REGULAR, path=self.path / name, kind=kind,
+                              found=file_kind(mode))
 
     @property
     def metadata(self) -> dict:
@@ -178,21 +194,20 @@ class RunStore:
         try:
             meta = json.loads(read_file(p))
         except FileNotFoundError:
-            raise RunDirError(f"{p}: missing (not a run directory?)") from None
+            raise refused(RunDirError, RunDirRefusal.RUN_JSON_MISSING, path=p) from None
         except UnreadableFile as e:
-            raise RunDirError(f"{e} (run.json holds the run's plan; nothing can be counted without it)") from None
+            raise refused(RunDirError, RunDirRefusal.RUN_JSON_UNREADABLE, detail=str(e)) from None
         except json.JSONDecodeError as e:
-            raise RunDirError(f"{p}: damaged ({terminal.problem(Problem.NOT_JSON, _json_fields(e))})") from None
+            raise refused(RunDirError, RunDirRefusal.RUN_JSON_NOT_JSON, path=p, json=_json_fields(e)) from None
         except UnicodeDecodeError as e:
-            raise RunDirError(f"{p}: damaged (not text: byte {e.start} is not UTF-8)") from None
+            raise refused(RunDirError, RunDirRefusal.RUN_JSON_NOT_UTF8, path=p, byte=e.start) from None
         except RecursionError:
-            raise RunDirError(f"{p}: damaged (nested too deeply to be a run's metadata)") from None
+            raise refused(RunDirError, RunDirRefusal.RUN_JSON_TOO_DEEP, path=p) from None
         if not isinstance(meta, dict):
-            raise RunDirError(f"{p}: damaged (a JSON object was expected, found {type(meta).__name__})")
+            raise refused(RunDirError, RunDirRefusal.RUN_JSON_NOT_OBJECT, path=p, found=type(meta).__name__)
         version = meta.get("format_version", 1)
         if not isinstance(version, int) or isinstance(version, bool) or version > RUN_FORMAT_VERSION:
-            raise NewerFormat(f"{p}: run format version {version!r}, written by a newer guideway-bench "
-                              f"(this one reads versions up to {RUN_FORMAT_VERSION}); update to read it")
+            raise refused(NewerFormat, RunDirRefusal.NEWER_FORMAT, path=p, version=version, reads=RUN_FORMAT_VERSION)
         return meta
 
     def update(self, **fields) -> None:
@@ -272,8 +287,7 @@ class RunStore:
 
     def _steps_dir_there(self) -> None:
         if not self.steps_dir.exists() and not self.steps_dir.is_symlink():
-            raise StorageError(f"{self.steps_dir}: missing (deleted while the run was using it?); "
-                               f"no step can be stored")
+            raise refused(StorageError, RunDirRefusal.STEPS_GONE, path=self.steps_dir)
 
     def check_writable(self) -> None:
         """Create, write, fsync and remove a probe file in ``steps/``: a run checks that it

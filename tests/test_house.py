@@ -35,6 +35,8 @@ CODED = {"Problem": (("bench/step_files.py", "bench/storage.py", "bench/accounti
                      {"StepProblem": 3, "bad": 1}),
          "LockRefusal": (("bench/runlock.py",), {"refused": 1, "InUse": None}),
          "OutDirRefusal": (("bench/demo.py",), {"refused": 1, "ConfigurationError": None}),
+         "RunDirRefusal": (("bench/storage.py",), {"refused": 1, "RunDirError": None, "NewerFormat": None,
+                                                   "FileExistsError": None, "StorageError": None}),
          "PageWarning": (("bench/watch/snapshot.py",), {"page.warning": 0})}
 
 # modules converted whole: they decide and make no sentence (docstrings aside); their words are

@@ -6,7 +6,7 @@ says them.  ``detail`` fields hold the words of a reader below (a file too large
 fields, run.json's own error), made where that reader decides.
 
 ``REFUSAL``: the one-line errors of a refusal (:class:`bench.runlock.LockRefusal`,
-:class:`bench.demo.OutDirRefusal`), made by :func:`refused` into the exception the command
+:class:`bench.demo.OutDirRefusal`, :class:`bench.storage.RunDirRefusal`), made by :func:`refused` into the exception the command
 raises; the exception keeps the code and the fields.
 """
 
@@ -91,6 +91,29 @@ REFUSAL: Words = {
                                                                       else "")
                                           + f"); the demo deletes nothing it did not write: {_DEMO_HOW} them"),
 }
+
+
+REFUSAL.update({
+    "run_dir_not_empty": lambda path: (f"run directory {path} exists and is not empty; "
+                                       f"use 'bench resume {path}' or choose another --out"),
+    "run_dir_missing": lambda path: f"{path}: no such directory (expected a run directory made by 'bench run')",
+    "run_dir_no_run_json": lambda path: (f"{path}: not a run directory (no run.json; expected a directory made by "
+                                         "'bench run')"),
+    "run_dir_link": lambda path, kind: (f"{path}: is a symbolic link; a run writes nothing through links (replace it "
+                                        f"with a real {kind})"),
+    "run_dir_not_regular": lambda path, kind, found: (f"{path}: not a {'directory' if kind == 'directory' else 'regular file'} "
+                                                      f"({found}); a run writes only regular files (replace or remove it)"),
+    "run_json_missing": lambda path: f"{path}: missing (not a run directory?)",
+    "run_json_unreadable": lambda detail: f"{detail} (run.json holds the run's plan; nothing can be counted without it)",
+    "run_json_not_json": lambda path, json: f"{path}: damaged ({PROBLEM['not_json'](**json)})",
+    "run_json_not_utf8": lambda path, byte: f"{path}: damaged (not text: byte {byte} is not UTF-8)",
+    "run_json_too_deep": lambda path: f"{path}: damaged (nested too deeply to be a run's metadata)",
+    "run_json_not_object": lambda path, found: f"{path}: damaged (a JSON object was expected, found {found})",
+    "run_json_newer": lambda path, version, reads: (f"{path}: run format version {version!r}, written by a newer "
+                                                    f"guideway-bench (this one reads versions up to {reads}); update "
+                                                    "to read it"),
+    "steps_gone": lambda path: f"{path}: missing (deleted while the run was using it?); no step can be stored",
+})
 
 
 def refused(exc: type[E], code: str, **fields) -> E:

@@ -27,7 +27,7 @@ from bench.reports._markdown import accounting_md
 from bench.reports._run import load_run
 from bench.runlock import LOCK_NAME, LockRefusal
 from bench.step_files import Problem
-from bench.storage import RunStore
+from bench.storage import RunDirRefusal, RunStore
 from bench.watch.snapshot import PageWarning, RunReader
 from procedures.stepped_sine import unsettled_in
 from sim.artefacts import artefact_causes, assess_step
@@ -129,7 +129,7 @@ def test_every_code_has_words_in_its_renderers():
     for module in (terminal_words, report_words):
         assert set(module.PROBLEM) == {str(c) for c in Problem}, module.__name__
     assert set(page_words.WARNING) == {str(c) for c in PageWarning}
-    assert set(terminal_words.REFUSAL) == {str(c) for c in (*LockRefusal, *OutDirRefusal)}
+    assert set(terminal_words.REFUSAL) == {str(c) for c in (*LockRefusal, *OutDirRefusal, *RunDirRefusal)}
 
 
 def _refusals(run, outs, capsys) -> list:
@@ -148,11 +148,15 @@ def _refusals(run, outs, capsys) -> list:
     for out in outs:
         before = snap(out.parent)
         got.append((main(["demo", "--out", str(out)]), capsys.readouterr().err, snap(out.parent) == before))
+    for command, path in (("report", run.parent / "absent"), ("report", outs[1]), ("resume", run.parent / "newer")):
+        before = snap(run.parent)
+        got.append((main([command, str(path)]), capsys.readouterr().err, snap(run.parent) == before))
     return got
 
 
 def test_rewording_every_refusal_changes_no_exit_status_and_no_file(small_run, tmp_path, capsys, monkeypatch):
-    """A session refused because the run is in use, and the demo refusing three directories:
+    """A session refused because the run is in use, the demo refusing three directories, a
+    report of no directory, a report of one that is not a run's, a resume of a newer format's:
     the same exit statuses, nothing written, when the terminal says codes only."""
     run = tmp_path / "run"
     shutil.copytree(small_run.path, run, ignore=shutil.ignore_patterns("report", "export", "analysis"))
@@ -166,14 +170,18 @@ def test_rewording_every_refusal_changes_no_exit_status_and_no_file(small_run, t
     outs[2].mkdir()
     (outs[2] / MANIFEST).write_text(json.dumps({"files": {}, "dirs": []}))
     (outs[2] / "ch1.tex").write_text("x")
+    newer = tmp_path / "newer"
+    newer.mkdir()
+    (newer / "run.json").write_text(json.dumps({"format_version": 99}))
     before = _refusals(run, outs, capsys)
-    assert [(code, kept) for code, _, kept in before] == [(ExitCode.FAILURE, True)] + [(ExitCode.USAGE, True)] * 3
+    assert [(code, kept) for code, _, kept in before] == [(ExitCode.FAILURE, True)] + [(ExitCode.USAGE, True)] * 6
     assert f"run directory {run} is in use by another process" in before[0][1]
     _codes_only(monkeypatch)
     after = _refusals(run, outs, capsys)
     assert [(code, kept) for code, _, kept in after] == [(code, kept) for code, _, kept in before]
     said = [err for _, err, _ in after]
-    for err, code in zip(said, ("in_use", "demo_not_a_dir", "demo_not_a_demo", "demo_foreign")):
+    for err, code in zip(said, ("in_use", "demo_not_a_dir", "demo_not_a_demo", "demo_foreign", "run_dir_missing",
+                                "run_dir_no_run_json", "run_json_newer"), strict=True):
         assert f"<{code}>" in err, said
 
 
