@@ -5,6 +5,9 @@
 says them.  ``detail`` fields hold the words of a reader below (a file too large, a step's
 fields, run.json's own error), made where that reader decides.
 
+``CHECK``: the lines ``bench check`` prints besides each problem's
+(:class:`bench.commands.results.CheckLine`).
+
 ``REFUSAL``: the one-line errors of a refusal (:class:`bench.runlock.LockRefusal`,
 :class:`bench.demo.OutDirRefusal`, :class:`bench.storage.RunDirRefusal`), made by :func:`refused` into the exception the command
 raises; the exception keeps the code and the fields.
@@ -15,6 +18,8 @@ from __future__ import annotations
 from typing import TypeVar
 
 from . import Words, say
+
+__all__ = ["CHECK", "PROBLEM", "REFUSAL", "Words", "problem", "refused", "say"]
 
 E = TypeVar("E", bound=Exception)
 
@@ -114,6 +119,23 @@ REFUSAL.update({
                                                     "to read it"),
     "steps_gone": lambda path: f"{path}: missing (deleted while the run was using it?); no step can be stored",
 })
+
+
+CHECK: Words = {
+    "unmeasured_tail": lambda last, count, run: (f"interrupted after step {last or '(none)'}; {count} not yet measured "
+                                                 f"(the plan's steps after it; bench resume {run} measures them)"),
+    "no_plan": lambda run, files, problems: (f"{run}: {files} step result files; run.json unreadable or its plan not "
+                                             "valid, so the steps cannot be counted against the plan; "
+                                             f"{problems} problem{'s' if problems != 1 else ''}"),
+    "resume_measures": lambda run: (f" (bench resume {run} measures missing and damaged steps again, keeping damaged "
+                                    "files in damaged/)"),
+    "resume_owes": lambda run: f" (bench resume {run} measures what the refinement still owes)",
+    "skipped_allowed": lambda count, strict: (f"{count} step{'s' * (count != 1)} skipped at run time as the plan allows "
+                                              '(infeasible = "skip"): '
+                                              + ("counted as problems (--strict)" if strict else
+                                                 "not a problem (--strict counts them); bench resume "
+                                                 "--retry-skipped measures them again")),
+}
 
 
 def refused(exc: type[E], code: str, **fields) -> E:

@@ -110,8 +110,7 @@ def test_rewording_a_missing_steps_words_keeps_the_interrupted_tail_one_line(sma
     _codes_only(monkeypatch)
     assert main(["check", str(run)]) == ExitCode.FAILURE
     lines = capsys.readouterr().out.splitlines()
-    assert any(f"interrupted after step {keys[11]}; {len(keys) - 12} not yet measured" in ln for ln in lines), lines
-    assert not any("<missing_pair>" in ln for ln in lines), lines
+    assert [ln for ln in lines if ln.startswith("  missing")] == ["  missing  <unmeasured_tail>"], lines
 
 
 RENDERERS = (terminal_words, report_words, page_words)
@@ -241,14 +240,15 @@ def test_rewording_every_storage_problem_changes_no_decision(small_run, tmp_path
     before = _check_and_account(run, capsys)
     _codes_only(monkeypatch)
     after = _check_and_account(run, capsys)
-    head = lambda lines: [ln.split(": ", 1)[0] for ln in lines]     # noqa: E731 - what precedes the words
+    head = lambda lines: [ln.partition(": ")[0] if ln.partition(": ")[2] else ln[:11]   # noqa: E731
+                          for ln in lines]          # the kind and the file, or the kind alone: what precedes the words
     assert after[0] == before[0] == ExitCode.FAILURE
     assert head(after[1]) == head(before[1]) and len(before[1]) == 9, before[1]
-    assert any("not yet measured" in ln for ln in after[1])       # the unmeasured tail: one line
+    assert "  missing  <unmeasured_tail>" in after[1]       # the unmeasured tail: one line
     said = [f"<{c}>" for c in ("not_json", "empty", "json_checksum", "npz_size", "npz_checksum", "missing_pair",
                                "not_a_step_file")]
     assert all(any(w in ln for ln in after[1]) for w in said), after[1]
-    assert not any("<" in ln for ln in before[1])
+    assert not any("<" in ln for ln in before[1]) and "<resume_measures>" in after[1][-1]
     overall = lambda md: [ln for ln in md if ln.startswith("Overall")]     # noqa: E731
     assert overall(after[2]) == overall(before[2]) and overall(before[2])
     assert "(damaged: <npz_size>)" in after[2][0] and "<" not in before[2][0]
