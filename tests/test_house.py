@@ -37,6 +37,7 @@ CODED = {"Problem": (("bench/step_files.py", "bench/storage.py", "bench/accounti
          "OutDirRefusal": (("bench/demo.py",), {"refused": 1, "ConfigurationError": None}),
          "RunDirRefusal": (("bench/storage.py",), {"refused": 1, "RunDirError": None, "NewerFormat": None,
                                                    "FileExistsError": None, "StorageError": None}),
+         "CheckLine": (("bench/commands/results.py",), {"say": 0}),
          "PageWarning": (("bench/watch/snapshot.py",), {"page.warning": 0})}
 
 # modules converted whole: they decide and make no sentence (docstrings aside); their words are

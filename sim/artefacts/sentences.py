@@ -125,3 +125,8 @@ def noisy(ratio: float, limit: float) -> str:
     """The note of a step whose displacement residual is ``ratio`` of its fundamental (over ``limit``)."""
     return (f"noisy: displacement residual {100 * ratio:.3g} % of the fundamental "
             f"(limit {100 * limit:g} %; used with its noise as weight)")
+
+
+def still_ringing(a) -> str:
+    """A line at the frequency of the vibration the block before showed: that vibration, weaker."""
+    return f"{artefact(a)}: at the frequency of the vibration the block before showed, so that vibration, weaker"

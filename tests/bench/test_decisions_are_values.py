@@ -66,7 +66,7 @@ def _decisions() -> tuple:
         q = assess_step(sig["force"], sig["accel"], sig["disp"], fs, f).quality
         u = unsettled_in(q, fs, sig["force"].size)
         out.append((q.status, q.rejected_by, [(a.kind, a.channel, a.action, a.settle_cycles) for a in q.artefacts],
-                    u.cycles, tuple(round(x, 6) for x in u.vibrations_Hz), bool(u.why)))
+                    u.cycles, tuple(round(x, 6) for x in u.vibrations_Hz), u.found))
         qs.append((f"s{i}", q))
     found = [(c["id"], c["channel"], c["evidence"]["steps"], c["gain"]) for c in artefact_causes(qs)]
     return tuple(out), found, qs[5][1].reason
@@ -94,6 +94,9 @@ def test_rewording_the_artefact_checks_messages_changes_no_decision(monkeypatch)
     after, found_after, reason_after = _decisions()
     assert reason_after.startswith("<not_periodic>; <mains_hint>"), reason_after     # reworded, the hint kept
     assert after == before and found_after == found
+    for name in makers:                 # no words at all: nothing decides by whether there are any
+        monkeypatch.setattr(sentences, name, lambda *a, **k: "")
+    assert _decisions()[:2] == (before, found)
 
 
 def test_rewording_a_missing_steps_words_keeps_the_interrupted_tail_one_line(small_run, tmp_path, capsys,
