@@ -7,15 +7,18 @@ are made to say each code alone, and ``bench check`` and ``bench report`` on a d
 decide, exit and write the same."""
 
 import fcntl
+import importlib
 import inspect
 import json
 import os
+import pkgutil
 import shutil
 
 import numpy as np
 import pytest
 
 import bench.storage as storage
+import bench.words
 import bench.words.page as page_words
 import bench.words.report as report_words
 import bench.words.terminal as terminal_words
@@ -116,7 +119,12 @@ def test_rewording_a_missing_steps_words_keeps_the_interrupted_tail_one_line(sma
     assert [ln for ln in lines if ln.startswith("  missing")] == ["  missing  <unmeasured_tail>"], lines
 
 
-RENDERERS = (terminal_words, report_words, page_words)
+# every renderer of bench/words/ (a new one is reworded without editing this test)
+RENDERERS = tuple(importlib.import_module(f"bench.words.{m.name}") for m in pkgutil.iter_modules(bench.words.__path__))
+
+
+def test_the_renderers_are_the_three_outputs():
+    assert {m.__name__ for m in RENDERERS} >= {m.__name__ for m in (terminal_words, report_words, page_words)}
 
 
 def _codes_only(monkeypatch) -> None:
