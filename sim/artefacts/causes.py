@@ -12,7 +12,7 @@ import numpy as np
 from . import sentences
 from .detectors import HARMONIC_GUARD
 from .quality import Artefact, StepQuality
-from .sentences import FORMULAS, LABEL, LABELS, UNIT, mains_line, si
+from .sentences import FORMULAS, LABELS, UNIT, mains_line
 
 
 def _span(values, unit: str, fmt: str = ".3g") -> str:
@@ -351,14 +351,9 @@ def _line_cause(base: float, items, total: int) -> dict:
     f = [a.freq_Hz for _, _, a in items if line_of(a) == main]
     amp = [a.size for _, _, a in items if line_of(a) == main]
     n = len({k for k, _, a in items if not math.isfinite(a.part_of_Hz)})
-    what = (f"{sentences.mains_family(base)} interference" if base else "interference from another source (a pump, a fan, a switching supply)")
-    others = sorted(set(count) - {main})
-    also = ("; also " + ", ".join((f"{m * base:g} Hz " if base else "") + f"on the {LABEL[c]} ({len(count[(c, m)])} steps)"
-                                  for c, m in others)) if others else ""
-    comp = (f"; with {len(parts)} component(s) of it that the line and the drive make together (leakage, "
-            f"sidebands) in {len({k for k, _ in parts})} steps, not sources of their own") if parts else ""
-    sentence = (f"a {np.median(f):.4g} Hz line of {si(float(np.median(amp)), UNIT[ch])} on the {LABEL[ch]} in {n} of "
-                f"{total} steps, not locked to the drive: {what}{also}{comp}; removed before the fit")
+    others = [(c, m * base, len(count[(c, m)])) for c, m in sorted(set(count) - {main})]
+    sentence = sentences.line_cause(float(np.median(f)), float(np.median(amp)), ch, n, total, base, others,
+                                    len(parts), len({k for k, _ in parts}))
     return _entry("line_interference", ch, items, total,
                   dict(frequency=_param(f, "Hz"), amplitude=_param(amp, UNIT[ch])), sentence)
 
@@ -368,7 +363,6 @@ def _other_cause(kind: str, ch: str, items, total: int) -> dict:
     n = len(qs)
     arts = [a for _, _, a in items]
     rej = sum(q.status == "rejected" for q in qs)
-    fate = (f"{n - rej} kept" if n > rej else "") + (", " if 0 < rej < n else "") + (f"{rej} rejected" if rej else "")
     where = _where(qs)
     if kind == "unsettled_transient":
         chans = sorted({a.channel for a in arts})
@@ -376,13 +370,9 @@ def _other_cause(kind: str, ch: str, items, total: int) -> dict:
         cyc = worst.settle_cycles
         tau = [1e3 / a.decay_per_s for a in arts if a.decay_per_s > 0]
         ft = [a.freq_Hz for a in arts if math.isfinite(a.freq_Hz)]
-        vib = (f"the rig's own unsettled free vibration near {np.median(ft):.3g} Hz" if ft
-               else "the rig's own unsettled free vibration")
-        const = f", time constant {_span(tau, 'ms')}" if tau else ""
-        advice = f"settle {'at least ' if worst.settle_at_least else ''}{cyc} more cycles" if cyc else "settle longer"
-        sentence = (f"steps {where} still vibrating at the record start ({vib}{const}, on the "
-                    f"{' and '.join(LABEL[c] for c in chans)}) in {n} of {total} steps: {advice}; "
-                    f"{fate} (transient removed or first periods dropped where the record allowed)")
+        sentence = sentences.transient_cause(where, float(np.median(ft)) if ft else math.nan,
+                                             _span(tau, "ms") if tau else "", chans, n, total, cyc,
+                                             worst.settle_at_least, rej)
         rates = [a.decay_per_s for a in arts if a.decay_per_s > 0]
         params = dict(settle_cycles_needed=_param([a.settle_cycles for a in arts], "cycles"))
         if rates:
@@ -392,17 +382,12 @@ def _other_cause(kind: str, ch: str, items, total: int) -> dict:
         return _entry(kind, ",".join(chans), items, total, params, sentence)
     size = [abs(a.size) for a in arts]
     if kind == "clipping":
-        sentence = (f"clipping on the {LABEL[ch]} in {n} of {total} steps ({where}): flat at "
-                    f"{si(max(size), UNIT[ch])}, the range of the sensor or its input; {fate}: use a larger range "
-                    f"or a lower level")
+        sentence = sentences.clipping_cause(ch, n, total, where, max(size), rej)
         params = dict(level=_param(size, UNIT[ch]), time_at_limit=_param([a.duration_s for a in arts], "s"))
     elif kind == "dropout":
-        sentence = (f"drop-outs on the {LABEL[ch]} in {n} of {total} steps ({where}): the signal held for up to "
-                    f"{1e3 * max(a.duration_s for a in arts):.3g} ms; {fate}: check the cable, connector and "
-                    f"acquisition")
+        sentence = sentences.dropout_cause(ch, n, total, where, max(a.duration_s for a in arts), rej)
         params = dict(duration=_param([a.duration_s for a in arts], "s"))
     else:
-        sentence = (f"an offset drift on the {LABEL[ch]} in {n} of {total} steps, up to {si(max(size), UNIT[ch])} "
-                    f"over a record (thermal drift of the sensor, or the carriage creeping); removed before the fit")
+        sentence = sentences.drift_cause(ch, n, total, max(size))
         params = dict(change=_param(size, UNIT[ch]))
     return _entry(kind, ch, items, total, params, sentence)

@@ -130,3 +130,55 @@ def noisy(ratio: float, limit: float) -> str:
 def still_ringing(a) -> str:
     """A line at the frequency of the vibration the block before showed: that vibration, weaker."""
     return f"{artefact(a)}: at the frequency of the vibration the block before showed, so that vibration, weaker"
+
+
+# ---------------------------------------------------------------- the causes of many steps (analysis.json)
+
+def _fate(n: int, rejected: int) -> str:
+    """'3 kept, 2 rejected': what became of the ``n`` steps of a cause."""
+    return ((f"{n - rejected} kept" if n > rejected else "") + (", " if 0 < rejected < n else "")
+            + (f"{rejected} rejected" if rejected else ""))
+
+
+def line_cause(freq_Hz: float, amplitude: float, channel: str, n: int, total: int, base_Hz: float,
+               others: list[tuple[str, float, int]], components: int, component_steps: int) -> str:
+    """An interference family: its main line (median frequency and amplitude on ``channel``
+    in ``n`` of ``total`` steps), the mains ``base_Hz`` (0: another source), its other lines
+    (channel, frequency, steps) and its components (leakage, sidebands)."""
+    what = (f"{mains_family(base_Hz)} interference" if base_Hz
+            else "interference from another source (a pump, a fan, a switching supply)")
+    also = ("; also " + ", ".join((f"{f:g} Hz " if base_Hz else "") + f"on the {LABEL[c]} ({k} steps)"
+                                  for c, f, k in others)) if others else ""
+    comp = (f"; with {components} component(s) of it that the line and the drive make together (leakage, "
+            f"sidebands) in {component_steps} steps, not sources of their own") if components else ""
+    return (f"a {freq_Hz:.4g} Hz line of {si(amplitude, UNIT[channel])} on the {LABEL[channel]} in {n} of "
+            f"{total} steps, not locked to the drive: {what}{also}{comp}; removed before the fit")
+
+
+def transient_cause(where: str, freq_Hz: float, time_constants: str, channels: list[str], n: int, total: int,
+                    cycles: int, at_least: bool, rejected: int) -> str:
+    """Steps still vibrating at the record start: where, the vibration's median frequency
+    (NaN: not known), its time constants ('' when none decays), the advice."""
+    vib = (f"the rig's own unsettled free vibration near {freq_Hz:.3g} Hz" if math.isfinite(freq_Hz)
+           else "the rig's own unsettled free vibration")
+    const = f", time constant {time_constants}" if time_constants else ""
+    advice = f"settle {'at least ' if at_least else ''}{cycles} more cycles" if cycles else "settle longer"
+    return (f"steps {where} still vibrating at the record start ({vib}{const}, on the "
+            f"{' and '.join(LABEL[c] for c in channels)}) in {n} of {total} steps: {advice}; "
+            f"{_fate(n, rejected)} (transient removed or first periods dropped where the record allowed)")
+
+
+def clipping_cause(channel: str, n: int, total: int, where: str, level: float, rejected: int) -> str:
+    return (f"clipping on the {LABEL[channel]} in {n} of {total} steps ({where}): flat at "
+            f"{si(level, UNIT[channel])}, the range of the sensor or its input; {_fate(n, rejected)}: use a larger "
+            f"range or a lower level")
+
+
+def dropout_cause(channel: str, n: int, total: int, where: str, longest_s: float, rejected: int) -> str:
+    return (f"drop-outs on the {LABEL[channel]} in {n} of {total} steps ({where}): the signal held for up to "
+            f"{1e3 * longest_s:.3g} ms; {_fate(n, rejected)}: check the cable, connector and acquisition")
+
+
+def drift_cause(channel: str, n: int, total: int, change: float) -> str:
+    return (f"an offset drift on the {LABEL[channel]} in {n} of {total} steps, up to {si(change, UNIT[channel])} "
+            f"over a record (thermal drift of the sensor, or the carriage creeping); removed before the fit")
