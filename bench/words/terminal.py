@@ -9,8 +9,9 @@ fields, run.json's own error), made where that reader decides.
 (:class:`bench.commands.results.CheckLine`).
 
 ``REFUSAL``: the one-line errors of a refusal (:class:`bench.runlock.LockRefusal`,
-:class:`bench.demo.OutDirRefusal`, :class:`bench.storage.RunDirRefusal`), made by :func:`refused` into the exception the command
-raises; the exception keeps the code and the fields.
+:class:`bench.demo.OutDirRefusal`, :class:`bench.storage.RunDirRefusal`), made by
+:func:`refused` into the exception the command raises; the exception keeps the code and
+the fields.
 """
 
 from __future__ import annotations
