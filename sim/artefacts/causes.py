@@ -178,9 +178,8 @@ def attribute_lines(quality: list[tuple[str, StepQuality]],
     repeated = {(i, id(a)) for i, a in lines if steady(i, a)}
     decays = [(a.freq_Hz, a.decay_per_s) for _, q in quality for a in q.artefacts
               if _vibration_Hz(a) and a.decay_per_s > 0]
-    modes = [(f"the {a.freq_Hz:.4g} Hz vibration of step {key}", a.freq_Hz)
-             for key, q in quality for a in q.artefacts if _vibration_Hz(a)]
-    modes += [(f"the {fr:.4g} Hz resonance of the measured response", float(fr)) for fr in resonances_Hz]
+    modes = [(key, a.freq_Hz) for key, q in quality for a in q.artefacts if _vibration_Hz(a)]
+    modes += [("", float(fr)) for fr in resonances_Hz]        # "": the measured response's resonance
     vib: list[list[float]] = [[a.freq_Hz for a in q.artefacts if _vibration_Hz(a)] for _, q in quality]
     interference: set[int] = set()
     out: list[tuple[str, StepQuality, list[Artefact], bool]] = []
@@ -192,10 +191,8 @@ def attribute_lines(quality: list[tuple[str, StepQuality]],
                 continue
             if id(a) in hidden:
                 F = hidden[id(a)]
-                arts.append(replace(a, part_of_Hz=F, evidence=(
-                    f"{a.evidence}; leakage of the {F:.4g} Hz line of the source, which lies within "
-                    f"{HARMONIC_GUARD:g} record resolutions of drive harmonic {round(F / q.freq_Hz)} here and cannot be "
-                    f"separated from it: not a source of its own")))
+                arts.append(replace(a, part_of_Hz=F, evidence=sentences.leakage_of_source(
+                    a.evidence, F, HARMONIC_GUARD, round(F / q.freq_Hz))))
                 changed = True
                 continue
             if is_mains(i, a):
@@ -206,20 +203,15 @@ def attribute_lines(quality: list[tuple[str, StepQuality]],
             before = [fv for fv in (vib[i - 1] if i else []) if near(fv)]
             mode = [(k, fv) for k, fv in modes if near(fv)]
             if before:
-                why = (f"at the frequency of the vibration of the step before ({quality[i - 1][0]}, "
-                       f"{before[0]:.4g} Hz): the rig's own free vibration, not interference")
+                why = sentences.vibration_of_step_before(quality[i - 1][0], before[0])
             elif mode:
-                why = (f"near {mode[0][0]}"
-                       + (f" and {len(mode) - 1} other(s)" if len(mode) > 1 else "")
-                       + ", the rig's own mode: the rig's own free vibration, not interference")
+                why = sentences.near_mode(mode[0][0], mode[0][1], len(mode) - 1)
             elif (i, id(a)) in repeated:
                 arts.append(a)
                 interference.add(id(a))
                 continue
             else:
-                why = (f"{'at a mains frequency in too few steps with one amplitude' if mains_line(a.freq_Hz) else 'at no mains frequency'}"
-                       f" and in fewer than {REPEAT_STEPS} steps at one frequency, drive frequencies and amplitude: "
-                       f"the rig's own free vibration, not interference")
+                why = sentences.not_repeated(mains_line(a.freq_Hz) is not None, REPEAT_STEPS)
             arts.append(_as_vibration(a, q, why, decays))
             vib[i].append(a.freq_Hz)
             changed = True
@@ -234,16 +226,12 @@ def attribute_lines(quality: list[tuple[str, StepQuality]],
                 while id(root) in parent:
                     root = parent[id(root)]
                 if id(root) in interference:
-                    a = replace(a, part_of_Hz=root.freq_Hz,
-                                evidence=f"{a.evidence}; a component of the {root.freq_Hz:.4g} Hz line of this step "
-                                         f"(leakage or a sideband with the drive), not a source of its own")
+                    a = replace(a, part_of_Hz=root.freq_Hz, evidence=sentences.component_of(a.evidence, root.freq_Hz))
                 elif id(root) in hidden:          # beside the leakage of a hum the step cannot separate
                     F = hidden[id(root)]
-                    a = replace(a, part_of_Hz=F, evidence=f"{a.evidence}; beside the leakage of the {F:.4g} Hz line of "
-                                                          f"the source (not separable in this step): its own too")
+                    a = replace(a, part_of_Hz=F, evidence=sentences.beside_leakage(a.evidence, F))
                 else:
-                    a = _as_vibration(a, q, f"beside the stronger {b.freq_Hz:.4g} Hz line of this step, which is "
-                                            f"not interference: the rig's own free vibration", decays)
+                    a = _as_vibration(a, q, sentences.beside_stronger(b.freq_Hz), decays)
                 changed = True
             final.append(a)
         if not changed:
@@ -267,13 +255,12 @@ def _as_vibration(a: Artefact, q: StepQuality, why: str, decays: list[tuple[floa
         sigma = float(np.median(rates))
         z = a.snr / max(1.0, sigma * q.record_s / 2)
         cycles = int(math.ceil(q.freq_Hz * math.log(z) / sigma)) if z > 1 else 0
-        advice = (f"; settle advice from the decay rate {sigma:.3g} /s of the source's transients"
-                  + (" near this frequency" if near else ""))
+        advice = sentences.advice_from_transients(sigma, bool(near))
     elif a.decay_bound_per_s > 0:     # no transient to learn from: the record's own bound, so at least this many
         sigma = a.decay_bound_per_s
         z = a.snr / max(1.0, sigma * q.record_s / 2)
         cycles = int(math.ceil(q.freq_Hz * math.log(z) / sigma)) if z > 1 else 0
-        advice = f"; its decay rate is below {sigma:.3g} /s (fit + 2 standard errors)"
+        advice = sentences.advice_from_bound(sigma)
         least = True
     return replace(a, kind="unsettled_transient", settle_cycles=cycles, settle_at_least=least,
                    evidence=f"{a.evidence}; {why}{advice}")

@@ -132,6 +132,56 @@ def still_ringing(a) -> str:
     return f"{artefact(a)}: at the frequency of the vibration the block before showed, so that vibration, weaker"
 
 
+# ---------------------------------------------------------------- whose line it is (attribute_lines' evidence)
+
+def leakage_of_source(evidence: str, line_Hz: float, guard: float, harmonic: int) -> str:
+    return (f"{evidence}; leakage of the {line_Hz:.4g} Hz line of the source, which lies within "
+            f"{guard:g} record resolutions of drive harmonic {harmonic} here and cannot be "
+            f"separated from it: not a source of its own")
+
+
+def vibration_of_step_before(step: str, freq_Hz: float) -> str:
+    return (f"at the frequency of the vibration of the step before ({step}, "
+            f"{freq_Hz:.4g} Hz): the rig's own free vibration, not interference")
+
+
+def near_mode(step: str, freq_Hz: float, others: int) -> str:
+    """Near the vibration of ``step`` at ``freq_Hz`` ('' : the measured response's
+    resonance) and ``others`` more: the rig's own mode."""
+    mode = (f"the {freq_Hz:.4g} Hz vibration of step {step}" if step
+            else f"the {freq_Hz:.4g} Hz resonance of the measured response")
+    return (f"near {mode}" + (f" and {others} other(s)" if others > 0 else "")
+            + ", the rig's own mode: the rig's own free vibration, not interference")
+
+
+def not_repeated(at_mains: bool, repeat_steps: int) -> str:
+    return (f"{'at a mains frequency in too few steps with one amplitude' if at_mains else 'at no mains frequency'}"
+            f" and in fewer than {repeat_steps} steps at one frequency, drive frequencies and amplitude: "
+            f"the rig's own free vibration, not interference")
+
+
+def component_of(evidence: str, line_Hz: float) -> str:
+    return (f"{evidence}; a component of the {line_Hz:.4g} Hz line of this step "
+            f"(leakage or a sideband with the drive), not a source of its own")
+
+
+def beside_leakage(evidence: str, line_Hz: float) -> str:
+    return f"{evidence}; beside the leakage of the {line_Hz:.4g} Hz line of the source (not separable in this step): its own too"
+
+
+def beside_stronger(line_Hz: float) -> str:
+    return f"beside the stronger {line_Hz:.4g} Hz line of this step, which is not interference: the rig's own free vibration"
+
+
+def advice_from_transients(decay_per_s: float, near: bool) -> str:
+    return (f"; settle advice from the decay rate {decay_per_s:.3g} /s of the source's transients"
+            + (" near this frequency" if near else ""))
+
+
+def advice_from_bound(decay_per_s: float) -> str:
+    return f"; its decay rate is below {decay_per_s:.3g} /s (fit + 2 standard errors)"
+
+
 # ---------------------------------------------------------------- the causes of many steps (analysis.json)
 
 def _fate(n: int, rejected: int) -> str:
