@@ -42,8 +42,8 @@ CODED = {"Problem": (("bench/step_files.py", "bench/storage.py", "bench/accounti
 
 # modules converted whole: they decide and make no sentence (docstrings aside); their words are
 # made by a renderer (bench/words/, or sim/artefacts/sentences.py for the words a step file stores)
-WORDLESS = ("bench/step_files.py", "bench/runlock.py", "sim/artefacts/causes.py", "sim/artefacts/decision.py",
-            "sim/artefacts/quality.py")
+WORDLESS = ("bench/step_files.py", "bench/runlock.py", "sim/artefacts/causes.py", "sim/artefacts/cleaning.py",
+            "sim/artefacts/decision.py", "sim/artefacts/quality.py")
 
 # a record's harmonics fitted outside the kernel (sim.records.lsq_harmonics); the ones left,
 # each to become a wrapper of the kernel (decision 0059: their figures would move)

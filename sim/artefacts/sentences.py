@@ -132,6 +132,57 @@ def still_ringing(a) -> str:
     return f"{artefact(a)}: at the frequency of the vibration the block before showed, so that vibration, weaker"
 
 
+# ---------------------------------------------------------------- one channel's evidence (detectors, cleaning)
+
+def clipped_samples(at_level: int, samples: int, runs: int) -> str:
+    return f"{at_level} samples ({100 * at_level / samples:.2g} % of the record) flat at the extreme value in {runs} runs"
+
+
+def one_value() -> str:
+    return "the channel holds one value over the whole record"
+
+
+def held_runs(runs: int, samples: int, longest: int, off: float, noise: float, quantum: float, unit: str,
+              log_chance: float, limit_per_run: float, limit_per_record: float) -> str:
+    """Drop-outs: ``runs`` runs of identical samples, the first ``off`` from the signal
+    against the noise and the quantum, with the natural log of its chance."""
+    chance = f"{math.exp(log_chance):.1g}" if log_chance > -700 else f"1e{log_chance / math.log(10):.0f}"
+    return (f"{runs} run(s) of identical samples, {samples} samples in all, longest "
+            f"{longest}; during the first the signal (periodic fit) was up "
+            f"to {si(off, unit)} from the held value, against a noise of {si(noise, unit)} "
+            f"and a quantum of {si(quantum, unit)}: a chance of {chance} "
+            f"(limit {limit_per_run:.1g} a run, {limit_per_record:g} per record)")
+
+
+def trend(z: float) -> str:
+    return f"linear + quadratic trend {z:.0f} standard errors from zero"
+
+
+def line_found(snr: float, of_drive: float) -> str:
+    return f"{snr:.0f} standard errors, {of_drive:.3f} x the drive frequency"
+
+
+def decaying_sinusoid(decay_per_s: float, se_per_s: float) -> str:
+    return f"a decaying sinusoid fitted, decay rate {decay_per_s:.3g} +- {se_per_s:.2g} /s"
+
+
+def falling_differences(periods_falling: int, periods: int, z_first: float) -> str:
+    return (f"the difference between consecutive periods falls over the first {periods_falling} "
+            f"of {periods} periods (first by {z_first:.0f} standard errors above the noise)")
+
+
+def free_vibration(accel: float, disp: float, freq_Hz: float, ratio: float, phase_deg: float, z_accel: float,
+                   z_disp: float, decay_per_s: float, decay_se: float, significant: bool, record_ms: float) -> str:
+    """A component both motion sensors see as one motion; its decay rate when fitted (NaN: not)."""
+    rate = ""
+    if not math.isnan(decay_se):
+        rate = (f"; decay rate {decay_per_s:.2g} +- {decay_se:.2g} /s" + ("" if significant else ", not significant")
+                + f" in a {record_ms:.3g} ms record")
+    return (f"a free vibration of the carriage, not interference: the accelerometer's {si(accel, 'm/s^2')} "
+            f"at {freq_Hz:.4g} Hz is -(2 pi f)^2 times the probe's {si(disp, 'm')} (ratio {ratio:.2f}, "
+            f"phase {phase_deg:+.0f} deg; {z_accel:.0f} and {z_disp:.0f} standard errors){rate}")
+
+
 # ---------------------------------------------------------------- whose line it is (attribute_lines' evidence)
 
 def leakage_of_source(evidence: str, line_Hz: float, guard: float, harmonic: int) -> str:
