@@ -12,7 +12,7 @@ from sim.errors import ConfigurationError
 from sim.errors import RunDirectoryError as RunDirError
 
 from .config import parse_stored_plan
-from .step_files import StepProblem, shown
+from .step_files import Problem, StepProblem, shown
 
 log = logging.getLogger(__name__)
 
@@ -101,12 +101,12 @@ class Accounting:
 
 def _owed_label(p: StepProblem) -> str:
     """'L00-feed dwell' or 'L01-pitch refinement'."""
-    return f"{p.key} {'dwell' if p.path.suffix == '.json' else 'refinement'}"
+    return f"{p.key} {'dwell' if p.code is Problem.DWELL_OWED else 'refinement'}"
 
 
 def _missing_label(p: StepProblem) -> str:
     """A step's key, or an adaptive sweep with the number of steps it lacks: 'L01-up (2)'."""
-    return p.key if p.path.suffix in (".json", ".npz") else f"{p.key} ({p.count})"
+    return f"{p.key} ({p.count})" if p.code is Problem.SWEEP_SHORT else p.key
 
 
 def _sweeps(plan) -> dict[tuple[int, str], list[str]]:

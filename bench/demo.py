@@ -15,11 +15,13 @@ import hashlib
 import json
 import logging
 import os
+from enum import StrEnum
 from pathlib import Path
 
 from sim.errors import ConfigurationError
 
 from .runlock import LOCK_NAME
+from .words.terminal import refused
 
 log = logging.getLogger(__name__)
 
@@ -109,24 +111,29 @@ def _foreign(out: Path, manifest: dict) -> list[str]:
     return sorted(found)
 
 
+class OutDirRefusal(StrEnum):
+    """Why ``bench demo --out`` refused a directory (the error's ``code``; its words:
+    :mod:`bench.words.terminal`)."""
+
+    NOT_A_DIR = "demo_not_a_dir"        # out
+    NOT_A_DEMO = "demo_not_a_demo"      # out, manifest (its file name)
+    FOREIGN = "demo_foreign"            # out, foreign (what the demo did not write, sorted)
+
+
 def check_out_dir(out: Path) -> bool:
     """True if ``out`` holds an earlier demo's files and nothing else, False if it is absent
     or empty; anything else raises :class:`ConfigurationError` naming what is there."""
     out = Path(out)
     if not out.exists() or (out.is_dir() and not any(p.name != LOCK_NAME for p in out.iterdir())):
         return False
-    how = "bench demo --out: choose a new or empty directory, or remove"
     if not out.is_dir() or out.is_symlink():
-        raise ConfigurationError(f"{out}: not a directory; {how} it")
+        raise refused(ConfigurationError, OutDirRefusal.NOT_A_DIR, out=out)
     manifest = _manifest(out)
     if manifest is None:
-        raise ConfigurationError(f"{out} is not empty and holds no earlier demo run (no readable {MANIFEST} listing "
-                                 f"the files a demo wrote there); the demo deletes nothing else: {how} its contents")
+        raise refused(ConfigurationError, OutDirRefusal.NOT_A_DEMO, out=out, manifest=MANIFEST)
     foreign = _foreign(out, manifest)
     if foreign:
-        shown = ", ".join(foreign[:6]) + (f" (+{len(foreign) - 6} more)" if len(foreign) > 6 else "")
-        raise ConfigurationError(f"{out} holds an earlier demo run and files the demo did not write ({shown}); "
-                                 f"the demo deletes nothing it did not write: {how} them")
+        raise refused(ConfigurationError, OutDirRefusal.FOREIGN, out=out, foreign=foreign)
     return True
 
 

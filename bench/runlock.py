@@ -32,11 +32,13 @@ import tempfile
 import threading
 from contextlib import contextmanager
 from datetime import UTC, datetime
+from enum import StrEnum
 from pathlib import Path
 
 from sim.errors import BenchError
 
 from .files import read_file
+from .words.terminal import refused
 
 LOCK_NAME = "session.lock"          # in a run directory
 
@@ -48,19 +50,30 @@ class InUse(BenchError):
     """A run directory or an instrument is held by another session."""
 
 
-def _holder_text(path: Path) -> str:
+class LockRefusal(StrEnum):
+    """Why a lock was refused (:class:`InUse`'s ``code``; its words: :mod:`bench.words.terminal`)."""
+
+    LINK = "lock_link"                  # path
+    NOT_A_FILE = "lock_not_a_file"      # path, held, name
+    IN_USE = "in_use"                   # held ("run_dir" | "instrument"), name, holder (the lock file's info, or {})
+    LOCK_DIR = "lock_dir"               # path, uid
+
+
+def _holder(path: Path) -> dict:
+    """Who holds the lock, as its file says: pid, host, since, command, run ({}: not said yet)."""
     try:
         info = json.loads(read_file(path, 4096))       # regular file, bounded (bench.files)
-        return (f"process {int(info['pid'])} on {info['host']} since {info['since']} "
-                f"({info.get('command', 'bench')}{', run directory ' + info['run'] if info.get('run') else ''})")
+        return dict(pid=int(info["pid"]), host=info["host"], since=info["since"],
+                    command=info.get("command", "bench"), run=info.get("run") or "")
     except (OSError, ValueError, KeyError, TypeError):
-        return "another process (it has not said which yet)"
+        return {}
 
 
 @contextmanager
-def hold(path: Path, what: str, run: Path | None = None):
+def hold(path: Path, held: str, name: str, run: Path | None = None):
     """Hold the exclusive lock ``path`` while the block runs, or raise :class:`InUse`
-    naming ``what`` and the holder.  ``run``: the run directory, told to whoever is refused."""
+    naming what is ``held`` ("run_dir" or "instrument") by ``name`` and the holder.
+    ``run``: the run directory, told to whoever is refused."""
     path = Path(path)
     key = os.path.realpath(path)
     with _guard:
@@ -80,16 +93,15 @@ def hold(path: Path, what: str, run: Path | None = None):
         fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o666)
     except OSError as e:
         if e.errno == errno.ELOOP:
-            raise InUse(f"{path}: is a symbolic link; a lock is never taken through links (remove it)") from None
+            raise refused(InUse, LockRefusal.LINK, path=path) from None
         raise
     try:
         if not stat.S_ISREG(os.fstat(fd).st_mode):
-            raise InUse(f"{path}: not a regular file (expected the lock file of {what})")
+            raise refused(InUse, LockRefusal.NOT_A_FILE, path=path, held=held, name=name)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise InUse(f"{what} is in use by {_holder_text(path)}; one session at a time: wait for it to end "
-                        f"or stop it (Ctrl-C in its terminal, or its watch page's stop)") from None
+            raise refused(InUse, LockRefusal.IN_USE, held=held, name=name, holder=_holder(path)) from None
         info = {"pid": os.getpid(), "host": socket.gethostname(),
                 "since": datetime.now(UTC).isoformat(timespec="seconds"),
                 "command": " ".join(["bench", *sys.argv[1:2]]) if sys.argv else "bench"}
@@ -114,7 +126,7 @@ def hold(path: Path, what: str, run: Path | None = None):
 
 def run_dir(path: Path):
     """The lock of the run directory ``path`` (which must exist)."""
-    return hold(Path(path) / LOCK_NAME, f"run directory {path}")
+    return hold(Path(path) / LOCK_NAME, "run_dir", str(path))
 
 
 def lock_dir() -> Path:
@@ -129,12 +141,11 @@ def lock_dir() -> Path:
     d.mkdir(mode=0o700, parents=True, exist_ok=True)
     st = os.lstat(d)
     if stat.S_ISLNK(st.st_mode) or not stat.S_ISDIR(st.st_mode) or st.st_uid != os.getuid():
-        raise InUse(f"{d}: the instruments' lock directory must be a real directory of user {os.getuid()} "
-                    f"(set GUIDEWAY_LOCK_DIR to another)")
+        raise refused(InUse, LockRefusal.LOCK_DIR, path=d, uid=os.getuid())
     return d
 
 
 def instrument(url: str, run: Path):
     """The lock of the instrument at ``url`` (by its URL as written) for a session of ``run``."""
     name = hashlib.sha256(url.encode()).hexdigest()[:24] + ".lock"
-    return hold(lock_dir() / name, f"instrument {url}", run=run)
+    return hold(lock_dir() / name, "instrument", url, run=run)

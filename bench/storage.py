@@ -70,9 +70,10 @@ from .durable import (
 from .durable import file_mode as file_mode
 from .files import UnreadableFile, file_kind, read_file
 from .runlock import LOCK_NAME
-from .step_files import MISSING_WORDS, DamagedStep, StepProblem, _check_npz, _json_reason, _read_step_json, _utf8
+from .step_files import DamagedStep, Problem, StepProblem, _check_npz, _json_fields, _read_step_json, _utf8
 from .step_files import _json_cut as _json_cut
 from .step_files import shown as shown
+from .words.terminal import refused
 
 log = logging.getLogger(__name__)
 
@@ -96,6 +97,24 @@ class RunStatus(enum.StrEnum):
 
 
 RunDirError = RunDirectoryError    # not a readable run directory (missing, or run.json damaged)
+
+
+class RunDirRefusal(enum.StrEnum):
+    """Why a run directory was refused (the error's ``code``; its words: :mod:`bench.words.terminal`)."""
+
+    NOT_EMPTY = "run_dir_not_empty"                 # path (a new run's --out)
+    NO_DIR = "run_dir_missing"                      # path
+    NO_RUN_JSON = "run_dir_no_run_json"             # path
+    LINK = "run_dir_link"                           # path, kind ("directory" | "file")
+    NOT_REGULAR = "run_dir_not_regular"             # path, kind, found (bench.files.file_kind)
+    RUN_JSON_MISSING = "run_json_missing"           # path
+    RUN_JSON_UNREADABLE = "run_json_unreadable"     # detail: the file reader's words
+    RUN_JSON_NOT_JSON = "run_json_not_json"         # path, json (Problem.NOT_JSON's fields)
+    RUN_JSON_NOT_UTF8 = "run_json_not_utf8"         # path, byte
+    RUN_JSON_TOO_DEEP = "run_json_too_deep"         # path
+    RUN_JSON_NOT_OBJECT = "run_json_not_object"     # path, found
+    NEWER_FORMAT = "run_json_newer"                 # path, version, reads (the newest this version reads)
+    STEPS_GONE = "steps_gone"                       # path: steps/ deleted while the run used it
 
 
 class NewerFormat(RunDirectoryError):
@@ -123,8 +142,7 @@ class RunStore:
         or empty but for the session lock the new session holds: bench.runlock)."""
         path = Path(path)
         if path.exists() and any(p.name != LOCK_NAME for p in path.iterdir()):
-            raise FileExistsError(f"run directory {path} exists and is not empty; "
-                                  f"use 'bench resume {path}' or choose another --out")
+            raise refused(FileExistsError, RunDirRefusal.NOT_EMPTY, path=path)
 
     @classmethod
     def create(cls, path: Path, metadata: dict) -> RunStore:
@@ -142,9 +160,9 @@ class RunStore:
     def open(cls, path: Path) -> RunStore:
         store = cls(path)
         if not store.path.exists():
-            raise RunDirError(f"{path}: no such directory (expected a run directory made by 'bench run')")
+            raise refused(RunDirError, RunDirRefusal.NO_DIR, path=path)
         if not (store.path / "run.json").is_file():
-            raise RunDirError(f"{path}: not a run directory (no run.json; expected a directory made by 'bench run')")
+            raise refused(RunDirError, RunDirRefusal.NO_RUN_JSON, path=path)
         _ = store.metadata          # a damaged run.json or a newer format is named now, not deep inside a reader
         store.refuse_links()
         return store
@@ -157,8 +175,7 @@ class RunStore:
         for name in WRITTEN:
             kind = "directory" if name in ("steps", "damaged") else "file"
             if (self.path / name).is_symlink():
-                raise RunDirError(f"{self.path / name}: is a symbolic link; a run writes nothing "
-                                  f"through links (replace it with a real {kind})")
+                raise refused(RunDirError, RunDirRefusal.LINK, path=self.path / name, kind=kind)
             if not writing:
                 continue
             try:
@@ -166,8 +183,8 @@ class RunStore:
             except FileNotFoundError:
                 continue
             if not (stat.S_ISDIR(mode) if kind == "directory" else stat.S_ISREG(mode)):
-                raise RunDirError(f"{self.path / name}: not a {'directory' if kind == 'directory' else 'regular file'} "
-                                  f"({file_kind(mode)}); a run writes only regular files (replace or remove it)")
+                raise refused(RunDirError, RunDirRefusal.NOT_REGULAR, path=self.path / name, kind=kind,
+                              found=file_kind(mode))
 
     @property
     def metadata(self) -> dict:
@@ -177,21 +194,20 @@ class RunStore:
         try:
             meta = json.loads(read_file(p))
         except FileNotFoundError:
-            raise RunDirError(f"{p}: missing (not a run directory?)") from None
+            raise refused(RunDirError, RunDirRefusal.RUN_JSON_MISSING, path=p) from None
         except UnreadableFile as e:
-            raise RunDirError(f"{e} (run.json holds the run's plan; nothing can be counted without it)") from None
+            raise refused(RunDirError, RunDirRefusal.RUN_JSON_UNREADABLE, detail=str(e)) from None
         except json.JSONDecodeError as e:
-            raise RunDirError(f"{p}: damaged ({_json_reason(e)})") from None
+            raise refused(RunDirError, RunDirRefusal.RUN_JSON_NOT_JSON, path=p, json=_json_fields(e)) from None
         except UnicodeDecodeError as e:
-            raise RunDirError(f"{p}: damaged (not text: byte {e.start} is not UTF-8)") from None
+            raise refused(RunDirError, RunDirRefusal.RUN_JSON_NOT_UTF8, path=p, byte=e.start) from None
         except RecursionError:
-            raise RunDirError(f"{p}: damaged (nested too deeply to be a run's metadata)") from None
+            raise refused(RunDirError, RunDirRefusal.RUN_JSON_TOO_DEEP, path=p) from None
         if not isinstance(meta, dict):
-            raise RunDirError(f"{p}: damaged (a JSON object was expected, found {type(meta).__name__})")
+            raise refused(RunDirError, RunDirRefusal.RUN_JSON_NOT_OBJECT, path=p, found=type(meta).__name__)
         version = meta.get("format_version", 1)
         if not isinstance(version, int) or isinstance(version, bool) or version > RUN_FORMAT_VERSION:
-            raise NewerFormat(f"{p}: run format version {version!r}, written by a newer guideway-bench "
-                              f"(this one reads versions up to {RUN_FORMAT_VERSION}); update to read it")
+            raise refused(NewerFormat, RunDirRefusal.NEWER_FORMAT, path=p, version=version, reads=RUN_FORMAT_VERSION)
         return meta
 
     def update(self, **fields) -> None:
@@ -271,8 +287,7 @@ class RunStore:
 
     def _steps_dir_there(self) -> None:
         if not self.steps_dir.exists() and not self.steps_dir.is_symlink():
-            raise StorageError(f"{self.steps_dir}: missing (deleted while the run was using it?); "
-                               f"no step can be stored")
+            raise refused(StorageError, RunDirRefusal.STEPS_GONE, path=self.steps_dir)
 
     def check_writable(self) -> None:
         """Create, write, fsync and remove a probe file in ``steps/``: a run checks that it
@@ -338,9 +353,11 @@ class RunStore:
             with np.load(io.BytesIO(read_file(zp)), allow_pickle=False) as z:
                 return {k: z[k] for k in z.files}
         except UnreadableFile as e:
-            raise DamagedStep(StepProblem(key, zp, "corrupt", str(e).split(": ", 1)[-1])) from None
+            raise DamagedStep(StepProblem(key, zp, "corrupt", Problem.UNREADABLE,
+                                          dict(detail=str(e).split(": ", 1)[-1]))) from None
         except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as e:
-            raise DamagedStep(StepProblem(key, zp, "corrupt", f"unreadable ({type(e).__name__}: {e})")) from None
+            raise DamagedStep(StepProblem(key, zp, "corrupt", Problem.NPZ_UNREADABLE,
+                                          dict(error=type(e).__name__, detail=str(e)))) from None
 
     def with_raw(self, results: list[dict]):
         """(result, raw block) of each given step whose block reads; damaged ones are
@@ -363,34 +380,33 @@ class RunStore:
         except NewerFormat:
             raise                                # not damage: refused by name
         except RunDirError as e:
-            problems.append(StepProblem("", self.path / "run.json", "corrupt", str(e).split(": ", 1)[-1]))
+            problems.append(StepProblem("", self.path / "run.json", "corrupt", Problem.RUN_JSON,
+                                        dict(detail=str(e).split(": ", 1)[-1])))
         if plan is not None and plan.refine:                   # refinement steps (decision 0043)
             known = (known or set()) | {p.stem for p in self.step_files() if plan.refined_key_ok(p.stem)}
             known |= {p.stem for p in self.steps_dir.glob("*.npz") if plan.refined_key_ok(p.stem)}
         if self.steps_dir.is_symlink():
-            problems.append(StepProblem("", self.steps_dir, "corrupt", "is a symbolic link; a run's steps are read "
-                                        "only inside the run directory"))
+            problems.append(StepProblem("", self.steps_dir, "corrupt", Problem.STEPS_LINK))
             return problems
         if not self.steps_dir.is_dir():
-            problems.append(StepProblem("", self.steps_dir, "missing", "no steps/ directory"))
+            problems.append(StepProblem("", self.steps_dir, "missing", Problem.NO_STEPS_DIR))
             return problems
         jsons = {p.stem for p in self.step_files()}
         for key in sorted(jsons):
             try:
                 raw = self.raw(key)                 # verifies both files first
                 if not {"force_N", "accel_m_s2", "disp_m"} <= set(raw):
-                    problems.append(StepProblem(key, self.steps_dir / f"{key}.npz", "corrupt",
-                                                f"raw block lacks {sorted({'force_N', 'accel_m_s2', 'disp_m'} - set(raw))}"))
+                    problems.append(StepProblem(key, self.steps_dir / f"{key}.npz", "corrupt", Problem.RAW_LACKS,
+                                                dict(channels={"force_N", "accel_m_s2", "disp_m"} - set(raw))))
             except DamagedStep as e:
                 problems.append(e.problem)
             if known is not None and key not in known:
-                problems.append(StepProblem(key, self.steps_dir / f"{key}.json", "unknown",
-                                            "a step the run's plan does not know"))
+                problems.append(StepProblem(key, self.steps_dir / f"{key}.json", "unknown", Problem.NOT_IN_PLAN))
         for p in sorted(self.steps_dir.iterdir()):
             if p.name.startswith(".") and p.name.endswith(".tmp"):
                 continue       # a write cut short by a kill: harmless, replaced on resume
             if not _utf8(p.name):
-                problems.append(StepProblem("", p, "unknown", "not a step file (its name is not UTF-8)"))
+                problems.append(StepProblem("", p, "unknown", Problem.NAME_NOT_UTF8))
                 continue
             if p.suffix == ".npz" and p.stem in jsons:
                 continue
@@ -398,10 +414,10 @@ class RunStore:
                 continue
             if p.suffix == ".npz":
                 if known is not None and p.stem not in known:
-                    problems.append(StepProblem(p.stem, p, "unknown", "a step the run's plan does not know"))
+                    problems.append(StepProblem(p.stem, p, "unknown", Problem.NOT_IN_PLAN))
                 # else: a block whose result was never written (kill -9): resume measures it
                 continue
-            problems.append(StepProblem("", p, "unknown", "not a step file"))
+            problems.append(StepProblem("", p, "unknown", Problem.NOT_A_STEP_FILE))
         return problems
 
     def skipped_at_run_time(self) -> dict[str, str]:
@@ -433,11 +449,11 @@ class RunStore:
 
         def present_step(key: str) -> None:      # a step with at least one of its files
             if key not in have_json:
-                missing.append(StepProblem(key, self.steps_dir / f"{key}.json", "missing",
-                                           MISSING_WORDS[(".json",)], files=(".json",)))
+                missing.append(StepProblem(key, self.steps_dir / f"{key}.json", "missing", Problem.MISSING_PAIR,
+                                           dict(files=(".json",)), files=(".json",)))
             elif bad.get(key) and bad[key].kind == "missing":
-                missing.append(StepProblem(key, self.steps_dir / f"{key}.npz", "missing",
-                                           MISSING_WORDS[(".npz",)], files=(".npz",)))
+                missing.append(StepProblem(key, self.steps_dir / f"{key}.npz", "missing", Problem.MISSING_PAIR,
+                                           dict(files=(".npz",)), files=(".npz",)))
             elif key in bad:
                 damaged.append(bad[key])
             else:
@@ -452,19 +468,17 @@ class RunStore:
                 if key not in have_json and key not in have_npz:
                     if key in allowed:
                         present += 1
-                        skipped.append(StepProblem(key, jp, "skipped", f"skipped at run time: {allowed[key]}"))
+                        skipped.append(StepProblem(key, jp, "skipped", Problem.SKIPPED, dict(why=allowed[key])))
                     elif not k:
-                        missing.append(StepProblem(key, jp, "missing", MISSING_WORDS[(".json", ".npz")],
-                                                   files=(".json", ".npz")))
+                        missing.append(StepProblem(key, jp, "missing", Problem.MISSING_PAIR,
+                                                   dict(files=(".json", ".npz")), files=(".json", ".npz")))
                     continue
                 present += 1
                 present_step(key)
             if k and present < n_sweep:
                 label = f"L{li:02d}-{direction}"
-                missing.append(StepProblem(label, self.steps_dir, "missing",
-                                           f"missing: {n_sweep - present} of the {n_sweep} steps this sweep "
-                                           f"measures (adaptive plan: chosen online, so not named by key)",
-                                           count=n_sweep - present))
+                missing.append(StepProblem(label, self.steps_dir, "missing", Problem.SWEEP_SHORT,
+                                           dict(short=n_sweep - present, planned=n_sweep), count=n_sweep - present))
         if plan.refine:       # refinement steps: chosen online, counted as measured (decision 0043)
             for key in sorted(k for k in have_json | have_npz if plan.refined_key_ok(k)):
                 n_planned += 1
@@ -498,19 +512,16 @@ class RunStore:
                 end = ends.get((li, mode))
                 if end is None and not completed:
                     done = len([k for k in intact if k.startswith(f"{step.index:05d}-L{li:02d}-R{mode[0].upper()}")])
-                    out.append(StepProblem(label, self.steps_dir, "owed",
-                                           f"the {mode} refinement at {step.force_N:g} N has not ended"
-                                           + (f" ({done} of at most {plan.refine_steps} steps measured)" if swept else
-                                              " (after the level's sweep)")
-                                           + (", nor its dwell" if plan.dwell_cycles else "")))
+                    out.append(StepProblem(label, self.steps_dir, "owed", Problem.REFINEMENT_OPEN,
+                                           dict(mode=mode, force_N=step.force_N, done=done, most=plan.refine_steps,
+                                                swept=swept, dwell=bool(plan.dwell_cycles))))
                 elif end is not None and end.get("dwell_owed"):
                     dwell = replace(step, freq_index=-1, refined=0, refined_mode=mode,
                                     dwell_cycles=plan.dwell_cycles).key
                     if dwell not in intact and dwell not in skipped:
-                        out.append(StepProblem(label, self.steps_dir / f"{dwell}.json", "owed",
-                                               f"the dwell of {plan.dwell_cycles} cycles at the {mode} resonance at "
-                                               f"{step.force_N:g} N ({dwell}) not measured (the refinement ended: "
-                                               f"{end['reason']})"))
+                        out.append(StepProblem(label, self.steps_dir / f"{dwell}.json", "owed", Problem.DWELL_OWED,
+                                               dict(cycles=plan.dwell_cycles, mode=mode, force_N=step.force_N,
+                                                    dwell=dwell, end=end["reason"])))
         return out
 
     def set_aside_damaged(self) -> list[StepProblem]:

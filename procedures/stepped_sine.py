@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from drivers import plan_block
-from sim.artefacts import HARMONIC_GUARD, Rejection, StepQuality, assess_step, si
+from sim.artefacts import HARMONIC_GUARD, Rejection, StepQuality, assess_step, sentences, si
 from sim.step_record import BlockRecord, measure_block
 from sim.step_result import ControlIteration, StepMeasurement, StepResult
 
@@ -49,13 +49,15 @@ MAX_SETTLE_WAIT_S = 2.0      # the longest extra wait one re-settle takes on the
 
 @dataclass(frozen=True)
 class Unsettled:
-    """What :func:`unsettled` found: the check's words ('' = settled), the drive cycles its
+    """What :func:`unsettled` found: whether settling longer may cure something
+    (``found``, the decision), the check's words of it (``why``), the drive cycles its
     transients still need (0 when it gives none) and the frequencies of the vibrations in
     the block (to know them again in the next block of the step)."""
 
     why: str = ""
     cycles: int = 0
     vibrations_Hz: tuple[float, ...] = ()
+    found: bool = False
 
 
 def unsettled(block: Block, freq_Hz: float, ringing_at: tuple[float, ...] = ()) -> Unsettled:
@@ -87,10 +89,9 @@ def unsettled_in(q: StepQuality, fs_Hz: float, n_samples: int, ringing_at: tuple
         words = [q.reason]         # it names the transient it saw, if any
     else:
         words = [a.describe() for a in arts]
-    words += [f"{a.describe()}: at the frequency of the vibration the block before showed, so that vibration, "
-              f"weaker" for a in still]
+    words += [sentences.still_ringing(a) for a in still]
     freqs = tuple(a.freq_Hz for a in arts + still if math.isfinite(a.freq_Hz))
-    return Unsettled("; ".join(words), max((a.settle_cycles for a in arts), default=0), freqs)
+    return Unsettled("; ".join(words), max((a.settle_cycles for a in arts), default=0), freqs, bool(words))
 
 
 @dataclass
@@ -306,13 +307,13 @@ class SteppedSine:
             found = unsettled_in(m.quality, block.fs_Hz, block.n_samples, found.vibrations_Hz)
             noise = m.disp_noise_rms
             ringing = noise > 3 * self.disp_noise_floor_m and noise < 0.9 * before
-            if not (found.why or ringing) or extra >= self.plan.max_extra_settle_blocks:
+            if not (found.found or ringing) or extra >= self.plan.max_extra_settle_blocks:
                 break
             log.info("step %s: settling one more block (%d of at most %d): %s", step.key, extra + 1,
-                     self.plan.max_extra_settle_blocks, found.why or
+                     self.plan.max_extra_settle_blocks, found.why if found.found else
                      f"displacement residual {si(noise, 'm')} > 3 x the noise at rest "
                      f"{si(self.disp_noise_floor_m, 'm')}")
-            if found.why:        # the plan's settle again, or what the check says the transient still
+            if found.found:        # the plan's settle again, or what the check says the transient still
                 # needs: its cycles count from the block's start, and the block has passed
                 need = min(found.cycles - periods, math.ceil(MAX_SETTLE_WAIT_S * f))
                 self._wait(f, 0.0, min_periods=max(settle, need))
@@ -320,8 +321,8 @@ class SteppedSine:
             block = self._acquire(f, periods)
             m = self._measure_block(block, f)
             extra += 1
-        why = found.why
-        if why:
+        why = found.why if found.found else ""
+        if found.found:
             log.warning("step %s: still unsettled after %d extra blocks (plan: max_extra_settle_blocks = %d), "
                         "recorded as it is: %s", step.key, extra, self.plan.max_extra_settle_blocks, why)
         return self.block_result(block, m, extra, why)

@@ -1,5 +1,6 @@
-"""The house's bars (issue 35, decisions 0057 and 0059), read from the source tree: no branch
-on the words of a message, one kernel that fits harmonics to a record, rooms of at most 600
+"""The house's bars (issue 35, decisions 0057, 0059 and 0067), read from the source tree: no
+branch on the words of a message, the values converted to codes carry no sentence (their words
+are made in bench/words/), one kernel that fits harmonics to a record, rooms of at most 600
 lines or a reason at their top, benchmarks that import no test module, one helper that
 starts `bench` in a process, one UFF58 reader."""
 
@@ -26,6 +27,24 @@ TEXT_BRANCH = re.compile(r'\.(reason|msg|message|why|note|text|curve|detail|warn
 # argparse's help formatter reads the help text it formats (the words themselves, not a decision)
 TEXT_ALLOWED = {("bench/cli.py", '"default" in text')}
 
+# the values whose words are made by the renderers of bench/words/ (decision 0067): their
+# codes' enum, the modules that make them, and each constructor (or helper that builds one)
+# with the position of its code argument
+# (None: an exception that must not be raised with words there)
+CODED = {"Problem": (("bench/step_files.py", "bench/storage.py", "bench/accounting.py", "bench/commands/results.py"),
+                     {"StepProblem": 3, "bad": 1}),
+         "LockRefusal": (("bench/runlock.py",), {"refused": 1, "InUse": None}),
+         "OutDirRefusal": (("bench/demo.py",), {"refused": 1, "ConfigurationError": None}),
+         "RunDirRefusal": (("bench/storage.py",), {"refused": 1, "RunDirError": None, "NewerFormat": None,
+                                                   "FileExistsError": None, "StorageError": None}),
+         "CheckLine": (("bench/commands/results.py",), {"say": 0}),
+         "PageWarning": (("bench/watch/snapshot.py",), {"page.warning": 0})}
+
+# modules converted whole: they decide and make no sentence (docstrings aside); their words are
+# made by a renderer (bench/words/, or sim/artefacts/sentences.py for the words a step file stores)
+WORDLESS = ("bench/step_files.py", "bench/runlock.py", "sim/artefacts/causes.py", "sim/artefacts/cleaning.py",
+            "sim/artefacts/decision.py", "sim/artefacts/quality.py")
+
 
 # modules that start `bench` in a process of their own on purpose (decision 0057)
 OWN_SPAWN = {"test_house.py", "test_packaging.py", "test_run_dir_files.py", "test_demo_out.py", "test_api.py", "test_terminal.py",
@@ -50,6 +69,64 @@ def test_no_branch_reads_the_words_of_a_message():
                 hits.append(m.group(0))
             found += [f"{rel}:{i}: {h}" for h in hits]
     assert not found, "branches on a message's words (make the decision a value, decision 0059):\n" + "\n".join(found)
+
+
+def _sentence(node: ast.AST) -> str | None:
+    """A string literal or f-string whose literal text holds a space between words: words for
+    a person (a file name such as ``f"{key}.json"`` is not)."""
+    if isinstance(node, ast.Constant) and isinstance(node.value, str):
+        text = node.value
+    elif isinstance(node, ast.JoinedStr):
+        text = "".join(v.value for v in node.values if isinstance(v, ast.Constant) and isinstance(v.value, str))
+    else:
+        return None
+    return text if re.search(r"[A-Za-z]\w* [A-Za-z(]", text) else None
+
+
+def _called(node: ast.Call) -> str | None:
+    """The name a call calls: ``f`` or ``module.f``."""
+    f = node.func
+    if isinstance(f, ast.Name):
+        return f.id
+    return f"{f.value.id}.{f.attr}" if isinstance(f, ast.Attribute) and isinstance(f.value, ast.Name) else None
+
+
+def test_a_coded_value_carries_no_sentence():
+    """Where a value's words moved to the renderers, its constructor gets a code of its enum
+    and fields, never words: a new problem is a new code and its words in bench/words/."""
+    found = []
+    for enum, (modules, makers) in CODED.items():
+        for rel in modules:
+            text = (REPO / rel).read_text()
+            for node in ast.walk(ast.parse(text)):
+                cls = _called(node) if isinstance(node, ast.Call) else None
+                if cls not in makers:
+                    continue
+                at = makers[cls]
+                code = (node.args[at] if len(node.args) > at else
+                        next((k.value for k in node.keywords if k.arg == "code"), None)) if at is not None else None
+                if at is not None and not (isinstance(code, ast.Attribute) and getattr(code.value, "id", None) == enum
+                                           or isinstance(code, ast.Name)):
+                    found.append(f"{rel}:{node.lineno}: {cls}(...) without a {enum} code")
+                parts = {id(v) for sub in ast.walk(node) if isinstance(sub, ast.JoinedStr) for v in sub.values}
+                for sub in ast.walk(node):
+                    if id(sub) not in parts and (said := _sentence(sub)) is not None:
+                        found.append(f"{rel}:{sub.lineno}: {cls}(...) given words {said!r}")
+    assert not found, "a coded value carries words (give it a code and its words in bench/words/):\n" + "\n".join(found)
+
+
+def test_a_converted_module_makes_no_sentence():
+    found = []
+    for rel in WORDLESS:
+        tree = ast.parse((REPO / rel).read_text())
+        docs = {id(n.body[0].value) for n in ast.walk(tree)
+                if isinstance(n, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+                and n.body and isinstance(n.body[0], ast.Expr)}
+        parts = {id(v) for n in ast.walk(tree) if isinstance(n, ast.JoinedStr) for v in n.values}
+        found += [f"{rel}:{n.lineno}: {said!r}" for n in ast.walk(tree)
+                  if id(n) not in docs | parts and (said := _sentence(n)) is not None]
+    assert not found, "words made outside the renderers (move them to bench/words/ or the module's sentences):\n" + \
+        "\n".join(found)
 
 
 def _fits_harmonics(node: ast.FunctionDef, src: str) -> bool:

@@ -4,11 +4,13 @@ stored run says (argument handling and printing; the work is in the modules they
 from __future__ import annotations
 
 import logging
+from enum import StrEnum
 from pathlib import Path
 
 from sim.errors import ConfigurationError
 
 from ..terminal import Progress
+from ..words import terminal
 from . import ExitCode
 from .run import _latch, _report
 
@@ -130,18 +132,13 @@ def cmd_check(args) -> int:
             print(f"{p.kind:>9}  {p.key}: {p.reason}" if p.kind == "owed" else f"{p.kind:>9}  {p}")
     if tail:
         last = max((k for k in acc.intact), default=None)
-        print(f"{'missing':>9}  interrupted after step {last or '(none)'}; {len(tail)} not yet measured "
-              f"(the plan's steps after it; bench resume {store.path} measures them)")
+        print(f"{'missing':>9}  " + say(CheckLine.UNMEASURED_TAIL, last=last, count=len(tail), run=store.path))
     if acc is None:
-        print(f"{store.path}: {len(store.step_files())} step result files; run.json unreadable or its plan not "
-              f"valid, so the steps cannot be counted against the plan; {len(problems)} "
-              f"problem{'s' if len(problems) != 1 else ''}")
+        print(say(CheckLine.NO_PLAN, run=store.path, files=len(store.step_files()), problems=len(problems)))
         return ExitCode.FAILURE
     print(f"{store.path}: {acc.summary()}"
-          + (f" (bench resume {store.path} measures missing and damaged steps again, keeping damaged "
-             "files in damaged/)" if acc.missing or acc.damaged else "")
-          + (f" (bench resume {store.path} measures what the refinement still owes)" if acc.owed and not
-             (acc.missing or acc.damaged) else ""))
+          + (say(CheckLine.RESUME_MEASURES, run=store.path) if acc.missing or acc.damaged else "")
+          + (say(CheckLine.RESUME_OWES, run=store.path) if acc.owed and not (acc.missing or acc.damaged) else ""))
     from ..verdict import promise
     meta = store.metadata
     kept = promise(meta.get("plan") or {}, store.results(warn=False), meta.get("rig"),
@@ -149,11 +146,23 @@ def cmd_check(args) -> int:
     if kept.short:        # the steps are intact; what they say against the procedure's promise (decision 0052)
         print(f"{kept.kind.label}: {'; '.join(kept.short)}")
     if skipped:
-        n = len(skipped)
-        print(f"{n} step{'s' * (n != 1)} skipped at run time as the plan allows (infeasible = \"skip\"): "
-              + ("counted as problems (--strict)" if args.strict else
-                 "not a problem (--strict counts them); bench resume --retry-skipped measures them again"))
+        print(say(CheckLine.SKIPPED, count=len(skipped), strict=args.strict))
     return ExitCode.FAILURE if problems or (skipped and args.strict) else ExitCode.OK
+
+
+class CheckLine(StrEnum):
+    """The lines ``bench check`` prints besides each problem's (their words:
+    :data:`bench.words.terminal.CHECK`)."""
+
+    UNMEASURED_TAIL = "unmeasured_tail"     # last (the last step stored, or None), count, run
+    NO_PLAN = "no_plan"                     # run, files (step result files), problems
+    RESUME_MEASURES = "resume_measures"     # run: what bench resume measures again
+    RESUME_OWES = "resume_owes"             # run: what it measures of a refinement's debt
+    SKIPPED = "skipped_allowed"             # count, strict
+
+
+def say(code: CheckLine, **fields) -> str:
+    return terminal.say(terminal.CHECK, code, fields)
 
 
 def _not_yet_measured(store, acc) -> list:

@@ -27,6 +27,7 @@ from sim.discrepancy.rounding import round_to_interval
 from ..numbers import number, percent
 from ..storage import shown
 from ..verdict import promise
+from ..words import report as words
 from . import _figures as figures
 from . import _figures_modes as mode_figures
 from ._analysis import analysis_data
@@ -305,9 +306,10 @@ def accounting_md(run: RunData) -> list[str]:
     intact = set(acc.intact)
     rejected = {k: why for k, status, why in run.attention if status == "rejected" and k in intact}
     used = [k for k in acc.intact if k not in rejected]
-    skipped = ([f"{p.key} ({p.reason})" for p in acc.skipped]
+    said = lambda p: words.problem(p.code, p.fields)    # noqa: E731
+    skipped = ([f"{p.key} ({said(p)})" for p in acc.skipped]
                + [f"{k} (rejected by the step-quality check: {why})" for k, why in rejected.items()]
-               + [f"{p.key} ({p.reason})" for p in acc.missing] + [f"{p.key} (damaged: {p.reason})" for p in acc.damaged])
+               + [f"{p.key} ({said(p)})" for p in acc.missing] + [f"{p.key} (damaged: {said(p)})" for p in acc.damaged])
     extra = len(run.results) - len(acc.intact)
     more = f"; and {len(skipped) - 12} more (`bench check` lists them all)" if len(skipped) > 12 else ""
     md = [f"**{len(used)} used / {acc.planned} planned**; skipped: {'; '.join(skipped[:12]) or 'none'}{more}"

@@ -22,6 +22,7 @@ import os
 import socket
 import threading
 from datetime import datetime
+from enum import StrEnum
 from pathlib import Path
 
 from procedures.kind import ProcedureKind
@@ -30,6 +31,7 @@ from procedures.plan import GUESS_KEYS, Plan
 from ..config import ConfigError, stored_rig
 from ..files import open_regular, read_file
 from ..storage import RunDirError, RunStatus, stored_plan
+from ..words import page
 from .stop import STOP_FILE
 
 log = logging.getLogger(__name__)
@@ -127,6 +129,12 @@ def _step_summary(r: dict) -> dict:
                 thd_force=r.get("force", {}).get("thd"), thd_accel=r.get("accel", {}).get("thd"),
                 thd_disp=r.get("disp", {}).get("thd"), drive_Vpp=r.get("drive_Vpp"),
                 drive_V=None if r.get("drive_Vpp") is None else r["drive_Vpp"] / 2)   # amplitude (0029)
+
+
+class PageWarning(StrEnum):
+    """A warning the page makes of the stored steps (its words: :mod:`bench.words.page`)."""
+
+    FORCE_NOT_REACHED = "force_not_reached"     # key, target_N, error (relative), iterations
 
 
 class RunReader:
@@ -379,8 +387,8 @@ class RunReader:
         out = [dict(source="plan", text=w) for w in meta.get("identifiability_warnings", [])]
         for r in results:
             if r.get("force_converged") is False:
-                out.append(dict(source="step", text=f"{r.get('key')}: force {r.get('target_force_N'):g} N not reached "
-                                                    f"(error {100 * (r.get('force_error') or 0):+.1f} %, "
-                                                    f"{r.get('control_iterations')} iterations)"))
+                out.append(dict(source="step", text=page.warning(PageWarning.FORCE_NOT_REACHED, dict(
+                    key=r.get("key"), target_N=r.get("target_force_N"), error=r.get("force_error") or 0,
+                    iterations=r.get("control_iterations")))))
         out += [dict(source="log", text=ln) for ln in self._log.read()]
         return out

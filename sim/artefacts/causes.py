@@ -9,9 +9,10 @@ from dataclasses import replace
 
 import numpy as np
 
+from . import sentences
 from .detectors import HARMONIC_GUARD
 from .quality import Artefact, StepQuality
-from .sentences import FORMULAS, LABEL, LABELS, UNIT, mains_family, mains_line, si
+from .sentences import FORMULAS, LABELS, UNIT, mains_line
 
 
 def _span(values, unit: str, fmt: str = ".3g") -> str:
@@ -177,9 +178,8 @@ def attribute_lines(quality: list[tuple[str, StepQuality]],
     repeated = {(i, id(a)) for i, a in lines if steady(i, a)}
     decays = [(a.freq_Hz, a.decay_per_s) for _, q in quality for a in q.artefacts
               if _vibration_Hz(a) and a.decay_per_s > 0]
-    modes = [(f"the {a.freq_Hz:.4g} Hz vibration of step {key}", a.freq_Hz)
-             for key, q in quality for a in q.artefacts if _vibration_Hz(a)]
-    modes += [(f"the {fr:.4g} Hz resonance of the measured response", float(fr)) for fr in resonances_Hz]
+    modes = [(key, a.freq_Hz) for key, q in quality for a in q.artefacts if _vibration_Hz(a)]
+    modes += [("", float(fr)) for fr in resonances_Hz]        # "": the measured response's resonance
     vib: list[list[float]] = [[a.freq_Hz for a in q.artefacts if _vibration_Hz(a)] for _, q in quality]
     interference: set[int] = set()
     out: list[tuple[str, StepQuality, list[Artefact], bool]] = []
@@ -191,10 +191,8 @@ def attribute_lines(quality: list[tuple[str, StepQuality]],
                 continue
             if id(a) in hidden:
                 F = hidden[id(a)]
-                arts.append(replace(a, part_of_Hz=F, evidence=(
-                    f"{a.evidence}; leakage of the {F:.4g} Hz line of the source, which lies within "
-                    f"{HARMONIC_GUARD:g} record resolutions of drive harmonic {round(F / q.freq_Hz)} here and cannot be "
-                    f"separated from it: not a source of its own")))
+                arts.append(replace(a, part_of_Hz=F, evidence=sentences.leakage_of_source(
+                    a.evidence, F, HARMONIC_GUARD, round(F / q.freq_Hz))))
                 changed = True
                 continue
             if is_mains(i, a):
@@ -205,20 +203,15 @@ def attribute_lines(quality: list[tuple[str, StepQuality]],
             before = [fv for fv in (vib[i - 1] if i else []) if near(fv)]
             mode = [(k, fv) for k, fv in modes if near(fv)]
             if before:
-                why = (f"at the frequency of the vibration of the step before ({quality[i - 1][0]}, "
-                       f"{before[0]:.4g} Hz): the rig's own free vibration, not interference")
+                why = sentences.vibration_of_step_before(quality[i - 1][0], before[0])
             elif mode:
-                why = (f"near {mode[0][0]}"
-                       + (f" and {len(mode) - 1} other(s)" if len(mode) > 1 else "")
-                       + ", the rig's own mode: the rig's own free vibration, not interference")
+                why = sentences.near_mode(mode[0][0], mode[0][1], len(mode) - 1)
             elif (i, id(a)) in repeated:
                 arts.append(a)
                 interference.add(id(a))
                 continue
             else:
-                why = (f"{'at a mains frequency in too few steps with one amplitude' if mains_line(a.freq_Hz) else 'at no mains frequency'}"
-                       f" and in fewer than {REPEAT_STEPS} steps at one frequency, drive frequencies and amplitude: "
-                       f"the rig's own free vibration, not interference")
+                why = sentences.not_repeated(mains_line(a.freq_Hz) is not None, REPEAT_STEPS)
             arts.append(_as_vibration(a, q, why, decays))
             vib[i].append(a.freq_Hz)
             changed = True
@@ -233,16 +226,12 @@ def attribute_lines(quality: list[tuple[str, StepQuality]],
                 while id(root) in parent:
                     root = parent[id(root)]
                 if id(root) in interference:
-                    a = replace(a, part_of_Hz=root.freq_Hz,
-                                evidence=f"{a.evidence}; a component of the {root.freq_Hz:.4g} Hz line of this step "
-                                         f"(leakage or a sideband with the drive), not a source of its own")
+                    a = replace(a, part_of_Hz=root.freq_Hz, evidence=sentences.component_of(a.evidence, root.freq_Hz))
                 elif id(root) in hidden:          # beside the leakage of a hum the step cannot separate
                     F = hidden[id(root)]
-                    a = replace(a, part_of_Hz=F, evidence=f"{a.evidence}; beside the leakage of the {F:.4g} Hz line of "
-                                                          f"the source (not separable in this step): its own too")
+                    a = replace(a, part_of_Hz=F, evidence=sentences.beside_leakage(a.evidence, F))
                 else:
-                    a = _as_vibration(a, q, f"beside the stronger {b.freq_Hz:.4g} Hz line of this step, which is "
-                                            f"not interference: the rig's own free vibration", decays)
+                    a = _as_vibration(a, q, sentences.beside_stronger(b.freq_Hz), decays)
                 changed = True
             final.append(a)
         if not changed:
@@ -266,13 +255,12 @@ def _as_vibration(a: Artefact, q: StepQuality, why: str, decays: list[tuple[floa
         sigma = float(np.median(rates))
         z = a.snr / max(1.0, sigma * q.record_s / 2)
         cycles = int(math.ceil(q.freq_Hz * math.log(z) / sigma)) if z > 1 else 0
-        advice = (f"; settle advice from the decay rate {sigma:.3g} /s of the source's transients"
-                  + (" near this frequency" if near else ""))
+        advice = sentences.advice_from_transients(sigma, bool(near))
     elif a.decay_bound_per_s > 0:     # no transient to learn from: the record's own bound, so at least this many
         sigma = a.decay_bound_per_s
         z = a.snr / max(1.0, sigma * q.record_s / 2)
         cycles = int(math.ceil(q.freq_Hz * math.log(z) / sigma)) if z > 1 else 0
-        advice = f"; its decay rate is below {sigma:.3g} /s (fit + 2 standard errors)"
+        advice = sentences.advice_from_bound(sigma)
         least = True
     return replace(a, kind="unsettled_transient", settle_cycles=cycles, settle_at_least=least,
                    evidence=f"{a.evidence}; {why}{advice}")
@@ -352,14 +340,9 @@ def _line_cause(base: float, items, total: int) -> dict:
     f = [a.freq_Hz for _, _, a in items if line_of(a) == main and not math.isfinite(a.part_of_Hz)]
     amp = [a.size for _, _, a in items if line_of(a) == main and not math.isfinite(a.part_of_Hz)]
     n = len({k for k, _, a in items if not math.isfinite(a.part_of_Hz)})
-    what = (f"{mains_family(base)} interference" if base else "interference from another source (a pump, a fan, a switching supply)")
-    others = sorted(set(count) - {main})
-    also = ("; also " + ", ".join((f"{m * base:g} Hz " if base else "") + f"on the {LABEL[c]} ({len(count[(c, m)])} steps)"
-                                  for c, m in others)) if others else ""
-    comp = (f"; with {len(parts)} component(s) of it that the line and the drive make together (leakage, "
-            f"sidebands) in {len({k for k, _ in parts})} steps, not sources of their own") if parts else ""
-    sentence = (f"a {np.median(f):.4g} Hz line of {si(float(np.median(amp)), UNIT[ch])} on the {LABEL[ch]} in {n} of "
-                f"{total} steps, not locked to the drive: {what}{also}{comp}; removed before the fit")
+    others = [(c, m * base, len(count[(c, m)])) for c, m in sorted(set(count) - {main})]
+    sentence = sentences.line_cause(float(np.median(f)), float(np.median(amp)), ch, n, total, base, others,
+                                    len(parts), len({k for k, _ in parts}))
     return _entry("line_interference", ch, items, total,
                   dict(frequency=_param(f, "Hz"), amplitude=_param(amp, UNIT[ch])), sentence)
 
@@ -369,7 +352,6 @@ def _other_cause(kind: str, ch: str, items, total: int) -> dict:
     n = len(qs)
     arts = [a for _, _, a in items]
     rej = sum(q.status == "rejected" for q in qs)
-    fate = (f"{n - rej} kept" if n > rej else "") + (", " if 0 < rej < n else "") + (f"{rej} rejected" if rej else "")
     where = _where(qs)
     if kind == "unsettled_transient":
         chans = sorted({a.channel for a in arts})
@@ -377,13 +359,9 @@ def _other_cause(kind: str, ch: str, items, total: int) -> dict:
         cyc = worst.settle_cycles
         tau = [1e3 / a.decay_per_s for a in arts if a.decay_per_s > 0]
         ft = [a.freq_Hz for a in arts if math.isfinite(a.freq_Hz)]
-        vib = (f"the rig's own unsettled free vibration near {np.median(ft):.3g} Hz" if ft
-               else "the rig's own unsettled free vibration")
-        const = f", time constant {_span(tau, 'ms')}" if tau else ""
-        advice = f"settle {'at least ' if worst.settle_at_least else ''}{cyc} more cycles" if cyc else "settle longer"
-        sentence = (f"steps {where} still vibrating at the record start ({vib}{const}, on the "
-                    f"{' and '.join(LABEL[c] for c in chans)}) in {n} of {total} steps: {advice}; "
-                    f"{fate} (transient removed or first periods dropped where the record allowed)")
+        sentence = sentences.transient_cause(where, float(np.median(ft)) if ft else math.nan,
+                                             _span(tau, "ms") if tau else "", chans, n, total, cyc,
+                                             worst.settle_at_least, rej)
         rates = [a.decay_per_s for a in arts if a.decay_per_s > 0]
         params = dict(settle_cycles_needed=_param([a.settle_cycles for a in arts], "cycles"))
         if rates:
@@ -393,17 +371,12 @@ def _other_cause(kind: str, ch: str, items, total: int) -> dict:
         return _entry(kind, ",".join(chans), items, total, params, sentence)
     size = [abs(a.size) for a in arts]
     if kind == "clipping":
-        sentence = (f"clipping on the {LABEL[ch]} in {n} of {total} steps ({where}): flat at "
-                    f"{si(max(size), UNIT[ch])}, the range of the sensor or its input; {fate}: use a larger range "
-                    f"or a lower level")
+        sentence = sentences.clipping_cause(ch, n, total, where, max(size), rej)
         params = dict(level=_param(size, UNIT[ch]), time_at_limit=_param([a.duration_s for a in arts], "s"))
     elif kind == "dropout":
-        sentence = (f"drop-outs on the {LABEL[ch]} in {n} of {total} steps ({where}): the signal held for up to "
-                    f"{1e3 * max(a.duration_s for a in arts):.3g} ms; {fate}: check the cable, connector and "
-                    f"acquisition")
+        sentence = sentences.dropout_cause(ch, n, total, where, max(a.duration_s for a in arts), rej)
         params = dict(duration=_param([a.duration_s for a in arts], "s"))
     else:
-        sentence = (f"an offset drift on the {LABEL[ch]} in {n} of {total} steps, up to {si(max(size), UNIT[ch])} "
-                    f"over a record (thermal drift of the sensor, or the carriage creeping); removed before the fit")
+        sentence = sentences.drift_cause(ch, n, total, max(size))
         params = dict(change=_param(size, UNIT[ch]))
     return _entry(kind, ch, items, total, params, sentence)

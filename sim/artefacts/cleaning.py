@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from . import sentences
 from .detectors import (
     DECAY_FRACTION,
     DECAY_Z,
@@ -21,7 +22,6 @@ from .detectors import (
     quantisation_line_bound,
 )
 from .quality import Artefact
-from .sentences import si
 
 TREND_Z = 6.0                 # offset drift: sqrt(chi-square, 2 dof) of the trend coefficients
 SETTLED_Z = 0.5               # cleaning passes: settled when a pass moves what it removes by less (harmonic standard errors)
@@ -91,14 +91,14 @@ def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
     arts = []
     if z > 0:
         arts.append(Artefact("offset_drift", ch, change, "removed",
-                             evidence=f"linear + quadratic trend {z:.0f} standard errors from zero"))
+                             evidence=sentences.trend(z)))
     se = noise * math.sqrt(2.0 / n)
     for ln in lines:
         arts.append(Artefact("line_interference", ch, ln.amp, "removed", freq_Hz=ln.freq_Hz, snr=ln.amp / se,
                              decay_bound_per_s=ln.decay_bound,
-                             evidence=f"{ln.amp / se:.0f} standard errors, {ln.freq_Hz / f:.3f} x the drive frequency"))
-    found: list[tuple] = [(ln.amp, ln.decay, ln.freq_Hz, f"a decaying sinusoid fitted, decay rate {ln.decay:.3g} +- "
-              f"{ln.decay_se:.2g} /s", True) for ln in transients]
+                             evidence=sentences.line_found(ln.amp / se, ln.freq_Hz / f)))
+    found: list[tuple] = [(ln.amp, ln.decay, ln.freq_Hz, sentences.decaying_sinusoid(ln.decay, ln.decay_se), True)
+                          for ln in transients]
     if not found:
         # the periodic part of the second half (the most settled), extrapolated to the whole
         # record: what is left in the first half and not in the second is still settling
@@ -151,8 +151,7 @@ def _envelope_transient(x: np.ndarray, fs: float, f: float, noise: float):
         return None                              # not falling over the record: a drift or a line, not a transient
     # a transient of amplitude A e^(-sigma t) at the drive frequency differs between periods by A (1 - e^(-sigma T))
     A0 = math.sqrt(2 * e0) / max(1 - math.exp(-sigma / f), 1e-12)
-    return (A0, float(sigma), math.nan, f"the difference between consecutive periods falls over the first {m} "
-                                        f"of {P} periods (first by {z[0]:.0f} standard errors above the noise)")
+    return (A0, float(sigma), math.nan, sentences.falling_differences(m, P, z[0]))
 
 
 def settle_cycles(A0: float, sigma: float, noise: float, n: int, fs: float, f: float) -> int:
@@ -192,12 +191,9 @@ def _motion_evidence(sig: dict, cleaned: dict, noise: dict, fs: float, f: float,
     ratio = amp["accel"] / pred
     line = max(("disp", "accel"), key=lambda ch: abs(amp[ch]) / se[ch])
     decay = _fit_sinusoid(sig[line] - _periodic_part(cleaned[line], fs, f), fs, fl, with_decay=True)
-    rate = ""
+    rate, rate_se, significant = math.nan, math.nan, False      # NaN: no decay rate fitted
     if decay is not None and decay.decay_se > 0:
-        rate = (f"; decay rate {decay.decay:.2g} +- {decay.decay_se:.2g} /s"
-                + (", not significant" if not decay.decay > DECAY_Z * decay.decay_se else "")
-                + f" in a {1e3 * n / fs:.3g} ms record")
-    return (f"a free vibration of the carriage, not interference: the accelerometer's {si(abs(amp['accel']), 'm/s^2')} "
-            f"at {fl:.4g} Hz is -(2 pi f)^2 times the probe's {si(abs(amp['disp']), 'm')} (ratio {abs(ratio):.2f}, "
-            f"phase {math.degrees(math.atan2(ratio.imag, ratio.real)):+.0f} deg; "
-            f"{abs(amp['accel']) / se['accel']:.0f} and {abs(amp['disp']) / se['disp']:.0f} standard errors){rate}")
+        rate, rate_se, significant = decay.decay, decay.decay_se, decay.decay > DECAY_Z * decay.decay_se
+    return sentences.free_vibration(abs(amp["accel"]), abs(amp["disp"]), fl, abs(ratio),
+                                    math.degrees(math.atan2(ratio.imag, ratio.real)), abs(amp["accel"]) / se["accel"],
+                                    abs(amp["disp"]) / se["disp"], rate, rate_se, significant, 1e3 * n / fs)

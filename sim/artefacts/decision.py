@@ -8,11 +8,13 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..records import CHANNELS, MAX_HARMONICS, analyse_records, checked_records, harmonic_words, lsq_harmonics
+from .. import records
+from ..records import CHANNELS, MAX_HARMONICS, analyse_records, checked_records, lsq_harmonics
+from . import sentences
 from .cleaning import _clean_channel, _motion_evidence, settle_cycles
 from .detectors import HARMONIC_GUARD, find_clipping, find_dropouts
 from .quality import Artefact, Assessment, StepQuality
-from .sentences import LABEL, MAINS_HZ, mains_line, not_periodic
+from .sentences import MAINS_HZ, mains_line
 
 DRIFT_LIMIT = 10.0            # periodicity gate: standard errors between the halves of a record
 NOISY_RESIDUAL = 0.02         # displacement residual rms / fundamental amplitude above which a step is flagged
@@ -43,11 +45,8 @@ def _mains_hint(f: float, periods: int, k_failed: int, lines: list[Artefact]) ->
             gap = abs(fm - k * f)
             seen = [a for a, (b, _) in found if b == base]
             if 0 < gap <= guard and (k == k_failed or seen):
-                why = (f"a {seen[0].freq_Hz:.4g} Hz line was found on the {LABEL[seen[0].channel]}" if seen
-                       else f"harmonic {k} is what changed")
-                return (f"mains hum, if present, at {fm:g} Hz lies {gap:.2g} Hz from drive harmonic {k} "
-                        f"({k * f:.4g} Hz) and cannot be separated from the response in {periods} periods "
-                        f"({why}): measure at least {math.ceil(HARMONIC_GUARD * f / gap)} periods")
+                return sentences.mains_hint(fm, gap, k, f, periods, seen[0].freq_Hz if seen else math.nan,
+                                            seen[0].channel if seen else "", math.ceil(HARMONIC_GUARD * f / gap))
     return ""
 
 
@@ -101,20 +100,20 @@ def assess_step(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None
         if tr:
             decay = tr[0].decay_per_s
             cyc = settle_cycles(a.size, decay, noise[a.channel], n, fs_Hz, f) if decay > 0 else 0
-            what = "transient" if decay > 0 else "free vibration"
             q.artefacts[i] = replace(a, kind="unsettled_transient", decay_per_s=decay, settle_cycles=cyc,
-                                     evidence=f"at the frequency of the {what} on the {LABEL[tr[0].channel]}")
+                                     evidence=sentences.same_vibration(decay > 0, tr[0].channel))
     if need > 0 and periods - need >= max(MIN_PERIODS, periods // 4):
         start = int(math.ceil(need * fs_Hz / f - 1e-9))
         for ch in CHANNELS:           # clean the kept part again: the fit is no longer biased by the transient
             cleaned[ch], _a, _t, noise[ch] = _clean_channel(ch, sig[ch][start:], fs_Hz, f)
         tr_arts = [a if a.action == "removed" else replace(a, action="trimmed") for a in tr_arts]
-        q.notes.append(f"first {need} of {periods} periods dropped (unsettled transient)")
+        q.notes.append(sentences.periods_dropped(need, periods))
     q.artefacts += tr_arts
     rec = analyse_records(cleaned["force"], cleaned["accel"], cleaned["disp"], fs_Hz, f)
     if rec.drift_sigma > DRIFT_LIMIT:
         q.status = "rejected"
-        q.reason = not_periodic(rec.drift_channel, harmonic_words(rec.drift_harmonic), rec.drift_sigma, DRIFT_LIMIT)
+        q.reason = sentences.not_periodic(rec.drift_channel, records.harmonic_words(rec.drift_harmonic),
+                                          rec.drift_sigma, DRIFT_LIMIT)
         hint = _mains_hint(f, periods, rec.drift_harmonic, q.artefacts)
         if hint:
             q.reason += f"; {hint}"
@@ -129,7 +128,6 @@ def assess_step(force_N, accel_m_s2, disp_m, fs_Hz: float, freq_Hz: float | None
     a1 = abs(d.harmonics[0]) if d.harmonics.size else 0.0
     ratio = d.noise_rms / a1 if a1 > 0 else math.inf
     if ratio > NOISY_RESIDUAL:
-        q.notes.append(f"noisy: displacement residual {100 * ratio:.3g} % of the fundamental "
-                       f"(limit {100 * NOISY_RESIDUAL:g} %; used with its noise as weight)")
+        q.notes.append(sentences.noisy(ratio, NOISY_RESIDUAL))
     q.status = "flagged" if q.notes else "usable"
     return Assessment(q, rec, cleaned, start, rec)

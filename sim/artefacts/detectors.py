@@ -12,8 +12,9 @@ from scipy.optimize import leastsq
 from scipy.special import log_ndtr, logsumexp
 
 from ..records import analyse_channel
+from . import sentences
 from .quality import Artefact
-from .sentences import UNIT, si
+from .sentences import UNIT
 
 LINE_FALSE_ALARM = 1e-4       # per record and channel
 HARMONIC_GUARD = 1.5          # record resolutions (fs / N) around each drive harmonic not searched for lines
@@ -64,8 +65,7 @@ def find_clipping(ch: str, x: np.ndarray, fs: float, f: float) -> list[Artefact]
         runs = [r for r in _runs(at) if r[1] >= 2]
         if n_at >= 5 * (n_next + 1) and runs and (not coarse() or _beyond(x, max(runs, key=lambda r: r[1]), level, q)):
             out.append(Artefact("clipping", ch, level, "rejected", time_s=runs[0][0] / fs, duration_s=n_at / fs,
-                                evidence=f"{n_at} samples ({100 * n_at / x.size:.2g} % of the record) flat at the "
-                                         f"extreme value in {len(runs)} runs"))
+                                evidence=sentences.clipped_samples(n_at, x.size, len(runs))))
     return out
 
 
@@ -114,7 +114,7 @@ def find_dropouts(ch: str, x: np.ndarray, fs: float, f: float, clipped: list[Art
         return []
     if runs[0][1] == n:
         return [Artefact("dropout", ch, float(x[0]), "rejected", time_s=0.0, duration_s=n / fs,
-                         evidence="the channel holds one value over the whole record")]
+                         evidence=sentences.one_value())]
     # a long hold far from the signal pulls the fitted harmonics (and the noise) with it, which
     # makes natural runs elsewhere look unlikely: the fit is made again with the runs found held
     # bridged by a straight line between the samples either side, until the runs found stop changing
@@ -149,13 +149,9 @@ def find_dropouts(ch: str, x: np.ndarray, fs: float, f: float, clipped: list[Art
         return []
     (s0, n0), lc0, d0 = bad[0]
     total = sum(L for (_, L), _, _ in bad)
-    chance = f"{math.exp(lc0):.1g}" if lc0 > -700 else f"1e{lc0 / math.log(10):.0f}"
     return [Artefact("dropout", ch, float(x[s0]), "rejected", time_s=s0 / fs, duration_s=n0 / fs,
-                     evidence=f"{len(bad)} run(s) of identical samples, {total} samples in all, longest "
-                              f"{max(L for (_, L), _, _ in bad)}; during the first the signal (periodic fit) was up "
-                              f"to {si(d0, UNIT[ch])} from the held value, against a noise of {si(noise, UNIT[ch])} "
-                              f"and a quantum of {si(q, UNIT[ch])}: a chance of {chance} "
-                              f"(limit {DROPOUT_FALSE_ALARM / n:.1g} a run, {DROPOUT_FALSE_ALARM:g} per record)")]
+                     evidence=sentences.held_runs(len(bad), total, max(L for (_, L), _, _ in bad), d0, noise, q,
+                                                  UNIT[ch], lc0, DROPOUT_FALSE_ALARM / n, DROPOUT_FALSE_ALARM))]
 
 
 def natural_run_chance(x: np.ndarray, fs: float, f: float, runs: list[tuple[int, int]],

@@ -9,7 +9,8 @@ from enum import StrEnum
 from typing import Any
 
 from ..records import PeriodicRecords
-from .sentences import LABEL, UNIT, si
+from . import sentences
+from .sentences import UNIT
 
 KINDS = ("line_interference", "unsettled_transient", "clipping", "dropout", "offset_drift")
 RAW_FAULT_KINDS = ("clipping", "dropout")     # found in the raw samples: the step is rejected before cleaning
@@ -48,30 +49,8 @@ class Artefact:
         return UNIT[self.channel]
 
     def describe(self) -> str:
-        where = f"on the {LABEL[self.channel]} ({self.channel})"
-        if self.kind == "line_interference":
-            return (f"a {self.freq_Hz:.4g} Hz line of {si(self.size, self.unit)} {where}, not locked to the drive "
-                    f"({self.evidence}); removed")
-        if self.kind == "unsettled_transient":
-            what = f"{self.freq_Hz:.4g} Hz " if math.isfinite(self.freq_Hz) else ""
-            done = {"removed": "; removed", "trimmed": "; the first periods were dropped"}.get(self.action, "")
-            if not self.decay_per_s > 0:
-                advice = (f"settle {'at least' if self.settle_at_least else 'about'} {self.settle_cycles} more cycles"
-                          if self.settle_cycles else "settle longer")
-                return (f"an unsettled {what}vibration of {si(self.size, self.unit)} {where} ({self.evidence}), "
-                        f"not decaying measurably within the record: {advice}{done}")
-            return (f"an unsettled {what}transient of {si(self.size, self.unit)} {where} at the record start, "
-                    f"decaying at {self.decay_per_s:.3g} /s (time constant {1e3 / self.decay_per_s:.3g} ms; "
-                    f"{self.evidence}): settle {self.settle_cycles} more cycles{done}")
-        if self.kind == "clipping":
-            return (f"clipping {where}: flat at {si(self.size, self.unit)} for {1e3 * self.duration_s:.3g} ms "
-                    f"from t = {self.time_s:.4g} s ({self.evidence})")
-        if self.kind == "dropout":
-            return (f"a drop-out {where}: the value {si(self.size, self.unit)} held for {1e3 * self.duration_s:.3g} ms "
-                    f"from t = {self.time_s:.4g} s ({self.evidence})")
-        if self.kind == "offset_drift":
-            return f"an offset drift {where} of {si(self.size, self.unit)} over the record ({self.evidence}); removed"
-        return f"{self.kind} {where}"
+        """The artefact in words (:func:`sim.artefacts.sentences.artefact`)."""
+        return sentences.artefact(self)
 
     def as_dict(self) -> dict:
         f = lambda v: None if not math.isfinite(v) else float(v)      # noqa: E731

@@ -2,20 +2,36 @@
 function that makes the words a decision used to read is made to say something else (codes
 only), and the decisions stay the same: a step's verdict, why it was rejected, what settling
 longer cures, the causes of a run's artefacts, which missing steps are the run's unmeasured
-tail, whether a step file was cut short."""
+tail, whether a step file was cut short.  The renderers of :mod:`bench.words` (decision 0067)
+are made to say each code alone, and ``bench check`` and ``bench report`` on a damaged run
+decide, exit and write the same."""
 
+import fcntl
+import importlib
+import inspect
 import json
+import os
+import pkgutil
 import shutil
 
 import numpy as np
 import pytest
 
 import bench.storage as storage
-import sim.artefacts.causes as causes
-import sim.artefacts.decision as decision
-import sim.artefacts.quality as quality
+import bench.words
+import bench.words.page as page_words
+import bench.words.report as report_words
+import bench.words.terminal as terminal_words
+import sim.artefacts.sentences as sentences
+import sim.records as records
 from bench.cli import ExitCode, main
-from bench.storage import RunStore
+from bench.demo import MANIFEST, OutDirRefusal
+from bench.reports._markdown import accounting_md
+from bench.reports._run import load_run
+from bench.runlock import LOCK_NAME, LockRefusal
+from bench.step_files import Problem
+from bench.storage import RunDirRefusal, RunStore
+from bench.watch.snapshot import PageWarning, RunReader
 from procedures.stepped_sine import unsettled_in
 from sim.artefacts import artefact_causes, assess_step
 
@@ -53,28 +69,37 @@ def _decisions() -> tuple:
         q = assess_step(sig["force"], sig["accel"], sig["disp"], fs, f).quality
         u = unsettled_in(q, fs, sig["force"].size)
         out.append((q.status, q.rejected_by, [(a.kind, a.channel, a.action, a.settle_cycles) for a in q.artefacts],
-                    u.cycles, tuple(round(x, 6) for x in u.vibrations_Hz), bool(u.why)))
+                    u.cycles, tuple(round(x, 6) for x in u.vibrations_Hz), u.found))
         qs.append((f"s{i}", q))
     found = [(c["id"], c["channel"], c["evidence"]["steps"], c["gain"]) for c in artefact_causes(qs)]
     return tuple(out), found, qs[5][1].reason
 
 
+# the functions of sim.artefacts.sentences that are not words: a size's format, a decision's value
+NOT_WORDS = {"si", "mains_line"}
+
+
 def test_rewording_the_artefact_checks_messages_changes_no_decision(monkeypatch):
     """The verdicts, the rejection's cause, the settle advice's cycles and the causes of 7
     steps (hum, clipping, not periodic with a mains hint, a transient) are the same when every
-    word-maker the checks' decisions once read says codes only."""
+    word-maker of the artefact check (each function of sim.artefacts.sentences) says codes only."""
     before, found, reason = _decisions()
     assert [d[0] for d in before] == ["flagged"] * 4 + ["rejected", "rejected", "flagged"]
     assert [str(d[1]) for d in before[4:6]] == ["raw_fault", "not_periodic"]
     assert before[5][5] and not before[4][5]        # settling longer may cure step 5, never step 4
     assert "mains hum" in reason and {"line_interference", "clipping", "unsettled_transient"} <= {c[0] for c in found}
-    monkeypatch.setattr(decision, "not_periodic", lambda ch, what, score, limit: f"P:{ch}:{what}")
-    monkeypatch.setattr(decision, "harmonic_words", lambda k: f"H{k}")
-    monkeypatch.setattr(causes, "mains_family", lambda base: f"M{base:g}")
-    monkeypatch.setattr(quality.Artefact, "describe", lambda self: f"A:{self.kind}:{self.channel}")
+    makers = [name for name, fn in vars(sentences).items() if inspect.isfunction(fn)
+              and fn.__module__ == sentences.__name__ and name not in NOT_WORDS]
+    assert {"artefact", "not_periodic", "mains_hint", "mains_family", "noisy"} <= set(makers)
+    for name in makers:
+        monkeypatch.setattr(sentences, name, (lambda n: lambda *a, **k: f"<{n}>")(name))
+    monkeypatch.setattr(records, "harmonic_words", lambda k: f"H{k}")
     after, found_after, reason_after = _decisions()
-    assert reason_after.startswith("P:disp:") and "mains hum" in reason_after      # reworded, the hint kept
+    assert reason_after.startswith("<not_periodic>; <mains_hint>"), reason_after     # reworded, the hint kept
     assert after == before and found_after == found
+    for name in makers:                 # no words at all: nothing decides by whether there are any
+        monkeypatch.setattr(sentences, name, lambda *a, **k: "")
+    assert _decisions()[:2] == (before, found)
 
 
 def test_rewording_a_missing_steps_words_keeps_the_interrupted_tail_one_line(small_run, tmp_path, capsys,
@@ -88,11 +113,156 @@ def test_rewording_a_missing_steps_words_keeps_the_interrupted_tail_one_line(sma
         for ext in (".json", ".npz"):
             (run / "steps" / f"{key}{ext}").unlink()
     RunStore.open(run).update(status="interrupted")
-    monkeypatch.setattr(storage, "MISSING_WORDS", {k: "|".join(k) for k in storage.MISSING_WORDS})
+    _codes_only(monkeypatch)
     assert main(["check", str(run)]) == ExitCode.FAILURE
     lines = capsys.readouterr().out.splitlines()
-    assert any(f"interrupted after step {keys[11]}; {len(keys) - 12} not yet measured" in ln for ln in lines), lines
-    assert not any(".json|.npz" in ln for ln in lines), lines
+    assert [ln for ln in lines if ln.startswith("  missing")] == ["  missing  <unmeasured_tail>"], lines
+
+
+# every renderer of bench/words/ (a new one is reworded without editing this test)
+RENDERERS = tuple(importlib.import_module(f"bench.words.{m.name}") for m in pkgutil.iter_modules(bench.words.__path__))
+
+
+def test_the_renderers_are_the_three_outputs():
+    assert {m.__name__ for m in RENDERERS} >= {m.__name__ for m in (terminal_words, report_words, page_words)}
+
+
+def _codes_only(monkeypatch) -> None:
+    """Every renderer of bench.words says a code alone: ``<code>``."""
+    for module in RENDERERS:
+        for name, words in vars(module).items():
+            if name.isupper() and isinstance(words, dict):
+                monkeypatch.setattr(module, name, {code: (lambda c: lambda **_: f"<{c}>")(code) for code in words})
+
+
+def test_every_code_has_words_in_its_renderers():
+    for module in (terminal_words, report_words):
+        assert set(module.PROBLEM) == {str(c) for c in Problem}, module.__name__
+    assert set(page_words.WARNING) == {str(c) for c in PageWarning}
+    assert set(terminal_words.REFUSAL) == {str(c) for c in (*LockRefusal, *OutDirRefusal, *RunDirRefusal)}
+
+
+def _refusals(run, outs, capsys) -> list:
+    """Each refusal's exit status, what it said on stderr and the files it left: ``bench
+    resume`` of a run whose lock another session holds, ``bench demo --out`` into a file,
+    a foreign directory and an earlier demo's directory with a file the demo did not write."""
+    snap = lambda d: sorted((p.relative_to(d).as_posix(), p.stat().st_size) for p in d.rglob("*"))   # noqa: E731
+    got = []
+    fd = os.open(run / LOCK_NAME, os.O_RDWR | os.O_CREAT)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)           # another open file: another session's lock
+        before = snap(run)
+        got.append((main(["resume", str(run), "--no-report"]), capsys.readouterr().err, snap(run) == before))
+    finally:
+        os.close(fd)
+    for out in outs:
+        before = snap(out.parent)
+        got.append((main(["demo", "--out", str(out)]), capsys.readouterr().err, snap(out.parent) == before))
+    for command, path in (("report", run.parent / "absent"), ("report", outs[1]), ("resume", run.parent / "newer")):
+        before = snap(run.parent)
+        got.append((main([command, str(path)]), capsys.readouterr().err, snap(run.parent) == before))
+    return got
+
+
+def test_rewording_every_refusal_changes_no_exit_status_and_no_file(small_run, tmp_path, capsys, monkeypatch):
+    """A session refused because the run is in use, the demo refusing three directories, a
+    report of no directory, a report of one that is not a run's, a resume of a newer format's:
+    the same exit statuses, nothing written, when the terminal says codes only."""
+    run = tmp_path / "run"
+    shutil.copytree(small_run.path, run, ignore=shutil.ignore_patterns("report", "export", "analysis"))
+    RunStore.open(run).update(status="interrupted")
+    outs = [tmp_path / d / "out" for d in ("file", "foreign", "demo")]
+    for out in outs:
+        out.parent.mkdir()
+    outs[0].write_text("a file")
+    (outs[1] / "thesis").mkdir(parents=True)
+    (outs[1] / "thesis" / "ch1.tex").write_text("x")
+    outs[2].mkdir()
+    (outs[2] / MANIFEST).write_text(json.dumps({"files": {}, "dirs": []}))
+    (outs[2] / "ch1.tex").write_text("x")
+    newer = tmp_path / "newer"
+    newer.mkdir()
+    (newer / "run.json").write_text(json.dumps({"format_version": 99}))
+    before = _refusals(run, outs, capsys)
+    assert [(code, kept) for code, _, kept in before] == [(ExitCode.FAILURE, True)] + [(ExitCode.USAGE, True)] * 6
+    assert f"run directory {run} is in use by another process" in before[0][1]
+    _codes_only(monkeypatch)
+    after = _refusals(run, outs, capsys)
+    assert [(code, kept) for code, _, kept in after] == [(code, kept) for code, _, kept in before]
+    said = [err for _, err, _ in after]
+    for err, code in zip(said, ("in_use", "demo_not_a_dir", "demo_not_a_demo", "demo_foreign", "run_dir_missing",
+                                "run_dir_no_run_json", "run_json_newer"), strict=True):
+        assert f"<{code}>" in err, said
+
+
+def test_the_pages_warnings_are_the_renderers_words(small_run, monkeypatch):
+    """The live page warns of a step whose force was not reached in the words it always
+    used, made by bench.words.page; said as codes, the same warnings in the same order."""
+    reader = RunReader(small_run.path)
+    results = [dict(key="00003-L00-F003-up", force_converged=False, target_force_N=2.0, force_error=-0.052,
+                    control_iterations=7), dict(key="00004-L00-F004-up", force_converged=True)]
+    meta = {"identifiability_warnings": ["F_s: no level above it"]}
+    before = reader._warnings(meta, results)
+    assert before[:2] == [dict(source="plan", text="F_s: no level above it"),
+                          dict(source="step", text="00003-L00-F003-up: force 2 N not reached (error -5.2 %, 7 iterations)")]
+    _codes_only(monkeypatch)
+    after = reader._warnings(meta, results)
+    assert after[1]["text"] == "<force_not_reached>"
+    assert [w["source"] for w in after] == [w["source"] for w in before]
+
+
+def _damaged_run(small_run, tmp_path):
+    """The small run with a step cut short, one emptied, one rewritten, a raw block cut short,
+    one flipped, one gone, a stray file, and the plan's last three steps never measured."""
+    run = tmp_path / "run"
+    shutil.copytree(small_run.path, run, ignore=shutil.ignore_patterns("report", "export", "analysis"))
+    steps = run / "steps"
+    keys = sorted(p.stem for p in steps.glob("*.json"))
+    j = lambda i: steps / f"{keys[i]}.json"      # noqa: E731
+    z = lambda i: steps / f"{keys[i]}.npz"       # noqa: E731
+    j(1).write_bytes(j(1).read_bytes()[:200])
+    j(2).write_bytes(b"")
+    j(3).write_text(j(3).read_text().replace('"force_N": ', '"force_N": 1', 1))
+    z(4).write_bytes(z(4).read_bytes()[:-100])
+    data = bytearray(z(5).read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    z(5).write_bytes(bytes(data))
+    z(6).unlink()
+    (steps / "notes.txt").write_text("a note")
+    for key in keys[-3:]:
+        for ext in (".json", ".npz"):
+            (steps / f"{key}{ext}").unlink()
+    RunStore.open(run).update(status="interrupted")
+    return run
+
+
+def _check_and_account(run, capsys) -> tuple:
+    """``bench check``'s exit status and lines; the report's first lines (what it used and
+    skipped, and why; the report's only words of a run directory's problems)."""
+    code = main(["check", str(run)])
+    return code, capsys.readouterr().out.splitlines(), accounting_md(load_run(run))
+
+
+def test_rewording_every_storage_problem_changes_no_decision(small_run, tmp_path, capsys, monkeypatch):
+    """``bench check`` and the report on a damaged run: the same exit status, the same
+    problems (kind, step, file) in the same order and the same overall verdict, when the
+    terminal's and the report's renderers say codes only; the words were theirs (the codes show)."""
+    run = _damaged_run(small_run, tmp_path)
+    before = _check_and_account(run, capsys)
+    _codes_only(monkeypatch)
+    after = _check_and_account(run, capsys)
+    head = lambda lines: [ln.partition(": ")[0] if ln.partition(": ")[2] else ln[:11]   # noqa: E731
+                          for ln in lines]          # the kind and the file, or the kind alone: what precedes the words
+    assert after[0] == before[0] == ExitCode.FAILURE
+    assert head(after[1]) == head(before[1]) and len(before[1]) == 9, before[1]
+    assert "  missing  <unmeasured_tail>" in after[1]       # the unmeasured tail: one line
+    said = [f"<{c}>" for c in ("not_json", "empty", "json_checksum", "npz_size", "npz_checksum", "missing_pair",
+                               "not_a_step_file")]
+    assert all(any(w in ln for ln in after[1]) for w in said), after[1]
+    assert not any("<" in ln for ln in before[1]) and "<resume_measures>" in after[1][-1]
+    overall = lambda md: [ln for ln in md if ln.startswith("Overall")]     # noqa: E731
+    assert overall(after[2]) == overall(before[2]) and overall(before[2])
+    assert "(damaged: <npz_size>)" in after[2][0] and "<" not in before[2][0]
 
 
 @pytest.mark.parametrize("text, kind", [('{"key": "00001", "status": "ok', "truncated"),

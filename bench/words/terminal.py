@@ -1,0 +1,152 @@
+"""The terminal's words (decision 0067): what ``bench`` prints and logs, by code.
+
+``PROBLEM``: a run directory's problems (:class:`bench.step_files.Problem`, the fields of a
+:class:`~bench.step_files.StepProblem`); ``bench check`` prints them, a damaged step's error
+says them.  ``detail`` fields hold the words of a reader below (a file too large, a step's
+fields, run.json's own error), made where that reader decides.
+
+``CHECK``: the lines ``bench check`` prints besides each problem's
+(:class:`bench.commands.results.CheckLine`).
+
+``REFUSAL``: the one-line errors of a refusal (:class:`bench.runlock.LockRefusal`,
+:class:`bench.demo.OutDirRefusal`, :class:`bench.storage.RunDirRefusal`), made by
+:func:`refused` into the exception the command raises; the exception keeps the code and
+the fields.
+"""
+
+from __future__ import annotations
+
+from typing import TypeVar
+
+from . import Words, say
+
+__all__ = ["CHECK", "PROBLEM", "REFUSAL", "Words", "problem", "refused", "say"]
+
+E = TypeVar("E", bound=Exception)
+
+# which of a step's two files are absent (StepProblem.files)
+_PAIR = {(".json", ".npz"): "neither .json nor .npz", (".json",): "no .json (only the .npz)",
+         (".npz",): "no .npz (only the .json)"}
+_FILE = {".json": "the step's result file", ".npz": "the step's raw block; its result file is there"}
+
+
+def _owed_refinement(mode: str, force_N: float, done: int, most: int, swept: bool, dwell: bool) -> str:
+    return (f"the {mode} refinement at {force_N:g} N has not ended"
+            + (f" ({done} of at most {most} steps measured)" if swept else " (after the level's sweep)")
+            + (", nor its dwell" if dwell else ""))
+
+
+PROBLEM: Words = {
+    "missing_pair": lambda files: f"missing: {_PAIR[tuple(files)]}",
+    "missing_file": lambda file: f"missing ({_FILE[file]})",
+    "unreadable": lambda detail: detail,
+    "os_error": lambda strerror: f"unreadable ({strerror})",
+    "empty": lambda: "empty (truncated to 0 bytes)",
+    "not_utf8": lambda byte: f"not text (byte {byte} is not UTF-8)",
+    "not_json": lambda cut, msg, line, column, chars: (f"{'truncated: ' if cut else ''}not valid JSON ({msg} at line "
+                                                       f"{line} column {column}, file of {chars} characters)"),
+    "too_deep": lambda: "not a step result (nested too deeply)",
+    "not_object": lambda found: f"not a step result (a JSON object was expected, found {found})",
+    "json_checksum": lambda: "checksum mismatch: the content differs from what was written",
+    "wrong_key": lambda inside, key: f"the result inside is for step {inside!r}, not {key!r}",
+    "bad_fields": lambda detail: detail,
+    "not_npz": lambda: "not a readable .npz (truncated or overwritten?)",
+    "npz_size": lambda size, written: f"{'truncated: ' if size < written else ''}{size} bytes, {written} were written",
+    "npz_checksum": lambda: "checksum mismatch: the raw block differs from what was written",
+    "npz_unreadable": lambda error, detail: f"unreadable ({error}: {detail})",
+    "run_json": lambda detail: detail,
+    "steps_link": lambda: "is a symbolic link; a run's steps are read only inside the run directory",
+    "no_steps_dir": lambda: "no steps/ directory",
+    "raw_lacks": lambda channels: f"raw block lacks {sorted(channels)}",
+    "not_in_plan": lambda: "a step the run's plan does not know",
+    "name_not_utf8": lambda: "not a step file (its name is not UTF-8)",
+    "not_a_step_file": lambda: "not a step file",
+    "skipped": lambda why: f"skipped at run time: {why}",
+    "sweep_short": lambda short, planned: (f"missing: {short} of the {planned} steps this sweep measures "
+                                           "(adaptive plan: chosen online, so not named by key)"),
+    "refinement_open": _owed_refinement,
+    "dwell_owed": lambda cycles, mode, force_N, dwell, end: (f"the dwell of {cycles} cycles at the {mode} resonance "
+                                                             f"at {force_N:g} N ({dwell}) not measured (the "
+                                                             f"refinement ended: {end})"),
+}
+
+
+def _holder(pid: int | None = None, host: str = "", since: str = "", command: str = "bench", run: str = "") -> str:
+    if pid is None:
+        return "another process (it has not said which yet)"
+    return f"process {pid} on {host} since {since} ({command}{', run directory ' + run if run else ''})"
+
+
+_HELD = {"run_dir": "run directory", "instrument": "instrument"}
+_DEMO_HOW = "bench demo --out: choose a new or empty directory, or remove"
+
+REFUSAL: Words = {
+    "lock_link": lambda path: f"{path}: is a symbolic link; a lock is never taken through links (remove it)",
+    "lock_not_a_file": lambda path, held, name: f"{path}: not a regular file (expected the lock file of {_HELD[held]} {name})",
+    "in_use": lambda held, name, holder: (f"{_HELD[held]} {name} is in use by {_holder(**holder)}; one session at a "
+                                          "time: wait for it to end or stop it (Ctrl-C in its terminal, or its watch "
+                                          "page's stop)"),
+    "lock_dir": lambda path, uid: (f"{path}: the instruments' lock directory must be a real directory of user {uid} "
+                                   "(set GUIDEWAY_LOCK_DIR to another)"),
+    "demo_not_a_dir": lambda out: f"{out}: not a directory; {_DEMO_HOW} it",
+    "demo_not_a_demo": lambda out, manifest: (f"{out} is not empty and holds no earlier demo run (no readable "
+                                              f"{manifest} listing the files a demo wrote there); the demo deletes "
+                                              f"nothing else: {_DEMO_HOW} its contents"),
+    "demo_foreign": lambda out, foreign: (f"{out} holds an earlier demo run and files the demo did not write ("
+                                          + ", ".join(foreign[:6]) + (f" (+{len(foreign) - 6} more)" if len(foreign) > 6
+                                                                      else "")
+                                          + f"); the demo deletes nothing it did not write: {_DEMO_HOW} them"),
+}
+
+
+REFUSAL.update({
+    "run_dir_not_empty": lambda path: (f"run directory {path} exists and is not empty; "
+                                       f"use 'bench resume {path}' or choose another --out"),
+    "run_dir_missing": lambda path: f"{path}: no such directory (expected a run directory made by 'bench run')",
+    "run_dir_no_run_json": lambda path: (f"{path}: not a run directory (no run.json; expected a directory made by "
+                                         "'bench run')"),
+    "run_dir_link": lambda path, kind: (f"{path}: is a symbolic link; a run writes nothing through links (replace it "
+                                        f"with a real {kind})"),
+    "run_dir_not_regular": lambda path, kind, found: (f"{path}: not a {'directory' if kind == 'directory' else 'regular file'} "
+                                                      f"({found}); a run writes only regular files (replace or remove it)"),
+    "run_json_missing": lambda path: f"{path}: missing (not a run directory?)",
+    "run_json_unreadable": lambda detail: f"{detail} (run.json holds the run's plan; nothing can be counted without it)",
+    "run_json_not_json": lambda path, json: f"{path}: damaged ({PROBLEM['not_json'](**json)})",
+    "run_json_not_utf8": lambda path, byte: f"{path}: damaged (not text: byte {byte} is not UTF-8)",
+    "run_json_too_deep": lambda path: f"{path}: damaged (nested too deeply to be a run's metadata)",
+    "run_json_not_object": lambda path, found: f"{path}: damaged (a JSON object was expected, found {found})",
+    "run_json_newer": lambda path, version, reads: (f"{path}: run format version {version!r}, written by a newer "
+                                                    f"guideway-bench (this one reads versions up to {reads}); update "
+                                                    "to read it"),
+    "steps_gone": lambda path: f"{path}: missing (deleted while the run was using it?); no step can be stored",
+})
+
+
+CHECK: Words = {
+    "unmeasured_tail": lambda last, count, run: (f"interrupted after step {last or '(none)'}; {count} not yet measured "
+                                                 f"(the plan's steps after it; bench resume {run} measures them)"),
+    "no_plan": lambda run, files, problems: (f"{run}: {files} step result files; run.json unreadable or its plan not "
+                                             "valid, so the steps cannot be counted against the plan; "
+                                             f"{problems} problem{'s' if problems != 1 else ''}"),
+    "resume_measures": lambda run: (f" (bench resume {run} measures missing and damaged steps again, keeping damaged "
+                                    "files in damaged/)"),
+    "resume_owes": lambda run: f" (bench resume {run} measures what the refinement still owes)",
+    "skipped_allowed": lambda count, strict: (f"{count} step{'s' * (count != 1)} skipped at run time as the plan allows "
+                                              '(infeasible = "skip"): '
+                                              + ("counted as problems (--strict)" if strict else
+                                                 "not a problem (--strict counts them); bench resume "
+                                                 "--retry-skipped measures them again")),
+}
+
+
+def refused(exc: type[E], code: str, **fields) -> E:
+    """The exception ``exc`` of a refusal: its message the words of ``code`` with ``fields``,
+    and ``code`` and ``fields`` kept on it (what a caller decides by)."""
+    e = exc(say(REFUSAL, code, fields))
+    e.code, e.fields = code, fields         # type: ignore[attr-defined]
+    return e
+
+
+def problem(code: str, fields) -> str:
+    """A run directory's problem in words (no file name: the caller shows it)."""
+    return say(PROBLEM, code, fields)
