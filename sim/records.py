@@ -39,6 +39,9 @@ CHANNELS = ("force", "accel", "disp")
 MAX_HARMONICS = 200
 DRIFT_HARMONICS = 3
 FREQ_HARMONICS = 5       # harmonics in the model that refines the frequency
+# up to this many harmonics the kernel sums its fitted signal directly (Horner in e^(i step n)):
+# good to 1e-13 of the signal, where the chirp-z transform's chirp loses 1e-11 on 5000 samples
+DIRECT_SYNTHESIS = 8
 
 
 @dataclass(frozen=True)
@@ -171,6 +174,18 @@ def _harmonic_system(N: int, step: float, K: int) -> tuple[np.ndarray, CZT, CZT]
     return G, CZT(N, m=K + 1, w=np.exp(-1j * step), a=1.0), CZT(K + 1, m=N, w=np.exp(1j * step), a=1.0)
 
 
+def _fitted(c: np.ndarray, N: int, step: float, synthesis: CZT) -> np.ndarray:
+    """a_0 + sum_k a_k cos(k step n) + b_k sin(k step n) = Re(sum_k c_k e^(i k step n)), c_k = a_k - i b_k,
+    n = 0..N-1: summed directly for a few harmonics, by the chirp-z transform for many."""
+    if c.size - 1 > DIRECT_SYNTHESIS:
+        return synthesis(c).real
+    z = np.exp(1j * step * np.arange(N))
+    p = np.full(N, c[-1])
+    for ck in c[-2::-1]:
+        p = p * z + ck
+    return p.real
+
+
 def noise_rms(residual: np.ndarray, params: int) -> float:
     """The per-sample noise of a record: the rms of its residual about a fitted model of
     ``params`` parameters, over ``residual.size - params`` degrees of freedom (the one noise
@@ -201,9 +216,8 @@ def lsq_harmonics(x: np.ndarray, fs: float, f: float, K: int, noise: bool = True
     coef = _solve_near_diagonal(G, rhs)
     a_cos, b_sin = coef[:K + 1], coef[K + 1:]
     rms = math.nan
-    if noise:   # fitted = a_0 + sum_k a_k cos(k step n) + b_k sin(k step n) = Re(sum_k (a_k - i b_k) e^(i k step n))
-        fitted = synthesis(np.concatenate([a_cos[:1], a_cos[1:] - 1j * b_sin])).real
-        rms = noise_rms(x - fitted, coef.size)
+    if noise:
+        rms = noise_rms(x - _fitted(np.concatenate([a_cos[:1], a_cos[1:] - 1j * b_sin]), N, step, synthesis), coef.size)
     # A sin(kwt + phi) = A cos(phi) sin + A sin(phi) cos -> C = b_sin + i a_cos
     return b_sin + 1j * a_cos[1:], float(a_cos[0]), rms
 

@@ -62,7 +62,7 @@ def test_clean_data_gets_no_cause(seed):
     d = a.to_dict()
     assert d["causes"] == [] and not d["unexplained"], d["verdict"]
     assert 0.5 < d["base"]["reduced_chi2"] < 2.0
-    for k, truth in (("F_s_N", case.rig["F_s_N"]), ("x_s_m", case.rig["x_s_m"]), ("m_kg", case.rig["mass_kg"])):
+    for k, truth in (("F_s_N", case.rig["F_s_N"]), ("x_s_m", case.rig["x_s_m"]), ("mass_kg", case.rig["mass_kg"])):
         assert d["parameters"][k]["value"] == pytest.approx(truth, rel=0.01)
     assert "within the noise" in d["verdict"]
 

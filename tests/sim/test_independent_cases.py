@@ -85,8 +85,8 @@ def test_a_clean_independent_rig_gives_no_physical_cause(tmp_path):
     assert physical(d) == [], d["verdict"]
     assert not d["unexplained"], d["verdict"]
     rig = RIGS[2]
-    for key, name in (("F_s_N", "F_s_N"), ("x_s_m", "x_s_m"), ("n", "n"), ("mass_kg", "m_kg")):
-        assert covers(d["parameters"][name], rig[key]), (name, d["parameters"][name], rig[key])
+    for key in ("F_s_N", "x_s_m", "n", "mass_kg"):
+        assert covers(d["parameters"][key], rig[key]), (key, d["parameters"][key], rig[key])
 
 
 @pytest.mark.slow

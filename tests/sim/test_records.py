@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from sim.records import analyse_records, estimate_frequency, lsq_harmonics
+from sim.records import analyse_records, estimate_frequency, harmonic_sigma, lsq_harmonics
 
 
 def signal(t, f, amps, phases):
@@ -84,3 +84,20 @@ def test_the_kernels_noise_is_exact_on_a_clean_record(noise):
     assert offset == pytest.approx(coef[0], abs=1e-12)
     assert rms == pytest.approx(want, rel=1e-6)
     assert lsq_harmonics(x - (x - A @ coef), fs, f, K)[2] < 1e-11     # the model itself: no noise left
+
+
+def test_the_steps_level_is_the_kernels_fundamental_free_of_the_offset_and_the_harmonics():
+    """The artefact check's level (the force fundamental) on 10.6 periods of 24.2 samples,
+    with an offset and a strong second harmonic: within 5 standard errors of the true 2 N
+    (main's single-bin sum over floor(periods) leaked 1e-3 N into it, 100 standard errors)."""
+    from sim.artefacts import assess_step
+    f, fs = 41.3, 1000.0
+    n = int(10.6 * fs / f)
+    t = np.arange(n) / fs
+    rng = np.random.default_rng(0)
+    force = 0.5 + signal(t, f, [2.0, 0.6], [0.3, 1.0]) + 1e-4 * rng.standard_normal(n)
+    disp = 1e-5 * np.sin(2 * np.pi * f * t - 1) + 1e-9 * rng.standard_normal(n)
+    accel = -(2 * np.pi * f) ** 2 * (disp - 1e-9 * rng.standard_normal(n)) + 1e-3 * rng.standard_normal(n)
+    q = assess_step(force, accel, disp, fs, f).quality
+    periods = math.floor(n * f / fs)
+    assert abs(q.level_N - 2.0) < 5 * harmonic_sigma(1e-4, int(periods * fs / f))
