@@ -113,6 +113,13 @@ class Weights:
         sig = dict(P=np.maximum(d.sP, REL_FLOOR * np.abs(d.P[:, 0]))[:, None],
                    A=np.maximum(d.sA, REL_FLOOR * np.abs(d.A[:, 0]))[:, None],
                    X=np.maximum(d.sX, REL_FLOOR * np.abs(d.X[:, 0]))[:, None])
+        # the noise-induced mean is the measured noise's, not the floor's: it grows with the
+        # square of the step, and a floor above the noise (a large-amplitude step's X, A)
+        # made it tens of times too large; on the pitching rig F_s and x_s came out 5e-5 and
+        # 1e-4 low at any noise (decision 0064).  The floors stay in the variances.
+        true = dict(P=np.asarray(d.sP, float)[:, None], A=np.asarray(d.sA, float)[:, None],
+                    X=np.asarray(d.sX, float)[:, None])
+        share = {ch: (true[ch] / np.where(sig[ch] > 0, sig[ch], 1.0)) ** 2 for ch in sig}
 
         def moved(dP, dA, dX, sign):
             dP, dA, dX = sign * dP * live, sign * dA * live, sign * dX * live
@@ -129,10 +136,10 @@ class Weights:
         bias = np.zeros((2,) + d.X.shape, complex)
         responses: list[np.ndarray] = []
 
-        def add(gF, gK, bF, bK, w: float = 1.0) -> None:
+        def add(gF, gK, bF, bK, w: float = 1.0, share: np.ndarray | float = 1.0) -> None:
             acc[:] += w * np.stack([gF.real ** 2, gF.imag ** 2, gK.real ** 2, gK.imag ** 2,
                                     gF.real * gK.real, gF.imag * gK.imag])
-            bias[:] += w * np.stack([bF, bK])
+            bias[:] += w * share * np.stack([bF, bK])
             responses.append(math.sqrt(w) * np.stack([gF, gK]))
         zero = np.zeros(Xf.shape, complex)
         for ch in ("P", "A", "X"):
@@ -140,17 +147,24 @@ class Weights:
                 for unit in (1.0, 1j):
                     dch = zero.copy()
                     dch[:, j] = unit * sig[ch][:, 0]
-                    add(*response(*(dch if c == ch else zero for c in ("P", "A", "X"))))
+                    add(*response(*(dch if c == ch else zero for c in ("P", "A", "X"))), share=share[ch])
         if Kf > K and tail_draws:
             rng = np.random.default_rng(seed)
-            for _ in range(tail_draws):
+            floored = any(not np.allclose(true[ch], sig[ch]) for ch in sig)
+
+            def draw(scale: dict) -> list[np.ndarray]:
                 ds = []
                 for ch in ("P", "A", "X"):
                     dch = zero.copy()
-                    dch[:, K:] = sig[ch] * (rng.choice([-1.0, 1.0], (Xf.shape[0], Kf - K))
-                                            + 1j * rng.choice([-1.0, 1.0], (Xf.shape[0], Kf - K)))
+                    dch[:, K:] = scale[ch] * (rng.choice([-1.0, 1.0], (Xf.shape[0], Kf - K))
+                                              + 1j * rng.choice([-1.0, 1.0], (Xf.shape[0], Kf - K)))
                     ds.append(dch)
-                add(*response(*ds), 1.0 / tail_draws)
+                return ds
+            for _ in range(tail_draws):
+                gF, gK, bF, bK = response(*draw(sig))
+                add(gF, gK, bF, bK, 1.0 / tail_draws, share=0.0 if floored else 1.0)
+                if floored:            # the mean from draws of the measured noise
+                    bias[:] += np.stack(response(*draw(true))[2:]) / tail_draws
         tiny = 1e-24 * np.abs(d.P[:, :1]) ** 2 + 1e-300
         var_F = np.maximum(acc[:2], tiny)
         var_K = np.maximum(acc[2:4], tiny)
