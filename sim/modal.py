@@ -581,8 +581,9 @@ def next_refinement_Hz(f_Hz: ArrayLike, mag: ArrayLike, peak_index: int, estimat
     peak lies between them).  A safeguarded line search on that bracket, like Brent's
     (decision record 0063); a gap beside the maximum wider than the tolerance is "open":
 
-    1. the half-power points (vertex x (1 -+ zeta), the fit's window), when none lies
-       within zeta/2;
+    1. a half-power point (vertex x (1 -+ zeta), the fit's window), when no point lies
+       between vertex x (1 -+ zeta/2) and vertex x (1 -+ 2 zeta) on its side (a zeta
+       that shrinks as the points come in does not ask again);
     2. a tolerance step beside the maximum, towards its wider open gap, when the model's
        vertex (``estimate_Hz``: the fit's, else a parabola's) is at the maximum (within
        tolerance/2) or in no open gap; not when the maximum is the last refinement step
@@ -607,8 +608,9 @@ def next_refinement_Hz(f_Hz: ArrayLike, mag: ArrayLike, peak_index: int, estimat
     v = estimate_Hz if math.isfinite(estimate_Hz) and lo < estimate_Hz < hi else fp
     z = zeta if math.isfinite(zeta) and 2 * tolerance < zeta < 0.3 else None
     if z is not None:
-        for x in (v * (1 - z), v * (1 + z)):
-            if f_min <= x <= f_max and not np.any(np.abs(f / x - 1) <= z / 2):
+        for x, side in ((v * (1 - z), -1.0), (v * (1 + z), 1.0)):
+            r = side * np.log(f / v)                  # how far out on that side, log
+            if f_min <= x <= f_max and not np.any((r >= math.log1p(z / 2)) & (r <= math.log1p(2 * z))):
                 return float(x)
     closed = math.log1p(1.01 * tolerance)
     gaps = [(g, a, b) for g, a, b in ((math.log(fp / lo), lo, fp), (math.log(hi / fp), fp, hi)) if g > closed]
