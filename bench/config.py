@@ -248,11 +248,12 @@ def plan_toml(p: dict) -> dict:
            "adaptive_per_sweep": p.get("adaptive_per_sweep", 0),
            "frequencies": {"list_Hz": as_list(p["freqs_Hz"]), "direction": p["direction"]},
            "control": {k: p[k] for k in keys if k in p}}
-    if p.get("refine"):
-        out["resonance"] = {"refine": True, "tolerance": p.get("refine_tolerance", 0.002),
-                            "max_steps": p.get("refine_steps", 10),
-                            "modes": list(p.get("refine_modes") or ("feed", "pitch")),
-                            "dwell_cycles": p.get("dwell_cycles", 0)}
+    res = {"refine": bool(p.get("refine")), "tolerance": p.get("refine_tolerance", 0.002),
+           "max_steps": p.get("refine_steps", 10), "modes": list(p.get("refine_modes") or ("feed", "pitch")),
+           "dwell_cycles": p.get("dwell_cycles", 0)}
+    if res["refine"] or res != {"refine": False, "tolerance": 0.002, "max_steps": 10, "modes": ["feed", "pitch"],
+                                "dwell_cycles": 0}:       # refine off with its settings kept: they come back
+        out["resonance"] = res
     if p.get("procedure", "stepped_sine") == "response_controlled":
         out["procedure"] = "response_controlled"
         out["response"] = {"quantity": p["response"], "levels": out.pop("levels_N")}

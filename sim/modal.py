@@ -576,24 +576,27 @@ def next_refinement_Hz(f_Hz: ArrayLike, mag: ArrayLike, peak_index: int, estimat
                        zeta: float, tolerance: float, f_min: float, f_max: float,
                        last_Hz: float | None = None) -> float | None:
     """The next frequency to measure to know a peak within ``tolerance`` (relative), or
-    None when it is known: the measured maximum has measured neighbours within
-    ``tolerance`` on both sides (the peak lies between them; decision record 0063).  A
-    safeguarded line search on the bracket of the measured maximum, like Brent's:
+    None when it is known: the measured maximum (``peak_index`` into ``f_Hz``, the maximum
+    of the curve ``mag``) has measured neighbours within ``tolerance`` on both sides (the
+    peak lies between them).  A safeguarded line search on that bracket, like Brent's
+    (decision record 0063); a gap beside the maximum wider than the tolerance is "open":
 
-    1. the half-power points (estimate x (1 -+ zeta), the fit's window), when none lies
-       within zeta/2;
-    2. a tolerance step beside the measured maximum, towards the wider of its open gaps
-       (a gap wider than the tolerance), when the model's vertex (``estimate_Hz``: the
-       fit's, else a parabola's) is at the maximum (within tolerance/2) or in no open gap
-       (in a closed one, or outside the bracket), unless that maximum is the last step (``last_Hz``) and was
-       itself such a step (then the vertex lags the data: a crawl by tolerance steps);
-    3. the vertex, when it lies inside an open gap, at least a fifth of the gap (log) from
-       either end (the gap shrinks to at most 0.8 of itself);
+    1. a half-power point (vertex x (1 -+ zeta), the fit's window), when no point lies
+       between vertex x (1 -+ zeta/2) and vertex x (1 -+ 2 zeta) on its side (a zeta
+       that shrinks as the points come in does not ask again);
+    2. a tolerance step beside the maximum, towards its wider open gap, when the model's
+       vertex (``estimate_Hz``: the fit's, else a parabola's) is at the maximum (within
+       tolerance/2) or in no open gap; not when the maximum is the last refinement step
+       (``last_Hz``) and already has a neighbour within the tolerance (it was such a step
+       and came out higher: the vertex lags the data, and tolerance steps would crawl);
+    3. the vertex, when it lies inside an open gap, tolerance/2 or more from its ends and,
+       once the last step became the maximum, at least a fifth of the gap (log) from either
+       end (the gap shrinks to at most 0.8 of itself);
     4. else the wider open gap, halved.
 
-    Every step lands inside an open gap of the measured maximum, so the bracket shrinks
-    whatever the vertex says: a skewed peak whose fitted vertex drifts towards it step by
-    step no longer spends the budget re-measuring the moving estimate (decision 0063)."""
+    Every step lands inside an open gap, so the bracket shrinks whatever the vertex says: a
+    skewed peak whose fitted vertex drifts with every point no longer spends the budget
+    re-measuring it."""
     f = np.asarray(f_Hz, float)
     o = np.argsort(f)
     f = f[o]
@@ -605,8 +608,9 @@ def next_refinement_Hz(f_Hz: ArrayLike, mag: ArrayLike, peak_index: int, estimat
     v = estimate_Hz if math.isfinite(estimate_Hz) and lo < estimate_Hz < hi else fp
     z = zeta if math.isfinite(zeta) and 2 * tolerance < zeta < 0.3 else None
     if z is not None:
-        for x in (v * (1 - z), v * (1 + z)):
-            if f_min <= x <= f_max and not np.any(np.abs(f / x - 1) <= z / 2):
+        for x, side in ((v * (1 - z), -1.0), (v * (1 + z), 1.0)):
+            r = side * np.log(f / v)                  # how far out on that side, log
+            if f_min <= x <= f_max and not np.any((r >= math.log1p(z / 2)) & (r <= math.log1p(2 * z))):
                 return float(x)
     closed = math.log1p(1.01 * tolerance)
     gaps = [(g, a, b) for g, a, b in ((math.log(fp / lo), lo, fp), (math.log(hi / fp), fp, hi)) if g > closed]

@@ -81,7 +81,7 @@ def test_the_demo_plan_parses_as_documented():
     assert len(plan.schedule()) == 7 * 24            # the grid; refinement steps are chosen online
     # it refines its resonances (issue 32, decision record 0063), as the file says
     assert (plan.refine, plan.refine_tolerance, plan.refine_steps, plan.refine_modes) == \
-        (True, 0.002, 10, ("feed", "pitch"))
+        (True, 0.002, 14, ("feed", "pitch"))
 
 
 def test_the_simulated_rig_parses_as_documented():

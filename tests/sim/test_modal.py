@@ -184,7 +184,7 @@ def test_refinement_brackets_the_peak_within_tolerance():
 def test_a_vertex_stuck_at_the_maximum_does_not_crawl():
     """Without a model's vertex (it stays at the measured maximum) the refinement used to
     step by the tolerance from the moving maximum and spend 30 steps on this peak; the line
-    search alternates such a step with halving the open gap (decision 0063): 14 steps."""
+    search alternates such a step with halving the open gap (decision 0063): 15 steps."""
     f = _refine(lambda f: np.abs(sdof(f)), model=False)
     lo, hi = _bracket(f, lambda f: np.abs(sdof(f)))
     assert lo < peak_Hz("receptance") < hi
