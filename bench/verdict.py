@@ -57,7 +57,7 @@ def refinement(plan: dict, results: list[dict], rig: dict | None = None) -> tupl
                   "(budget spent; [plan.resonance] max_steps)" for lv, mode, how, n in ends if how == "budget spent")
     converged = sum(1 for e in ends if e[2] == "converged")
     kept = (f"the refinement converged for {converged} peak{'s' * (converged != 1)}"
-            + (f" ({sum(1 for e in ends if e[2] == 'no peak')} with no peak inside the grid to refine)"
+            + (f" ({sum(1 for e in ends if e[2] == 'no peak')} more had no peak inside the grid to refine)"
                if any(e[2] == "no peak" for e in ends) else ""))
     return kept, short
 
