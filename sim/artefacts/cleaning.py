@@ -41,7 +41,6 @@ def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
     # harmonics back as tiny steady lines: neither is the rig's (decision 0039)
     q = _quantum(x)
     floor = q / math.sqrt(12.0)
-    trend = zero                  # the trend of the pass before (lines are searched beside it)
     moved = math.inf
     for _pass in range(4):        # a trend converges more slowly than lines: more passes only for it
         periodic, C = _periodic_fit(x - removed, fs, f)
@@ -50,25 +49,19 @@ def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
         noise = max(seen, floor)
         below = quantisation_line_bound(q, math.sqrt(max(seen * seen - floor * floor, 0.0)))
         aliases = _aliases(C, noise * math.sqrt(2.0 / n), f, fs)
-        for beside in ((trend, zero) if trend is not zero else (zero,)):
-            # after a pass that found a trend, the lines are searched beside it first (what the
-            # trend's low-frequency leakage would make look like a line stays out); if the trend
-            # is gone, or on the first pass, in the residual itself, and beside the trend found then
-            lines, transients = _find_lines(r - beside, fs, f, aliases)
+        lines, transients = _find_lines(r, fs, f, aliases)
+        lines = [ln for ln in lines if ln.amp > below]
+        removed_part = sum((ln.model for ln in lines + transients), zero)
+        trend, change, z = _trend(r - removed_part, noise)
+        if not z > TREND_Z:
+            trend, change, z = zero, 0.0, 0.0
+        elif lines or transients:     # what the trend's low-frequency leakage made look like a line goes
+            lines, transients = _find_lines(r - trend, fs, f, aliases)
             lines = [ln for ln in lines if ln.amp > below]
             removed_part = sum((ln.model for ln in lines + transients), zero)
             trend, change, z = _trend(r - removed_part, noise)
             if not z > TREND_Z:
                 trend, change, z = zero, 0.0, 0.0
-            elif beside is zero and (lines or transients):
-                lines, transients = _find_lines(r - trend, fs, f, aliases)
-                lines = [ln for ln in lines if ln.amp > below]
-                removed_part = sum((ln.model for ln in lines + transients), zero)
-                trend, change, z = _trend(r - removed_part, noise)
-                if not z > TREND_Z:
-                    trend, change, z = zero, 0.0, 0.0
-            if z > 0 or beside is zero:
-                break
         new = trend + sum((ln.model for ln in lines + transients), zero)
         if (_pass == 0 and not lines and not transients and z == 0.0) or (_pass == 1 and z == 0.0):
             break
