@@ -37,6 +37,7 @@ from bench.reports import run_modes  # noqa: E402
 from bench.session import run_plan  # noqa: E402
 from bench.storage import RunStore  # noqa: E402
 from benchtools.masing_peaks import LEVELS_N, REFERENCES, oil_model  # noqa: E402
+from sim.rig import RigModel  # noqa: E402
 
 PLAN = {"plan": {"name": "two oils, refined, dwell", "levels_N": list(LEVELS_N),
                  "frequencies": {"start_Hz": 30.0, "stop_Hz": 300.0, "points": 16},
@@ -54,7 +55,7 @@ def campaign_run(oil: str, seed: int, out: Path, levels=LEVELS_N):
             return store
     plan = parse_plan({"plan": dict(PLAN["plan"], levels_N=list(levels))})
     rig = load_rig(DEFAULTS / "sim_rig_pitch.toml")
-    rig = replace(rig, model=oil_model(oil))
+    rig = replace(rig, model=RigModel.from_dict(oil_model(oil)))
     return run_plan(plan, rig, out, identify=False, labels={"oil": oil}, sim_seed=seed)
 
 
