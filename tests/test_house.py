@@ -38,12 +38,14 @@ CODED = {"Problem": (("bench/step_files.py", "bench/storage.py", "bench/accounti
          "RunDirRefusal": (("bench/storage.py",), {"refused": 1, "RunDirError": None, "NewerFormat": None,
                                                    "FileExistsError": None, "StorageError": None}),
          "CheckLine": (("bench/commands/results.py",), {"say": 0}),
-         "PageWarning": (("bench/watch/snapshot.py",), {"page.warning": 0})}
+         "PageWarning": (("bench/watch/snapshot.py",), {"page.warning": 0}),
+         "RunLine": (("bench/commands/run.py",), {"say": 0}),
+         "ModeLine": (("bench/commands/results.py",), {"say_mode": 0})}
 
 # modules converted whole: they decide and make no sentence (docstrings aside); their words are
 # made by a renderer (bench/words/, or sim/artefacts/sentences.py for the words a step file stores)
 WORDLESS = ("bench/step_files.py", "bench/runlock.py", "sim/artefacts/causes.py", "sim/artefacts/cleaning.py",
-            "sim/artefacts/decision.py", "sim/artefacts/quality.py")
+            "sim/artefacts/decision.py", "sim/artefacts/quality.py", "bench/verdict.py", "bench/reports/_overall.py")
 
 
 # modules that start `bench` in a process of their own on purpose (decision 0057)

@@ -144,7 +144,7 @@ def cmd_check(args) -> int:
     kept = promise(meta.get("plan") or {}, store.results(warn=False), meta.get("rig"),
                    completed=meta.get("status") == RunStatus.COMPLETED)
     if kept.short:        # the steps are intact; what they say against the procedure's promise (decision 0052)
-        print(f"{kept.kind.label}: {'; '.join(kept.short)}")
+        print(say(CheckLine.PROMISE_SHORT, label=kept.kind.label, short=[terminal.promised(s) for s in kept.short]))
     if skipped:
         print(say(CheckLine.SKIPPED, count=len(skipped), strict=args.strict))
     return ExitCode.FAILURE if problems or (skipped and args.strict) else ExitCode.OK
@@ -158,7 +158,22 @@ class CheckLine(StrEnum):
     NO_PLAN = "no_plan"                     # run, files (step result files), problems
     RESUME_MEASURES = "resume_measures"     # run: what bench resume measures again
     RESUME_OWES = "resume_owes"             # run: what it measures of a refinement's debt
+    PROMISE_SHORT = "promise_short"         # label (the procedure's), short: the shortfalls' words
     SKIPPED = "skipped_allowed"             # count, strict
+
+
+class ModeLine(StrEnum):
+    """The lines ``bench modes`` prints (their words: :data:`bench.words.terminal.MODES`);
+    each mode's with run, mode and level (formatted in its quantity)."""
+
+    LOCKED = "locked"                   # f_Hz, zeta (phase resonance: the locked point's energy balance)
+    FITTED = "fitted"                   # f_Hz, zeta: (value, low, high); balance: (value, low, high) or None
+    NOT_ESTIMATED = "not_estimated"     # status, note
+    WROTE = "wrote"                     # files
+
+
+def say_mode(code: ModeLine, **fields) -> str:
+    return terminal.say(terminal.MODES, code, fields)
 
 
 def say(code: CheckLine, **fields) -> str:
@@ -201,18 +216,15 @@ def cmd_modes(args) -> int:
     runs, files = write_modes([Path(r) for r in args.runs], Path(args.out), model=not args.no_model)
     for r in runs:
         for e in r.modes:
+            at = {"run": r.label, "mode": e.mode, "level": r.level_quantity.format(e.level_N)}
             if e.ok and e.phase_resonance:     # one locked point: its energy balance, no fit, no interval
-                print(f"{r.label}: {e.mode} at {r.level_quantity.format(e.level_N)}: {e.resonance_Hz:.5g} Hz "
-                      f"(phase resonance, locked), damping ratio (energy balance at the locked point) "
-                      f"{100 * e.damping_ratio:.3g} %")
+                print(say_mode(ModeLine.LOCKED, **at, f_Hz=e.resonance_Hz, zeta=e.damping_ratio))
             elif e.ok:
                 eb = e.extra.get("energy_balance")
-                print(f"{r.label}: {e.mode} at {r.level_quantity.format(e.level_N)}: {e.resonance_Hz:.5g} Hz "
-                      f"[{e.resonance_low_Hz:.5g}, {e.resonance_high_Hz:.5g}], damping ratio (single-mode fit) "
-                      f"{100 * e.damping_ratio:.3g} % [{100 * e.damping_ratio_low:.3g}, {100 * e.damping_ratio_high:.3g}]"
-                      + (f", (energy balance at resonance) {100 * eb.value:.3g} % [{100 * eb.low:.3g}, "
-                         f"{100 * eb.high:.3g}]" if eb is not None else ""))
+                print(say_mode(ModeLine.FITTED, **at, f_Hz=(e.resonance_Hz, e.resonance_low_Hz, e.resonance_high_Hz),
+                               zeta=(e.damping_ratio, e.damping_ratio_low, e.damping_ratio_high),
+                               balance=(eb.value, eb.low, eb.high) if eb is not None else None))
             else:
-                print(f"{r.label}: {e.mode} at {r.level_quantity.format(e.level_N)}: {e.status}" + (f" ({e.note})" if e.note else ""))
-    print("wrote " + ", ".join(str(f) for f in files))
+                print(say_mode(ModeLine.NOT_ESTIMATED, **at, status=e.status, note=e.note))
+    print(say_mode(ModeLine.WROTE, files=[str(f) for f in files]))
     return ExitCode.OK

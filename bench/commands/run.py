@@ -6,15 +6,34 @@ from __future__ import annotations
 import logging
 import sys
 import time
+from enum import StrEnum
 from pathlib import Path
 
 from procedures.kind import ProcedureKind
 from sim.errors import ConfigurationError
 
 from ..terminal import Progress, end_line
+from ..words import terminal
 from . import ExitCode
 
 log = logging.getLogger(__name__)
+
+
+class RunLine(StrEnum):
+    """The lines ``bench run`` and ``bench resume`` print at the end of a run (their words:
+    :data:`bench.words.terminal.RUN`)."""
+
+    ENDED = "ended"                         # status, done, total (steps), out
+    NO_REPORT = "no_report"                 # reason (the signal's), out
+    REPORT = "report"                       # path, then (a signal during the report, or None)
+    PROMISE_BROKEN = "promise_broken"       # label (the procedure's), short: the shortfalls' words
+    OUTPUT_NEVER_ON = "output_never_on"
+    OUTPUT_OFF = "output_off"               # confirmed by the generator
+    OUTPUT_OFF_UNCONFIRMED = "output_off_unconfirmed"
+
+
+def say(code: RunLine, **fields) -> str:
+    return terminal.say(terminal.RUN, code, fields)
 
 
 def _load_configs(args):
@@ -159,19 +178,20 @@ def _session_held(args, resume: bool, latch) -> int:
         latch.reopen()             # the report is work too; held: nothing raises inside it (0051)
         latch.hold(doing=REPORTING)
         begin_report = latch.reason is None    # decided before "run completed": a signal after it is one during the report
-    print(f"run {meta['status']}: {meta['steps_done']}/{meta['steps_total']} steps in {out}/", flush=True)
+    print(say(RunLine.ENDED, status=meta["status"], done=meta["steps_done"], total=meta["steps_total"], out=out),
+          flush=True)
     if wants_report:
         if begin_report:
             _report(out, latch)
         else:
-            print(f"report not written: {latch.reason} before it began; `bench report {out}` writes it",
-                  file=sys.stderr)
+            print(say(RunLine.NO_REPORT, reason=latch.reason, out=out), file=sys.stderr)
         latch.finish()
     if meta["status"] == RunStatus.COMPLETED:
         from ..verdict import promise
         kept = promise(meta.get("plan") or {}, store.results(warn=False), meta.get("rig"))
         if kept.fatal:           # completed, but not what the procedure was run for (decision 0052)
-            print(f"the {kept.kind.label} did not measure what it promised: {'; '.join(kept.short)}", file=sys.stderr)
+            print(say(RunLine.PROMISE_BROKEN, label=kept.kind.label, short=[terminal.promised(s) for s in kept.short]),
+                  file=sys.stderr)
             code = ExitCode.FAILURE
     if latch.reason is not None and code == ExitCode.OK:
         raise KeyboardInterrupt(latch.reason)     # a signal before the work was done: exit 130
@@ -188,7 +208,7 @@ def _report(run: Path, latch, with_runs=()) -> None:
     latch.hold(doing=REPORTING)
     from ..api import open_run
     path = open_run(run).report(with_runs=tuple(with_runs))
-    print(f"report: {path}" + (f" (complete; then {latch.reason})" if latch.reason else ""), flush=True)
+    print(say(RunLine.REPORT, path=path, then=latch.reason), flush=True)
 
 
 def _event_count(out: Path) -> int:
@@ -212,13 +232,11 @@ def _say_output_state(out: Path, since: int = 0) -> None:
         events = []
     offs = [e for e in events if e.get("event") == "output_off"]
     if not offs:
-        print("output not switched on by this session (stopped before the generator was set up)",
-              file=sys.stderr, flush=True)
+        print(say(RunLine.OUTPUT_NEVER_ON), file=sys.stderr, flush=True)
     elif offs[-1].get("confirmed"):
-        print("output off, confirmed by the generator", file=sys.stderr, flush=True)
+        print(say(RunLine.OUTPUT_OFF), file=sys.stderr, flush=True)
     else:
-        print("WARNING: output off NOT confirmed by the generator: switch the amplifier off by hand "
-              "and check the generator", file=sys.stderr, flush=True)
+        print(say(RunLine.OUTPUT_OFF_UNCONFIRMED), file=sys.stderr, flush=True)
 
 
 def _start_watch(run_dir: Path, args):

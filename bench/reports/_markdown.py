@@ -25,14 +25,13 @@ from procedures.kind import ProcedureKind
 from sim.discrepancy.rounding import round_to_interval
 
 from ..numbers import number, percent
-from ..storage import shown
-from ..verdict import promise
 from ..words import report as words
 from . import _figures as figures
 from . import _figures_modes as mode_figures
 from ._analysis import analysis_data
 from ._damping import DAMPING_HEADS, DAMPING_KINDS, damping_notes, damping_row
-from ._identification import ID_PARAMS, IdentificationData, determined_from, finite, steps_of, truth_misses
+from ._identification import ID_PARAMS, IdentificationData, determined_from, finite, steps_of
+from ._overall import overall
 from ._refinement import refinement_lines
 from ._run import ANALYSIS_HTML, RunData, load_run
 from ._steps import UNSETTLED_RESIDUAL, control_error, pp_source
@@ -302,7 +301,7 @@ def accounting_md(run: RunData) -> list[str]:
     acc = run.accounting
     if acc is None or acc.planned is None:
         return [f"**{len(run.results)} used / ? planned**: run.json holds no plan this version can read, so the "
-                "steps cannot be counted against it.", "", "Overall: **needs attention**: no readable plan.", ""]
+                "steps cannot be counted against it.", "", words.overall(overall(run, 0, [])), ""]
     intact = set(acc.intact)
     rejected = {k: why for k, status, why in run.attention if status == "rejected" and k in intact}
     used = [k for k in acc.intact if k not in rejected]
@@ -314,82 +313,7 @@ def accounting_md(run: RunData) -> list[str]:
     more = f"; and {len(skipped) - 12} more (`bench check` lists them all)" if len(skipped) > 12 else ""
     md = [f"**{len(used)} used / {acc.planned} planned**; skipped: {'; '.join(skipped[:12]) or 'none'}{more}"
           + (f"; also used: {extra} step{'s' * (extra != 1)} the plan does not know" if extra > 0 else ""), ""]
-    why = []
-    status = run.meta.get("status", "?")
-    if status != "completed":
-        why.append({"interrupted": "the run was interrupted (bench resume continues it)",
-                    "aborted": "the run was stopped by a limit",
-                    "running": "the run is still running, or ended without recording its end"}.get(
-                        status, f"the run ended with status '{status}'"))
-    if acc.missing:
-        why.append(f"{acc.missing_count} step{'s' * (acc.missing_count != 1)} missing")
-    if acc.damaged:
-        why.append(f"{len(acc.damaged)} step{'s' * (len(acc.damaged) != 1)} damaged")
-    if rejected:
-        why.append(f"{len(rejected)} step{'s' * (len(rejected) != 1)} rejected by the step-quality check "
-                   "(see Steps needing attention)")
-    if run.attention_error:
-        why.append(f"the step quality could not be computed ({run.attention_error})")
-    trips = [e for e in run.events if e.get("event") == "abort"]
-    if trips:
-        why.append("limit trip: " + "; ".join(str(e.get("reason", "?")) for e in trips))
-    errors = [e for e in run.events if e.get("event") in ("instrument_error", "error")]
-    if errors:
-        why.append(f"{len(errors)} instrument or run error{'s' * (len(errors) != 1)} (see the events below)")
-    kept = promise(run.plan, run.results, run.rig, completed=status == "completed")
-    why += kept.short
-    if acc.orphan:
-        why.append(f"{len(acc.orphan)} file{'s' * (len(acc.orphan) != 1)} in steps/ that no planned step owns "
-                   f"({', '.join(shown(p.path.name) for p in acc.orphan[:5])})")
-    notes = []
-    stops = [e for e in run.events if e.get("event") == "interrupted"]
-    resumes = [e for e in run.events if e.get("event") == "resume"]
-    if stops or resumes:
-        k = max(len(stops), len(resumes))
-        how = ", ".join(sorted({str(e.get("reason") or "?") for e in stops}))
-        if len(resumes) > len(stops):
-            how += (", " if how else "") + "ended without recording why (killed, crashed or power lost)"
-        (notes if status == "completed" else why).append(
-            f"interrupted {k} time{'s' * (k != 1)} ({how}) and resumed {len(resumes)} "
-            f"time{'s' * (len(resumes) != 1)}: resumed steps restart from the step before, not from the rig's "
-            "uninterrupted history (decision 0013)")
-    ident = run.ident
-    if ident.failed:
-        why.append(f"the final identification failed ({ident.failed})")
-    est = ident.latest
-    if est is not None and est.get("misfit"):
-        why.append(f"the identified model does not fit the data beyond the noise (reduced chi^2 "
-                   f"{number(est.get('reduced_chi2'), fmt='.3g')}): its parameters are biased"
-                   + ("" if run.analysis is not None else "; `bench analyze` names what is missing"))
-    flagged = flagged_reasons(run.attention)
-    if flagged:
-        total = sum(1 for _, status, _ in run.attention if status == "flagged")
-        notes.append(f"{total} step{'s' * (total != 1)} flagged by the step-quality check, used with their noise as "
-                     f"weight ({', '.join(f'{k} {why}' for why, k in flagged)}; see Steps needing attention)")
-    misses = truth_misses(ident, est)
-    if misses:
-        notes.append("the simulated rig's truth lies outside the 95 % interval of "
-                     + ", ".join(f"{label} ({k:.2g} standard errors out)" for label, k in misses)
-                     + ": the estimate misses it by more than its interval allows")
-    below = run.below_resolution
-    if below and run.probe:
-        notes.append(f"{len(below)} step{'s' * (len(below) != 1)} move{'s' * (len(below) == 1)} less than the "
-                     f"probe resolves ({1e9 * run.probe.rms_m:.3g} nm rms, {run.probe.source}): their displacement "
-                     "is noise; their force and acceleration are still good (accelerance, mass)")
-    if why:
-        md += [f"Overall: **needs attention**: {'; '.join(why)}."
-               + (f" Also: {'; '.join(notes)}." if notes else ""), ""]
-    else:
-        n = len(acc.skipped)
-        but = (f" but {n} skipped at run time as the plan allows (infeasible = \"skip\": {run.level_quantity.name} unreachable "
-               "within the drive limit)" if n else "")
-        fits = ", the identified model fits" if kept.kind is ProcedureKind.STEPPED_SINE and est is not None else ""
-        if notes:
-            md += [f"Overall: **went well, with notes**: every planned step measured, intact and usable{but}, "
-                   f"{kept.kept}, no limit trip or error; but {'; '.join(notes)}.", ""]
-        else:
-            md += [f"Overall: **went well**: every planned step measured, intact and usable{but}, {kept.kept}, "
-                   f"no limit trip, error or interruption{fits}.", ""]
+    md += [words.overall(overall(run, len(rejected), flagged_reasons(run.attention))), ""]
     return md
 
 

@@ -2,7 +2,8 @@
 level's resonance search ended, from the stored steps (procedures.resonance.
 refinement_outcomes), becomes the mode's status "not converged" in modes.csv and the
 report, with the interval widened to the bracket of the measured maximum (the peak lies
-between its measured neighbours whatever the fit says), and a sentence in the report."""
+between its measured neighbours whatever the fit says), and a sentence in the report (its
+words, and the note's, made by bench.words.report, decision 0067)."""
 
 from __future__ import annotations
 
@@ -13,12 +14,13 @@ from collections.abc import Sequence
 from procedures.resonance import refinement_outcomes
 from sim.modal import LevelData, ModeEstimate, find_feed, find_pitch
 
+from ..words import report as words
+
 log = logging.getLogger(__name__)
 
 NOT_CONVERGED = "not converged"
-_WHY = {"budget_spent": "the refinement budget ([plan.resonance] max_steps) was spent",
-        "no_progress": "the next step could not be measured (a frequency measured already, or the step skipped)",
-        "not finished": "the run stopped before the level's refinement ended"}
+# how a refinement ended without converging (procedures.resonance.refinement_outcomes)
+_OPEN = ("budget_spent", "no_progress", "not finished")
 
 
 def mark_refinement(modes: Sequence[ModeEstimate], meta: dict, results: list[dict], data: Sequence[LevelData],
@@ -41,11 +43,10 @@ def mark_refinement(modes: Sequence[ModeEstimate], meta: dict, results: list[dic
     by_level = {d.level_N: d for d in data}
     for e in modes:
         why = outcomes.get((e.level_N, e.mode))
-        if why not in _WHY or e.status not in ("ok", "coarse"):
+        if why not in _OPEN or e.status not in ("ok", "coarse"):
             continue
         e.status = NOT_CONVERGED
-        e.note = (f"refinement not converged: {_WHY[why]}; the interval holds the measured maximum's bracket"
-                  + (f" ({e.note})" if e.note else ""))
+        e.note = words.refinement_note(why, e.note)
         d = by_level.get(e.level_N)
         if d is not None and math.isfinite(e.resonance_Hz):
             lo, hi = _bracket(d, e)
@@ -65,6 +66,6 @@ def _bracket(d: LevelData, e: ModeEstimate) -> tuple[float, float]:
 
 def refinement_lines(outcomes: dict) -> list[str]:
     """The report's lines for the refinements that did not converge."""
-    bad = sorted((lv, mode, why) for (lv, mode), why in outcomes.items() if why in _WHY)
-    return [f"- Refinement not converged: {mode} mode at {lv:g} N: {_WHY[why]}." for lv, mode, why in bad]
+    bad = sorted((lv, mode, why) for (lv, mode), why in outcomes.items() if why in _OPEN)
+    return [words.refinement_line(why, mode, lv) for lv, mode, why in bad]
 

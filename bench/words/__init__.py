@@ -20,9 +20,19 @@ that nothing a decision depends on changes (tests/bench/test_decisions_are_value
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 Words = Mapping[str, Callable[..., str]]
+
+
+@dataclass(frozen=True)
+class Said:
+    """A decision's value: its ``code`` (a ``StrEnum`` member beside the deciding code) and
+    its ``fields``; a renderer makes its words (:func:`say`)."""
+
+    code: str
+    fields: Mapping[str, Any] = field(default_factory=dict)
 
 
 def say(words: Words, code: str, fields: Mapping[str, Any]) -> str:

@@ -20,7 +20,7 @@ from typing import TypeVar
 
 from . import Words, say
 
-__all__ = ["CHECK", "PROBLEM", "REFUSAL", "Words", "problem", "refused", "say"]
+__all__ = ["CHECK", "MODES", "PROBLEM", "PROMISE", "REFUSAL", "RUN", "Words", "problem", "promised", "refused", "say"]
 
 E = TypeVar("E", bound=Exception)
 
@@ -131,11 +131,84 @@ CHECK: Words = {
     "resume_measures": lambda run: (f" (bench resume {run} measures missing and damaged steps again, keeping damaged "
                                     "files in damaged/)"),
     "resume_owes": lambda run: f" (bench resume {run} measures what the refinement still owes)",
+    "promise_short": lambda label, short: f"{label}: {'; '.join(short)}",
     "skipped_allowed": lambda count, strict: (f"{count} step{'s' * (count != 1)} skipped at run time as the plan allows "
                                               '(infeasible = "skip"): '
                                               + ("counted as problems (--strict)" if strict else
                                                  "not a problem (--strict counts them); bench resume "
                                                  "--retry-skipped measures them again")),
+}
+
+
+def _within(tolerance: float | None) -> str:
+    return f"within {100 * tolerance:g} %" if tolerance is not None else "within tolerance"
+
+
+def _refined(refined: dict | None) -> str:
+    if refined is None:
+        return ""
+    c, more = refined["converged"], refined["no_peak"]
+    return (f", the refinement converged for {c} peak{'s' * (c != 1)}"
+            + (f" ({more} more had no peak inside the grid to refine)" if more else ""))
+
+
+def _lost(level: str, why: str | None, measured: bool) -> str:
+    return f"{level}: {why or 'not locked'}" if measured else f"{level}: not measured"
+
+
+# what a run's procedure kept of its promise and where it fell short (bench.verdict.Kept,
+# Short); `bench check`, `bench run` and the report's overall line say them
+PROMISE: Words = {
+    "levels_locked": lambda locked, levels: (f"{locked} of {levels} levels locked (the phase held in its band), each "
+                                             "a point of the backbone; phase resonance identifies no model"),
+    "level_held": lambda name, symbol, tolerance, refined: (f"the {name} ({symbol}) held {_within(tolerance)} of its "
+                                                            f"level at every step{_refined(refined)}"),
+    "force_held": lambda tolerance, refined: f"the force {_within(tolerance)} at every step{_refined(refined)}",
+    "not_locked": lambda locked, levels, lost: (f"{locked} of {levels} levels locked; not locked: "
+                                                + "; ".join(_lost(*x) for x in lost)),
+    "out_of_tolerance": lambda name, symbol, steps: (f"{name}{f' ({symbol})' if symbol else ''} out of tolerance at "
+                                                     f"{steps} step{'s' * (steps != 1)}"),
+    "budget_spent": lambda mode, level, tolerance, steps: (f"refinement: the {mode} peak at {level} not within "
+                                                           f"{100 * tolerance:g} % after {steps} steps (budget spent; "
+                                                           "[plan.resonance] max_steps)"),
+}
+
+
+def promised(said) -> str:
+    """What a procedure kept, or one of its shortfalls (a :class:`bench.words.Said`), in words."""
+    return say(PROMISE, said.code, said.fields)
+
+
+# the lines `bench run` and `bench resume` print at the end of a run (bench.commands.run.RunLine)
+RUN: Words = {
+    "ended": lambda status, done, total, out: f"run {status}: {done}/{total} steps in {out}/",
+    "no_report": lambda reason, out: f"report not written: {reason} before it began; `bench report {out}` writes it",
+    "report": lambda path, then: f"report: {path}" + (f" (complete; then {then})" if then else ""),
+    "promise_broken": lambda label, short: f"the {label} did not measure what it promised: {'; '.join(short)}",
+    "output_never_on": lambda: "output not switched on by this session (stopped before the generator was set up)",
+    "output_off": lambda: "output off, confirmed by the generator",
+    "output_off_unconfirmed": lambda: ("WARNING: output off NOT confirmed by the generator: switch the amplifier off "
+                                       "by hand and check the generator"),
+}
+
+
+def _fitted(run, mode, level, f_Hz, zeta, balance) -> str:
+    (f, f_lo, f_hi), (z, z_lo, z_hi) = f_Hz, zeta
+    return (f"{run}: {mode} at {level}: {f:.5g} Hz [{f_lo:.5g}, {f_hi:.5g}], damping ratio (single-mode fit) "
+            f"{100 * z:.3g} % [{100 * z_lo:.3g}, {100 * z_hi:.3g}]"
+            + (f", (energy balance at resonance) {100 * balance[0]:.3g} % [{100 * balance[1]:.3g}, "
+               f"{100 * balance[2]:.3g}]" if balance is not None else ""))
+
+
+# the lines `bench modes` prints (bench.commands.results.ModeLine)
+MODES: Words = {
+    "locked": lambda run, mode, level, f_Hz, zeta: (f"{run}: {mode} at {level}: {f_Hz:.5g} Hz (phase resonance, "
+                                                    "locked), damping ratio (energy balance at the locked point) "
+                                                    f"{100 * zeta:.3g} %"),
+    "fitted": _fitted,
+    "not_estimated": lambda run, mode, level, status, note: (f"{run}: {mode} at {level}: {status}"
+                                                             + (f" ({note})" if note else "")),
+    "wrote": lambda files: "wrote " + ", ".join(files),
 }
 
 

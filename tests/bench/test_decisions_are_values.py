@@ -13,6 +13,7 @@ import json
 import os
 import pkgutil
 import shutil
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -25,12 +26,16 @@ import bench.words.terminal as terminal_words
 import sim.artefacts.sentences as sentences
 import sim.records as records
 from bench.cli import ExitCode, main
+from bench.commands.results import CheckLine, ModeLine
+from bench.commands.run import RunLine
 from bench.demo import MANIFEST, OutDirRefusal
-from bench.reports._markdown import accounting_md
+from bench.reports._markdown import accounting_md, flagged_reasons
+from bench.reports._overall import Concern, Verdict, overall
 from bench.reports._run import load_run
 from bench.runlock import LOCK_NAME, LockRefusal
 from bench.step_files import Problem
 from bench.storage import RunDirRefusal, RunStore
+from bench.verdict import Kept, Short
 from bench.watch.snapshot import PageWarning, RunReader
 from procedures.stepped_sine import unsettled_in
 from sim.artefacts import artefact_causes, assess_step
@@ -140,6 +145,12 @@ def test_every_code_has_words_in_its_renderers():
         assert set(module.PROBLEM) == {str(c) for c in Problem}, module.__name__
     assert set(page_words.WARNING) == {str(c) for c in PageWarning}
     assert set(terminal_words.REFUSAL) == {str(c) for c in (*LockRefusal, *OutDirRefusal, *RunDirRefusal)}
+    assert set(terminal_words.PROMISE) == {str(c) for c in (*Kept, *Short)}
+    assert set(report_words.CONCERN) == {str(c) for c in (*Concern, *Kept, *Short)}
+    assert set(report_words.OVERALL) == {str(c) for c in Verdict}
+    assert set(terminal_words.CHECK) == {str(c) for c in CheckLine}
+    assert set(terminal_words.RUN) == {str(c) for c in RunLine}
+    assert set(terminal_words.MODES) == {str(c) for c in ModeLine}
 
 
 def _refusals(run, outs, capsys) -> list:
@@ -260,8 +271,8 @@ def test_rewording_every_storage_problem_changes_no_decision(small_run, tmp_path
                                "not_a_step_file")]
     assert all(any(w in ln for ln in after[1]) for w in said), after[1]
     assert not any("<" in ln for ln in before[1]) and "<resume_measures>" in after[1][-1]
-    overall = lambda md: [ln for ln in md if ln.startswith("Overall")]     # noqa: E731
-    assert overall(after[2]) == overall(before[2]) and overall(before[2])
+    said_overall = [ln for ln in before[2] if ln.startswith("Overall: **needs attention**: ")]
+    assert said_overall and "<needs_attention>" in after[2] and not any(ln.startswith("Overall") for ln in after[2])
     assert "(damaged: <npz_size>)" in after[2][0] and "<" not in before[2][0]
 
 
@@ -280,3 +291,39 @@ def test_a_step_file_cut_inside_a_string_is_truncated_whatever_the_parser_says(t
         json.loads(text)
     except json.JSONDecodeError as err:
         assert storage._json_cut(err) == (kind == "truncated")
+
+
+def _verdicts(run) -> dict:
+    """The small run without its two flagged steps (went well), as it is (notes: the flagged
+    steps), resumed once (notes), and stopped by a limit (attention): each one's verdict, its
+    reasons' and notes' codes, what the procedure kept, and the report's overall line."""
+    runs = {"clean": replace(run, attention=[]), "as run": run,
+            "resumed": replace(run, events=[*run.events, {"event": "interrupted", "reason": "SIGINT"}, {"event": "resume"}]),
+            "tripped": replace(run, meta={**run.meta, "status": "aborted"},
+                               events=[*run.events, {"event": "abort", "reason": "force limit"}])}
+    out = {}
+    for name, r in runs.items():
+        o = overall(r, 0, flagged_reasons(r.attention))
+        out[name] = ((o.verdict, [s.code for s in o.why], [s.code for s in o.notes], o.kept.kept.code),
+                     [ln for ln in accounting_md(r) if ln.startswith(("Overall", "<"))])
+    return out
+
+
+def test_rewording_the_overall_line_changes_no_verdict(small_run, monkeypatch):
+    """The report's overall line (issue 35 item 1): went well, went well with notes (a run
+    resumed once), needs attention (a run stopped by a limit) are values; said as codes the
+    verdicts, their reasons and notes are the same, and the line is the verdict's code."""
+    run = load_run(small_run.path)
+    before = _verdicts(run)
+    values = {k: v for k, (v, _) in before.items()}
+    assert [v[0] for v in values.values()] == [Verdict.WENT_WELL, *[Verdict.WENT_WELL_WITH_NOTES] * 2,
+                                               Verdict.NEEDS_ATTENTION]
+    assert values["as run"][2] == [Concern.FLAGGED] and values["resumed"][2] == [Concern.INTERRUPTED, Concern.FLAGGED]
+    assert values["tripped"][1][:2] == [Concern.RUN_STATUS, Concern.LIMIT_TRIP]
+    assert [ln[0].partition(": ")[2].partition(":")[0] for _, ln in before.values()] == [
+        "**went well**", *["**went well, with notes**"] * 2, "**needs attention**"]
+    assert "force limit" in before["tripped"][1][0] and "interrupted 1 time (SIGINT)" in before["resumed"][1][0]
+    _codes_only(monkeypatch)
+    after = _verdicts(run)
+    assert {k: v for k, (v, _) in after.items()} == values
+    assert [ln for _, ln in after.values()] == [[f"<{v[0]}>"] for v in values.values()]

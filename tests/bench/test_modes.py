@@ -417,15 +417,18 @@ def test_the_backbone_figure_overlays_a_stepped_sines_modes_at_their_amplitudes(
 def test_the_headline_says_whether_the_refinement_converged_or_spent_its_budget(feed_run):
     """Issue 30 item 4 / issue 31 (decision 0052): a refined run is "went well" only when each
     refined peak is known within the tolerance; one whose budget ran out first is named."""
-    from bench.verdict import promise
+    from bench.verdict import Short, promise
+    from bench.words.terminal import promised
     meta, results = feed_run.metadata, feed_run.results()
     kept = promise(meta["plan"], results, meta["rig"])
-    assert "the refinement converged for 1 peak" in kept.kept and not kept.short
+    assert kept.kept.fields["refined"]["converged"] == 1 and not kept.short
+    assert "the refinement converged for 1 peak" in promised(kept.kept)
     # the same steps judged against a tolerance they do not reach, with the budget they used
     done = sum(1 for r in results if "-RF" in r["key"])
     strict = dict(meta["plan"], refine_tolerance=1e-6, refine_steps=done)
     (short,) = promise(strict, results, meta["rig"]).short
-    assert short == (f"refinement: the feed peak at 1 N not within 0.0001 % after {done} steps "
+    assert short.code is Short.BUDGET_SPENT and short.fields["steps"] == done
+    assert promised(short) == (f"refinement: the feed peak at 1 N not within 0.0001 % after {done} steps "
                      "(budget spent; [plan.resonance] max_steps)")
     assert not promise(strict, results, meta["rig"], completed=False).short    # an unfinished run: not judged
 
