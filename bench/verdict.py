@@ -78,9 +78,9 @@ def refinement(plan: dict, results: list[dict], rig: dict | None = None) -> tupl
     ends = [(q.format(level), mode, how, n) for li, level in enumerate(p.levels_N)
             for mode, how, n in refiner.outcome(li, level)]
     short = tuple(Said(Short.BUDGET_SPENT, {"mode": mode, "level": lv, "tolerance": p.refine_tolerance, "steps": n})
-                  for lv, mode, how, n in ends if how == "budget spent")
+                  for lv, mode, how, n in ends if how == "budget_spent")
     kept = {"converged": sum(1 for e in ends if e[2] == "converged"),
-            "no_peak": sum(1 for e in ends if e[2] == "no peak")}
+            "no_peak": sum(1 for e in ends if e[2] == "no_peak")}
     return kept, short
 
 

@@ -122,7 +122,7 @@ class Refiner:
 
     def outcome(self, level_index: int, level: float) -> list[tuple[str, str, int]]:
         """How the refinement of a finished level ended, per refined mode: (mode, "converged"
-        | "budget spent" | "no peak", refinement steps taken), the run's own decision
+        | "budget_spent" | "no_peak", refinement steps taken), the run's own decision
         (:func:`refinement_end`) replayed from the stored steps (decision 0052)."""
         steps = [r for r in self.results() if r["level_index"] == level_index and "-W" not in r["key"]]
         if len(steps) < 3:
@@ -132,7 +132,7 @@ class Refiner:
         for mode in self.modes:
             done = sum(1 for r in steps if f"-R{mode[0].upper()}" in r["key"])
             why = refinement_end(self, mode, d, done, last_refined_Hz(steps, mode)) or "converged"
-            out.append((mode, {"no_peak": "no peak", "budget_spent": "budget spent"}.get(why, "converged"), done))
+            out.append((mode, why if why in ("no_peak", "budget_spent") else "converged", done))
         return out
 
     def _resonance(self, mode: str, d: LevelData) -> tuple[float, float, int, np.ndarray] | None:
