@@ -7,15 +7,46 @@ from __future__ import annotations
 import difflib
 import math
 import tomllib
+from enum import StrEnum
 from pathlib import Path
 
 from sim.errors import ConfigurationError
 
 from .files import TooLarge, UnreadableFile, read_file
+from .words import Said, terminal
+from .words.terminal import refused
 
 MAX_FILE_BYTES = 2**20        # a plan or rig TOML file (the demo's plan is 3 kB)
 
 ConfigError = ConfigurationError     # a configuration value is missing, unknown or out of range
+
+
+class ConfigProblem(StrEnum):
+    """A problem of a plan or rig file (its words: :data:`bench.words.terminal.CONFIG`); a
+    key's problem has the fields source (the file), table and key."""
+
+    NOT_A_TABLE = "not_a_table"             # source, table
+    UNKNOWN_TABLE = "unknown_table"         # source, table (its full name), near (or None), allowed
+    UNKNOWN_KEY = "unknown_key"             # source, table, key, near (or None), allowed
+    UNKNOWN_KEYS = "unknown_keys"           # source, table, keys, allowed (keys no procedure uses)
+    MISSING = "missing"
+    NOT_A_NUMBER = "not_a_number"           # integer, value
+    OUT_OF_RANGE = "out_of_range"           # value, low, low_open, high, note
+    NOT_A_LIST = "not_a_list"               # got (the value, shortened)
+    TOO_MANY = "too_many"                   # count, most
+    NOT_ONE_OF = "not_one_of"               # allowed, value
+    NOT_A_STRING = "not_a_string"           # value
+    NOT_A_BOOL = "not_a_bool"               # value
+    FILE_NOT_FOUND = "file_not_found"       # path
+    FILE_TOO_LARGE = "file_too_large"       # path, size, most
+    FILE_UNREADABLE = "file_unreadable"     # detail (the reader's words)
+    FILE_IS_DIR = "file_is_dir"             # path
+    UTF16 = "utf16"                         # path
+    NUL_BYTES = "nul_bytes"                 # path, offset
+    NOT_UTF8 = "not_utf8"                   # path, byte, line, offset
+    NOT_TOML = "not_toml"                   # path, detail (the TOML parser's words)
+    TOO_DEEP = "too_deep"                   # path
+    SEVERAL = "several"                     # problems: each line's Said (code None: a line with words only)
 
 
 class _Section:
@@ -31,17 +62,22 @@ class _Section:
         self.named: set[str] = set()
         self.bad: set[str] = set()        # keys whose value was a problem (a stand-in was used)
         if not isinstance(data, dict):
-            self.problem(f"{source}: [{path}] must be a table")
+            self.coded(ConfigProblem.NOT_A_TABLE, source=source, table=path)
             data = {}
         self.data = data
         if keys is not None:
             self.unknown(keys)
 
     def problem(self, message: str) -> None:
-        """A problem of this file: collected, or raised when nothing collects."""
+        """A problem of this file: collected, or raised when nothing collects (a
+        :class:`Line`'s code and fields kept)."""
         if self.errors is None:
-            raise ConfigError(message)
+            raise _error(message)
         self.errors.append(message)
+
+    def coded(self, code: ConfigProblem, **fields) -> None:
+        """A problem of this file named by its code and fields (its words: terminal.CONFIG)."""
+        self.problem(Line(terminal.config(code, **fields), code, fields))
 
     def _or(self, get, fallback, suffix="", key=""):
         """``get()``, or, if it finds a problem, the problem collected and ``fallback`` (a
@@ -51,8 +87,10 @@ class _Section:
             return get()
         except ConfigError as e:
             if self.errors is None:
-                raise ConfigError(f"{e}{suffix}") from None
-            self.errors.extend(f"{line}{suffix}" for line in str(e).splitlines())
+                e.args = (f"{e}{suffix}",)
+                raise e from None
+            self.errors.extend(Line(f"{line}{suffix}", said.code, said.fields)
+                               for line, said in zip(str(e).splitlines(), _problems(e), strict=True))
             self.bad.add(key)
             return fallback
 
@@ -64,72 +102,69 @@ class _Section:
 
     def unknown(self, keys) -> None:
         """Name every key outside ``keys``, with the close valid one when there is one."""
-        problems = []
         self.named = {k for k in self.data if k not in keys}      # named here, not again by done()
+        full = lambda k: f"{self.path}.{k}" if self.path else k     # noqa: E731
         for key in [k for k in self.data if k not in keys]:
-            table = isinstance(self.data[key], dict)
             near = difflib.get_close_matches(key, list(keys), n=1, cutoff=0.6)
-            full = lambda k: f"{self.path}.{k}" if self.path else k     # noqa: E731
-            if table:
-                hint = f"did you mean [{full(near[0])}]?" if near else f"allowed: {sorted(keys)}"
-                problems.append(f"[{full(key)}]: unknown table; {hint}")
+            if isinstance(self.data[key], dict):
+                self.coded(ConfigProblem.UNKNOWN_TABLE, source=self.source, table=full(key),
+                           near=full(near[0]) if near else None, allowed=sorted(keys))
             else:
-                hint = f"did you mean {near[0]}?" if near else f"allowed: {sorted(keys)}"
-                problems.append(f"{'[' + self.path + '] ' if self.path else ''}{key}: unknown key; {hint}")
-        for problem in problems:
-            self.problem(f"{self.source}: {problem}")
+                self.coded(ConfigProblem.UNKNOWN_KEY, source=self.source, table=self.path, key=key,
+                           near=near[0] if near else None, allowed=sorted(keys))
 
     def where(self, key: str) -> str:
-        return f"{self.source}: [{self.path}] {key}"
+        return terminal.where(self.source, self.path, key)
+
+    def _bad(self, code: ConfigProblem, key: str, **fields) -> ConfigError:
+        return refused(ConfigError, code, source=self.source, table=self.path, key=key, **fields)
 
     def _get(self, key, default):
         self.used.add(key)
         if key not in self.data:
             if default is _REQUIRED:
-                raise ConfigError(f"{self.where(key)}: missing (required)")
+                raise self._bad(ConfigProblem.MISSING, key)
             return default
         return self.data[key]
 
     def _number(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, integer=False, note=""):
         v = self._get(key, default)
-        kind = "an integer" if integer else "a number"
         if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not float(v).is_integer()):
-            raise ConfigError(f"{self.where(key)}: must be {kind}, got {v!r}")
+            raise self._bad(ConfigProblem.NOT_A_NUMBER, key, integer=integer, value=v)
         ok = (v > lo if lo_open else v >= lo) and v <= hi and math.isfinite(v)
         if not ok:
-            lo_s = f"> {lo:g}" if lo_open else f">= {lo:g}"
-            raise ConfigError(f"{self.where(key)}: must be {lo_s} and <= {hi:g}{note}, got {v!r}")
+            raise self._bad(ConfigProblem.OUT_OF_RANGE, key, value=v, low=lo, low_open=lo_open, high=hi, note=note)
         return int(v) if integer else float(v)
 
     def _numbers(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, note="", most=None):
         v = self._get(key, default)
         if not isinstance(v, list) or not v:
-            raise ConfigError(f"{self.where(key)}: must be a non-empty list of numbers, got {_short(v)}")
+            raise self._bad(ConfigProblem.NOT_A_LIST, key, got=_short(v))
         if most is not None and len(v) > most:
-            raise ConfigError(f"{self.where(key)}: {len(v)} values; at most {most}")
+            raise self._bad(ConfigProblem.TOO_MANY, key, count=len(v), most=most)
         # every bad element named, one line each
         sub = _Section(self.source, self.path, {f"{key}[{i}]": x for i, x in enumerate(v)}, errors=[])
         out = [sub.number(f"{key}[{i}]", lo=lo, hi=hi, lo_open=lo_open, note=note) for i in range(len(v))]
         if sub.errors:
-            raise ConfigError("\n".join(sub.errors))
+            raise _error("\n".join(sub.errors), sub.errors)
         return out
 
     def _choice(self, key, default, allowed):
         v = self._get(key, default)
         if v not in allowed:
-            raise ConfigError(f"{self.where(key)}: must be one of {list(allowed)}, got {v!r}")
+            raise self._bad(ConfigProblem.NOT_ONE_OF, key, allowed=list(allowed), value=v)
         return v
 
     def _text(self, key, default=""):
         v = self._get(key, default)
         if not isinstance(v, str):
-            raise ConfigError(f"{self.where(key)}: must be a string, got {v!r}")
+            raise self._bad(ConfigProblem.NOT_A_STRING, key, value=v)
         return v
 
     def _flag(self, key, default=False):
         v = self._get(key, default)
         if not isinstance(v, bool):
-            raise ConfigError(f"{self.where(key)}: must be true or false, got {v!r}")
+            raise self._bad(ConfigProblem.NOT_A_BOOL, key, value=v)
         return v
 
     # the accessors: a bad value is a problem of the file (collected), the rest goes on
@@ -162,10 +197,50 @@ class _Section:
     def done(self) -> None:
         unknown = sorted(set(self.data) - self.used - self.named)
         if unknown:
-            self.problem(f"{self.source}: [{self.path}] unknown key(s) {unknown}; allowed: {sorted(self.used)}")
+            self.coded(ConfigProblem.UNKNOWN_KEYS, source=self.source, table=self.path, keys=unknown,
+                       allowed=sorted(self.used))
 
 
 _REQUIRED = object()
+
+
+class Line(str):
+    """One problem's line of a ConfigError, with its ``code`` and ``fields`` (None: a line
+    still made where it is decided, in bench.config or bench.rig_config)."""
+
+    code: ConfigProblem | None
+    fields: dict
+
+    def __new__(cls, text: str, code: ConfigProblem | None = None, fields: dict | None = None):
+        line = super().__new__(cls, text)
+        line.code, line.fields = code, dict(fields or {})
+        return line
+
+
+def _problems(e: Exception) -> list[Said]:
+    """The problems a ConfigError names, one a line: each with its code and fields (a line
+    without a code: code None, its words the field ``text``)."""
+    lines = getattr(e, "fields", {}).get("problems") if getattr(e, "code", None) == ConfigProblem.SEVERAL else None
+    if lines is not None:
+        return list(lines)
+    if getattr(e, "code", None) is not None and len(str(e).splitlines()) == 1:
+        return [Said(e.code, e.fields)]                                           # type: ignore[attr-defined]
+    return [Said(None, {"text": line}) for line in str(e).splitlines()]      # type: ignore[arg-type]
+
+
+def _error(message: str, lines: list[str] | None = None) -> ConfigError:
+    """The ConfigError of ``message``: one problem's with its code and fields, several
+    problems' (``lines``) with the code SEVERAL and each problem's :class:`Said`."""
+    lines = lines if lines is not None else [message]
+    if len(lines) == 1 and getattr(lines[0], "code", None) is not None:
+        e = ConfigError(message)
+        e.code, e.fields = lines[0].code, lines[0].fields                          # type: ignore[attr-defined]
+        return e
+    said = [Said(getattr(x, "code", None), getattr(x, "fields", None) or ({} if getattr(x, "code", None) else
+                                                                            {"text": str(x)})) for x in lines]
+    e = ConfigError(message)
+    e.code, e.fields = ConfigProblem.SEVERAL, {"problems": said}                   # type: ignore[attr-defined]
+    return e
 
 
 def _inside(lo: float, hi: float, lo_open: bool) -> float:
@@ -191,7 +266,8 @@ def _collecting(parse, data: dict, source: str):
             raise
         out = None
     if errors:
-        raise ConfigError("\n".join(dict.fromkeys(errors)))
+        lines = list(dict.fromkeys(errors))
+        raise _error("\n".join(lines), lines)
     return out
 
 
@@ -208,35 +284,32 @@ def _load(path: Path) -> dict:
     try:
         data = read_file(path, MAX_FILE_BYTES)
     except FileNotFoundError:
-        raise ConfigError(f"{path}: file not found") from None
+        raise refused(ConfigError, ConfigProblem.FILE_NOT_FOUND, path=path) from None
     except TooLarge as e:
-        raise ConfigError(f"{path}: {e.size} bytes; a plan or rig file is at most {MAX_FILE_BYTES} bytes") from None
+        raise refused(ConfigError, ConfigProblem.FILE_TOO_LARGE, path=path, size=e.size, most=MAX_FILE_BYTES) from None
     except UnreadableFile as e:
-        raise ConfigError(str(e)) from None
+        raise refused(ConfigError, ConfigProblem.FILE_UNREADABLE, detail=str(e)) from None
     except IsADirectoryError:
-        raise ConfigError(f"{path}: a directory, not a TOML file") from None
+        raise refused(ConfigError, ConfigProblem.FILE_IS_DIR, path=path) from None
     if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
-        raise ConfigError(f"{path}: saved as UTF-16; TOML files are UTF-8 (save it again as UTF-8)")
+        raise refused(ConfigError, ConfigProblem.UTF16, path=path)
     nul = data.find(b"\x00")
     if nul >= 0:                  # never in TOML; every other byte of UTF-16 text without its mark
-        raise ConfigError(f"{path}: NUL bytes at offset {nul}: the file seems saved as UTF-16 "
-                          f"without a byte-order mark; TOML files are UTF-8 (save it again as UTF-8)")
+        raise refused(ConfigError, ConfigProblem.NUL_BYTES, path=path, offset=nul)
     if data.startswith(b"\xef\xbb\xbf"):
         data = data[3:]
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:
         line = data[:e.start].count(b"\n") + 1
-        raise ConfigError(f"{path}: not UTF-8: byte 0x{data[e.start]:02x} at line {line} "
-                          f"(offset {e.start}); the file seems saved in another encoding (Latin-1, "
-                          f"Windows-1252, ...); TOML files are UTF-8 "
-                          f"(save it again as UTF-8)") from None
+        raise refused(ConfigError, ConfigProblem.NOT_UTF8, path=path, byte=data[e.start], line=line,
+                      offset=e.start) from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{path}: not valid TOML: {e}") from None
+        raise refused(ConfigError, ConfigProblem.NOT_TOML, path=path, detail=str(e)) from None
     except RecursionError:
-        raise ConfigError(f"{path}: not a plan or rig: tables or arrays nested too deeply") from None
+        raise refused(ConfigError, ConfigProblem.TOO_DEEP, path=path) from None
 
 
 def read_toml(path: Path) -> dict:

@@ -20,7 +20,7 @@ from typing import TypeVar
 
 from . import Words, say
 
-__all__ = ["CHECK", "MODES", "PROBLEM", "PROMISE", "REFUSAL", "RUN", "Words", "problem", "promised", "refused", "say"]
+__all__ = ["CHECK", "CONFIG", "MODES", "PROBLEM", "PROMISE", "REFUSAL", "RUN", "Words", "problem", "promised", "refused", "say"]
 
 E = TypeVar("E", bound=Exception)
 
@@ -210,6 +210,58 @@ MODES: Words = {
                                                              + (f" ({note})" if note else "")),
     "wrote": lambda files: "wrote " + ", ".join(files),
 }
+
+
+def where(source: str, table: str, key: str) -> str:
+    """Where in a plan or rig file a key is: the file, the table and the key."""
+    return f"{source}: [{table}] {key}"
+
+
+def _hint(near: str | None, allowed: list) -> str:
+    return f"did you mean {near}?" if near else f"allowed: {allowed}"
+
+
+_UTF8 = "TOML files are UTF-8 (save it again as UTF-8)"
+
+# a plan's or rig's problems (bench.toml_tables.ConfigProblem); a key's with source, table, key
+CONFIG: Words = {
+    "not_a_table": lambda source, table: f"{source}: [{table}] must be a table",
+    "unknown_table": lambda source, table, near, allowed: (f"{source}: [{table}]: unknown table; "
+                                                          + _hint(f"[{near}]" if near else None, allowed)),
+    "unknown_key": lambda source, table, key, near, allowed: (f"{source}: {'[' + table + '] ' if table else ''}{key}: "
+                                                              f"unknown key; {_hint(near, allowed)}"),
+    "unknown_keys": lambda source, table, keys, allowed: f"{source}: [{table}] unknown key(s) {keys}; allowed: {allowed}",
+    "missing": lambda source, table, key: f"{where(source, table, key)}: missing (required)",
+    "not_a_number": lambda source, table, key, integer, value: (f"{where(source, table, key)}: must be "
+                                                                f"{'an integer' if integer else 'a number'}, got {value!r}"),
+    "out_of_range": lambda source, table, key, value, low, low_open, high, note: (
+        f"{where(source, table, key)}: must be {'>' if low_open else '>='} {low:g} and <= {high:g}{note}, got {value!r}"),
+    "not_a_list": lambda source, table, key, got: f"{where(source, table, key)}: must be a non-empty list of numbers, got {got}",
+    "too_many": lambda source, table, key, count, most: f"{where(source, table, key)}: {count} values; at most {most}",
+    "not_one_of": lambda source, table, key, allowed, value: f"{where(source, table, key)}: must be one of {allowed}, got {value!r}",
+    "not_a_string": lambda source, table, key, value: f"{where(source, table, key)}: must be a string, got {value!r}",
+    "not_a_bool": lambda source, table, key, value: f"{where(source, table, key)}: must be true or false, got {value!r}",
+    "file_not_found": lambda path: f"{path}: file not found",
+    "file_too_large": lambda path, size, most: f"{path}: {size} bytes; a plan or rig file is at most {most} bytes",
+    "file_unreadable": lambda detail: detail,
+    "file_is_dir": lambda path: f"{path}: a directory, not a TOML file",
+    "utf16": lambda path: f"{path}: saved as UTF-16; {_UTF8}",
+    "nul_bytes": lambda path, offset: (f"{path}: NUL bytes at offset {offset}: the file seems saved as UTF-16 without a "
+                                       f"byte-order mark; {_UTF8}"),
+    "not_utf8": lambda path, byte, line, offset: (f"{path}: not UTF-8: byte 0x{byte:02x} at line {line} (offset "
+                                                  f"{offset}); the file seems saved in another encoding (Latin-1, "
+                                                  f"Windows-1252, ...); {_UTF8}"),
+    "not_toml": lambda path, detail: f"{path}: not valid TOML: {detail}",
+    "too_deep": lambda path: f"{path}: not a plan or rig: tables or arrays nested too deeply",
+    "several": lambda problems: "\n".join(say(CONFIG, p.code, p.fields) if p.code else p.fields["text"]
+                                          for p in problems),
+}
+REFUSAL.update(CONFIG)
+
+
+def config(code: str, **fields) -> str:
+    """A plan's or rig's problem in words (a line of the ConfigError that collects them)."""
+    return say(CONFIG, code, fields)
 
 
 def refused(exc: type[E], code: str, **fields) -> E:

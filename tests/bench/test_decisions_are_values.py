@@ -35,6 +35,7 @@ from bench.reports._run import load_run
 from bench.runlock import LOCK_NAME, LockRefusal
 from bench.step_files import Problem
 from bench.storage import RunDirRefusal, RunStore
+from bench.toml_tables import ConfigProblem
 from bench.verdict import Kept, Short
 from bench.watch.snapshot import PageWarning, RunReader
 from procedures.stepped_sine import unsettled_in
@@ -144,7 +145,9 @@ def test_every_code_has_words_in_its_renderers():
     for module in (terminal_words, report_words):
         assert set(module.PROBLEM) == {str(c) for c in Problem}, module.__name__
     assert set(page_words.WARNING) == {str(c) for c in PageWarning}
-    assert set(terminal_words.REFUSAL) == {str(c) for c in (*LockRefusal, *OutDirRefusal, *RunDirRefusal)}
+    assert set(terminal_words.REFUSAL) == {str(c) for c in (*LockRefusal, *OutDirRefusal, *RunDirRefusal,
+                                                           *ConfigProblem)}
+    assert set(terminal_words.CONFIG) == {str(c) for c in ConfigProblem}
     assert set(terminal_words.PROMISE) == {str(c) for c in (*Kept, *Short)}
     assert set(report_words.CONCERN) == {str(c) for c in (*Concern, *Kept, *Short)}
     assert set(report_words.OVERALL) == {str(c) for c in Verdict}
@@ -327,3 +330,35 @@ def test_rewording_the_overall_line_changes_no_verdict(small_run, monkeypatch):
     after = _verdicts(run)
     assert {k: v for k, (v, _) in after.items()} == values
     assert [ln for _, ln in after.values()] == [[f"<{v[0]}>"] for v in values.values()]
+
+
+BAD_PLAN = ('[plan]\nlevels_N = [1.0, -2.0]\nlevls = 0.02\n'
+            '[plan.frequencies]\nstart_Hz = 20.0\nstop_Hz = 200.0\npoints = 4\n')
+
+
+def test_a_plans_problems_are_codes_with_fields_and_rewording_them_changes_no_exit(tmp_path, capsys, monkeypatch):
+    """A plan's problems (a misspelt key, a level out of range) are a ConfigError whose
+    problems carry their codes and fields (key, value, bound); ``bench dry-run`` exits 2 with
+    the same lines in the same order when the terminal says codes only; a file that is not
+    TOML is one coded problem."""
+    from bench.config import ConfigError, load_plan
+    (tmp_path / "plan.toml").write_text(BAD_PLAN)
+    (tmp_path / "bad.toml").write_text("[plan\n")
+    with pytest.raises(ConfigError) as e:
+        load_plan(tmp_path / "plan.toml")
+    assert e.value.code is ConfigProblem.SEVERAL
+    problems = [(p.code, p.fields.get("key"), p.fields.get("value"), p.fields.get("low"), p.fields.get("high"))
+                for p in e.value.fields["problems"]]
+    assert problems == [(ConfigProblem.UNKNOWN_KEY, "levls", None, None, None),
+                        (ConfigProblem.OUT_OF_RANGE, "levels_N[1]", -2.0, 0.1, 100.0)], problems
+    assert str(e.value).splitlines()[1] == (f"{tmp_path / 'plan.toml'}: [plan] levels_N[1]: must be >= 0.1 and <= 100 "
+                                            "(the bench's force range, 0.1-100 N), got -2.0")
+    with pytest.raises(ConfigError) as bad:
+        load_plan(tmp_path / "bad.toml")
+    assert bad.value.code is ConfigProblem.NOT_TOML and bad.value.fields["path"] == tmp_path / "bad.toml"
+    said = lambda: (main(["dry-run", "--plan", str(tmp_path / "plan.toml")]), capsys.readouterr().err)  # noqa: E731
+    before = said()
+    _codes_only(monkeypatch)
+    after = said()
+    assert after[0] == before[0] == ExitCode.USAGE and "levls: unknown key" in before[1]
+    assert "<unknown_key>" in after[1] and "<out_of_range>" in after[1] and "levls" not in after[1]
