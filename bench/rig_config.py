@@ -62,7 +62,7 @@ def _check_model(sec: _Section) -> RigModel | None:
             sec.choice(key, None, spec.choices)
             continue
         sec.number(key, None, spec.lo, spec.hi, lo_open=spec.lo_open, integer=spec.integer,
-                   suffix=f" (unit: {spec.unit})" if spec.unit else "")
+                   unit=spec.unit or "")
     if sec.errors:
         return None              # the model's own rules once its values are right
     try:

@@ -30,8 +30,8 @@ class ConfigProblem(StrEnum):
     UNKNOWN_KEY = "unknown_key"             # source, table, key, near (or None), allowed
     UNKNOWN_KEYS = "unknown_keys"           # source, table, keys, allowed (keys no procedure uses)
     MISSING = "missing"
-    NOT_A_NUMBER = "not_a_number"           # integer, value
-    OUT_OF_RANGE = "out_of_range"           # value, low, low_open, high, note
+    NOT_A_NUMBER = "not_a_number"           # integer, value, unit ("": none named)
+    OUT_OF_RANGE = "out_of_range"           # value, low, low_open, high, note, unit
     NOT_A_LIST = "not_a_list"               # got (the value, shortened)
     TOO_MANY = "too_many"                   # count, most
     NOT_ONE_OF = "not_one_of"               # allowed, value
@@ -79,7 +79,7 @@ class _Section:
         """A problem of this file named by its code and fields (its words: terminal.CONFIG)."""
         self.problem(Line(terminal.config(code, **fields), code, fields))
 
-    def _or(self, get, fallback, suffix="", key=""):
+    def _or(self, get, fallback, key=""):
         """``get()``, or, if it finds a problem, the problem collected and ``fallback`` (a
         value of the right type the rest of the file's checks can go on with; ``key`` is
         then remembered as bad, see :meth:`rule`)."""
@@ -87,9 +87,8 @@ class _Section:
             return get()
         except ConfigError as e:
             if self.errors is None:
-                e.args = (f"{e}{suffix}",)
-                raise e from None
-            self.errors.extend(Line(f"{line}{suffix}", said.code, said.fields)
+                raise
+            self.errors.extend(Line(line, said.code, said.fields)
                                for line, said in zip(str(e).splitlines(), _problems(e), strict=True))
             self.bad.add(key)
             return fallback
@@ -127,13 +126,15 @@ class _Section:
             return default
         return self.data[key]
 
-    def _number(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, integer=False, note=""):
+    def _number(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, integer=False, note="",
+                unit=""):
         v = self._get(key, default)
         if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not float(v).is_integer()):
-            raise self._bad(ConfigProblem.NOT_A_NUMBER, key, integer=integer, value=v)
+            raise self._bad(ConfigProblem.NOT_A_NUMBER, key, integer=integer, value=v, unit=unit)
         ok = (v > lo if lo_open else v >= lo) and v <= hi and math.isfinite(v)
         if not ok:
-            raise self._bad(ConfigProblem.OUT_OF_RANGE, key, value=v, low=lo, low_open=lo_open, high=hi, note=note)
+            raise self._bad(ConfigProblem.OUT_OF_RANGE, key, value=v, low=lo, low_open=lo_open, high=hi, note=note,
+                            unit=unit)
         return int(v) if integer else float(v)
 
     def _numbers(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, note="", most=None):
@@ -169,11 +170,11 @@ class _Section:
 
     # the accessors: a bad value is a problem of the file (collected), the rest goes on
     def number(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, integer=False, note="",
-               suffix=""):
+               unit=""):
         ok_default = isinstance(default, (int, float)) and not isinstance(default, bool)
         fallback = default if ok_default else _inside(lo, hi, lo_open)
-        return self._or(lambda: self._number(key, default, lo, hi, lo_open=lo_open, integer=integer, note=note),
-                        int(fallback) if integer else float(fallback), suffix, key)
+        return self._or(lambda: self._number(key, default, lo, hi, lo_open=lo_open, integer=integer, note=note,
+                                             unit=unit), int(fallback) if integer else float(fallback), key)
 
     def numbers(self, key, default=None, lo=-math.inf, hi=math.inf, *, lo_open=False, note="", most=None):
         return self._or(lambda: self._numbers(key, default, lo, hi, lo_open=lo_open, note=note, most=most),

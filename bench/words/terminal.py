@@ -223,6 +223,10 @@ def _hint(near: str | None, allowed: list) -> str:
 
 _UTF8 = "TOML files are UTF-8 (save it again as UTF-8)"
 
+
+def _unit(unit: str) -> str:
+    return f" (unit: {unit})" if unit else ""
+
 # a plan's or rig's problems (bench.toml_tables.ConfigProblem); a key's with source, table, key
 CONFIG: Words = {
     "not_a_table": lambda source, table: f"{source}: [{table}] must be a table",
@@ -232,10 +236,11 @@ CONFIG: Words = {
                                                               f"unknown key; {_hint(near, allowed)}"),
     "unknown_keys": lambda source, table, keys, allowed: f"{source}: [{table}] unknown key(s) {keys}; allowed: {allowed}",
     "missing": lambda source, table, key: f"{where(source, table, key)}: missing (required)",
-    "not_a_number": lambda source, table, key, integer, value: (f"{where(source, table, key)}: must be "
-                                                                f"{'an integer' if integer else 'a number'}, got {value!r}"),
-    "out_of_range": lambda source, table, key, value, low, low_open, high, note: (
-        f"{where(source, table, key)}: must be {'>' if low_open else '>='} {low:g} and <= {high:g}{note}, got {value!r}"),
+    "not_a_number": lambda source, table, key, integer, value, unit: (
+        f"{where(source, table, key)}: must be {'an integer' if integer else 'a number'}, got {value!r}{_unit(unit)}"),
+    "out_of_range": lambda source, table, key, value, low, low_open, high, note, unit: (
+        f"{where(source, table, key)}: must be {'>' if low_open else '>='} {low:g} and <= {high:g}{note}, got "
+        f"{value!r}{_unit(unit)}"),
     "not_a_list": lambda source, table, key, got: f"{where(source, table, key)}: must be a non-empty list of numbers, got {got}",
     "too_many": lambda source, table, key, count, most: f"{where(source, table, key)}: {count} values; at most {most}",
     "not_one_of": lambda source, table, key, allowed, value: f"{where(source, table, key)}: must be one of {allowed}, got {value!r}",

@@ -353,6 +353,16 @@ def test_a_plans_problems_are_codes_with_fields_and_rewording_them_changes_no_ex
                         (ConfigProblem.OUT_OF_RANGE, "levels_N[1]", -2.0, 0.1, 100.0)], problems
     assert str(e.value).splitlines()[1] == (f"{tmp_path / 'plan.toml'}: [plan] levels_N[1]: must be >= 0.1 and <= 100 "
                                             "(the bench's force range, 0.1-100 N), got -2.0")
+    from bench.config import DEFAULTS
+    from bench.rig_config import parse_rig
+    from bench.toml_tables import read_toml
+    rig = read_toml(DEFAULTS / "sim_rig.toml")
+    rig["rig"]["model"]["F_s_N"] = -10.0
+    with pytest.raises(ConfigError) as model:
+        parse_rig(rig, "rig.toml")           # a model key's unit is a field (it was words added to the line)
+    assert (model.value.code, model.value.fields["key"], model.value.fields["unit"]) == (
+        ConfigProblem.OUT_OF_RANGE, "F_s_N", "N")
+    assert str(model.value) == "rig.toml: [rig.model] F_s_N: must be > 0 and <= 10000, got -10.0 (unit: N)"
     with pytest.raises(ConfigError) as bad:
         load_plan(tmp_path / "bad.toml")
     assert bad.value.code is ConfigProblem.NOT_TOML and bad.value.fields["path"] == tmp_path / "bad.toml"
