@@ -372,3 +372,22 @@ def test_a_plans_problems_are_codes_with_fields_and_rewording_them_changes_no_ex
     after = said()
     assert after[0] == before[0] == ExitCode.USAGE and "levls: unknown key" in before[1]
     assert "<unknown_key>" in after[1] and "<out_of_range>" in after[1] and "levls" not in after[1]
+
+
+def test_a_broken_promise_said_as_codes_still_exits_1(tmp_path, capsys, monkeypatch):
+    """``bench run`` of a backbone that never locks (its window below the mode) completes and
+    exits 1 because the procedure did not measure what it promised (decision 0052; in words:
+    tests/bench/test_procedure_words.py); said as codes, the same exit status, its end lines
+    and ``bench check``'s shortfall line the codes of bench.words.terminal."""
+    from bench.config import DEFAULTS
+    plan = tmp_path / "bb.toml"
+    plan.write_text('[plan]\nprocedure = "phase_resonance"\nlevels_N = [1.0]\n[plan.backbone]\nstart_Hz = 40.0\n'
+                    'max_Hz = 50.0\n[plan.control]\nsettle_cycles = 10\nmeasure_cycles = 10\n')
+    _codes_only(monkeypatch)
+    run = tmp_path / "run"
+    code = main(["run", "--plan", str(plan), "--rig", str(DEFAULTS / "sim_rig.toml"), "--out", str(run), "--no-report"])
+    said = capsys.readouterr()
+    assert code == ExitCode.FAILURE and RunStore.open(run).metadata["status"] == "completed", said.err[-2000:]
+    assert "<ended>" in said.out.splitlines() and {"<promise_broken>", "<output_off>"} <= set(said.err.splitlines())
+    assert main(["check", str(run)]) == ExitCode.OK
+    assert "<promise_short>" in capsys.readouterr().out.splitlines()
