@@ -19,6 +19,7 @@ from .sentences import UNIT
 LINE_FALSE_ALARM = 1e-4       # per record and channel
 HARMONIC_GUARD = 1.5          # record resolutions (fs / N) around each drive harmonic not searched for lines
 MAX_LINES = 6
+_BLOCK = 128                 # samples: exp((-sigma + i w) t) as the outer product of block starts and offsets
 TREND_Z = 6.0                 # offset drift: sqrt(chi-square, 2 dof) of the trend coefficients
 DECAY_Z = 6.0                 # a line's decay rate, in standard errors, above which it is a transient
 DECAY_FRACTION = 0.8          # ... and its amplitude at the end / at the start below this
@@ -323,9 +324,10 @@ def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Lin
     n = r.size
     scale = float(np.std(r)) or 1.0
     r = r / scale
-    t = np.arange(n) / fs
     T = n / fs
-    tt = t / T
+    tt = np.arange(n) / n
+    nb = -(-n // _BLOCK)
+    t_in, t_of = np.arange(_BLOCK) / fs, np.arange(nb) * (_BLOCK / fs)
     w0 = 2 * np.pi * f0
     nd = 2 if with_decay else 1                # nonlinear parameters: (w - w0) T [, sigma T]
 
@@ -336,13 +338,12 @@ def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Lin
         key = p.tobytes()
         if last[0] != key:
             w = w0 + p[0] / T
-            wt = w * t
-            if with_decay:
-                sig = p[1] / T
-                e = np.exp(-sig * t)
-                last[:] = key, (w, sig, e * np.sin(wt), e * np.cos(wt))
-            else:                          # e^0 = 1: the same numbers without the exponential
-                last[:] = key, (w, 0.0, np.sin(wt), np.cos(wt))
+            sig = p[1] / T if with_decay else 0.0
+            # e^((-sigma + i w) t) as the outer product of its values at the block starts and
+            # within a block: the same numbers to rounding as sin, cos and exp of every sample,
+            # at a fraction of their time (decision 0068)
+            z = np.outer(np.exp(complex(-sig, w) * t_of), np.exp(complex(-sig, w) * t_in)).ravel()[:n]
+            last[:] = key, (w, sig, z.imag, z.real)
         return last[1]
 
     def resid(p):
@@ -352,27 +353,36 @@ def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Lin
     def jac(p):
         _, _, s, c = parts(p)
         a, b = p[nd], p[nd + 1]
-        J = np.empty((n, nd + 3))
-        J[:, 0] = tt * (a * c - b * s)
+        J = np.empty((nd + 3, n))          # the Jacobian's columns as rows (col_deriv): no transposed copy
+        np.multiply(tt, a * c - b * s, out=J[0])
         if with_decay:
-            J[:, 1] = -tt * (a * s + b * c)
-        J[:, nd], J[:, nd + 1], J[:, nd + 2] = s, c, 1.0
+            np.multiply(tt, -(a * s + b * c), out=J[1])
+        J[nd], J[nd + 1], J[nd + 2] = s, c, 1.0
         return J
 
-    ab, *_ = np.linalg.lstsq(np.column_stack([np.sin(w0 * t), np.cos(w0 * t), np.ones(n)]), r, rcond=None)
+    if n < nd + 3:
+        return None
+    # the start: a, b, c by linear least squares at f0, from the normal equations (their sums
+    # from e^(i w0 t): sin^2 and cos^2 from e^(2 i w0 t), whose sines add to n)
+    _, _, s0, c0 = parts(np.zeros(nd + 3))
+    z0 = c0 + 1j * s0
+    sz, sz2 = complex(z0.sum()), complex(np.dot(z0, z0))
+    G = np.array([[(n - sz2.real) / 2, sz2.imag / 2, sz.imag], [sz2.imag / 2, (n + sz2.real) / 2, sz.real],
+                  [sz.imag, sz.real, n]])
+    try:
+        ab = np.linalg.solve(G, np.array([s0 @ r, c0 @ r, r.sum()]))
+    except np.linalg.LinAlgError:
+        return None
     p0 = np.concatenate([np.zeros(nd), ab])
     try:
         # MINPACK's lmder as least_squares(method="lm", x_scale="jac", max_nfev=40) calls it (the
-        # same arguments and tolerances: the same iterates to the last bit), without the
-        # wrappers least_squares puts around every evaluation (a third of the time of a case
-        # with a strong hum on every step, issue 33)
-        if n < p0.size:
-            raise ValueError("fewer samples than parameters")
-        p, _, info, _, _ = leastsq(resid, p0, Dfun=jac, full_output=True, ftol=1e-8, xtol=1e-8, gtol=1e-8,
-                                   maxfev=40)
+        # same arguments and tolerances), without the wrappers least_squares puts around every
+        # evaluation (a third of the time of a case with a strong hum on every step, issue 33)
+        p, _, info, _, _ = leastsq(resid, p0, Dfun=jac, full_output=True, col_deriv=True, ftol=1e-8, xtol=1e-8,
+                                   gtol=1e-8, maxfev=40)
         fun = info["fvec"]
         J = jac(p)
-        cov = float(fun @ fun) / max(1, n - p0.size) * np.linalg.pinv(J.T @ J)
+        cov = float(fun @ fun) / max(1, n - p0.size) * np.linalg.pinv(J @ J.T)
     except (ValueError, np.linalg.LinAlgError):
         return None
     w, sig, s, c = parts(p)
