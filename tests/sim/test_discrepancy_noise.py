@@ -18,7 +18,7 @@ import pytest
 
 from sim.discrepancy.analysis import data_from_steps
 from sim.discrepancy.cases import make_case, observable_rig
-from sim.discrepancy.fit import Weights, fit, whitened
+from sim.discrepancy.fit import REL_FLOOR, Weights, fit, whitened
 from sim.discrepancy.models import Model
 
 PAIRS = 12
@@ -80,3 +80,25 @@ def test_the_noise_induced_mean_of_the_residuals_is_predicted_and_removed():
     assert mc[3] < -0.5, (mc, mc_se)
     assert np.all(np.abs(predicted - mc) < 0.05 + 3 * mc_se), (predicted, mc, mc_se)
 
+
+
+def test_no_measured_noise_adds_no_mean_whatever_the_floors():
+    """Decision 0064: the noise-induced mean is the measured noise's.  With every channel's
+    measured noise zero the residuals' noise-induced mean is zero (an independent fact: no
+    noise, no mean), though the variances keep their floors (1e-5 of each fundamental); with
+    the floors' noise in the mean it was as large as the floors' own mean."""
+    clean = make_case(1047, ("sensor_delay",), noise=(0.0, 0.0, 0.0))
+    steps0 = [dataclasses.replace(s, harmonics=dataclasses.replace(
+        s.harmonics, sigma_force=0.0, sigma_accel=0.0, sigma_disp=0.0)) for s in clean.steps]
+    d0 = data_from_steps(steps0, 9)
+    model = Model((), 9)
+    rig = observable_rig(clean)
+    truth = np.array([math.log(rig["F_s_N"]), math.log(rig["x_s_m"]), rig["n"], math.log(rig["mass_kg"])])
+    W = Weights.propagated(model, truth, d0)
+    assert np.all(np.isfinite(W.s_F)) and np.all(W.s_F > 0)           # the floors are in the variances
+    floors = dataclasses.replace(d0, sP=REL_FLOOR * np.abs(d0.P[:, 0]), sA=REL_FLOOR * np.abs(d0.A[:, 0]),
+                                 sX=REL_FLOOR * np.abs(d0.X[:, 0]))
+    W_floor = Weights.propagated(model, truth, floors)                 # the floors as measured noise
+    scale = np.max(np.abs(W_floor.bias_F)) + np.max(np.abs(W_floor.bias_K))
+    assert scale > 0
+    assert np.max(np.abs(W.bias_F)) + np.max(np.abs(W.bias_K)) <= 1e-6 * scale
