@@ -117,7 +117,8 @@ def damping_row(e: ModeEstimate) -> dict:
                            "the phase-resonance run's mass (backbone.csv)")
         return dict(damping_row_empty(), damping_energy_balance_fraction=eb.value, energy_balance_mass=eb.mass_note)
     eb = e.extra.get("energy_balance")
-    hp = e.extra.get("half_power") or (e.half_power_damping_ratio, nan, nan)
+    # a level whose peak is not located (overdamped/flat, coarse, ...) has no half-power band
+    hp = e.extra.get("half_power") or ((e.half_power_damping_ratio, nan, nan) if e.ok else (nan, nan, nan))
     return dict(damping_fit_fraction=e.damping_ratio, damping_fit_low_fraction=e.damping_ratio_low,
                 damping_fit_high_fraction=e.damping_ratio_high,
                 damping_energy_balance_fraction=eb.value if eb else nan,

@@ -7,6 +7,7 @@ wider dense runs, half-power damping)."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 
 import numpy as np
@@ -459,3 +460,18 @@ def test_damping_ratios_name_their_definition_and_the_energy_balance_is_the_back
     assert "modal mass" in pitch["energy_balance_mass"]
     assert abs(float(pitch["energy_balance_mass_kg"]) / 10.0 - 1) > 0.2
     assert 0 < float(pitch["damping_energy_balance_fraction"]) < 0.2
+
+
+def test_a_peak_not_located_has_no_half_power_ratio():
+    """Issue 32 item 2: half-power "where the band is measured", each with an interval. On
+    an overdamped/flat level (the demo's 10 N feed row) the estimator's half-power point
+    value has no located peak to be half of; the row gave it (36.89 %) without an interval
+    beside a "-" peak. Such a row now has none, a located peak keeps its value."""
+    from bench.reports._damping import damping_row
+    from sim.modal import ModeEstimate
+    flat = ModeEstimate(mode="feed", level_N=10.0, status="overdamped/flat", curve="compliance_pp",
+                        resonance_Hz=28.0, resonance_low_Hz=24.0, resonance_high_Hz=39.0, half_power_damping_ratio=0.3689)
+    row = damping_row(flat)
+    assert all(math.isnan(row[f"damping_half_power_{k}fraction"]) for k in ("low_", "", "high_"))
+    located = dataclasses.replace(flat, status="ok")
+    assert damping_row(located)["damping_half_power_fraction"] == 0.3689
