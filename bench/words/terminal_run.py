@@ -225,3 +225,105 @@ REFUSAL.update({
     "cannot_write": lambda path, error: f"{path}: cannot write: {error}",
     "not_serialisable": lambda kind: f"not JSON serialisable: {kind}",
 })
+
+
+# what reading a run directory logs and fills in (bench.storage.StoreLine)
+STORE: Words = {
+    "events_unreadable": lambda error: f"{error}; its events are not used",
+    "event_line_damaged": lambda path, line: f"{path}: line {line} damaged (torn or not JSON); skipped",
+    "event_line_not_object": lambda path, line: f"{path}: line {line} is not an event object; skipped",
+    "history_unreadable": lambda error: f"{error}; the identification history is not shown",
+    "skipping_step": lambda key, error: f"skipping step {key}: {error}",
+    "damaged_moved": lambda key, problem, dest: (f"step {key} damaged ({problem}): files moved to {dest}; it will be "
+                                                 "measured again"),
+    "no_reason": lambda: "no reason recorded",
+}
+
+
+# what is at a path (bench.files.FileKind)
+FILE_KIND: Words = {
+    "fifo": lambda: "a FIFO",
+    "char_device": lambda: "a character device",
+    "block_device": lambda: "a block device",
+    "socket": lambda: "a socket",
+    "directory": lambda: "a directory",
+    "regular": lambda: "a regular file",
+    "other": lambda: "not a regular file",
+}
+
+# the refusals of a run directory's files as they are read (bench.files.FileRefusal)
+REFUSAL.update({
+    "too_large": lambda path, size, limit: (f"{path}: {f'{size} bytes' if size is not None else 'grew while read'}, "
+                                            f"more than the {limit} bytes a file of this kind may have; not read"),
+    "read_link": lambda path: (f"{path}: is a symbolic link; a run's files are read only as regular files inside "
+                               "the run directory"),
+    "not_regular_read": lambda path, kind: f"{path}: not a regular file ({say(FILE_KIND, kind, {})}); not read",
+})
+
+
+def _keys(keys: list[str], limit: int = 8) -> str:
+    return ", ".join(keys[:limit]) + (f" and {len(keys) - limit} more" if len(keys) > limit else "")
+
+
+def _missing(missing) -> list[str]:
+    """A step's key, or an adaptive sweep with the number of steps it lacks: 'L01-up (2)'."""
+    return [f"{key} ({short})" if short is not None else key for key, short in missing]
+
+
+def _damaged(damaged) -> list[str]:
+    return [f"{key} ({kind})" for key, kind in damaged]
+
+
+def _owed(owed) -> list[str]:
+    """'L00-feed dwell' or 'L01-pitch refinement'."""
+    return [f"{key} {'dwell' if dwell else 'refinement'}" for key, dwell in owed]
+
+
+def _planned(planned: int | None) -> str:
+    return "?" if planned is None else str(planned)
+
+
+def _resume(measures, retry, planned, missing, damaged, owed, skipped) -> str:
+    parts = [f"measures again {measures} of {_planned(planned)} planned step{'s' * (planned != 1)}"]
+    if missing:
+        parts.append("missing: " + _keys(_missing(missing), 12))
+    if damaged:
+        parts.append("damaged: " + _keys(_damaged(damaged), 12))
+    if owed:
+        parts.append("owed: " + _keys(_owed(owed), 12))
+    if skipped:
+        parts.append(("skipped at run time, retried: " if retry else
+                      "skipped at run time, not retried (--retry-skipped retries them): ") + _keys(skipped, 12))
+    return "; ".join(parts)
+
+
+def _summary(intact, orphan, planned, missing, damaged, owed, skipped) -> str:
+    skip = f"skipped at run time: {_keys(skipped)}; " if skipped else ""
+    return (f"{intact} intact / {_planned(planned)} planned; {skip}"
+            f"missing: {_keys(_missing(missing)) or 'none'}; "
+            f"damaged: {_keys(_damaged(damaged)) or 'none'}; "
+            f"orphan: {_keys(orphan) or 'none'}"
+            + (f"; owed: {_keys(_owed(owed))}" if owed else ""))
+
+
+# a run's account (bench.accounting.AccountLine): what a resume measures, bench check's summary
+ACCOUNT: Words = {
+    "resume": _resume,
+    "summary": _summary,
+}
+REFUSAL.update({"stored_plan": lambda error: f"{error} (the plan stored in run.json; nothing is counted against it)"})
+
+
+# the warm-up's words (bench.warmup.WarmupLine)
+WARMUP: Words = {
+    "source": lambda: "warm-up plan",
+    "ended": lambda status: f"warm-up run ended {status!r}",
+    "stamp_unwritten": lambda path, error: f"could not write the warm-up stamp {path}: {error}",
+}
+
+# the demo's words (bench.demo.DemoLine)
+DEMO: Words = {
+    "link": lambda name: f"{name} (a link)",
+    "changed": lambda name: f"{name} (changed since the demo wrote it)",
+    "deleted": lambda out, files: f"deleted the earlier demo in {out} ({files} files)",
+}

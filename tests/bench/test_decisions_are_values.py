@@ -26,11 +26,13 @@ import bench.words.terminal as terminal_words
 import bench.words.terminal_run as terminal_run_words
 import sim.artefacts.sentences as sentences
 import sim.records as records
+from bench.accounting import AccountLine, AccountRefusal
 from bench.cli import ExitCode, main
 from bench.commands.results import CheckLine, ModeLine
 from bench.commands.run import DryRunLine, ResumeLine, RunLine, RunRefusal, SequenceLine, WatchLine
-from bench.demo import MANIFEST, OutDirRefusal
+from bench.demo import MANIFEST, DemoLine, OutDirRefusal
 from bench.durable import WriteRefusal
+from bench.files import FileKind, FileRefusal
 from bench.reports._markdown import accounting_md, flagged_reasons
 from bench.reports._overall import Concern, Verdict, overall
 from bench.reports._run import load_run
@@ -38,9 +40,10 @@ from bench.runlock import LOCK_NAME, LockRefusal
 from bench.session import EnvelopeProblem, EnvelopeRefusal, SessionLine
 from bench.signals import Doing, SignalLine
 from bench.step_files import Problem
-from bench.storage import RunDirRefusal, RunStore
+from bench.storage import RunDirRefusal, RunStore, StoreLine
 from bench.toml_tables import ConfigProblem
 from bench.verdict import Kept, Short
+from bench.warmup import WarmupLine
 from bench.watch.snapshot import PageWarning, RunReader
 from procedures.stepped_sine import unsettled_in
 from sim.artefacts import artefact_causes, assess_step
@@ -161,8 +164,11 @@ def test_every_code_has_words_in_its_renderers():
     run = terminal_run_words            # a run's words before and while it runs (bench run, resume, dry-run, watch)
     for words, codes in ((run.DRY_RUN, DryRunLine), (run.RESUME, ResumeLine), (run.WATCH, WatchLine),
                          (run.SEQUENCE, SequenceLine), (run.ENVELOPE, EnvelopeProblem), (run.SESSION, SessionLine),
-                         (run.DOING, Doing), (run.SIGNAL, SignalLine),
-                         (run.REFUSAL, (*RunRefusal, *EnvelopeRefusal, *WriteRefusal))):
+                         (run.DOING, Doing), (run.SIGNAL, SignalLine), (run.STORE, StoreLine),
+                         (run.FILE_KIND, FileKind), (run.ACCOUNT, AccountLine),
+                         (run.WARMUP, WarmupLine), (run.DEMO, DemoLine),
+                         (run.REFUSAL, (*RunRefusal, *EnvelopeRefusal, *WriteRefusal, *FileRefusal,
+                                                                  *AccountRefusal))):
         assert set(words) == {str(c) for c in codes}, codes
 
 
