@@ -327,3 +327,16 @@ DEMO: Words = {
     "changed": lambda name: f"{name} (changed since the demo wrote it)",
     "deleted": lambda out, files: f"deleted the earlier demo in {out} ({files} files)",
 }
+
+
+# the program's own lines about a command's end (bench.cli.CliLine)
+CLI: Words = {
+    "interrupted": lambda: "interrupted",
+    "internal": lambda: "internal error",
+    "problems": lambda count: f"{count} problems:",
+    "late": lambda reason: f"bench: {reason} after the work was done: nothing left to stop",
+    "failed": lambda command: f"bench {command} failed",
+    "error": lambda: "error: ",
+    "hint_internal": lambda: ", rerun with --debug for the traceback",
+    "hint_debug": lambda: " (--debug shows the traceback)",
+}

@@ -27,7 +27,7 @@ import bench.words.terminal_run as terminal_run_words
 import sim.artefacts.sentences as sentences
 import sim.records as records
 from bench.accounting import AccountLine, AccountRefusal
-from bench.cli import ExitCode, main
+from bench.cli import CliLine, ExitCode, main
 from bench.commands.results import CheckLine, ModeLine
 from bench.commands.run import DryRunLine, ResumeLine, RunLine, RunRefusal, SequenceLine, WatchLine
 from bench.demo import MANIFEST, DemoLine, OutDirRefusal
@@ -166,7 +166,7 @@ def test_every_code_has_words_in_its_renderers():
                          (run.SEQUENCE, SequenceLine), (run.ENVELOPE, EnvelopeProblem), (run.SESSION, SessionLine),
                          (run.DOING, Doing), (run.SIGNAL, SignalLine), (run.STORE, StoreLine),
                          (run.FILE_KIND, FileKind), (run.ACCOUNT, AccountLine),
-                         (run.WARMUP, WarmupLine), (run.DEMO, DemoLine),
+                         (run.WARMUP, WarmupLine), (run.DEMO, DemoLine), (run.CLI, CliLine),
                          (run.REFUSAL, (*RunRefusal, *EnvelopeRefusal, *WriteRefusal, *FileRefusal,
                                                                   *AccountRefusal))):
         assert set(words) == {str(c) for c in codes}, codes
