@@ -50,7 +50,8 @@ WORDLESS = ("bench/step_files.py", "bench/runlock.py", "sim/artefacts/causes.py"
             "sim/artefacts/decision.py", "sim/artefacts/quality.py", "bench/verdict.py", "bench/reports/_overall.py",
             "bench/toml_tables.py", "bench/commands/run.py", "bench/session.py", "bench/durable.py", "bench/signals.py",
             "bench/storage.py", "bench/files.py", "bench/accounting.py",
-            "bench/warmup.py", "bench/demo.py", "bench/cli.py")
+            "bench/warmup.py", "bench/demo.py", "bench/cli.py", "bench/watch/server.py", "bench/watch/stop.py",
+            "bench/watch/snapshot.py")
 
 
 # modules that start `bench` in a process of their own on purpose (decision 0057)

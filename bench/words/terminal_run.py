@@ -1,16 +1,27 @@
-"""The terminal's words of a run before and while it runs (decision 0067), by code.
+"""The terminal's words of a run before and while it runs, and of the modules it runs
+through (decision 0067; issue 35 item 1), by code.
 
-``DRY_RUN``: ``bench dry-run``'s lines (:class:`bench.commands.run.DryRunLine`);
-``RESUME``: what ``bench resume`` says before it measures
-(:class:`bench.commands.run.ResumeLine`); ``WATCH``: the watch page's lines
-(:class:`bench.commands.run.WatchLine`); ``SEQUENCE``: ``bench sequence``'s lines at its end
-(:class:`bench.commands.run.SequenceLine`); ``REFUSAL``: the one-line errors of these
-commands (:class:`bench.commands.run.RunRefusal`), made by :func:`refused`.
+``bench`` commands: ``DRY_RUN`` (:class:`bench.commands.run.DryRunLine`), ``RESUME``
+(``ResumeLine``: what ``bench resume`` says before it measures), ``WATCH`` (``WatchLine``),
+``SEQUENCE`` (``SequenceLine``), ``CLI`` (:class:`bench.cli.CliLine`: the program's own lines
+about a command's end).
 
-``ENVELOPE``: what the rig's limits cannot hold at a (level, frequency)
-(:class:`bench.session.EnvelopeProblem`, the ``problems`` of an
-:class:`~bench.session.EnvelopePoint`), and :func:`envelope_table` the table of the plan's
-envelope ``bench dry-run`` prints and a refusal ends with.
+A session: ``ENVELOPE`` (:class:`bench.session.EnvelopeProblem`, the ``problems`` of an
+:class:`~bench.session.EnvelopePoint`) and :func:`envelope_table`, the plan's envelope that
+``bench dry-run`` prints and a refusal ends with; ``SESSION`` (``SessionLine``: its log lines
+and the status line's estimates); ``DOING`` and ``SIGNAL`` (:class:`bench.signals.Doing`,
+``SignalLine``: what a held signal lets finish); ``STOP`` (:class:`bench.watch.stop.StopLine`).
+
+A run directory: ``STORE`` (:class:`bench.storage.StoreLine`), ``FILE_KIND``
+(:class:`bench.files.FileKind`), ``ACCOUNT`` (:class:`bench.accounting.AccountLine`: what a
+resume measures, ``bench check``'s summary); ``WARMUP`` (:class:`bench.warmup.WarmupLine`),
+``DEMO`` (:class:`bench.demo.DemoLine`); the watch page's log: ``SNAPSHOT``
+(:class:`bench.watch.snapshot.SnapshotLine`), ``SERVER`` (:class:`bench.watch.server.ServerLine`).
+
+``REFUSAL``: the one-line errors (``RunRefusal``, ``EnvelopeRefusal``,
+:class:`bench.durable.WriteRefusal`, :class:`bench.files.FileRefusal`,
+:class:`bench.accounting.AccountRefusal`), made by :func:`refused` into the exception raised,
+which keeps the code and the fields.  The page's own words are :mod:`bench.words.page`'s.
 """
 
 from __future__ import annotations
@@ -19,7 +30,9 @@ from typing import TypeVar
 
 from . import Words, say
 
-__all__ = ["DRY_RUN", "ENVELOPE", "REFUSAL", "RESUME", "SEQUENCE", "WATCH", "duration", "envelope_table", "refused"]
+__all__ = ["ACCOUNT", "CLI", "DEMO", "DOING", "DRY_RUN", "ENVELOPE", "FILE_KIND", "REFUSAL", "RESUME", "SEQUENCE",
+           "SERVER", "SESSION", "SIGNAL", "SNAPSHOT", "STOP", "STORE", "WARMUP", "WATCH", "duration", "envelope_table",
+           "refused"]
 
 E = TypeVar("E", bound=Exception)
 
@@ -339,4 +352,33 @@ CLI: Words = {
     "error": lambda: "error: ",
     "hint_internal": lambda: ", rerun with --debug for the traceback",
     "hint_debug": lambda: " (--debug shows the traceback)",
+}
+
+
+# what reading a run for the watch page logs (bench.watch.snapshot.SnapshotLine)
+SNAPSHOT: Words = {
+    "no_plan": lambda error: f"no usable plan in run.json: {error}",
+    "step_unreadable": lambda path, error: f"cannot read step {path}: {error}",
+    "no_modes": lambda error: f"modes could not be estimated: {error}",
+}
+
+
+# a stop request's words (bench.watch.stop.StopLine): its log line, the interruption's reason
+STOP: Words = {
+    "requested": lambda path, by: f"stop requested for {path} by {by}",
+    "stopped": lambda by: f"stop requested by {by}",
+    "by_page": lambda client: f"the watch page ({client})",
+}
+
+
+# what the watch page's server logs (bench.watch.server.ServerLine)
+SERVER: Words = {
+    "off_loopback": lambda host: (f"the watch page is served on {host}, off loopback: anyone who can reach this "
+                                  "address can read the run (the stop token is still needed to stop it)"),
+    "full": lambda connections, client: f"watch: {connections} connections already; closed one from {client}",
+    "late": lambda: "watch: request not complete within its deadline; connection closed",
+    "went_away": lambda client, error: f"watch: {client} went away: {error}",
+    "error": lambda client, kind, error: f"watch: error serving {client}: {kind}: {error}",
+    "stop_refused": lambda client, given: f"refused a stop request from {client}: {'wrong' if given else 'no'} token",
+    "stop_unwritten": lambda path, error: f"could not write the stop request into {path}: {error}",
 }

@@ -44,7 +44,9 @@ from bench.storage import RunDirRefusal, RunStore, StoreLine
 from bench.toml_tables import ConfigProblem
 from bench.verdict import Kept, Short
 from bench.warmup import WarmupLine
-from bench.watch.snapshot import PageWarning, RunReader
+from bench.watch.server import PageError, ServerLine
+from bench.watch.snapshot import PageMessage, PageWarning, RunReader, SnapshotLine
+from bench.watch.stop import StopLine
 from procedures.stepped_sine import unsettled_in
 from sim.artefacts import artefact_causes, assess_step
 
@@ -167,6 +169,8 @@ def test_every_code_has_words_in_its_renderers():
                          (run.DOING, Doing), (run.SIGNAL, SignalLine), (run.STORE, StoreLine),
                          (run.FILE_KIND, FileKind), (run.ACCOUNT, AccountLine),
                          (run.WARMUP, WarmupLine), (run.DEMO, DemoLine), (run.CLI, CliLine),
+                         (run.SNAPSHOT, SnapshotLine), (run.STOP, StopLine), (run.SERVER, ServerLine),
+                         (page_words.MESSAGE, PageMessage), (page_words.ERROR, PageError),
                          (run.REFUSAL, (*RunRefusal, *EnvelopeRefusal, *WriteRefusal, *FileRefusal,
                                                                   *AccountRefusal))):
         assert set(words) == {str(c) for c in codes}, codes
