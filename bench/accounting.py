@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 
 from procedures.plan import Plan
@@ -13,8 +14,24 @@ from sim.errors import RunDirectoryError as RunDirError
 
 from .config import parse_stored_plan
 from .step_files import Problem, StepProblem, shown
+from .words import say, terminal_run
 
 log = logging.getLogger(__name__)
+
+
+class AccountLine(StrEnum):
+    """A run's account (:data:`bench.words.terminal_run.ACCOUNT`); its fields: planned,
+    missing [(key, steps a sweep lacks or None)], damaged [(key, kind)], owed [(key, a
+    dwell?)], skipped [key], and those of each code."""
+
+    RESUME = "resume"                       # measures, retry (the skipped ones)
+    SUMMARY = "summary"                     # intact, orphan [file name]
+
+
+class AccountRefusal(StrEnum):
+    """Why nothing is counted (:data:`bench.words.terminal_run.REFUSAL`)."""
+
+    STORED_PLAN = "stored_plan"             # error: the stored plan's
 
 
 def stored_plan(meta: dict, source: Path | str = "run.json") -> Plan:
@@ -24,16 +41,12 @@ def stored_plan(meta: dict, source: Path | str = "run.json") -> Plan:
     try:
         return parse_stored_plan(meta.get("plan"), str(source))
     except ConfigurationError as e:
-        raise RunDirError(f"{e} (the plan stored in run.json; nothing is counted against it)") from None
+        raise terminal_run.refused(RunDirError, AccountRefusal.STORED_PLAN, error=e) from None
 
 
 def planned_keys(meta: dict, source: Path | str) -> set[str]:
     """Keys of every step of the run's stored plan (:class:`RunDirError` if it is not valid)."""
     return {s.key for s in stored_plan(meta, source).schedule()}
-
-
-def _keys_text(keys: list[str], limit: int = 8) -> str:
-    return ", ".join(keys[:limit]) + (f" and {len(keys) - limit} more" if len(keys) > limit else "")
 
 
 @dataclass
@@ -69,44 +82,24 @@ class Accounting:
     def missing_count(self) -> int:
         return sum(p.count for p in self.missing)
 
+    def _fields(self) -> dict:
+        return dict(planned=self.planned,
+                    missing=[(p.key, p.count if p.code is Problem.SWEEP_SHORT else None) for p in self.missing],
+                    damaged=[(p.key, p.kind) for p in self.damaged],
+                    owed=[(p.key, p.code is Problem.DWELL_OWED) for p in self.owed],
+                    skipped=[p.key for p in self.skipped])
+
     def resume_text(self, retry_skipped: bool = False) -> str:
         """'measures again 3 of 30 planned steps; missing: K1, K2; damaged: K3 (truncated);
         skipped at run time, not retried (--retry-skipped retries them): K4'."""
         n = self.missing_count + len(self.damaged) + (len(self.skipped) if retry_skipped else 0)
-        parts = [f"measures again {n} of {'?' if self.planned is None else self.planned} planned "
-                 f"step{'s' * (self.planned != 1)}"]
-        if self.missing:
-            parts.append("missing: " + _keys_text([_missing_label(p) for p in self.missing], 12))
-        if self.damaged:
-            parts.append("damaged: " + _keys_text([f"{p.key} ({p.kind})" for p in self.damaged], 12))
-        if self.owed:
-            parts.append("owed: " + _keys_text([_owed_label(p) for p in self.owed], 12))
-        if self.skipped:
-            parts.append(("skipped at run time, retried: " if retry_skipped else
-                          "skipped at run time, not retried (--retry-skipped retries them): ")
-                         + _keys_text([p.key for p in self.skipped], 12))
-        return "; ".join(parts)
+        return say(terminal_run.ACCOUNT, AccountLine.RESUME, dict(self._fields(), measures=n, retry=retry_skipped))
 
     def summary(self) -> str:
         """'28 intact / 30 planned; skipped at run time: K4; missing: K1; damaged: K2
         (truncated); orphan: none' (the skipped part only when there is one)."""
-        missing = [_missing_label(p) for p in self.missing]
-        skipped = f"skipped at run time: {_keys_text([p.key for p in self.skipped])}; " if self.skipped else ""
-        return (f"{len(self.intact)} intact / {'?' if self.planned is None else self.planned} planned; {skipped}"
-                f"missing: {_keys_text(missing) or 'none'}; "
-                f"damaged: {_keys_text([f'{p.key} ({p.kind})' for p in self.damaged]) or 'none'}; "
-                f"orphan: {_keys_text([shown(p.path.name) for p in self.orphan]) or 'none'}"
-                + (f"; owed: {_keys_text([_owed_label(p) for p in self.owed])}" if self.owed else ""))
-
-
-def _owed_label(p: StepProblem) -> str:
-    """'L00-feed dwell' or 'L01-pitch refinement'."""
-    return f"{p.key} {'dwell' if p.code is Problem.DWELL_OWED else 'refinement'}"
-
-
-def _missing_label(p: StepProblem) -> str:
-    """A step's key, or an adaptive sweep with the number of steps it lacks: 'L01-up (2)'."""
-    return f"{p.key} ({p.count})" if p.code is Problem.SWEEP_SHORT else p.key
+        return say(terminal_run.ACCOUNT, AccountLine.SUMMARY,
+                   dict(self._fields(), intact=len(self.intact), orphan=[shown(p.path.name) for p in self.orphan]))
 
 
 def _sweeps(plan) -> dict[tuple[int, str], list[str]]:

@@ -19,6 +19,7 @@ import argparse
 import logging
 import os
 import sys
+from enum import StrEnum
 
 from sim.errors import BenchError, ConfigurationError, EnvelopeError, LimitError, RunDirectoryError
 
@@ -34,8 +35,26 @@ from .commands.run import (
 )
 from .commands.tools import cmd_frf, cmd_paper, cmd_twin, cmd_twins, cmd_warmup
 from .terminal import Progress, end_line, setup_logging, tolerant_streams
+from .words import say, terminal_run
 
 log = logging.getLogger(__name__)
+
+
+class CliLine(StrEnum):
+    """The program's own lines about a command's end (:data:`bench.words.terminal_run.CLI`)."""
+
+    INTERRUPTED = "interrupted"             # (its reason follows: "Ctrl-C", "signal N")
+    INTERNAL = "internal"                   # (the exception's type and first line follow)
+    PROBLEMS = "problems"                   # count: a file's problems (their lines follow)
+    LATE = "late"                           # reason: a signal after the work was done
+    FAILED = "failed"                       # command (the log's line with the traceback)
+    ERROR = "error"                         # before a command's one-line error (not an interruption)
+    HINT_INTERNAL = "hint_internal"         # after an internal error's line: where its traceback is
+    HINT_DEBUG = "hint_debug"               # after another error's line
+
+
+def _said(code: CliLine, **fields) -> str:
+    return say(terminal_run.CLI, code, fields)
 
 
 
@@ -141,22 +160,6 @@ def _add_twin_parsers(sub) -> None:
     s.set_defaults(func=cmd_compare)
 
 
-DESCRIPTION = """\
-Stepped-sine friction tests on the linear-guideway shaker rig, or on its simulated twin:
-plan and run a test, watch it live, stop and resume it, then report, export and analyse
-the measurements.  Start with `bench demo` (the default plan on the simulated rig), then
-`bench dry-run --plan P --rig R` and `bench run --plan P --rig R --out DIR` with your own
-plan and rig files (annotated examples in bench/defaults/).  Force levels 0.1-100 N,
-frequencies 20-1000 Hz.  `bench COMMAND --help` explains each command."""
-
-EPILOG = """\
-exit codes: 0 done; 1 failure (an instrument error, a failed run, `bench check` found
-problems); 2 usage or configuration error (the message names the file, key and allowed
-values); 3 stopped by a limit (refused before the output went on, or aborted); 130
-interrupted (Ctrl-C, SIGTERM, SIGHUP: the terminal closed, SIGQUIT) before the work
-was done; a signal while the report is written is honoured once it is complete.  The
-output is switched off on every exit.
--v, --debug and -vv may come before or after the command."""
 
 
 class _Formatter(argparse.RawDescriptionHelpFormatter):
@@ -184,7 +187,21 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="bench", description=DESCRIPTION, epilog=EPILOG)
+    p = _Parser(prog="bench", description="""\
+Stepped-sine friction tests on the linear-guideway shaker rig, or on its simulated twin:
+plan and run a test, watch it live, stop and resume it, then report, export and analyse
+the measurements.  Start with `bench demo` (the default plan on the simulated rig), then
+`bench dry-run --plan P --rig R` and `bench run --plan P --rig R --out DIR` with your own
+plan and rig files (annotated examples in bench/defaults/).  Force levels 0.1-100 N,
+frequencies 20-1000 Hz.  `bench COMMAND --help` explains each command.""",
+                epilog="""\
+exit codes: 0 done; 1 failure (an instrument error, a failed run, `bench check` found
+problems); 2 usage or configuration error (the message names the file, key and allowed
+values); 3 stopped by a limit (refused before the output went on, or aborted); 130
+interrupted (Ctrl-C, SIGTERM, SIGHUP: the terminal closed, SIGQUIT) before the work
+was done; a signal while the report is written is honoured once it is complete.  The
+output is switched off on every exit.
+-v, --debug and -vv may come before or after the command.""")
     _add_common(p, argparse.SUPPRESS)
     p.set_defaults(verbose=0, debug=False)
     from . import __version__
@@ -207,9 +224,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_watch_options(s)
     s.set_defaults(func=cmd_demo)
 
-    for name, func, hlp in (("run", cmd_run, "run a stepped-sine plan on a rig"),
-                            ("dry-run", cmd_dry_run, "check a plan against the rig's limits; print the envelope")):
-        s = sub.add_parser(name, help=hlp)
+    for name, func, s in (("run", cmd_run, sub.add_parser("run", help="run a stepped-sine plan on a rig")),
+                          ("dry-run", cmd_dry_run,
+                           sub.add_parser("dry-run", help="check a plan against the rig's limits; print the envelope"))):
         s.add_argument("--plan", help="plan TOML: force levels (0.1-100 N), frequencies (20-1000 Hz), control "
                                       "(default: the demo plan, bench/defaults/demo_plan.toml)")
         s.add_argument("--rig", help="rig TOML: instrument URLs, calibration, limits "
@@ -362,7 +379,7 @@ def _internal(e: BaseException) -> bool:
 
 def _one_line(e: BaseException) -> str:
     if isinstance(e, KeyboardInterrupt):
-        return f"interrupted{f' ({e})' if str(e) else ''}"
+        return f"{_said(CliLine.INTERRUPTED)}{f' ({e})' if str(e) else ''}"
     if isinstance(e, OSError) and e.strerror:
         where = " -> ".join(str(f) for f in (e.filename, e.filename2) if f is not None)
         return f"{where}: {e.strerror}" if where else e.strerror
@@ -370,9 +387,9 @@ def _one_line(e: BaseException) -> str:
     first = text[0] if text else ""
     named = f"{type(e).__name__}: {first}" if first else type(e).__name__
     if _internal(e):
-        return f"internal error ({named})"
+        return f"{_said(CliLine.INTERNAL)} ({named})"
     if isinstance(e, ConfigurationError) and len(text) > 1:    # a file's problems, one line each
-        return f"{len(text)} problems:\n" + "\n".join(f"  {line}" for line in text)
+        return _said(CliLine.PROBLEMS, count=len(text)) + "".join(f"\n  {line}" for line in text)
     if _exit_code(e) in (ExitCode.USAGE, ExitCode.LIMIT) and first:
         return first
     return named
@@ -411,7 +428,7 @@ def main(argv: list[str] | None = None) -> int:
         if latch.reason is not None and code == ExitCode.OK:   # a signal a finalizer dropped: never 0
             code = ExitCode.INTERRUPTED
         elif latch.late is not None:
-            print(f"bench: {latch.late} after the work was done: nothing left to stop", file=sys.stderr, flush=True)
+            print(_said(CliLine.LATE, reason=latch.late), file=sys.stderr, flush=True)
     ignore_at_exit()
     return code
 
@@ -433,11 +450,11 @@ def _main(args) -> int:
         code = _exit_code(e)
         end_line()
         if args.debug:
-            log.exception("bench %s failed", args.command)
-        hint = ("" if args.debug or code == ExitCode.INTERRUPTED else
-                ", rerun with --debug for the traceback" if _internal(e) else " (--debug shows the traceback)")
-        print(f"bench {args.command}: {'error: ' if code != ExitCode.INTERRUPTED else ''}{_one_line(e)}{hint}",
-              file=sys.stderr)
+            log.exception(_said(CliLine.FAILED, command=args.command))
+        hint = (None if args.debug or code == ExitCode.INTERRUPTED else
+                CliLine.HINT_INTERNAL if _internal(e) else CliLine.HINT_DEBUG)
+        print(f"bench {args.command}: {_said(CliLine.ERROR) if code != ExitCode.INTERRUPTED else ''}{_one_line(e)}"
+              f"{_said(hint) if hint else ''}", file=sys.stderr)
         return code
     finally:
         end_line()

@@ -21,9 +21,29 @@ from pathlib import Path
 from sim.errors import ConfigurationError
 
 from .runlock import LOCK_NAME
+from .words import say, terminal_run
 from .words.terminal import refused
 
 log = logging.getLogger(__name__)
+
+
+class Writer(StrEnum):
+    """Who wrote a manifest (``written_by``, stored as this string)."""
+
+    DEMO = "bench demo"
+
+
+class DemoLine(StrEnum):
+    """The demo's words (:data:`bench.words.terminal_run.DEMO`): what it found in --out that
+    it did not write, and what it deleted."""
+
+    LINK = "link"                           # name: a link where the demo wrote a file
+    CHANGED = "changed"                     # name: a file changed since the demo wrote it
+    DELETED = "deleted"                     # out, files (the earlier demo's, deleted)
+
+
+def _said(code: DemoLine, **fields) -> str:
+    return say(terminal_run.DEMO, code, fields)
 
 MANIFEST = "demo-manifest.json"
 _OWN = {LOCK_NAME, MANIFEST}             # the session lock is never deleted (decision 0040)
@@ -66,7 +86,7 @@ def write_manifest(out: Path) -> None:
     if process.get("pid") != os.getpid():
         return
     files, dirs, _ = _entries(out)
-    manifest = {"written_by": "bench demo",
+    manifest = {"written_by": Writer.DEMO.value,
                 "files": {p.relative_to(out).as_posix(): {"bytes": p.stat().st_size, "sha256": _sha256(p)}
                           for p in files},
                 "dirs": [d.relative_to(out).as_posix() for d in dirs]}
@@ -103,11 +123,11 @@ def _foreign(out: Path, manifest: dict) -> list[str]:
         if outer:
             found.add(outer)
         elif p in links:
-            found.add(f"{name} (a link)")
+            found.add(_said(DemoLine.LINK, name=name))
         elif p in files and name not in listed:
             found.add(name)
         elif p in files and (p.stat().st_size != listed[name].get("bytes") or _sha256(p) != listed[name].get("sha256")):
-            found.add(f"{name} (changed since the demo wrote it)")
+            found.add(_said(DemoLine.CHANGED, name=name))
     return sorted(found)
 
 
@@ -150,4 +170,4 @@ def clear_earlier_demo(out: Path) -> None:
     for d in sorted(dirs, key=lambda d: len(d.parts), reverse=True):
         d.rmdir()
     (out / MANIFEST).unlink()
-    log.info("deleted the earlier demo in %s (%d files)", out, len(files))
+    log.info(_said(DemoLine.DELETED, out=out, files=len(files)))

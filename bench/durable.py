@@ -14,6 +14,7 @@ import tempfile
 import threading
 from contextlib import contextmanager
 from datetime import UTC, datetime
+from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +22,23 @@ import numpy as np
 from sim.errors import RunDirectoryError as RunDirError
 from sim.errors import StorageError
 
+from .words.terminal_run import refused
+
 log = logging.getLogger(__name__)
+
+
+class WriteRefusal(StrEnum):
+    """Why a run directory's file is not written (fields: path; its words:
+    :data:`bench.words.terminal_run.REFUSAL`)."""
+
+    DIR_MISSING = "dir_missing"
+    DIR_LINK = "dir_link"                   # a directory where a run writes is a link
+    NOT_A_DIR = "not_a_dir"
+    APPEND_LINK = "append_link"             # a file a run appends to is a link
+    FIFO = "fifo"
+    NOT_REGULAR = "not_regular"
+    CANNOT_WRITE = "cannot_write"           # path, error (the OSError's)
+    NOT_SERIALISABLE = "not_serialisable"   # kind: the type's name (no path)
 
 
 _umask_lock = threading.Lock()
@@ -63,12 +80,11 @@ def real_dir(path: Path, *, create: bool = False) -> Path:
     try:
         st = os.lstat(path)
     except FileNotFoundError:
-        raise RunDirError(f"{path}: missing (expected a directory)") from None
+        raise refused(RunDirError, WriteRefusal.DIR_MISSING, path=path) from None
     if stat.S_ISLNK(st.st_mode):
-        raise RunDirError(f"{path}: is a symbolic link; a run writes nothing through links "
-                          f"(replace it with a real directory)")
+        raise refused(RunDirError, WriteRefusal.DIR_LINK, path=path)
     if not stat.S_ISDIR(st.st_mode):
-        raise RunDirError(f"{path}: not a directory")
+        raise refused(RunDirError, WriteRefusal.NOT_A_DIR, path=path)
     return path
 
 
@@ -79,14 +95,13 @@ def open_append(path: Path):
                      0o666)
     except OSError as e:
         if os.path.islink(path):
-            raise RunDirError(f"{path}: is a symbolic link; a run writes nothing through links "
-                              f"(remove it)") from None
+            raise refused(RunDirError, WriteRefusal.APPEND_LINK, path=path) from None
         if e.errno == errno.ENXIO:             # a FIFO nobody reads: never waited on
-            raise RunDirError(f"{path}: not a regular file (a FIFO)") from None
+            raise refused(RunDirError, WriteRefusal.FIFO, path=path) from None
         raise
     if not stat.S_ISREG(os.fstat(fd).st_mode):
         os.close(fd)
-        raise RunDirError(f"{path}: not a regular file")
+        raise refused(RunDirError, WriteRefusal.NOT_REGULAR, path=path)
     return os.fdopen(fd, "a")
 
 
@@ -116,7 +131,7 @@ def _writing(path: Path):
     try:
         yield
     except OSError as e:
-        raise StorageError(f"{path}: cannot write: {e.strerror or e}") from e
+        raise refused(StorageError, WriteRefusal.CANNOT_WRITE, path=path, error=e.strerror or e) from e
 
 
 def _json_default(o):
@@ -126,7 +141,7 @@ def _json_default(o):
         return o.tolist()
     if isinstance(o, complex):
         return {"re": o.real, "im": o.imag}
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+    raise refused(TypeError, WriteRefusal.NOT_SERIALISABLE, kind=type(o).__name__)
 
 
 def write_json(path: Path, obj) -> None:

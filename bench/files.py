@@ -13,9 +13,32 @@ from __future__ import annotations
 import errno
 import os
 import stat
+from enum import StrEnum
 from pathlib import Path
 
 from sim.errors import RunDirectoryError
+
+from .words import say, terminal_run
+
+
+class FileRefusal(StrEnum):
+    """Why a run directory's file is not read (:data:`bench.words.terminal_run.REFUSAL`)."""
+
+    TOO_LARGE = "too_large"                 # path, size (None: it grew while read), limit
+    READ_LINK = "read_link"                 # path
+    NOT_REGULAR_READ = "not_regular_read"   # path, kind (a FileKind)
+
+
+class FileKind(StrEnum):
+    """What is at a path (:func:`file_kind`; :data:`bench.words.terminal_run.FILE_KIND`)."""
+
+    FIFO = "fifo"
+    CHAR_DEVICE = "char_device"
+    BLOCK_DEVICE = "block_device"
+    SOCKET = "socket"
+    DIRECTORY = "directory"
+    REGULAR = "regular"
+    OTHER = "other"
 
 # The largest file of each kind a reader takes (docs/run-format.md, decision record 0041): a
 # reader never reads more than this (plus one byte, to tell), so a link to /dev/zero or a
@@ -43,9 +66,10 @@ class TooLarge(UnreadableFile):
     """A regular file larger than its kind's bound."""
 
     def __init__(self, path: Path, size: int | None, limit: int):
-        said = f"{size} bytes" if size is not None else "grew while read"
-        super().__init__(f"{path}: {said}, more than the {limit} bytes a file of this kind may have; not read")
+        fields = dict(path=path, size=size, limit=limit)
+        super().__init__(say(terminal_run.REFUSAL, FileRefusal.TOO_LARGE, fields))
         self.size, self.limit = size, limit
+        self.code, self.fields = FileRefusal.TOO_LARGE, fields
 
 
 def max_bytes(path: Path) -> int:
@@ -61,13 +85,12 @@ def open_regular(path: Path) -> int:
         fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC)
     except OSError as e:
         if e.errno == errno.ELOOP:
-            raise UnreadableFile(f"{path}: is a symbolic link; a run's files are read only as regular "
-                                 f"files inside the run directory") from None
+            raise terminal_run.refused(UnreadableFile, FileRefusal.READ_LINK, path=path) from None
         raise
     st = os.fstat(fd)
     if not stat.S_ISREG(st.st_mode):
         os.close(fd)
-        raise UnreadableFile(f"{path}: not a regular file ({file_kind(st.st_mode)}); not read")
+        raise terminal_run.refused(UnreadableFile, FileRefusal.NOT_REGULAR_READ, path=path, kind=kind_of(st.st_mode))
     return fd
 
 
@@ -97,10 +120,16 @@ def read_file(path: Path, limit: int | None = None) -> bytes:
         os.close(fd)
 
 
-def file_kind(mode: int) -> str:
-    for test, name in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
-                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"),
-                       (stat.S_ISDIR, "a directory"), (stat.S_ISREG, "a regular file")):
+def kind_of(mode: int) -> FileKind:
+    """What a ``stat`` mode says is at a path."""
+    for test, kind in ((stat.S_ISFIFO, FileKind.FIFO), (stat.S_ISCHR, FileKind.CHAR_DEVICE),
+                       (stat.S_ISBLK, FileKind.BLOCK_DEVICE), (stat.S_ISSOCK, FileKind.SOCKET),
+                       (stat.S_ISDIR, FileKind.DIRECTORY), (stat.S_ISREG, FileKind.REGULAR)):
         if test(mode):
-            return name
-    return "not a regular file"
+            return kind
+    return FileKind.OTHER
+
+
+def file_kind(mode: int) -> str:
+    """What is at a path, in words ('a FIFO')."""
+    return say(terminal_run.FILE_KIND, kind_of(mode), {})

@@ -16,6 +16,7 @@ import socket
 import sys
 from contextlib import ExitStack
 from dataclasses import dataclass, replace
+from enum import StrEnum
 from importlib import metadata as importlib_metadata
 from pathlib import Path
 from typing import Any
@@ -42,13 +43,52 @@ from sim.errors import EnvelopeError, StorageError
 
 from . import runlock
 from .config import Plan, Rig
-from .signals import SignalLatch, uninterruptible
+from .signals import Doing, SignalLatch, uninterruptible
 from .storage import RunStatus, RunStore, open_append, planned_count
 from .watch import stop as stop_request
+from .words import Said, say, terminal_run
 
 log = logging.getLogger(__name__)
 
 FORCE_MARGIN = 1.25      # control overshoot allowance: the envelope is checked at 1.25 x each level
+
+
+class EnvelopeProblem(StrEnum):
+    """A limit of the rig a (level, frequency) exceeds at FORCE_MARGIN x the level (its
+    words: :data:`bench.words.terminal_run.ENVELOPE`)."""
+
+    DRIVE = "drive"                         # drive_V (at the level), margin, limit_V
+    FORCE = "force"                         # level_N, margin, limit_N
+    DISPLACEMENT = "displacement"           # disp_m, level, unit, margin, response (a response's level), limit_m
+    ACCELERATION = "acceleration"           # accel_m_s2, level, unit, margin, response, limit_m_s2
+
+
+class EnvelopeRefusal(StrEnum):
+    """Why a plan is refused before anything is opened (fields: points, margin)."""
+
+    SKIP_IN_WINDOW = "skip_in_window"       # infeasible = "skip" inside a phase-resonance window
+    NOT_HELD = "not_held"                   # steps the rig's limits cannot hold
+
+
+class SessionLine(StrEnum):
+    """What a session logs and shows while it runs (:data:`bench.words.terminal_run.SESSION`)."""
+
+    SKIPPING = "skipping"                   # skipped, points
+    IDENTIFIABILITY = "identifiability"     # warning
+    OFF_UNCONFIRMED = "off_unconfirmed"     # error, url
+    OFF_FAILED = "off_failed"               # url, error
+    ABORTED = "aborted"                     # error
+    INTERRUPTED = "interrupted"             # path
+    INSTRUMENT_ERROR = "instrument_error"   # kind, error
+    STORAGE_ERROR = "storage_error"         # error
+    FAILED = "failed"
+    END_UNRECORDED = "end_unrecorded"       # status, error
+    EVENT_UNRECORDED = "event_unrecorded"   # kind, error
+    ESTIMATES = "estimates"                 # F_s_N, x_s_m, n, mass_kg, at_bound, misfit (the status line's)
+
+
+def said(code: SessionLine, **fields) -> str:
+    return say(terminal_run.SESSION, code, fields)
 
 
 @dataclass(frozen=True)
@@ -58,13 +98,8 @@ class EnvelopePoint:
     drive_V: float           # generator output amplitude (= Vpp/2) at the level, without the margin
     disp_m: float            # bounds at FORCE_MARGIN x the level
     accel_m_s2: float
-    problems: tuple[str, ...]
+    problems: tuple[Said, ...]   # EnvelopeProblem codes and their fields
     quantity: Quantity = FORCE   # what ``level`` is an amplitude of
-
-    @property
-    def where(self) -> str:
-        """'0.0009 m at 20 Hz': the level in its unit and the frequency."""
-        return f"{self.quantity.format(self.level)} at {self.freq_Hz:g} Hz"
 
 
 def envelope(plan: Plan, rig: Rig) -> list[EnvelopePoint]:
@@ -76,7 +111,6 @@ def envelope(plan: Plan, rig: Rig) -> list[EnvelopePoint]:
     P/(m w^2) plus a pre-rolling allowance of 3 x_s; acceleration P/m (the free-mass bound,
     reached above the friction resonance); both at the margin."""
     lim = tightest(rig.limits, plan.limits)
-    m = f"x {FORCE_MARGIN:g} margin"
     out = []
     # phase resonance: its frequency window's ends bound what the loop can drive
     window = (plan.backbone.min_Hz, plan.backbone.max_Hz) if plan.backbone else ()
@@ -89,13 +123,14 @@ def envelope(plan: Plan, rig: Rig) -> list[EnvelopePoint]:
             drive = F / rig.amp_gain_N_per_V
             disp = Fp / (rig.expected_mass_kg * w * w) + 3 * rig.expected_x_s_m
             acc = Fp / rig.expected_mass_kg
+            at = dict(level=F, unit=FORCE.unit, margin=FORCE_MARGIN, response=False)
             problems = tuple(p for p, bad in (
-                (f"drive {drive:.3g} V {m} = {drive * FORCE_MARGIN:.3g} V > drive_V {lim.drive_V:g} V",
+                (Said(EnvelopeProblem.DRIVE, dict(drive_V=drive, margin=FORCE_MARGIN, limit_V=lim.drive_V)),
                  drive * FORCE_MARGIN > lim.drive_V),
-                (f"{F:g} N {m} = {Fp:.3g} N > force_N {lim.force_N:g} N", Fp > lim.force_N),
-                (f"displacement {disp * 1e3:.3g} mm at {F:g} N {m} > disp_m {lim.disp_m * 1e3:g} mm",
-                 disp > lim.disp_m),
-                (f"acceleration {acc:.3g} m/s^2 at {F:g} N {m} > accel_m_s2 {lim.accel_m_s2:g} m/s^2",
+                (Said(EnvelopeProblem.FORCE, dict(level_N=F, margin=FORCE_MARGIN, limit_N=lim.force_N)),
+                 Fp > lim.force_N),
+                (Said(EnvelopeProblem.DISPLACEMENT, dict(disp_m=disp, limit_m=lim.disp_m, **at)), disp > lim.disp_m),
+                (Said(EnvelopeProblem.ACCELERATION, dict(accel_m_s2=acc, limit_m_s2=lim.accel_m_s2, **at)),
                  acc > lim.accel_m_s2)) if bad)
             out.append(EnvelopePoint(F, f, drive, disp, acc, problems))
     return out
@@ -112,26 +147,18 @@ def _response_envelope(plan: Plan, rig: Rig, lim) -> list[EnvelopePoint]:
             w2 = (2 * math.pi * f) ** 2
             X = (level if plan.response == "disp" else level / w2) * FORCE_MARGIN
             force = rig.expected_mass_kg * w2 * X / FORCE_MARGIN
+            at = dict(level=level, unit=q.unit, margin=FORCE_MARGIN, response=True)
             problems = tuple(p for p, bad in (
-                (f"displacement {X * 1e3:.3g} mm at {q.format(level)} x {FORCE_MARGIN:g} > disp_m "
-                 f"{lim.disp_m * 1e3:g} mm", X > lim.disp_m),
-                (f"acceleration {X * w2:.3g} m/s^2 at {q.format(level)} x {FORCE_MARGIN:g} > accel_m_s2 "
-                 f"{lim.accel_m_s2:g} m/s^2", X * w2 > lim.accel_m_s2)) if bad)
+                (Said(EnvelopeProblem.DISPLACEMENT, dict(disp_m=X, limit_m=lim.disp_m, **at)), X > lim.disp_m),
+                (Said(EnvelopeProblem.ACCELERATION, dict(accel_m_s2=X * w2, limit_m_s2=lim.accel_m_s2, **at)),
+                 X * w2 > lim.accel_m_s2)) if bad)
             out.append(EnvelopePoint(level, f, force / rig.amp_gain_N_per_V, X, X * w2, problems, q))
     return out
 
 
 def envelope_report(points: list[EnvelopePoint]) -> str:
-    unit = points[0].quantity.unit if points else "N"
-    lines = [f"{'level ' + unit:>11} {'drive V':>8} {'disp mm (max)':>14} {'accel m/s2':>10}  problems",
-             f"(drive: the generator's amplitude, V = Vpp/2, at the level; displacement, acceleration and every "
-             f"limit check: at {FORCE_MARGIN:g} x the level, the control's overshoot margin)"]
-    for F in sorted({p.level for p in points}):
-        ps = [p for p in points if p.level == F]
-        bad = [f"{p.freq_Hz:g} Hz: {'; '.join(p.problems)}" for p in ps if p.problems]
-        lines.append(f"{F:11.3g} {max(p.drive_V for p in ps):8.3g} {max(p.disp_m for p in ps) * 1e3:14.4g} "
-                     f"{max(p.accel_m_s2 for p in ps):10.3g}  {bad[0] + (f' (+{len(bad) - 1} more)' if len(bad) > 1 else '') if bad else 'ok'}")
-    return "\n".join(lines)
+    """The plan's envelope as ``bench dry-run`` prints it (:func:`bench.words.terminal_run.envelope_table`)."""
+    return terminal_run.envelope_table(points, FORCE_MARGIN)
 
 
 def check_envelope(plan: Plan, rig: Rig) -> Plan:
@@ -141,19 +168,15 @@ def check_envelope(plan: Plan, rig: Rig) -> Plan:
     bad = [p for p in points if p.problems]
     if bad and plan.infeasible == "skip":
         if plan.backbone:
-            raise EnvelopeError(f"infeasible = \"skip\" cannot skip part of a phase-resonance window: "
-                                f"{bad[0].where}: {'; '.join(bad[0].problems)}\n"
-                                + envelope_report(points))
+            raise terminal_run.refused(EnvelopeError, EnvelopeRefusal.SKIP_IN_WINDOW, points=points,
+                                       margin=FORCE_MARGIN)
         li = {F: i for i, F in enumerate(plan.levels_N)}
         fi = {f: i for i, f in enumerate(plan.freqs_Hz)}
         skip = tuple(sorted({(li[p.level], fi[p.freq_Hz]) for p in bad}))
-        log.warning("skipping %d of %d (level, frequency) points the rig's limits cannot hold",
-                    len(skip), len(points))
+        log.warning(said(SessionLine.SKIPPING, skipped=len(skip), points=len(points)))
         return replace(plan, skip=skip)
     if bad:
-        raise EnvelopeError(f"the rig's limits cannot hold {len(bad)} of {len(points)} steps of the plan, "
-                            f"e.g. {bad[0].where}: {'; '.join(bad[0].problems)}\n"
-                            + envelope_report(points))
+        raise terminal_run.refused(EnvelopeError, EnvelopeRefusal.NOT_HELD, points=points, margin=FORCE_MARGIN)
     return plan
 
 
@@ -228,13 +251,13 @@ def switch_off(gen: ScpiFunctionGenerator, url: str) -> bool:
         if not gen.output_enabled():
             return True
     except Exception as exc:  # noqa: BLE001 - try the new connection below
-        log.warning("output off not confirmed on the open link (%s); reconnecting to %s", exc, url)
+        log.warning(said(SessionLine.OFF_UNCONFIRMED, error=exc, url=url))
     try:
         with ScpiFunctionGenerator(url, timeout_s=gen.timeout_s) as again:
             again.set_output(False)
         return True
     except Exception as exc:  # noqa: BLE001
-        log.error("could not switch the output off at %s: %s", url, exc)
+        log.error(said(SessionLine.OFF_FAILED, url=url, error=exc))
         return False
 
 
@@ -288,7 +311,7 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
     plan = check_envelope(plan, rig)
     warnings = identifiability(plan, rig) if plan.procedure is ProcedureKind.STEPPED_SINE else []
     for w in warnings:
-        log.warning("identifiability: %s", w)
+        log.warning(said(SessionLine.IDENTIFIABILITY, warning=w))
     latch = latch or SignalLatch()
     out = Path(out)
     if not resume:
@@ -356,38 +379,38 @@ def _supervised(plan: Plan, rig: Rig, store: RunStore, latch: SignalLatch, *, pr
         except LimitExceeded as e:
             status = RunStatus.ABORTED
             _note(store, "abort", reason=str(e))
-            log.error("aborted: %s", e)
+            log.error(said(SessionLine.ABORTED, error=e))
         except KeyboardInterrupt as e:
             status = RunStatus.INTERRUPTED
             _note(store, "interrupted", reason=str(e) or "Ctrl-C")
             if sup is not None:
-                with uninterruptible("ramping down", latch):
+                with uninterruptible(Doing.RAMP_DOWN, latch):
                     sup.shutdown()       # ramp down; the output is switched off below
             stop_request.clear(store.path)
-            log.warning("interrupted; resume with: bench resume %s", store.path)
+            log.warning(said(SessionLine.INTERRUPTED, path=store.path))
             raise
         except InstrumentError as e:
             status = RunStatus.INSTRUMENT_ERROR
             _note(store, "instrument_error", error=f"{type(e).__name__}: {e}")
-            log.error("instrument error: %s: %s", type(e).__name__, e)
+            log.error(said(SessionLine.INSTRUMENT_ERROR, kind=type(e).__name__, error=e))
         except StorageError as e:          # named, no traceback: the output goes off below
             _note(store, "storage_error", error=str(e))
-            log.error("storage error: %s; the output is switched off, the steps stored so far are intact", e)
+            log.error(said(SessionLine.STORAGE_ERROR, error=e))
             raise
         except Exception as e:
             _note(store, "error", error=f"{type(e).__name__}: {e}")
-            log.exception("run failed")
+            log.exception(said(SessionLine.FAILED))
             raise
         finally:
             latch.finish()   # the measuring is over: a signal now stops nothing (the switch-off runs on, 0051)
-            with uninterruptible("switching the output off", latch):
+            with uninterruptible(Doing.SWITCH_OFF, latch):
                 stack.close()    # output off, then close links and twins
                 try:
                     done = store.done_keys()
                     refined = sum(1 for k in done if plan.refined_key_ok(k))   # refinement steps: counted as run
                     store.finish(status, steps_done=len(done), steps_total=planned_count(plan) + refined)
                 except StorageError as e:
-                    log.error("the run's end (%s) could not be recorded: %s", status, e)
+                    log.error(said(SessionLine.END_UNRECORDED, status=status, error=e))
                     unrecorded = e
     if unrecorded is not None:          # only when nothing else is on its way out
         raise unrecorded
@@ -399,7 +422,7 @@ def _note(store: RunStore, kind: str, **fields) -> None:
     try:
         store.event(kind, **fields)
     except StorageError as e:
-        log.error("event %s not recorded: %s", kind, e)
+        log.error(said(SessionLine.EVENT_UNRECORDED, kind=kind, error=e))
 
 
 def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Supervisor, latch: SignalLatch,
@@ -447,10 +470,8 @@ def _measure(plan: Plan, rig: Rig, store: RunStore, ins: Instruments, sup: Super
             if est:
                 v = est["values"]
                 bound = est.get("at_bound", [])
-                progress_note[0] = (f"F_s {v['F_s_N']:.3g} N x_s {v['x_s_m'] * 1e6:.3g} um "
-                                    f"n {v['n']:.3g} m {v['mass_kg']:.3g} kg"
-                                    + (f" ({', '.join(bound)} at the search bound: not estimates)" if bound else "")
-                                    + (" (the model does not fit: see the report)" if est.get("misfit") else ""))
+                progress_note[0] = said(SessionLine.ESTIMATES, F_s_N=v["F_s_N"], x_s_m=v["x_s_m"], n=v["n"],
+                                        mass_kg=v["mass_kg"], at_bound=bound, misfit=bool(est.get("misfit")))
 
     def show(done: int, total: int, note: str) -> None:
         if progress:

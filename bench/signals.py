@@ -27,8 +27,27 @@ from __future__ import annotations
 import logging
 import signal
 from contextlib import contextmanager
+from enum import StrEnum
+
+from .words import say, terminal_run
 
 log = logging.getLogger(__name__)
+
+
+class Doing(StrEnum):
+    """What a held latch or :func:`uninterruptible` lets finish, said when a signal comes
+    (its words: :data:`bench.words.terminal_run.DOING`)."""
+
+    REPORT = "report"                       # the report is written
+    RAMP_DOWN = "ramp_down"
+    SWITCH_OFF = "switch_off"
+
+
+class SignalLine(StrEnum):
+    """The log line of a signal let wait (:data:`bench.words.terminal_run.SIGNAL`)."""
+
+    HELD = "held"                           # reason ("Ctrl-C", "signal N"), doing
+    UNINTERRUPTIBLE = "uninterruptible"     # signum, doing
 
 # every signal whose default action ends the process and that a session can catch
 ENDING = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT)
@@ -63,7 +82,7 @@ class SignalLatch:
         self.late: str | None = None        # one that came after (:meth:`finish`)
         self._hold = False
         self._finished = False
-        self._doing = ""                    # what a held latch lets finish (said when a signal comes)
+        self._doing: Doing | None = None    # what a held latch lets finish (said when a signal comes)
 
     def handler(self, signum, frame):
         if self._finished:
@@ -73,7 +92,7 @@ class SignalLatch:
         if not self._hold:
             raise KeyboardInterrupt(self.reason)
         if self._doing:
-            log.warning("%s while %s: finishing it first", self.reason, self._doing)
+            log.warning(say(terminal_run.SIGNAL, SignalLine.HELD, dict(reason=self.reason, doing=self._doing)))
 
     def note(self, signum: int) -> None:
         """Record ``signum`` without raising (a handler of its own ran instead)."""
@@ -89,7 +108,7 @@ class SignalLatch:
     def installed(self):
         return handling(self.handler, *ENDING)
 
-    def hold(self, doing: str = "") -> None:
+    def hold(self, doing: Doing | None = None) -> None:
         """From now on latch a signal without raising it (a run directory being set up must
         not be left half-written) until :meth:`release`; ``doing``: what is let finish, said
         on the terminal when a signal comes."""
@@ -99,7 +118,7 @@ class SignalLatch:
     def release(self) -> None:
         """Raise again at once; raise now a signal latched while held."""
         self._hold = False
-        self._doing = ""
+        self._doing = None
         self.check()
 
     @property
@@ -110,7 +129,7 @@ class SignalLatch:
         """The work is done (the measuring over, the report written): from now on a signal
         is only recorded as :attr:`late`; nothing is left for it to stop."""
         self._hold = self._finished = True
-        self._doing = ""
+        self._doing = None
 
     def reopen(self) -> None:
         """More work follows the end (the report): held, and a signal that came since
@@ -147,13 +166,13 @@ def ignore_at_exit() -> None:
         signal.signal(s, signal.SIG_IGN)
 
 
-def uninterruptible(what: str, latch: SignalLatch | None = None):
+def uninterruptible(what: Doing, latch: SignalLatch | None = None):
     """Hold the ending signals off while ``what`` runs (switching the output off must not
     be cut short by an impatient second Ctrl-C); they are logged, not lost silently, and
     recorded in ``latch`` (so a signal during the switch-off of a completed run still
     stops what the command would do next)."""
     def handler(signum, frame):
-        log.warning("signal %d while %s: finishing that first", signum, what)
+        log.warning(say(terminal_run.SIGNAL, SignalLine.UNINTERRUPTIBLE, dict(signum=signum, doing=what)))
         if latch is not None:
             latch.note(signum)
     return handling(handler, *ENDING)

@@ -73,9 +73,26 @@ from .runlock import LOCK_NAME
 from .step_files import DamagedStep, Problem, StepProblem, _check_npz, _json_fields, _read_step_json, _utf8
 from .step_files import _json_cut as _json_cut
 from .step_files import shown as shown
+from .words import say, terminal_run
 from .words.terminal import refused
 
 log = logging.getLogger(__name__)
+
+
+class StoreLine(enum.StrEnum):
+    """What reading a run directory logs and fills in (:data:`bench.words.terminal_run.STORE`)."""
+
+    EVENTS_UNREADABLE = "events_unreadable"             # error
+    EVENT_LINE_DAMAGED = "event_line_damaged"           # path, line
+    EVENT_LINE_NOT_OBJECT = "event_line_not_object"     # path, line
+    HISTORY_UNREADABLE = "history_unreadable"           # error (identification.jsonl's)
+    SKIPPING_STEP = "skipping_step"                     # key, error
+    DAMAGED_MOVED = "damaged_moved"                     # key, problem, dest
+    NO_REASON = "no_reason"                             # a step skipped at run time without one
+
+
+def _said(code: StoreLine, **fields) -> str:
+    return say(terminal_run.STORE, code, fields)
 
 
 # run.json's ``format_version`` (docs/run-format.md; absent = 1, the layout before the
@@ -234,18 +251,18 @@ class RunStore:
         except FileNotFoundError:
             return out
         except UnreadableFile as e:
-            log.warning("%s; its events are not used", e)
+            log.warning(_said(StoreLine.EVENTS_UNREADABLE, error=e))
             return out
         for n, line in enumerate(data.decode(errors="replace").splitlines(), 1):
             try:
                 e = json.loads(line)
             except (json.JSONDecodeError, RecursionError):
-                log.warning("%s: line %d damaged (torn or not JSON); skipped", p, n)
+                log.warning(_said(StoreLine.EVENT_LINE_DAMAGED, path=p, line=n))
                 continue
             if isinstance(e, dict):
                 out.append(e)
             else:
-                log.warning("%s: line %d is not an event object; skipped", p, n)
+                log.warning(_said(StoreLine.EVENT_LINE_NOT_OBJECT, path=p, line=n))
         return out
 
     def identification_history(self) -> list[dict]:
@@ -256,7 +273,7 @@ class RunStore:
         except FileNotFoundError:
             return []
         except UnreadableFile as e:
-            log.warning("%s; the identification history is not shown", e)
+            log.warning(_said(StoreLine.HISTORY_UNREADABLE, error=e))
             return []
         out = []
         for line in data.decode(errors="replace").splitlines():
@@ -342,7 +359,7 @@ class RunStore:
             except DamagedStep as e:
                 self.problems.append(e.problem)
                 if warn:
-                    log.warning("skipping step %s: %s", p.stem, e)
+                    log.warning(_said(StoreLine.SKIPPING_STEP, key=p.stem, error=e))
         return out
 
     def raw(self, key: str) -> dict[str, np.ndarray]:
@@ -366,7 +383,7 @@ class RunStore:
             try:
                 yield r, self.raw(r["key"])
             except DamagedStep as e:
-                log.warning("skipping step %s: %s", r["key"], e)
+                log.warning(_said(StoreLine.SKIPPING_STEP, key=r["key"], error=e))
 
     # ------------------------------------------------------------------ checking and repair
     def check(self) -> list[StepProblem]:
@@ -428,7 +445,7 @@ class RunStore:
         out: dict[str, str] = {}
         for e in self.events():
             if e.get("event") == "step_skipped" and isinstance(e.get("key"), str):
-                out[e["key"]] = str(e.get("reason") or "no reason recorded")
+                out[e["key"]] = str(e.get("reason") or _said(StoreLine.NO_REASON))
         return out
 
     def account(self) -> Accounting:
@@ -537,7 +554,7 @@ class RunStore:
                 if p.exists():
                     os.replace(p, dest / p.name)
             self._npz_ok.pop(pr.key, None)
-            log.warning("step %s damaged (%s): files moved to %s; it will be measured again", pr.key, pr, dest)
+            log.warning(_said(StoreLine.DAMAGED_MOVED, key=pr.key, problem=pr, dest=dest))
             self.event("damaged_step", step=pr.key, problem=pr.kind, reason=str(pr), moved_to=str(dest))
         _fsync_dir(self.steps_dir)
         return damaged

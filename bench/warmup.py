@@ -17,11 +17,26 @@ from __future__ import annotations
 import logging
 import tempfile
 import time
+from enum import StrEnum
 from pathlib import Path
 
 from sim.kernel_cache import invalidate_stale_kernels, sources_hash
 
+from .words import say, terminal_run
+
 log = logging.getLogger(__name__)
+
+
+class WarmupLine(StrEnum):
+    """The warm-up's words (:data:`bench.words.terminal_run.WARMUP`)."""
+
+    SOURCE = "source"                       # the warm-up plan's name where a plan's file name goes
+    ENDED = "ended"                         # status (a run that did not complete: an error)
+    STAMP_UNWRITTEN = "stamp_unwritten"     # path, error
+
+
+def _said(code: WarmupLine, **fields) -> str:
+    return say(terminal_run.WARMUP, code, fields)
 
 SIM_DIR = Path(__file__).resolve().parents[1] / "sim"
 STAMP = SIM_DIR / "__pycache__" / "kernels.warm"
@@ -59,13 +74,13 @@ def warm_up() -> float:
         rig.set_generator(freq_Hz=100.0, amplitude_Vpp=0.2, output_on=True)
         rig.run(256, 25600.0)
     with tempfile.TemporaryDirectory(prefix="bench-warmup-") as tmp:
-        store = run_plan(parse_plan(_PLAN, "warm-up plan"), load_rig(DEFAULTS / "sim_rig.toml"),
+        store = run_plan(parse_plan(_PLAN, _said(WarmupLine.SOURCE)), load_rig(DEFAULTS / "sim_rig.toml"),
                          Path(tmp) / "run", identify=True)
         if store.metadata["status"] != RunStatus.COMPLETED:
-            raise RuntimeError(f"warm-up run ended {store.metadata['status']!r}")
+            raise RuntimeError(_said(WarmupLine.ENDED, status=store.metadata["status"]))
     try:
         STAMP.parent.mkdir(exist_ok=True)
         STAMP.write_text(compiled)
     except OSError as e:         # a read-only install: numba caches elsewhere or not at all
-        log.warning("could not write the warm-up stamp %s: %s", STAMP, e)
+        log.warning(_said(WarmupLine.STAMP_UNWRITTEN, path=STAMP, error=e))
     return time.perf_counter() - t0

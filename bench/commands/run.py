@@ -9,11 +9,12 @@ import time
 from enum import StrEnum
 from pathlib import Path
 
-from procedures.kind import ProcedureKind
+from procedures.kind import FORCE, ProcedureKind
 from sim.errors import ConfigurationError
 
+from ..signals import Doing
 from ..terminal import Progress, end_line
-from ..words import terminal
+from ..words import terminal, terminal_run
 from . import ExitCode
 
 log = logging.getLogger(__name__)
@@ -32,8 +33,62 @@ class RunLine(StrEnum):
     OUTPUT_OFF_UNCONFIRMED = "output_off_unconfirmed"
 
 
+class DryRunLine(StrEnum):
+    """``bench dry-run``'s lines (their words: :data:`bench.words.terminal_run.DRY_RUN`)."""
+
+    BACKBONE_PLAN = "backbone_plan"         # name, levels (count), start_Hz, min_Hz, max_Hz, rig, simulated
+    BACKBONE_TIME = "backbone_time"         # bound_s, max_blocks
+    PLAN = "plan"                           # name, procedure, levels, freqs, direction, steps, rig, simulated,
+    #                                         measured, per_sweep, refined, refine_steps, modes, tolerance, dwell_cycles
+    LEVELS = "levels"                       # levels, unit, quantity, held (a response's level)
+    TIME = "time"                           # quantity, bound_s, without_extra_s, block_s, blocks, typical_s, refined
+    STEPS = "steps"                         # lines: the planned steps', in order
+    REFUSED = "refused"                     # first: the refusal's first line
+    RUNS_SOME = "runs_some"                 # run, skipped (steps)
+    ENVELOPE_OK = "envelope_ok"
+    IDENTIFIABILITY = "identifiability"     # warning
+
+
+class ResumeLine(StrEnum):
+    """What ``bench resume`` says before it measures (:data:`bench.words.terminal_run.RESUME`)."""
+
+    NOTHING_TO_DO = "nothing_to_do"         # skipped (any), summary
+    MEASURES = "measures"                   # text: what it measures again
+    FINISHING = "finishing"                 # skipped (any), status (the run's end)
+
+
+class WatchLine(StrEnum):
+    """The watch page's lines (:data:`bench.words.terminal_run.WATCH`)."""
+
+    URL = "url"                             # url (beside a run)
+    SERVING = "serving"                     # url (bench watch)
+    WAITING = "waiting"                     # path
+    NO_RUN_JSON = "no_run_json"             # path
+    APPEARED = "appeared"                   # path
+
+
+class SequenceLine(StrEnum):
+    """``bench sequence``'s lines at its end (:data:`bench.words.terminal_run.SEQUENCE`)."""
+
+    ENTRY = "entry"                         # name, status, done, total
+    REPORT = "report"                       # path
+
+
+class RunRefusal(StrEnum):
+    """The one-line errors of these commands (:data:`bench.words.terminal_run.REFUSAL`)."""
+
+    WATCH_PORT = "watch_port"               # host, port, error
+    WATCH_A_FILE = "watch_a_file"           # path
+    WATCH_NO_PARENT = "watch_no_parent"     # path, parent
+    LABEL = "label"                         # item
+
+
 def say(code: RunLine, **fields) -> str:
     return terminal.say(terminal.RUN, code, fields)
+
+
+def _said(words: terminal.Words, code: StrEnum, **fields) -> str:
+    return terminal.say(words, code, fields)
 
 
 def _load_configs(args):
@@ -50,65 +105,53 @@ def cmd_dry_run(args) -> int:
 
     plan, rig = _load_configs(args)
     steps = plan.schedule()
+    named = dict(name=plan.name, rig=rig.name, simulated=rig.simulated)
     if plan.backbone:
         b = plan.backbone
-        print(f"plan '{plan.name}': phase resonance, {len(plan.levels_N)} force levels (N) from {b.start_Hz:g} Hz in the window "
-              f"{b.min_Hz:g}-{b.max_Hz:g} Hz (envelope at both ends); rig '{rig.name}'"
-              f"{' (simulated)' if rig.simulated else ''}")
+        _dry(DryRunLine.BACKBONE_PLAN, levels=len(plan.levels_N), start_Hz=b.start_Hz, min_Hz=b.min_Hz,
+             max_Hz=b.max_Hz, **named)
         from ..plan_time import backbone_time_bound_s
-        print(f"expected rig time: at most {_duration(backbone_time_bound_s(plan))} (every level probing its phase "
-              f"slope and spending max_blocks = {b.max_blocks} controller blocks at the window's lowest frequency, "
-              f"then settled, measured and re-measured to the plan's limits; a level that locks takes a few blocks)")
+        _dry(DryRunLine.BACKBONE_TIME, bound_s=backbone_time_bound_s(plan), max_blocks=b.max_blocks)
     else:
         n, refined, seconds = planned_steps(plan)
-        runs = (f"{n} measured (adaptive: {plan.adaptive_per_sweep} per sweep, chosen online)"
-                if plan.adaptive_per_sweep and n != len(steps) else f"{n} measured")
-        if refined:
-            runs += (f" + at most {refined} refinement steps ([plan.resonance]: {plan.refine_steps} per mode and level, "
-                     f"modes {', '.join(plan.refine_modes)}, tolerance {100 * plan.refine_tolerance:g} %"
-                     + (f"; with a dwell of {plan.dwell_cycles} cycles at each mode's resonance per level"
-                        if plan.dwell_cycles else "") + ")")
         q = plan.level_quantity
-        print(f"plan '{plan.name}': {plan.procedure.label}, {len(plan.levels_N)} levels x {len(plan.freqs_Hz)} frequencies "
-              f"({plan.direction}) = {len(steps)} steps, {runs}; rig '{rig.name}'{' (simulated)' if rig.simulated else ''}")
-        print(f"levels: {', '.join(q.format(v) for v in plan.levels_N)} ({q.name} amplitude"
-              + (", the response fundamental held at each frequency)" if q.key != "force" else ")"))
-        print(dry_run_time_line(plan, seconds, refined).replace("force control", f"{q.name} control"))
+        _dry(DryRunLine.PLAN, procedure=plan.procedure.label, levels=len(plan.levels_N), freqs=len(plan.freqs_Hz),
+             direction=plan.direction, steps=len(steps), measured=n,
+             per_sweep=plan.adaptive_per_sweep if plan.adaptive_per_sweep and n != len(steps) else None,
+             refined=refined, refine_steps=plan.refine_steps, modes=list(plan.refine_modes),
+             tolerance=plan.refine_tolerance, dwell_cycles=plan.dwell_cycles, **named)
+        _dry(DryRunLine.LEVELS, levels=list(plan.levels_N), unit=q.unit, quantity=q.name, held=q.key != FORCE.key)
+        print(dry_run_time_line(plan, seconds, refined))
         if getattr(args, "steps", False):
-            print("\n".join(["steps, in the order they run:"] + [p.line() for p in planned_step_list(plan)]))
+            _dry(DryRunLine.STEPS, lines=[p.line() for p in planned_step_list(plan)])
     print(envelope_report(envelope(plan, rig)))
     from procedures.online_id import identifiability
     try:
         runnable = check_envelope(plan, rig)
     except EnvelopeError as e:
-        print(f"REFUSED: {str(e).splitlines()[0]}")
+        _dry(DryRunLine.REFUSED, first=str(e).splitlines()[0])
         return ExitCode.LIMIT
     if runnable.skip:
-        print(f"envelope: {len(runnable.schedule())} steps run, {len(steps) - len(runnable.schedule())} "
-              f"skipped (infeasible = \"skip\")")
+        _dry(DryRunLine.RUNS_SOME, run=len(runnable.schedule()), skipped=len(steps) - len(runnable.schedule()))
     else:
-        print("envelope ok: the rig's limits hold every step")
+        _dry(DryRunLine.ENVELOPE_OK)
     for w in identifiability(runnable, rig) if plan.procedure is ProcedureKind.STEPPED_SINE else []:
-        print(f"identifiability warning: {w}")
+        _dry(DryRunLine.IDENTIFIABILITY, warning=w)
     return 0
+
+
+def _dry(code: DryRunLine, **fields) -> None:
+    print(_said(terminal_run.DRY_RUN, code, **fields))
 
 
 def dry_run_time_line(plan, typical_s: float, refined: int) -> str:
     """dry-run's rig time: the upper bound (bench.plan_time) and the typical figure."""
     from ..plan_time import extra_block_seconds_max, rig_time_bound_s
-    return (f"expected rig time: at most {_duration(rig_time_bound_s(plan))} (every step's force control and extra "
-            f"settle blocks to the plan's limits, steps chosen online at the lowest frequency, refinement budget "
-            f"used up); without the extra settle blocks at most {_duration(rig_time_bound_s(plan, extra_settle=False))}, "
-            f"plus at most {extra_block_seconds_max(plan, min(plan.freqs_Hz)):.3g} s for each extra settle block a "
-            f"step needs (at most {plan.max_extra_settle_blocks} a step); typically about {_duration(typical_s)}"
-            + (" with the refinement budget used up" if refined else "")
-            + " (a simulated rig runs faster or slower than real time)")
-
-
-def _duration(seconds: float) -> str:
-    m, s = divmod(int(round(seconds)), 60)
-    h, m = divmod(m, 60)
-    return f"{h} h {m:02d} min" if h else f"{m} min {s:02d} s" if m else f"{s} s"
+    return terminal.say(terminal_run.DRY_RUN, DryRunLine.TIME, dict(
+        quantity=plan.level_quantity.name, bound_s=rig_time_bound_s(plan),
+        without_extra_s=rig_time_bound_s(plan, extra_settle=False),
+        block_s=extra_block_seconds_max(plan, min(plan.freqs_Hz)), blocks=plan.max_extra_settle_blocks,
+        typical_s=typical_s, refined=refined))
 
 
 def _latch():
@@ -145,13 +188,11 @@ def _session_held(args, resume: bool, latch) -> int:
         meta, acc = store.metadata, store.account()
         retry = bool(getattr(args, "retry_skipped", False)) and bool(acc.skipped)
         if acc.complete and not retry and meta.get("status") == RunStatus.COMPLETED:
-            print("resume: nothing to do: the run completed and its steps are all there "
-                  + ("or were skipped at run time as the plan allows (--retry-skipped measures them again) "
-                     if acc.skipped else "") + f"({acc.summary()})")
+            print(_said(terminal_run.RESUME, ResumeLine.NOTHING_TO_DO, skipped=bool(acc.skipped), summary=acc.summary()))
             return ExitCode.OK
-        print(f"resume: {acc.resume_text(retry)}" if acc.missing or acc.damaged or acc.owed or retry else
-              f"resume: every planned step is there{' or was skipped at run time' if acc.skipped else ''}; "
-              f"finishing the run (it ended '{meta.get('status', '?')}')",
+        print(_said(terminal_run.RESUME, ResumeLine.MEASURES, text=acc.resume_text(retry))
+              if acc.missing or acc.damaged or acc.owed or retry else
+              _said(terminal_run.RESUME, ResumeLine.FINISHING, skipped=bool(acc.skipped), status=meta.get("status", "?")),
               flush=True)
         plan, rig = stored_configs(meta, f"{args.run}/run.json")     # validated as account() did
         out, seed = Path(args.run), meta.get("sim_seed")
@@ -176,7 +217,7 @@ def _session_held(args, resume: bool, latch) -> int:
     begin_report = False
     if wants_report:
         latch.reopen()             # the report is work too; held: nothing raises inside it (0051)
-        latch.hold(doing=REPORTING)
+        latch.hold(doing=Doing.REPORT)
         begin_report = latch.reason is None    # decided before "run completed": a signal after it is one during the report
     print(say(RunLine.ENDED, status=meta["status"], done=meta["steps_done"], total=meta["steps_total"], out=out),
           flush=True)
@@ -198,14 +239,11 @@ def _session_held(args, resume: bool, latch) -> int:
     return code
 
 
-REPORTING = "the report is written (the output is off)"
-
-
 def _report(run: Path, latch, with_runs=()) -> None:
     """Write the run's report with ``latch`` held: a signal meanwhile is recorded, not
     raised into the numba kernels or the figures' finalizers where it could be swallowed,
     and is honoured once the report is complete (decision 0051)."""
-    latch.hold(doing=REPORTING)
+    latch.hold(doing=Doing.REPORT)
     from ..api import open_run
     path = open_run(run).report(with_runs=tuple(with_runs))
     print(say(RunLine.REPORT, path=path, then=latch.reason), flush=True)
@@ -244,7 +282,7 @@ def _start_watch(run_dir: Path, args):
     if not getattr(args, "watch", False):
         return None
     server = _watch_server(run_dir, args.watch_host, args.watch_port).start()
-    print(f"watch: {server.url}", flush=True)
+    print(_said(terminal_run.WATCH, WatchLine.URL, url=server.url), flush=True)
     return server
 
 
@@ -253,22 +291,22 @@ def _watch_server(run_dir: Path, host: str, port: int):
     try:
         return WatchServer(run_dir, host, port)
     except OSError as e:       # port taken, no such interface, privileged port
-        raise ConfigurationError(f"cannot serve the watch page on {host}:{port}: {e}") from e
+        raise terminal_run.refused(ConfigurationError, RunRefusal.WATCH_PORT, host=host, port=port, error=e) from e
 
 
 def cmd_watch(args) -> int:
     """Serve the live page of a run directory until Ctrl-C."""
     run_dir = Path(args.run)
     if run_dir.exists() and not run_dir.is_dir():
-        raise ConfigurationError(f"{run_dir}: not a run directory (a file)")
+        raise terminal_run.refused(ConfigurationError, RunRefusal.WATCH_A_FILE, path=run_dir)
     absent = not run_dir.is_dir()
     if absent and not run_dir.absolute().parent.is_dir():      # a mistyped path, not a run to come
-        raise ConfigurationError(f"{run_dir}: no such run directory, nor its parent {run_dir.absolute().parent} "
-                                 f"(bench watch waits for a run directory to appear inside an existing one)")
+        raise terminal_run.refused(ConfigurationError, RunRefusal.WATCH_NO_PARENT, path=run_dir,
+                                   parent=run_dir.absolute().parent)
     if absent:        # started before the run: the page shows "waiting" until the run creates it
-        print(f"waiting for {run_dir} to appear ... (Ctrl-C stops)", flush=True)
+        print(_said(terminal_run.WATCH, WatchLine.WAITING, path=run_dir), flush=True)
     elif not (run_dir / "run.json").is_file():
-        log.warning("%s has no run.json yet: the page waits for the run to start", run_dir)
+        log.warning(_said(terminal_run.WATCH, WatchLine.NO_RUN_JSON, path=run_dir))
     from ..signals import ENDING, handling
 
     server = _watch_server(run_dir, args.host, args.port)
@@ -277,13 +315,13 @@ def cmd_watch(args) -> int:
     ended = []
     with handling(lambda signum, frame: ended.append(signum), *ENDING):
         server.start()
-        print(f"watch: {server.url}  (Ctrl-C ends the page, not the run)", flush=True)
+        print(_said(terminal_run.WATCH, WatchLine.SERVING, url=server.url), flush=True)
         try:
             while not ended:
                 time.sleep(0.2)
                 if absent and run_dir.is_dir():
                     absent = False
-                    print(f"{run_dir} appeared: the page follows the run", flush=True)
+                    print(_said(terminal_run.WATCH, WatchLine.APPEARED, path=run_dir), flush=True)
         finally:
             server.close()         # open pages get the last state and a goodbye
     return 0
@@ -315,9 +353,9 @@ def _sequence(args, resume: bool) -> int:
                run_sequence(Path(args.sequence), Path(args.out), progress=progress, report=not args.no_report))
     end_line()
     for e in res.entries:
-        print(f"{e['name']}: {e['status']}" + (f" ({e['steps_done']}/{e['steps_total']} steps)"
-                                                if e["status"] != "not started" else ""))
-    print(f"sequence report: {res.path / 'report.md'}")
+        print(_said(terminal_run.SEQUENCE, SequenceLine.ENTRY, name=e["name"], status=e["status"], done=e["steps_done"],
+                    total=e["steps_total"]))
+    print(_said(terminal_run.SEQUENCE, SequenceLine.REPORT, path=res.path / "report.md"))
     statuses = [e["status"] for e in res.entries]
     if res.completed:
         return ExitCode.OK
@@ -351,6 +389,6 @@ def parse_labels(items: list[str] | None) -> dict[str, str]:
     for item in items or []:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
-            raise ConfigurationError(f"--label {item!r}: expected KEY=VALUE, e.g. --label lubricant=\"ISO VG 32\"")
+            raise terminal_run.refused(ConfigurationError, RunRefusal.LABEL, item=item)
         out[key.strip()] = value.strip()
     return out

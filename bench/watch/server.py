@@ -42,11 +42,13 @@ import sys
 import threading
 import time
 import urllib.parse
+from enum import StrEnum
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
 from ..storage import RunStatus
+from ..words import page, say, terminal_run
 from . import stop
 from .snapshot import RunReader
 
@@ -85,10 +87,45 @@ def is_loopback(host: str) -> bool:
         return False
     mapped = getattr(ip, "ipv4_mapped", None)
     return (mapped or ip).is_loopback
-NO_TOKEN = ("this link has no token: open the link with ?token=... that `bench watch` or "
-            "`bench run --watch` printed")
-WRONG_TOKEN = ("this link's token is not this server's (the page was restarted?): open the link "
-               "that `bench watch` or `bench run --watch` printed last")
+
+
+class PageError(StrEnum):
+    """Why the server answers a request with an error (the JSON's ``error``; its words:
+    :data:`bench.words.page.ERROR`)."""
+
+    NO_TOKEN = "no_token"
+    WRONG_TOKEN = "wrong_token"
+    BUSY = "busy"                           # connections: every ordinary one taken
+    CHUNKED = "chunked"                     # Transfer-Encoding
+    BAD_LENGTH = "bad_length"               # given: the Content-Length headers
+    TOO_LARGE = "too_large"                 # length, most (bytes)
+    HOST = "host"                           # an unexpected Host header
+    NO_PAGE = "no_page"                     # path
+    NO_ACTION = "no_action"                 # path
+    STOP_TOKEN = "stop_token"               # a stop without a valid token
+    NOT_RUNNING = "not_running"             # status, gone (the run's process)
+    STOP_UNWRITTEN = "stop_unwritten"       # error
+    STREAMS = "streams"                     # most: live pages
+
+
+class ServerLine(StrEnum):
+    """What the watch page's server logs (:data:`bench.words.terminal_run.SERVER`)."""
+
+    OFF_LOOPBACK = "off_loopback"           # host
+    FULL = "full"                           # connections, client
+    LATE = "late"                           # a request not read within its deadline
+    WENT_AWAY = "went_away"                 # client, error
+    ERROR = "error"                         # client, kind, error
+    STOP_REFUSED = "stop_refused"           # client, given (a wrong token, or none)
+    STOP_UNWRITTEN = "stop_unwritten"       # path, error
+
+
+def _error(code: PageError, **fields) -> dict:
+    return {"error": say(page.ERROR, code, fields)}
+
+
+def _logged(code: ServerLine, **fields) -> str:
+    return say(terminal_run.SERVER, code, fields)
 
 
 def _plotly_js() -> bytes:
@@ -141,9 +178,7 @@ class WatchServer(ThreadingHTTPServer):
         self._watchdog.start()
         super().__init__((host, port), _Handler)
         if not self.loopback:
-            log.warning("the watch page is served on %s, off loopback: anyone who can reach this "
-                        "address can read the run (the stop token is still needed to stop it)",
-                        self.server_address[0])
+            log.warning(_logged(ServerLine.OFF_LOOPBACK, host=self.server_address[0]))
 
     # one thread per connection, at most MAX_CONNECTIONS of them, and STOP_RESERVE more that
     # serve a stop request only (so slow clients filling the others cannot lock the stop out)
@@ -154,8 +189,7 @@ class WatchServer(ThreadingHTTPServer):
             reserved = True
             self._reserved.add(request)
         else:
-            log.warning("watch: %d connections already; closed one from %s", MAX_CONNECTIONS + STOP_RESERVE,
-                        client_address[0])
+            log.warning(_logged(ServerLine.FULL, connections=MAX_CONNECTIONS + STOP_RESERVE, client=client_address[0]))
             self.shutdown_request(request)
             return
         with self._streams_lock:
@@ -208,16 +242,16 @@ class WatchServer(ThreadingHTTPServer):
                     r.shutdown(socket.SHUT_RDWR)       # the handler's read ends; it closes
                 except OSError:
                     pass
-                log.debug("watch: request not complete within its deadline; connection closed")
+                log.debug(_logged(ServerLine.LATE))
 
     def handle_error(self, request, client_address):
         """A client that went away (a closed tab, a reset) is routine: no traceback on the
         terminal; anything else is one warning line (-vv: the traceback)."""
         exc = sys.exc_info()[1]
         if isinstance(exc, (ConnectionError, TimeoutError)):
-            log.debug("watch: %s went away: %s", client_address[0], exc)
+            log.debug(_logged(ServerLine.WENT_AWAY, client=client_address[0], error=exc))
             return
-        log.warning("watch: error serving %s: %s: %s", client_address[0], type(exc).__name__, exc,
+        log.warning(_logged(ServerLine.ERROR, client=client_address[0], kind=type(exc).__name__, error=exc),
                     exc_info=log.isEnabledFor(logging.DEBUG))
 
     @property
@@ -281,8 +315,7 @@ class _Handler(BaseHTTPRequestHandler):
                 self.command == "POST" and self.path.split("?", 1)[0] == "/api/stop"):
             return False
         self.close_connection = True
-        self._send_json(HTTPStatus.SERVICE_UNAVAILABLE,
-                        {"error": f"{MAX_CONNECTIONS} connections busy; only a stop request is served now"})
+        self._send_json(HTTPStatus.SERVICE_UNAVAILABLE, _error(PageError.BUSY, connections=MAX_CONNECTIONS))
         return True
 
     # ------------------------------------------------------------------ helpers
@@ -305,20 +338,19 @@ class _Handler(BaseHTTPRequestHandler):
         given = self.headers.get_all("Content-Length") or []
         if self.headers.get("Transfer-Encoding"):
             self.close_connection = True
-            self._send_json(HTTPStatus.NOT_IMPLEMENTED, {"error": "Transfer-Encoding is not supported"})
+            self._send_json(HTTPStatus.NOT_IMPLEMENTED, _error(PageError.CHUNKED))
             return False
         if not given:
             self.server.disarm(self.request)
             return True
         if len(set(given)) != 1 or not _DIGITS.fullmatch(given[0].strip()):
             self.close_connection = True
-            self._send_json(HTTPStatus.BAD_REQUEST, {"error": f"bad Content-Length: {', '.join(given)[:40]!r}"})
+            self._send_json(HTTPStatus.BAD_REQUEST, _error(PageError.BAD_LENGTH, given=given))
             return False
         length = int(given[0])
         if length > MAX_BODY:
             self.close_connection = True
-            self._send_json(HTTPStatus.REQUEST_ENTITY_TOO_LARGE,
-                            {"error": f"request body of {length} bytes; at most {MAX_BODY}"})
+            self._send_json(HTTPStatus.REQUEST_ENTITY_TOO_LARGE, _error(PageError.TOO_LARGE, length=length, most=MAX_BODY))
             return False
         if length and len(self.rfile.read(length)) < length:
             self.close_connection = True       # the client went away mid-body
@@ -329,12 +361,12 @@ class _Handler(BaseHTTPRequestHandler):
     def _send_json(self, code: int, obj) -> None:
         self._send(code, _json(obj), "application/json")
 
-    def _token_problem(self, given: str) -> str | None:
+    def _token_problem(self, given: str) -> PageError | None:
         """Why ``given`` does not open the run's data (None: it does)."""
         if not given:
-            return NO_TOKEN
+            return PageError.NO_TOKEN
         if not hmac.compare_digest(given.encode(), self.server.token.encode()):
-            return WRONG_TOKEN
+            return PageError.WRONG_TOKEN
         return None
 
     def _host_ok(self) -> bool:
@@ -349,12 +381,12 @@ class _Handler(BaseHTTPRequestHandler):
         if not self._body_ok() or self._only_stop():
             return
         if not self._host_ok():
-            return self._send_json(HTTPStatus.FORBIDDEN, {"error": "unexpected Host header"})
+            return self._send_json(HTTPStatus.FORBIDDEN, _error(PageError.HOST))
         path, _, query = self.path.partition("?")
         if path.startswith("/api/"):
             problem = self._token_problem(urllib.parse.parse_qs(query).get("token", [""])[0])
             if problem:
-                return self._send_json(HTTPStatus.FORBIDDEN, {"error": problem})
+                return self._send_json(HTTPStatus.FORBIDDEN, _error(problem))
         if path in ("/", "/index.html"):
             self._send(HTTPStatus.OK, PAGE.read_bytes(), "text/html; charset=utf-8")
         elif path == "/page.js":
@@ -366,31 +398,29 @@ class _Handler(BaseHTTPRequestHandler):
         elif path == "/api/stream":
             self._stream()
         else:
-            self._send_json(HTTPStatus.NOT_FOUND, {"error": f"no such page: {path}"})
+            self._send_json(HTTPStatus.NOT_FOUND, _error(PageError.NO_PAGE, path=path))
 
     def do_POST(self):  # noqa: N802
         if not self._body_ok() or self._only_stop():
             return
         if not self._host_ok():
-            return self._send_json(HTTPStatus.FORBIDDEN, {"error": "unexpected Host header"})
+            return self._send_json(HTTPStatus.FORBIDDEN, _error(PageError.HOST))
         if self.path.split("?", 1)[0] != "/api/stop":
-            return self._send_json(HTTPStatus.NOT_FOUND, {"error": f"no such action: {self.path}"})
+            return self._send_json(HTTPStatus.NOT_FOUND, _error(PageError.NO_ACTION, path=self.path))
         given = self.headers.get("X-Stop-Token", "")
         if not hmac.compare_digest(given.encode(), self.server.token.encode()):
-            log.warning("refused a stop request from %s: %s token", self.address_string(),
-                        "wrong" if given else "no")
-            return self._send_json(HTTPStatus.FORBIDDEN, {"error": "a valid stop token is needed "
-                                                          "(the one printed with the page's URL)"})
+            log.warning(_logged(ServerLine.STOP_REFUSED, client=self.address_string(), given=bool(given)))
+            return self._send_json(HTTPStatus.FORBIDDEN, _error(PageError.STOP_TOKEN))
         state = self.server.reader.snapshot()
         if state.get("status") != RunStatus.RUNNING or state.get("process_gone"):
-            shown = "process gone" if state.get("process_gone") else state.get("status")
-            return self._send_json(HTTPStatus.CONFLICT, {"error": f"the run is not running ({shown})"})
+            return self._send_json(HTTPStatus.CONFLICT, _error(PageError.NOT_RUNNING, status=state.get("status"),
+                                                               gone=bool(state.get("process_gone"))))
         try:
-            req = stop.request_stop(self.server.run_dir, by=f"the watch page ({self.client_address[0]})")
+            req = stop.request_stop(self.server.run_dir,
+                                    by=say(terminal_run.STOP, stop.StopLine.BY_PAGE, dict(client=self.client_address[0])))
         except OSError as e:
-            log.error("could not write the stop request into %s: %s", self.server.run_dir, e)
-            return self._send_json(HTTPStatus.INTERNAL_SERVER_ERROR,
-                                   {"error": f"could not write the stop request: {e}; use Ctrl-C in the run's terminal"})
+            log.error(_logged(ServerLine.STOP_UNWRITTEN, path=self.server.run_dir, error=e))
+            return self._send_json(HTTPStatus.INTERNAL_SERVER_ERROR, _error(PageError.STOP_UNWRITTEN, error=e))
         self._send_json(HTTPStatus.ACCEPTED, {"requested": req})
 
     def _stream(self) -> None:
@@ -400,8 +430,7 @@ class _Handler(BaseHTTPRequestHandler):
                 self.server.streams += 1
         if full:
             self.close_connection = True
-            return self._send_json(HTTPStatus.SERVICE_UNAVAILABLE,
-                                   {"error": f"{MAX_STREAMS} live pages open already; close one"})
+            return self._send_json(HTTPStatus.SERVICE_UNAVAILABLE, _error(PageError.STREAMS, most=MAX_STREAMS))
         try:
             self.send_response(HTTPStatus.OK)
             self.send_header("Content-Type", "text/event-stream")

@@ -31,7 +31,7 @@ from procedures.plan import GUESS_KEYS, Plan
 from ..config import ConfigError, stored_rig
 from ..files import open_regular, read_file
 from ..storage import RunDirError, RunStatus, stored_plan
-from ..words import page
+from ..words import page, say, terminal_run
 from .stop import STOP_FILE
 
 log = logging.getLogger(__name__)
@@ -98,7 +98,7 @@ def plan_of(meta: dict) -> Plan | None:
     try:
         return stored_plan(meta, "run.json")
     except RunDirError as e:
-        log.debug("no usable plan in run.json: %s", e)
+        log.debug(_logged(SnapshotLine.NO_PLAN, error=e))
         return None
 
 
@@ -135,6 +135,33 @@ class PageWarning(StrEnum):
     """A warning the page makes of the stored steps (its words: :mod:`bench.words.page`)."""
 
     FORCE_NOT_REACHED = "force_not_reached"     # key, target_N, error (relative), iterations
+
+
+class PageMessage(StrEnum):
+    """The page's message of a run it cannot show yet, and of a fit that failed (its words:
+    :data:`bench.words.page.MESSAGE`)."""
+
+    WAITING = "waiting"                         # no run.json yet
+    UNREADABLE = "unreadable"                   # error: run.json's
+    TOO_DEEP = "too_deep"                       # run.json nested too deeply
+    FIT_FAILED = "fit_failed"                   # names: the parameters not finite or absurd
+    UNUSABLE = "unusable"                       # the final identification holds neither values nor an error
+
+
+class SnapshotLine(StrEnum):
+    """What reading a run for the page logs (:data:`bench.words.terminal_run.SNAPSHOT`)."""
+
+    NO_PLAN = "no_plan"                         # error
+    STEP_UNREADABLE = "step_unreadable"         # path, error
+    NO_MODES = "no_modes"                       # error
+
+
+def _message(code: PageMessage, **fields) -> str:
+    return say(page.MESSAGE, code, fields)
+
+
+def _logged(code: SnapshotLine, **fields) -> str:
+    return say(terminal_run.SNAPSHOT, code, fields)
 
 
 class RunReader:
@@ -195,7 +222,7 @@ class RunReader:
                     self._steps[e.name] = json.loads(read_file(Path(e.path)))
                     self._step_mtime[e.name] = e.stat().st_mtime
                 except (OSError, ValueError, RecursionError) as exc:     # renamed into place: only if damaged
-                    log.warning("cannot read step %s: %s", e.path, exc)
+                    log.warning(_logged(SnapshotLine.STEP_UNREADABLE, path=e.path, error=exc))
         return [self._steps[k] for k in sorted(self._steps)]
 
     def snapshot(self) -> dict:
@@ -213,11 +240,11 @@ class RunReader:
         try:
             meta = json.loads(read_file(self.path / "run.json"))
         except FileNotFoundError:
-            return {"run_dir": str(self.path), "status": "waiting", "message": "no run.json yet: waiting for the run to start"}
+            return {"run_dir": str(self.path), "status": "waiting", "message": _message(PageMessage.WAITING)}
         except ValueError as e:
-            return {"run_dir": str(self.path), "status": "unreadable", "message": f"run.json: {e}"}
+            return {"run_dir": str(self.path), "status": "unreadable", "message": _message(PageMessage.UNREADABLE, error=e)}
         except RecursionError:
-            return {"run_dir": str(self.path), "status": "unreadable", "message": "run.json: nested too deeply"}
+            return {"run_dir": str(self.path), "status": "unreadable", "message": _message(PageMessage.TOO_DEEP)}
         results = self._read_steps()
         events = _jsonl(self._events.read())
         ident = _jsonl(self._ident.read())
@@ -344,7 +371,7 @@ class RunReader:
             modes = track_modes(data, pitch=not (model is not None and band is None),
                                 pitch_band_Hz=band)
         except Exception as e:  # noqa: BLE001 - the page must come out; the rest of it is unaffected
-            log.warning("modes could not be estimated: %s", e)
+            log.warning(_logged(SnapshotLine.NO_MODES, error=e))
             return []
         if band is None and not any(e.mode == "pitch" and e.ok for e in modes):
             modes = [e for e in modes if e.mode != "pitch"]
@@ -371,10 +398,9 @@ class RunReader:
         latest_warnings = ident[-1].get("warnings", []) if ident else []
         final = meta.get("identification")
         if isinstance(final, dict) and isinstance(final.get("values"), dict) and not ok(final):
-            final = {"error": f"the final fit failed: {', '.join(insane(final['values']))} came out not finite or "
-                              "absurd (an overflow in the fit)"}
+            final = {"error": _message(PageMessage.FIT_FAILED, names=list(insane(final["values"])))}
         elif not (isinstance(final, dict) and isinstance(final.get("values"), dict)):
-            final = None if not isinstance(final, dict) else {"error": final.get("error", "unusable result")}
+            final = None if not isinstance(final, dict) else {"error": final.get("error", _message(PageMessage.UNUSABLE))}
         if analysis is not None and ok(analysis):
             final = analysis
         try:

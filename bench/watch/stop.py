@@ -14,14 +14,25 @@ import json
 import logging
 import os
 import tempfile
+from enum import StrEnum
 from pathlib import Path
 
 from ..files import read_file
 from ..storage import file_mode, now_iso
+from ..words import say, terminal_run
 
 log = logging.getLogger(__name__)
 
 STOP_FILE = "stop.request"
+
+
+class StopLine(StrEnum):
+    """A stop request's words (:data:`bench.words.terminal_run.STOP`): the log line, and the
+    interruption's reason (an ``interrupted`` event stores it)."""
+
+    REQUESTED = "requested"                 # path (the run directory), by
+    STOPPED = "stopped"                     # by
+    BY_PAGE = "by_page"                     # client: who asked, the request's ``by``
 
 
 class StopRequested(KeyboardInterrupt):
@@ -36,7 +47,7 @@ def request_stop(run_dir: Path, by: str) -> dict:
     with os.fdopen(fd, "w") as fh:
         json.dump(req, fh)
     os.replace(tmp, Path(run_dir) / STOP_FILE)
-    log.warning("stop requested for %s by %s", run_dir, by)
+    log.warning(say(terminal_run.STOP, StopLine.REQUESTED, dict(path=run_dir, by=by)))
     return req
 
 
@@ -70,7 +81,7 @@ class StopOnRequest:
             self._also()            # a stop from elsewhere (the session's signal latch)
         if self._file.exists():
             req = pending(self._file.parent) or {}
-            raise StopRequested(f"stop requested by {req.get('by', 'unknown')}")
+            raise StopRequested(say(terminal_run.STOP, StopLine.STOPPED, dict(by=req.get("by", "unknown"))))
 
     def acquire_periods(self, *args, **kw):
         self._check()

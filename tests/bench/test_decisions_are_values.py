@@ -23,21 +23,30 @@ import bench.words
 import bench.words.page as page_words
 import bench.words.report as report_words
 import bench.words.terminal as terminal_words
+import bench.words.terminal_run as terminal_run_words
 import sim.artefacts.sentences as sentences
 import sim.records as records
-from bench.cli import ExitCode, main
+from bench.accounting import AccountLine, AccountRefusal
+from bench.cli import CliLine, ExitCode, main
 from bench.commands.results import CheckLine, ModeLine
-from bench.commands.run import RunLine
-from bench.demo import MANIFEST, OutDirRefusal
+from bench.commands.run import DryRunLine, ResumeLine, RunLine, RunRefusal, SequenceLine, WatchLine
+from bench.demo import MANIFEST, DemoLine, OutDirRefusal
+from bench.durable import WriteRefusal
+from bench.files import FileKind, FileRefusal
 from bench.reports._markdown import accounting_md, flagged_reasons
 from bench.reports._overall import Concern, Verdict, overall
 from bench.reports._run import load_run
 from bench.runlock import LOCK_NAME, LockRefusal
+from bench.session import EnvelopeProblem, EnvelopeRefusal, SessionLine
+from bench.signals import Doing, SignalLine
 from bench.step_files import Problem
-from bench.storage import RunDirRefusal, RunStore
+from bench.storage import RunDirRefusal, RunStore, StoreLine
 from bench.toml_tables import ConfigProblem
 from bench.verdict import Kept, Short
-from bench.watch.snapshot import PageWarning, RunReader
+from bench.warmup import WarmupLine
+from bench.watch.server import PageError, ServerLine
+from bench.watch.snapshot import PageMessage, PageWarning, RunReader, SnapshotLine
+from bench.watch.stop import StopLine
 from procedures.stepped_sine import unsettled_in
 from sim.artefacts import artefact_causes, assess_step
 
@@ -154,6 +163,17 @@ def test_every_code_has_words_in_its_renderers():
     assert set(terminal_words.CHECK) == {str(c) for c in CheckLine}
     assert set(terminal_words.RUN) == {str(c) for c in RunLine}
     assert set(terminal_words.MODES) == {str(c) for c in ModeLine}
+    run = terminal_run_words            # a run's words before and while it runs (bench run, resume, dry-run, watch)
+    for words, codes in ((run.DRY_RUN, DryRunLine), (run.RESUME, ResumeLine), (run.WATCH, WatchLine),
+                         (run.SEQUENCE, SequenceLine), (run.ENVELOPE, EnvelopeProblem), (run.SESSION, SessionLine),
+                         (run.DOING, Doing), (run.SIGNAL, SignalLine), (run.STORE, StoreLine),
+                         (run.FILE_KIND, FileKind), (run.ACCOUNT, AccountLine),
+                         (run.WARMUP, WarmupLine), (run.DEMO, DemoLine), (run.CLI, CliLine),
+                         (run.SNAPSHOT, SnapshotLine), (run.STOP, StopLine), (run.SERVER, ServerLine),
+                         (page_words.MESSAGE, PageMessage), (page_words.ERROR, PageError),
+                         (run.REFUSAL, (*RunRefusal, *EnvelopeRefusal, *WriteRefusal, *FileRefusal,
+                                                                  *AccountRefusal))):
+        assert set(words) == {str(c) for c in codes}, codes
 
 
 def _refusals(run, outs, capsys) -> list:
@@ -391,3 +411,42 @@ def test_a_broken_promise_said_as_codes_still_exits_1(tmp_path, capsys, monkeypa
     assert "<ended>" in said.out.splitlines() and {"<promise_broken>", "<output_off>"} <= set(said.err.splitlines())
     assert main(["check", str(run)]) == ExitCode.OK
     assert "<promise_short>" in capsys.readouterr().out.splitlines()
+
+
+ENVELOPE_PLAN = """[plan]
+levels_N = [1.0, 30.0]
+infeasible = "{infeasible}"
+[plan.frequencies]
+list_Hz = [20.0, 80.0]
+[plan.limits]
+drive_V = 7.0
+force_N = 130.0
+disp_m = 0.15e-3
+accel_m_s2 = 20.0
+"""
+
+
+def test_rewording_a_runs_words_changes_no_envelope_decision(tmp_path, capsys, monkeypatch):
+    """``bench dry-run`` of a plan whose 30 N at 20 Hz moves a free 10 kg mass 0.19 mm (> 0.15
+    mm): refused (exit 3) as a code, and with ``infeasible = "skip"`` the same step skipped
+    (exit 0), when the terminal says codes only; the refusal keeps its code and the problem."""
+    from bench.config import DEFAULTS, load_plan, load_rig
+    from bench.session import EnvelopeError, check_envelope
+    plans = {}
+    for infeasible in ("refuse", "skip"):
+        plans[infeasible] = tmp_path / f"{infeasible}.toml"
+        plans[infeasible].write_text(ENVELOPE_PLAN.format(infeasible=infeasible))
+    _codes_only(monkeypatch)
+    assert main(["dry-run", "--plan", str(plans["refuse"])]) == ExitCode.LIMIT
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[:3] == ["<plan>", "<levels>", "<time>"] and lines[-1] == "<refused>", lines
+    assert lines[-2].split()[0] == "30" and lines[-2].endswith("20 Hz: <displacement>"), lines   # the envelope's row
+    assert main(["dry-run", "--plan", str(plans["skip"])]) == ExitCode.OK
+    assert "<runs_some>" in capsys.readouterr().out.splitlines()
+    rig = load_rig(DEFAULTS / "sim_rig.toml")
+    assert check_envelope(load_plan(plans["skip"]), rig).skip == ((1, 0),)          # 30 N at 20 Hz
+    with pytest.raises(EnvelopeError) as refusal:
+        check_envelope(load_plan(plans["refuse"]), rig)
+    assert str(refusal.value) == "<not_held>" and refusal.value.code == EnvelopeRefusal.NOT_HELD
+    bad = [p for p in refusal.value.fields["points"] if p.problems]
+    assert [(p.level, p.freq_Hz, [s.code for s in p.problems]) for p in bad] == [(30.0, 20.0, ["displacement"])]
