@@ -23,6 +23,7 @@ import bench.words
 import bench.words.page as page_words
 import bench.words.report as report_words
 import bench.words.terminal as terminal_words
+import bench.words.terminal_data as data_words
 import sim.artefacts.sentences as sentences
 import sim.records as records
 from bench.cli import ExitCode, main
@@ -33,9 +34,11 @@ from bench.reports._markdown import accounting_md, flagged_reasons
 from bench.reports._overall import Concern, Verdict, overall
 from bench.reports._run import load_run
 from bench.runlock import LOCK_NAME, LockRefusal
+from bench.sources import SourceProblem
 from bench.step_files import Problem
 from bench.storage import RunDirRefusal, RunStore
 from bench.toml_tables import ConfigProblem
+from bench.twin import NotInPlant, TwinNote, TwinSaid
 from bench.verdict import Kept, Short
 from bench.watch.snapshot import PageWarning, RunReader
 from procedures.stepped_sine import unsettled_in
@@ -154,6 +157,12 @@ def test_every_code_has_words_in_its_renderers():
     assert set(terminal_words.CHECK) == {str(c) for c in CheckLine}
     assert set(terminal_words.RUN) == {str(c) for c in RunLine}
     assert set(terminal_words.MODES) == {str(c) for c in ModeLine}
+    data = {"SOURCE": SourceProblem, "NOT_IN_PLANT": NotInPlant, "TWIN_NOTE": TwinNote, "TWIN": TwinSaid}
+    for name, codes in data.items():
+        assert set(getattr(data_words, name)) == {str(c) for c in codes}, name
+    assert set(data) == set(data_words._MAPPINGS)       # said() finds each code in one mapping only
+    every = [str(c) for codes in data.values() for c in codes]
+    assert len(every) == len(set(every))
 
 
 def _refusals(run, outs, capsys) -> list:
@@ -391,3 +400,45 @@ def test_a_broken_promise_said_as_codes_still_exits_1(tmp_path, capsys, monkeypa
     assert "<ended>" in said.out.splitlines() and {"<promise_broken>", "<output_off>"} <= set(said.err.splitlines())
     assert main(["check", str(run)]) == ExitCode.OK
     assert "<promise_short>" in capsys.readouterr().out.splitlines()
+
+
+def _twin_and_source_decisions(tmp_path, capsys) -> tuple:
+    """What the twin decides of three causes (not in the plant: the rig's own transient, a
+    line in one step that is not mains, a cause with no plant form; a viscous damping built
+    in), what the UFF58 reader decides of a step missing two records, and ``bench analyze``
+    of a file that holds no dataset 58 (exit status, and its one line)."""
+    from bench.config import DEFAULTS, load_rig
+    from bench.sources import _uff_step
+    from bench.twin import apply_causes
+    model = {k: v for k, v in vars(load_rig(DEFAULTS / "sim_rig.toml").model).items() if not k.startswith("_")}
+    causes = [dict(id="unsettled_transient"), dict(id="mystery"), dict(id="viscous_damping", parameters=dict(c=dict(value=3.0))),
+              dict(id="line_interference", channel="disp", parameters=dict(frequency=dict(value=37.3), amplitude=dict(value=1e-8)),
+                   evidence=dict(steps=["s1"]))]
+    _, applied, missed = apply_causes(dict(model), causes, dict(mass_kg=model["mass_kg"], drive_height_m=None))
+    with pytest.raises(ValueError) as e:
+        _uff_step("s1", [dict(ordinate_spec_data_type=13, _record=1, data=np.zeros(8))])
+    (tmp_path / "junk.uff").write_text("not a universal file\n")
+    code = main(["analyze", str(tmp_path / "junk.uff")])
+    return applied, missed, (e.value.code, e.value.fields, str(e.value)), code, capsys.readouterr().err.strip()
+
+
+def test_rewording_the_data_commands_words_changes_no_decision(tmp_path, capsys, monkeypatch):
+    """The twin's causes not in its plant, a UFF58 step's missing records and ``bench
+    analyze``'s refusal of a file with no dataset 58 are codes with fields; said as codes
+    (bench.words.terminal_data), the twin builds in and leaves out the same causes (a line in
+    one step is the rig's own vibration by its code, no longer by whether its words are
+    empty) and the command exits the same."""
+    applied, missed, (code, fields, said), status, err = _twin_and_source_decisions(tmp_path, capsys)
+    assert list(applied) == ["viscous_damping"] and [m["cause"] for m in missed] == ["unsettled_transient", "mystery",
+                                                                                     "line_interference"]
+    assert missed[2]["reason"].startswith("a 37.3 Hz line in 1 step(s) only, not mains")
+    assert (code, fields) == (SourceProblem.MISSING_RECORDS, {"sdts": [12, 8]})
+    assert said == "missing record(s): acceleration (type 12), displacement (type 8)"
+    assert status == ExitCode.USAGE and "junk.uff: no dataset 58 in the file (dataset types: []) (" in err, err
+    _codes_only(monkeypatch)
+    after = _twin_and_source_decisions(tmp_path, capsys)
+    assert after[0] == applied and [m["cause"] for m in after[1]] == [m["cause"] for m in missed]
+    assert [m["reason"] for m in after[1]] == ["<unsettled>", "<no_form>", "<free_vibration>"]
+    assert after[2] == (code, fields, "<missing_records>") and after[3] == status and "<no_dataset_58> (" in after[4]
+    monkeypatch.setattr(data_words, "NOT_IN_PLANT", {c: lambda **_: "" for c in data_words.NOT_IN_PLANT})
+    assert _twin_and_source_decisions(tmp_path, capsys)[:2] == (applied, [dict(m, reason="") for m in missed])

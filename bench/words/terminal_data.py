@@ -1,0 +1,162 @@
+"""The words of the data's commands (decision 0067): ``bench twin``, ``bench analyze``,
+``bench compare``, ``bench export`` and the readers of measured steps (:mod:`bench.sources`),
+by code.
+
+``SOURCE``: what is wrong with a source or one of its steps (:class:`bench.sources.SourceProblem`):
+a refusal's one-line error, or a step's rejection reason (analysis.json's ``steps_rejected``,
+the report, ``bench analyze``'s log).
+
+``NOT_IN_PLANT``: why a cause the analysis named is not in a twin's plant
+(:class:`bench.twin.NotInPlant`); ``TWIN_NOTE``: the defaults a twin used and why
+(:class:`bench.twin.TwinNote`); ``TWIN``: ``bench twin``'s refusals and warning and the words
+of the files it writes (:class:`bench.twin.TwinSaid`).  twin.json and the TOML files store
+these words.
+
+A code's words are found by :func:`said` in whichever mapping of this module has them (the
+codes are unique across the module); :func:`refused` makes the exception of a refusal.
+"""
+
+from __future__ import annotations
+
+from typing import TypeVar
+
+from . import Words, say
+
+E = TypeVar("E", bound=Exception)
+
+# ---------------------------------------------------------------------------- bench.sources
+
+# a UFF58 record's ordinate specific data type (record 8)
+_SDT = {13: "force (type 13)", 12: "acceleration (type 12)", 8: "displacement (type 8)"}
+
+SOURCE: Words = {
+    "no_such_source": lambda path: f"{path}: no such run directory or file",
+    "run_unreadable": lambda path, detail: f"{path}: cannot read the run's metadata or step results: {detail}",
+    "damaged": lambda detail: f"damaged: {detail}",
+    "raw_unreadable": lambda error, detail: f"raw block unreadable: {error}: {detail}",
+    "raw_lacks": lambda missing: f"raw block lacks {', '.join(missing)}",
+    "not_uff": lambda path, error, detail: f"{path}: not a readable universal file ({error}: {detail})",
+    "not_a_dataset": lambda found: f"pyuff gave a {found}",
+    "record_unreadable": lambda record, error, detail: (f"record {record} of the file (dataset 58) cannot be read: "
+                                                        f"{error}: {detail}"),
+    "no_dataset_58": lambda path, types: f"{path}: no dataset 58 in the file (dataset types: {types})",
+    "not_a_quantity": lambda record, sdt: (f"record {record}: ordinate data type {sdt} is not force (13), "
+                                           "acceleration (12) or displacement (8)"),
+    "two_records": lambda sdt, first, second: f"two {_SDT[sdt]} records (file records {first} and {second})",
+    "missing_records": lambda sdts: f"missing record(s): {', '.join(_SDT[t] for t in sdts)}",
+    "uneven_spacing": lambda record: f"record {record}: uneven abscissa spacing (need a constant 1/fs)",
+    "complex_record": lambda channel: f"{channel} record holds complex values (need a real time record)",
+    "lengths_differ": lambda sizes: f"records of different lengths: {sizes}",
+    "no_sample_rate": lambda: "no valid abscissa increment (sample rate) on the force record",
+    "rates_differ": lambda rates: f"records at different sample rates: { {k: f'{v:.6g} S/s' for k, v in rates.items()} }",
+    "not_finite": lambda channel: f"non-finite values in the {channel} record",
+    "not_time_records": lambda path, count: f"{path}: {count} dataset-58 functions not of type 1 (time response) ignored",
+    "step_rejected": lambda path, step, reason: f"{path}: step {step} rejected: {reason}",
+}
+
+# ---------------------------------------------------------------------------- bench.twin
+
+
+def _keys(keys: dict) -> str:
+    return ", ".join(f"{k} = {v}" for k, v in keys.items())
+
+
+# why a cause the analysis named is not in the twin's plant (bench.twin.NotInPlant): twin.json's
+# not_in_plant and rig.toml's "NOT IN THE PLANT" lines store these words
+NOT_IN_PLANT: Words = {
+    "unsettled": lambda: ("the measured rig's own free vibration, not yet settled at the record start: the twin's "
+                          "plant rings by itself; settle longer rather than build it in"),
+    "free_vibration": lambda freq_Hz, steps: (f"a {freq_Hz:.4g} Hz line in {steps} step(s) only, not mains: the "
+                                              "measured rig's own free vibration, not interference (decision 0045); "
+                                              "not built into the twin"),
+    "no_form": lambda: "no plant or sensor form for this cause (bench.twin.CAUSE_KEYS)",
+    "no_parameter": lambda parameter: f"the analysis gives no parameter {parameter!r} for it",
+    "not_in_this_plant": lambda absent, keys: f"this version's plant has no {', '.join(absent)} (keys {_keys(keys)})",
+    "taken": lambda taken, owners, keys: (f"the plant holds one {', '.join(taken)}, already taken by "
+                                          f"{', '.join(owners)} (keys {_keys(keys)})"),
+    "not_a_plant": lambda detail: f"its identified values are not a valid plant: {detail}",
+    "unexplained": lambda reasons: ("structure the analysis could not name"
+                                    + (f": {'; '.join(reasons)}" if reasons else "")),
+}
+
+# the defaults a twin used and why (bench.twin.TwinNote): twin.json's notes, rig.toml's "note:" lines
+TWIN_NOTE: Words = {
+    "levels_out": lambda levels, low, high: f"force levels {levels} N outside the bench's range {low:g}-{high:g} N left out",
+    "freqs_out": lambda count, low, high: f"{count} frequencies outside the bench's range {low:g}-{high:g} Hz left out",
+    "direction_from_order": lambda direction: f"sweep direction '{direction}' from the order of the steps in the file (no tags)",
+    "plan_defaults": lambda: "settle cycles (20) and force control from the plan defaults: a file does not record them",
+    "foreign_rig": lambda: ("a foreign file: calibration from bench/defaults/sim_rig.toml (sensitivities lowered so the "
+                            "largest reading is at most 5 V), amplifier gain reaching the largest level with 5 V, limits "
+                            "twice the plan's envelope and three times the largest measured peaks, drive limit 10 V"),
+    "no_drive_voltage": lambda gain: (f"no drive voltage in the source (a file): amp_gain_N_per_V is the calibration's "
+                                      f"single gain {gain:g} N/V, an ideal amplifier (no shaker fitted)"),
+}
+
+
+def _header(what: str, p: dict) -> str:
+    lines = [f"# {what}, written by `bench twin` (decision record 0026)",
+             f"# source: {p['source']} ({p['source_kind']}, {p['steps_used']} steps used, "
+             f"{p['steps_rejected']} rejected)",
+             f"# source sha256: {p['source_sha256']}",
+             f"# analysis: software {p['analysis_software_version'] or 'unknown'}; bench twin: software "
+             f"{p['software_version']}" + ("; plain Masing twin (base parameters only)" if p["plain"] else "")]
+    return "\n".join(lines) + "\n"
+
+
+def _rig_comments(parameters: dict, applied: dict, shaker: dict, not_in_plant: list, notes: list) -> str:
+    v = parameters
+    lines = ["# identified (95 %): " + ", ".join(
+        f"{k} {v[k]['value']:.5g} [{v[k]['low']:.5g}, {v[k]['high']:.5g}]" for k in ("F_s_N", "x_s_m", "n", "mass_kg"))]
+    for cid, keys in applied.items():
+        lines.append(f"# cause {cid} -> " + ", ".join(f"{k} = {val:.5g}" if isinstance(val, float) else f"{k} = {val}"
+                                                       for k, val in keys.items()))
+    for name, q in shaker.get("parameters", {}).items() if shaker.get("keys") else ():
+        lines.append(f"# shaker {name} {q['value']:.5g} " + (f"[{q['low']:.5g}, {q['high']:.5g}] (95 %)" if q["fitted"]
+                                                             else "(fixed at the default)"))
+    for item in not_in_plant:
+        lines.append(f"# NOT IN THE PLANT: {item['cause']}: {item['reason']}")
+    for n in notes:
+        lines.append(f"# note: {n}")
+    lines.append("# channel noise (force_noise_N, accel_noise_m_s2, disp_noise_m): median per-sample rms of the source")
+    return "\n".join(lines) + "\n"
+
+
+# bench twin's refusals and warning, and the words of the files it writes (bench.twin.TwinSaid)
+TWIN: Words = {
+    "no_level_or_freq": lambda path, level_low, level_high, freq_low, freq_high: (
+        f"{path}: no force level or frequency within the bench's range ({level_low:g}-{level_high:g} N, "
+        f"{freq_low:g}-{freq_high:g} Hz)"),
+    "no_analysis": lambda path: f"{path}: no analysis.json (run `bench analyze SOURCE` or leave --analysis out)",
+    "analysis_not_json": lambda path, detail: f"{path}: not valid JSON: {detail}",
+    "analysis_not_object": lambda path: f"{path}: not an analysis.json (a JSON object was expected)",
+    "analysis_schema": lambda path, schema: f"{path}: not an analysis.json (schema {schema!r})",
+    "no_steps_for_twin": lambda path: f"{path}: no usable steps to build a twin from",
+    "analysis_of_another": lambda analysis, of, source: f"the analysis in {analysis} is of {of}, not of {source}",
+    "no_toml_form": lambda name: f"no TOML form for {name}",
+    "rig_name": lambda source, plain: f"twin of {source}" + (" (plain Masing)" if plain else ""),
+    "rig_notes": lambda source, rig: f"bench twin of {source}" + (f" (rig '{rig}')" if rig is not None
+                                                                  else " (foreign file)"),
+    "plan_name": lambda name: f"twin of {name}",
+    "rig_label": lambda: "twin rig.toml",
+    "plan_label": lambda: "twin plan.toml",
+    "rig_header": lambda provenance: _header("Simulated twin of a measured rig", provenance),
+    "plan_header": lambda provenance: _header("The source's plan, to run on its twin", provenance),
+    "rig_comments": _rig_comments,
+}
+
+# the mappings :func:`said` and :func:`refused` look a code up in (by name: a reworded mapping is found)
+_MAPPINGS = ("SOURCE", "NOT_IN_PLANT", "TWIN_NOTE", "TWIN")
+
+
+def said(code: str, **fields) -> str:
+    """The words of ``code`` (a code of this module's mappings) with ``fields``."""
+    words = next((w for w in (globals()[n] for n in _MAPPINGS) if str(code) in w), {})
+    return say(words, code, fields)
+
+
+def refused(exc: type[E], code: str, **fields) -> E:
+    """The exception ``exc`` of a refusal: its message the words of ``code`` with ``fields``,
+    ``code`` and ``fields`` kept on it (what a caller decides by)."""
+    e = exc(said(code, **fields))
+    e.code, e.fields = code, fields         # type: ignore[attr-defined]
+    return e
