@@ -48,7 +48,8 @@ CODED = {"Problem": (("bench/step_files.py", "bench/storage.py", "bench/accounti
 # made by a renderer (bench/words/, or sim/artefacts/sentences.py for the words a step file stores)
 WORDLESS = ("bench/step_files.py", "bench/runlock.py", "sim/artefacts/causes.py", "sim/artefacts/cleaning.py",
             "sim/artefacts/decision.py", "sim/artefacts/quality.py", "bench/verdict.py", "bench/reports/_overall.py",
-            "bench/toml_tables.py", "bench/sources.py", "bench/twin.py")
+            "bench/toml_tables.py", "bench/sources.py", "bench/twin.py", "bench/compare.py", "bench/export.py",
+            "bench/export_modes.py", "bench/analyze.py")
 
 
 # modules that start `bench` in a process of their own on purpose (decision 0057)

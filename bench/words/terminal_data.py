@@ -12,6 +12,13 @@ the report, ``bench analyze``'s log).
 of the files it writes (:class:`bench.twin.TwinSaid`).  twin.json and the TOML files store
 these words.
 
+``COMPARE``: ``bench compare``'s refusals, the words compare.json stores and its summary
+(:class:`bench.compare.CompareSaid`).
+
+``EXPORT``: ``bench export``'s log lines and the ID lines of the universal files it writes
+(:class:`bench.export.ExportSaid`); ``ANALYZE``: ``bench analyze``'s
+(:class:`bench.analyze.AnalyzeSaid`).
+
 A code's words are found by :func:`said` in whichever mapping of this module has them (the
 codes are unique across the module); :func:`refused` makes the exception of a refusal.
 """
@@ -144,8 +151,115 @@ TWIN: Words = {
     "rig_comments": _rig_comments,
 }
 
+# ---------------------------------------------------------------------------- bench.compare
+
+
+def _pct(x) -> str:
+    return "n/a" if x is None else f"{100 * x:.3g} %"
+
+
+def _coverage(cov: dict) -> list[str]:
+    """The coverage in words: how many of the reference's usable steps were compared, which
+    were not and why, and whether they are the resonance."""
+    lines = [f"coverage: {cov['matched']} of the reference's {cov['reference_steps']} usable steps matched "
+             f"({100 * cov['fraction']:.3g} %; needed {100 * cov['min_coverage']:.3g} %)"]
+    if cov["unmatched"]:
+        res = cov["resonance_unmatched"]
+        if res:
+            lines.append(f"{len(res)} of the unmatched steps are at the resonance (within the half-power band of "
+                         f"their level's peak compliance), where the rig differs most: {', '.join(res)}")
+        for m in cov["unmatched"]:
+            lines.append(f"  unmatched {m['step']} ({m.get('level') or format(m['level_N'], '.3g') + ' N'}, "
+                         f"{m['freq_Hz']:.4g} Hz"
+                         f"{', ' + m['direction'] if m['direction'] else ''}"
+                         f"{', resonance' if m['resonance'] else ''}): {m['why']}")
+    return lines
+
+
+def _summary(result: dict, quantities: tuple, judged_noise: float) -> str:
+    o = result["overall"]
+    cov = result["coverage"]
+    by = (result.get("matching") or {}).get("level")
+    lines = [f"{result['matched']} steps matched{' by ' + by if by else ''} ({len(result['unmatched_reference'])} of "
+             f"the reference and {len(result['unmatched_other'])} of the other unmatched)"] + _coverage(cov)
+    for q in quantities:
+        x = o[q]
+        lines.append(f"{q:>11}: rms difference {_pct(x['rms_rel_diff'])} over the {x['judged']} steps precise enough "
+                     f"to judge ({_pct(x['rms_rel_diff_all'])} over all; magnitude {x['rms_mag_diff_pct']:.3g} %, "
+                     f"phase {x['rms_phase_diff_deg']:.3g} deg; {x['rms_noise_units']:.3g} x noise), "
+                     f"largest judged {_pct(x['max_rel_diff'])}")
+    if o["rms_rel_diff"] is None:
+        lines.append(f"OUTSIDE: no step is precise enough to judge a difference of {100 * result['tolerance']:g} % "
+                     f"(its noise alone would give more than {100 * judged_noise * result['tolerance']:g} %)")
+    else:
+        lines.append(f"{'within' if o['within_tolerance'] else 'OUTSIDE'} the tolerance of "
+                     f"{100 * result['tolerance']:g} % (larger rms {_pct(o['rms_rel_diff'])})")
+    if not cov["covered"]:
+        lines.append(f"NOT PASSED: only {100 * cov['fraction']:.3g} % of the reference's usable steps were compared "
+                     f"(--min-coverage {cov['min_coverage']:g})"
+                     + (", the resonance among the missing" if cov["resonance_unmatched"] else ""))
+    return "\n".join(lines) + "\n"
+
+
+# bench compare's refusals, the words compare.json stores (the level steps were matched by, why
+# a step is unmatched) and its summary (bench.compare.CompareSaid)
+COMPARE: Words = {
+    "bad_tolerance": lambda value: f"--tolerance must be a positive fraction (0.02 = 2 %), got {value!r}",
+    "bad_min_coverage": lambda value: (f"--min-coverage must be a fraction in (0, 1] (1 = every usable step of the "
+                                       f"reference matched), got {value!r}"),
+    "no_steps_to_compare": lambda path: f"{path}: no usable steps to compare",
+    "no_match": lambda reference, other, level_pct, freq_pct: (
+        f"no step of {reference} matches one of {other} in level (the force, or the response both held; within "
+        f"{level_pct:g} %), frequency (within {freq_pct:g} %) and direction"),
+    "by_response": lambda unit: f"the response both held ({unit})",
+    "by_force": lambda: "the force (N)",
+    "rejected_in_other": lambda step, reason: f"rejected in the other ({step}): {reason}",
+    "not_in_other": lambda: "not in the other",
+    "summary": _summary,
+}
+
+# ---------------------------------------------------------------------------- bench.export, bench.export_modes
+
+
+def _labels(labels: dict) -> str:
+    return "labels: " + (", ".join(f"{k}={v}" for k, v in labels.items()) if labels else "none")
+
+
+_FRF = {"X": ("compliance X/F", "X1/F1, probe"), "A": ("accelerance A/F", "A1/F1, drive point")}
+
+# bench export's log lines and the words of the ID lines of the universal files it writes
+# (bench.export.ExportSaid)
+EXPORT: Words = {
+    "one_step": lambda level, direction, key: (f"export: level {level} {direction} has one readable step ({key}): "
+                                               "no FRF record in frf.uff; it is in steps.csv"),
+    "phase_resonance": lambda run: (f"{run}: phase resonance: one locked point per level, no FRF along frequency, so "
+                                    "no frf.uff; the points are in steps.csv and modes.uff"),
+    "no_frf": lambda run: f"{run}: no level has two readable steps, so no frf.uff",
+    "no_steps_to_export": lambda run: f"{run}: no completed steps; only the CSV header was written",
+    "id_too_long": lambda line: f"UFF ID line longer than 80 characters: {line!r}",
+    "frf_id1": lambda kind, level, direction: f"{_FRF[kind][0]}, {level}, {direction} sweep",
+    "frf_id2": lambda plan, rig: f"{plan} on {rig}",
+    "frf_id5": lambda kind, quantity, labels: f"{_FRF[kind][1]}, {quantity} amplitude held at the level; {_labels(labels)}",
+    "time_id1": lambda channel, unit, key: f"{channel} ({unit}), step {key}",
+    "mode_id1": lambda mode, level_N, status, resonance_Hz, curve: (
+        f"{mode} mode {level_N:g} N ({status}): resonance {resonance_Hz:.6g} Hz, peak of {curve}"),
+    "mode_id2": lambda fit: f"freq = fit's undamped natural frequency (Hz); zeta fit %: {fit}",
+    "mode_id3": lambda balance, half_power: f"zeta % energy balance {balance} half-power {half_power}",
+    "mode_id5": lambda run, mass: f"run {run}; modal mass kg: {mass or 'unknown'}",
+}
+
+# ---------------------------------------------------------------------------- bench.analyze
+
+# bench analyze's refusal and log line (bench.analyze.AnalyzeSaid)
+ANALYZE: Words = {
+    "no_steps_to_analyse": lambda path, rejected: (f"{path}: no usable steps ({len(rejected)} rejected"
+                                                   + (f", first: {rejected[0]['step']}: {rejected[0]['reason']}"
+                                                      if rejected else "") + ")"),
+    "analysing": lambda steps, path, rejected: f"analysing {steps} steps of {path} ({rejected} rejected)",
+}
+
 # the mappings :func:`said` and :func:`refused` look a code up in (by name: a reworded mapping is found)
-_MAPPINGS = ("SOURCE", "NOT_IN_PLANT", "TWIN_NOTE", "TWIN")
+_MAPPINGS = ("SOURCE", "NOT_IN_PLANT", "TWIN_NOTE", "TWIN", "COMPARE", "EXPORT", "ANALYZE")
 
 
 def said(code: str, **fields) -> str:

@@ -26,10 +26,14 @@ import bench.words.terminal as terminal_words
 import bench.words.terminal_data as data_words
 import sim.artefacts.sentences as sentences
 import sim.records as records
+from bench.analyze import AnalyzeSaid
 from bench.cli import ExitCode, main
 from bench.commands.results import CheckLine, ModeLine
 from bench.commands.run import RunLine
+from bench.compare import CompareSaid
 from bench.demo import MANIFEST, OutDirRefusal
+from bench.export import ExportSaid
+from bench.export_modes import ModeId
 from bench.reports._markdown import accounting_md, flagged_reasons
 from bench.reports._overall import Concern, Verdict, overall
 from bench.reports._run import load_run
@@ -157,7 +161,8 @@ def test_every_code_has_words_in_its_renderers():
     assert set(terminal_words.CHECK) == {str(c) for c in CheckLine}
     assert set(terminal_words.RUN) == {str(c) for c in RunLine}
     assert set(terminal_words.MODES) == {str(c) for c in ModeLine}
-    data = {"SOURCE": SourceProblem, "NOT_IN_PLANT": NotInPlant, "TWIN_NOTE": TwinNote, "TWIN": TwinSaid}
+    data = {"SOURCE": SourceProblem, "NOT_IN_PLANT": NotInPlant, "TWIN_NOTE": TwinNote, "TWIN": TwinSaid,
+            "COMPARE": CompareSaid, "EXPORT": (*ExportSaid, *ModeId), "ANALYZE": AnalyzeSaid}
     for name, codes in data.items():
         assert set(getattr(data_words, name)) == {str(c) for c in codes}, name
     assert set(data) == set(data_words._MAPPINGS)       # said() finds each code in one mapping only
