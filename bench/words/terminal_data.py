@@ -19,6 +19,10 @@ these words.
 (:class:`bench.export.ExportSaid`); ``ANALYZE``: ``bench analyze``'s
 (:class:`bench.analyze.AnalyzeSaid`).
 
+``TOOLS``: the lines of ``bench paper``, ``frf``, ``warmup``, ``twins`` and ``twin``
+(:class:`bench.commands.tools.ToolLine`); ``RESULTS``: the lines of ``bench identify``,
+``analyze`` and ``compare`` (:class:`bench.commands.results.ResultLine`).
+
 A code's words are found by :func:`said` in whichever mapping of this module has them (the
 codes are unique across the module); :func:`refused` makes the exception of a refusal.
 """
@@ -258,8 +262,55 @@ ANALYZE: Words = {
     "analysing": lambda steps, path, rejected: f"analysing {steps} steps of {path} ({rejected} rejected)",
 }
 
+# ---------------------------------------------------------------------------- bench.commands.tools
+
+
+def _twin_applied(cause: str, keys: dict) -> str:
+    return f"cause {cause} -> " + ", ".join(f"{k} = {x:.4g}" if isinstance(x, float) else f"{k} = {x}"
+                                            for k, x in keys.items())
+
+
+# the lines of `bench paper`, `frf`, `warmup`, `twins` and `twin` (bench.commands.tools.ToolLine)
+TOOLS: Words = {
+    "paper_progress": lambda: "paper figures",
+    "paper_wrote": lambda count, out: f"wrote {count} files to {out}/ (start with {out}/README.md)",
+    "bad_points": lambda points: f"--points must be >= 1, got {points}",
+    "frf_progress": lambda gamma0, n, engine: f"FRF gamma0={gamma0} n={n} ({engine})",
+    "frf_peak": lambda kind, beta, G: f"# {kind} resonance: beta={beta:.4f} G={G:.4f}",
+    "compiling": lambda: "compiling the simulation kernels (once per machine and change of sim/) ...",
+    "compiled": lambda seconds: f"kernels compiled and cached in {seconds:.0f} s",
+    "not_simulated": lambda rig: f"{rig}: not a simulated rig (simulated = true is needed)",
+    "stopping_twins": lambda: "stopping twins",
+    "twin_parameters": lambda parameters: "twin: " + ", ".join(f"{k} {parameters[k]['value']:.4g}"
+                                                              for k in ("F_s_N", "x_s_m", "n", "mass_kg")),
+    "twin_applied": _twin_applied,
+    "twin_not_in_plant": lambda cause, reason: f"not in the plant: {cause}: {reason}",
+    "twin_wrote": lambda rig, plan, twin: f"wrote {rig}, {plan} and {twin}",
+    "twin_run_it": lambda rig, plan: f"run it: bench run --plan {plan} --rig {rig} --out RUN",
+}
+
+# ---------------------------------------------------------------------------- bench.commands.results
+
+# the lines of `bench identify`, `analyze` and `compare` (bench.commands.results.ResultLine)
+RESULTS: Words = {
+    "no_source": lambda: "no such file or directory (expected a run directory or a UFF58 file)",
+    "step_rejected_here": lambda step, reason: f"step {step} rejected: {reason}",
+    "no_steps_to_identify": lambda path: f"{path}: no steps with force, acceleration and displacement to identify from",
+    "analysis_unreadable": lambda path, detail: (f"warning: {path} cannot be read ({detail}); the analysis' causes "
+                                                 "are not in the model"),
+    "model": lambda effects, source, named: (f"model: Masing friction and the moving mass"
+                                             f"{' with ' + ', '.join(effects) if effects else ''} "
+                                             f"({source if named else 'final fit'})"),
+    "table_head": lambda: f"{'parameter':>10} {'estimate':>12} {'95 % interval':>28}",
+    "fit": lambda steps, rejected, chi2: f"{steps} steps ({rejected} rejected), reduced chi^2 {chi2}",
+    "warning": lambda text: f"warning: {text}",
+    "analyzed": lambda causes, unexplained, out: (f"causes: {', '.join(causes) or 'none'}; "
+                                                  f"unexplained: {'yes' if unexplained else 'no'}; written to {out}"),
+    "compared": lambda out: f"written to {out}/compare.json and compare.html",
+}
+
 # the mappings :func:`said` and :func:`refused` look a code up in (by name: a reworded mapping is found)
-_MAPPINGS = ("SOURCE", "NOT_IN_PLANT", "TWIN_NOTE", "TWIN", "COMPARE", "EXPORT", "ANALYZE")
+_MAPPINGS = ("SOURCE", "NOT_IN_PLANT", "TWIN_NOTE", "TWIN", "COMPARE", "EXPORT", "ANALYZE", "TOOLS", "RESULTS")
 
 
 def said(code: str, **fields) -> str:

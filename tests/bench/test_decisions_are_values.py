@@ -28,8 +28,9 @@ import sim.artefacts.sentences as sentences
 import sim.records as records
 from bench.analyze import AnalyzeSaid
 from bench.cli import ExitCode, main
-from bench.commands.results import CheckLine, ModeLine
+from bench.commands.results import CheckLine, ModeLine, ResultLine
 from bench.commands.run import RunLine
+from bench.commands.tools import ToolLine
 from bench.compare import CompareSaid
 from bench.demo import MANIFEST, OutDirRefusal
 from bench.export import ExportSaid
@@ -162,7 +163,8 @@ def test_every_code_has_words_in_its_renderers():
     assert set(terminal_words.RUN) == {str(c) for c in RunLine}
     assert set(terminal_words.MODES) == {str(c) for c in ModeLine}
     data = {"SOURCE": SourceProblem, "NOT_IN_PLANT": NotInPlant, "TWIN_NOTE": TwinNote, "TWIN": TwinSaid,
-            "COMPARE": CompareSaid, "EXPORT": (*ExportSaid, *ModeId), "ANALYZE": AnalyzeSaid}
+            "COMPARE": CompareSaid, "EXPORT": (*ExportSaid, *ModeId), "ANALYZE": AnalyzeSaid, "TOOLS": ToolLine,
+            "RESULTS": ResultLine}
     for name, codes in data.items():
         assert set(getattr(data_words, name)) == {str(c) for c in codes}, name
     assert set(data) == set(data_words._MAPPINGS)       # said() finds each code in one mapping only
