@@ -88,6 +88,7 @@ class SourceProblem(StrEnum):
     NO_SAMPLE_RATE = "no_sample_rate"
     RATES_DIFFER = "rates_differ"           # rates: channel -> S/s
     NOT_FINITE = "not_finite"               # channel
+    NO_STEPS_TO_IDENTIFY = "no_steps_to_identify"   # path (bench identify, an identification batch)
     NOT_TIME_RECORDS = "not_time_records"   # path, count (a log line)
     STEP_REJECTED = "step_rejected"         # path, step, reason (a log line)
 

@@ -49,7 +49,9 @@ CODED = {"Problem": (("bench/step_files.py", "bench/storage.py", "bench/accounti
 WORDLESS = ("bench/step_files.py", "bench/runlock.py", "sim/artefacts/causes.py", "sim/artefacts/cleaning.py",
             "sim/artefacts/decision.py", "sim/artefacts/quality.py", "bench/verdict.py", "bench/reports/_overall.py",
             "bench/toml_tables.py", "bench/sources.py", "bench/twin.py", "bench/compare.py", "bench/export.py",
-            "bench/export_modes.py", "bench/analyze.py", "bench/commands/tools.py", "bench/commands/results.py")
+            "bench/export_modes.py", "bench/analyze.py", "bench/commands/tools.py", "bench/commands/results.py",
+            "bench/studies/engine.py", "bench/studies/montecarlo.py", "bench/studies/maps.py", "bench/studies/batch.py",
+            "bench/studies/__init__.py")
 
 
 # modules that start `bench` in a process of their own on purpose (decision 0057)

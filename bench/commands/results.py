@@ -48,7 +48,7 @@ def cmd_identify(args) -> int:
     from ..analyze import default_out_dir
     from ..config import DEFAULTS, load_rig, parse_rig, rig_toml
     from ..numbers import number
-    from ..sources import load_source
+    from ..sources import SourceProblem, load_source
     from ..storage import RunStore
 
     source = Path(args.source)
@@ -62,7 +62,7 @@ def cmd_identify(args) -> int:
     for r in src.rejected:
         print(say_result(ResultLine.STEP_REJECTED, step=r.step, reason=r.reason))
     if not src.steps:
-        raise words.refused(ConfigurationError, ResultLine.NO_STEPS, path=source)
+        raise words.refused(ConfigurationError, SourceProblem.NO_STEPS_TO_IDENTIFY, path=source)
     guess = rig.guess()
     analysis_json = default_out_dir(source) / "analysis.json"
     extra: tuple[str, ...] = ()
@@ -179,7 +179,6 @@ class ResultLine(StrEnum):
 
     NO_SOURCE = "no_source"                 # the FileNotFoundError's strerror
     STEP_REJECTED = "step_rejected_here"    # step, reason
-    NO_STEPS = "no_steps_to_identify"       # path
     ANALYSIS_UNREADABLE = "analysis_unreadable"     # path, detail: the reader's error
     MODEL = "model"                         # effects, source, named: whether the estimate names its source
     TABLE_HEAD = "table_head"

@@ -23,6 +23,8 @@ these words.
 (:class:`bench.commands.tools.ToolLine`); ``RESULTS``: the lines of ``bench identify``,
 ``analyze`` and ``compare`` (:class:`bench.commands.results.ResultLine`).
 
+``STUDIES``: the studies' refusals, log lines and the words they store (:mod:`bench.studies`).
+
 A code's words are found by :func:`said` in whichever mapping of this module has them (the
 codes are unique across the module); :func:`refused` makes the exception of a refusal.
 """
@@ -61,6 +63,7 @@ SOURCE: Words = {
     "no_sample_rate": lambda: "no valid abscissa increment (sample rate) on the force record",
     "rates_differ": lambda rates: f"records at different sample rates: { {k: f'{v:.6g} S/s' for k, v in rates.items()} }",
     "not_finite": lambda channel: f"non-finite values in the {channel} record",
+    "no_steps_to_identify": lambda path: f"{path}: no steps with force, acceleration and displacement to identify from",
     "not_time_records": lambda path, count: f"{path}: {count} dataset-58 functions not of type 1 (time response) ignored",
     "step_rejected": lambda path, step, reason: f"{path}: step {step} rejected: {reason}",
 }
@@ -295,7 +298,6 @@ TOOLS: Words = {
 RESULTS: Words = {
     "no_source": lambda: "no such file or directory (expected a run directory or a UFF58 file)",
     "step_rejected_here": lambda step, reason: f"step {step} rejected: {reason}",
-    "no_steps_to_identify": lambda path: f"{path}: no steps with force, acceleration and displacement to identify from",
     "analysis_unreadable": lambda path, detail: (f"warning: {path} cannot be read ({detail}); the analysis' causes "
                                                  "are not in the model"),
     "model": lambda effects, source, named: (f"model: Masing friction and the moving mass"
@@ -309,8 +311,44 @@ RESULTS: Words = {
     "compared": lambda out: f"written to {out}/compare.json and compare.html",
 }
 
+# ---------------------------------------------------------------------------- bench.studies
+
+# the studies' refusals, log lines and words they store (bench.studies: StudiesSaid, engine.StudySaid,
+# maps.MapRefusal, montecarlo.McRefusal, batch.BatchSaid)
+STUDIES: Words = {
+    "no_attribute": lambda module, name: f"module {module!r} has no attribute {name!r}",
+    "version": lambda version: f"guideway-bench {version}",
+    "not_installed": lambda: "guideway-bench (not installed)",
+    "no_scheduler": lambda scheduler, detail: f"cannot reach the dask scheduler at {scheduler}: {detail}",
+    "same_inputs": lambda kind: f"{kind} study: two tasks have the same inputs",
+    "different_study": lambda path, kind, seed, spec: (f"{path} holds a different study ({kind}, seed {seed}, "
+                                                       f"spec {spec}); use a new directory or the same inputs to "
+                                                       "resume it"),
+    "already_done": lambda path, done, total, todo: f"{path}: {done} of {total} tasks already done, {todo} to compute",
+    "resumed": lambda: "(resumed)",
+    "failed_so_far": lambda count: f"{count} failed",
+    "task_failed": lambda key, inputs, error: f"task {key} failed with inputs {inputs}: {error}",
+    "cancelling": lambda path, count: f"{path}: cancelling {count} pending tasks",
+    "no_n_or_gamma0": lambda: "a map needs at least one n and one gamma0",
+    "bad_n": lambda n: f"n must be > 0 and != 1, got {n!r}",
+    "bad_gamma0": lambda gamma0: f"gamma0 must lie in (0, 1) (above 1 the carriage rolls away), got {gamma0!r}",
+    "bad_beta_range": lambda low, high: f"need 0 < beta_min < beta_max, got {low!r}, {high!r}",
+    "bad_beta_points": lambda points: f"beta_points must be >= 3, got {points!r}",
+    "bad_engine": lambda engine: f"engine must be 'shooting' or 'rk4', got {engine!r}",
+    "no_peaks": lambda n, gamma0, detail: f"n={n:g} gamma0={gamma0:g}: no peaks ({detail})",
+    "bad_samples": lambda samples: f"samples must be >= 1, got {samples!r}",
+    "bad_spread": lambda spread: f"spread is a factor >= 1, got {spread!r}",
+    "negative_spread": lambda: "n_spread and noise_scale must be >= 0",
+    "not_simulated_rig": lambda: "a Monte-Carlo study needs a simulated rig (simulated = true, [rig.model])",
+    "no_n_drawn": lambda n, spread: f"expected n {n} +- {spread} leaves no n > 0.2 away from 1",
+    "no_such_path": lambda path: f"{path}: no such file or directory",
+    "no_sources_in": lambda path: f"{path}: no run directories (run.json) or UFF58 files (.uff, .unv) in it",
+    "no_modes": lambda path, detail: f"{path}: modes could not be estimated: {detail}",
+}
+
+
 # the mappings :func:`said` and :func:`refused` look a code up in (by name: a reworded mapping is found)
-_MAPPINGS = ("SOURCE", "NOT_IN_PLANT", "TWIN_NOTE", "TWIN", "COMPARE", "EXPORT", "ANALYZE", "TOOLS", "RESULTS")
+_MAPPINGS = ("SOURCE", "NOT_IN_PLANT", "TWIN_NOTE", "TWIN", "COMPARE", "EXPORT", "ANALYZE", "TOOLS", "RESULTS", "STUDIES")
 
 
 def said(code: str, **fields) -> str:

@@ -42,6 +42,11 @@ from bench.runlock import LOCK_NAME, LockRefusal
 from bench.sources import SourceProblem
 from bench.step_files import Problem
 from bench.storage import RunDirRefusal, RunStore
+from bench.studies import StudiesSaid
+from bench.studies.batch import BatchSaid
+from bench.studies.engine import StudySaid
+from bench.studies.maps import MapRefusal
+from bench.studies.montecarlo import McRefusal
 from bench.toml_tables import ConfigProblem
 from bench.twin import NotInPlant, TwinNote, TwinSaid
 from bench.verdict import Kept, Short
@@ -164,7 +169,7 @@ def test_every_code_has_words_in_its_renderers():
     assert set(terminal_words.MODES) == {str(c) for c in ModeLine}
     data = {"SOURCE": SourceProblem, "NOT_IN_PLANT": NotInPlant, "TWIN_NOTE": TwinNote, "TWIN": TwinSaid,
             "COMPARE": CompareSaid, "EXPORT": (*ExportSaid, *ModeId), "ANALYZE": AnalyzeSaid, "TOOLS": ToolLine,
-            "RESULTS": ResultLine}
+            "RESULTS": ResultLine, "STUDIES": (*StudiesSaid, *StudySaid, *MapRefusal, *McRefusal, *BatchSaid)}
     for name, codes in data.items():
         assert set(getattr(data_words, name)) == {str(c) for c in codes}, name
     assert set(data) == set(data_words._MAPPINGS)       # said() finds each code in one mapping only
