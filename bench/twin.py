@@ -178,10 +178,10 @@ def check_model(model: dict) -> None:
 
 def _free_vibration(cause: dict) -> tuple[NotInPlant, dict] | None:
     """Why ``cause`` is the measured rig's own free vibration, which a twin never builds in
-    (its plant rings by itself when its steps change), as a code and its fields, or None: an unsettled transient, or a
-    "line" no steady source explains (in fewer than ``REPEAT_STEPS`` steps and not mains: the
-    fundamental, or a harmonic in at least 2 steps; an analysis.json written before decision
-    0045 named those lines)."""
+    (its plant rings by itself when its steps change), as a code and its fields, or None: an
+    unsettled transient, or a "line" no steady source explains (in fewer than
+    ``REPEAT_STEPS`` steps and not mains: the fundamental, or a harmonic in at least 2 steps;
+    an analysis.json written before decision 0045 named those lines)."""
     if cause["id"] == "unsettled_transient":
         return NotInPlant.UNSETTLED, {}
     if cause["id"] != "line_interference":
