@@ -68,7 +68,8 @@ TAG = "bench"
 
 class SourceProblem(StrEnum):
     """What is wrong with a source (a refusal) or with one of its steps (the step's rejection
-    reason), and the reader's log lines; words: :data:`bench.words.terminal_data.SOURCE`."""
+    reason), the reader's log lines and a step's level in words; words:
+    :data:`bench.words.terminal_data.SOURCE`."""
 
     NO_SUCH_SOURCE = "no_such_source"       # path
     RUN_UNREADABLE = "run_unreadable"       # path, detail: the reader's error
@@ -91,6 +92,8 @@ class SourceProblem(StrEnum):
     NO_STEPS_TO_IDENTIFY = "no_steps_to_identify"   # path (bench identify, an identification batch)
     NOT_TIME_RECORDS = "not_time_records"   # path, count (a log line)
     STEP_REJECTED = "step_rejected"         # path, step, reason (a log line)
+    LEVEL_HELD = "level_held"               # level, unit, force_N: a step's level in words (not a problem)
+    LEVEL_FORCE = "level_force"             # force_N
 
 
 @dataclass
@@ -111,8 +114,8 @@ class MeasuredStep:
 
     def level_text(self) -> str:
         """The step's level in words: the force, and the response it held if it held one."""
-        return (f"{self.held[0]:g} {self.held[1]} held, {self.level_N:.3g} N" if self.held
-                else f"{self.level_N:.3g} N")
+        return (words.said(SourceProblem.LEVEL_HELD, level=self.held[0], unit=self.held[1], force_N=self.level_N)
+                if self.held else words.said(SourceProblem.LEVEL_FORCE, force_N=self.level_N))
 
 
 @dataclass

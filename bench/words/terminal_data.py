@@ -66,6 +66,8 @@ SOURCE: Words = {
     "no_steps_to_identify": lambda path: f"{path}: no steps with force, acceleration and displacement to identify from",
     "not_time_records": lambda path, count: f"{path}: {count} dataset-58 functions not of type 1 (time response) ignored",
     "step_rejected": lambda path, step, reason: f"{path}: step {step} rejected: {reason}",
+    "level_held": lambda level, unit, force_N: f"{level:g} {unit} held, {force_N:.3g} N",
+    "level_force": lambda force_N: f"{force_N:.3g} N",
 }
 
 # ---------------------------------------------------------------------------- bench.twin
