@@ -28,10 +28,12 @@ log = logging.getLogger(__name__)
 
 
 class AnalyzeSaid(StrEnum):
-    """``bench analyze``'s refusal and log line (words: :data:`bench.words.terminal_data.ANALYZE`)."""
+    """``bench analyze``'s refusal and log lines (words: :data:`bench.words.terminal_data.ANALYZE`)."""
 
     NO_STEPS = "no_steps_to_analyse"        # path, rejected: [{step, reason}]
     ANALYSING = "analysing"                 # steps, path, rejected: counts
+    ARTEFACT = "artefact"                   # sentence: the artefact cause's (sim.artefacts)
+    VERDICT = "verdict"                     # verdict: the analysis' (sim.discrepancy)
 
 
 def default_out_dir(source: Path) -> Path:
@@ -68,7 +70,7 @@ def analyze_source(source: Path, out_dir: Path | None = None, rig: Path | None =
     log.info("%s", words.said(AnalyzeSaid.ANALYSING, steps=len(steps), path=source, rejected=len(rejected)))
     artefacts = artefact_causes(src.quality(), total=len(src.steps) + len(src.rejected))
     for c in artefacts:
-        log.info("artefact: %s", c["sentence"])
+        log.info("%s", words.said(AnalyzeSaid.ARTEFACT, sentence=c["sentence"]))
     analysis = analyze_steps(steps, guess, source=str(source), software_version=__version__, rejected=rejected,
                              v_ref_m_per_s=v_ref, artefacts=artefacts)
     result = analysis.to_dict()
@@ -76,5 +78,5 @@ def analyze_source(source: Path, out_dir: Path | None = None, rig: Path | None =
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "analysis.json", result)
     write_analysis_html(result, out / "analysis.html")
-    log.info("verdict: %s", result["verdict"])
+    log.info("%s", words.said(AnalyzeSaid.VERDICT, verdict=result["verdict"]))
     return result

@@ -259,12 +259,14 @@ EXPORT: Words = {
 
 # ---------------------------------------------------------------------------- bench.analyze
 
-# bench analyze's refusal and log line (bench.analyze.AnalyzeSaid)
+# bench analyze's refusal and log lines (bench.analyze.AnalyzeSaid)
 ANALYZE: Words = {
     "no_steps_to_analyse": lambda path, rejected: (f"{path}: no usable steps ({len(rejected)} rejected"
                                                    + (f", first: {rejected[0]['step']}: {rejected[0]['reason']}"
                                                       if rejected else "") + ")"),
     "analysing": lambda steps, path, rejected: f"analysing {steps} steps of {path} ({rejected} rejected)",
+    "artefact": lambda sentence: f"artefact: {sentence}",
+    "verdict": lambda verdict: f"verdict: {verdict}",
 }
 
 # ---------------------------------------------------------------------------- bench.commands.tools
