@@ -11,6 +11,7 @@ estimated from the data) and writes ``analysis.json`` (schema in docs/analysis.m
 from __future__ import annotations
 
 import logging
+from enum import StrEnum
 from pathlib import Path
 
 from sim.artefacts import artefact_causes
@@ -19,10 +20,20 @@ from sim.errors import ConfigurationError
 
 from . import __version__
 from .reports import write_analysis_html
-from .sources import load_source
+from .sources import SourceProblem, load_source
 from .storage import write_json
+from .words import terminal_data as words
 
 log = logging.getLogger(__name__)
+
+
+class AnalyzeSaid(StrEnum):
+    """``bench analyze``'s refusal and log lines (words: :data:`bench.words.terminal_data.ANALYZE`)."""
+
+    NO_STEPS = "no_steps_to_analyse"        # path, rejected: [{step, reason}]
+    ANALYSING = "analysing"                 # steps, path, rejected: counts
+    ARTEFACT = "artefact"                   # sentence: the artefact cause's (sim.artefacts)
+    VERDICT = "verdict"                     # verdict: the analysis' (sim.discrepancy)
 
 
 def default_out_dir(source: Path) -> Path:
@@ -50,17 +61,16 @@ def analyze_source(source: Path, out_dir: Path | None = None, rig: Path | None =
     ``src``: SOURCE already read by :func:`bench.sources.load_source` (not read again)."""
     source = Path(source)
     if not source.exists():
-        raise ConfigurationError(f"{source}: no such run directory or file")
+        raise words.refused(ConfigurationError, SourceProblem.NO_SUCH_SOURCE, path=source)
     src = src if src is not None else load_source(source)
     steps, rejected = list(src.steps), [dict(step=r.step, reason=r.reason) for r in src.rejected]
     if not steps:
-        raise ConfigurationError(f"{source}: no usable steps ({len(rejected)} rejected"
-                         + (f", first: {rejected[0]['step']}: {rejected[0]['reason']}" if rejected else "") + ")")
+        raise words.refused(ConfigurationError, AnalyzeSaid.NO_STEPS, path=source, rejected=rejected)
     guess, v_ref = _guess(source, Path(rig) if rig else None)
-    log.info("analysing %d steps of %s (%d rejected)", len(steps), source, len(rejected))
+    log.info("%s", words.said(AnalyzeSaid.ANALYSING, steps=len(steps), path=source, rejected=len(rejected)))
     artefacts = artefact_causes(src.quality(), total=len(src.steps) + len(src.rejected))
     for c in artefacts:
-        log.info("artefact: %s", c["sentence"])
+        log.info("%s", words.said(AnalyzeSaid.ARTEFACT, sentence=c["sentence"]))
     analysis = analyze_steps(steps, guess, source=str(source), software_version=__version__, rejected=rejected,
                              v_ref_m_per_s=v_ref, artefacts=artefacts)
     result = analysis.to_dict()
@@ -68,5 +78,5 @@ def analyze_source(source: Path, out_dir: Path | None = None, rig: Path | None =
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "analysis.json", result)
     write_analysis_html(result, out / "analysis.html")
-    log.info("verdict: %s", result["verdict"])
+    log.info("%s", words.said(AnalyzeSaid.VERDICT, verdict=result["verdict"]))
     return result

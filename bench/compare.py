@@ -31,14 +31,16 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
 
 from sim.errors import ConfigurationError
 
-from .sources import MeasuredStep, Source, load_source
+from .sources import MeasuredStep, Source, SourceProblem, load_source
 from .storage import write_json
+from .words import terminal_data as words
 
 log = logging.getLogger(__name__)
 
@@ -49,6 +51,21 @@ QUANTITIES = ("compliance", "accelerance")
 JUDGED_NOISE = 0.5     # a step is judged when its noise alone gives at most half the tolerance
 LEVEL_GROUP = 1.15     # reference levels within 15 % are one force level (as the comparison page)
 RESONANCE_BAND = 1 / math.sqrt(2)   # a step within the half-power band of its level's peak compliance
+
+
+class CompareSaid(StrEnum):
+    """``bench compare``'s refusals, what compare.json says of the matching and of each
+    unmatched step, and the summary it prints (words: :data:`bench.words.terminal_data.COMPARE`)."""
+
+    BAD_TOLERANCE = "bad_tolerance"         # value
+    BAD_MIN_COVERAGE = "bad_min_coverage"   # value
+    NO_STEPS = "no_steps_to_compare"        # path
+    NO_MATCH = "no_match"                   # reference, other, level_pct, freq_pct
+    BY_RESPONSE = "by_response"             # unit: the steps were matched by the response both held
+    BY_FORCE = "by_force"                   # ... by the force
+    REJECTED_IN_OTHER = "rejected_in_other"  # step, reason: the other's step at its level and frequency
+    NOT_IN_OTHER = "not_in_other"           # never measured there
+    SUMMARY = "summary"                     # result, quantities, judged_noise
 
 
 @dataclass(frozen=True)
@@ -98,8 +115,8 @@ def _matched_by(ref: list[MeasuredStep], other: list[MeasuredStep]) -> str:
     """The level the steps were matched by, in words."""
     units = {s.held[1] if s.held else "N" for s in ref + other}
     if len(units) == 1 and units != {"N"}:
-        return f"the response both held ({units.pop()})"
-    return "the force (N)"
+        return words.said(CompareSaid.BY_RESPONSE, unit=units.pop())
+    return words.said(CompareSaid.BY_FORCE)
 
 
 def _ri(z: complex) -> list[float]:
@@ -154,8 +171,8 @@ def _why_unmatched(r: MeasuredStep, other: Source) -> str:
         if q is None or not (math.isfinite(q.freq_Hz) and math.isfinite(q.level_N) and q.level_N > 0):
             continue
         if abs(q.freq_Hz / r.freq_Hz - 1) <= FREQ_TOL and abs(q.level_N / r.level_N - 1) <= LEVEL_TOL:
-            return f"rejected in the other ({x.step}): {x.reason}"
-    return "not in the other"
+            return words.said(CompareSaid.REJECTED_IN_OTHER, step=x.step, reason=x.reason)
+    return words.said(CompareSaid.NOT_IN_OTHER)
 
 
 def coverage(ref: Source, oth: Source, pairs: list[tuple[int, int]], min_coverage: float) -> dict:
@@ -178,27 +195,25 @@ def compare_sources(reference, other, tolerance: float = 0.02, min_coverage: flo
     sources already read by :func:`bench.sources.load_source`.  ``min_coverage``: the share
     of the reference's usable steps that must be matched for the comparison to pass."""
     if not (math.isfinite(tolerance) and tolerance > 0):
-        raise ConfigurationError(f"--tolerance must be a positive fraction (0.02 = 2 %), got {tolerance!r}")
+        raise words.refused(ConfigurationError, CompareSaid.BAD_TOLERANCE, value=tolerance)
     if not (math.isfinite(min_coverage) and 0 < min_coverage <= 1):
-        raise ConfigurationError(f"--min-coverage must be a fraction in (0, 1] (1 = every usable step of the "
-                                 f"reference matched), got {min_coverage!r}")
+        raise words.refused(ConfigurationError, CompareSaid.BAD_MIN_COVERAGE, value=min_coverage)
     srcs = []
     for p in (reference, other):
         if isinstance(p, Source):
             srcs.append(p)
             continue
         if not Path(p).exists():
-            raise ConfigurationError(f"{p}: no such run directory or file")
+            raise words.refused(ConfigurationError, SourceProblem.NO_SUCH_SOURCE, path=p)
         srcs.append(load_source(Path(p)))
     ref, oth = srcs
     for s in srcs:
         if not s.steps:
-            raise ConfigurationError(f"{s.path}: no usable steps to compare")
+            raise words.refused(ConfigurationError, CompareSaid.NO_STEPS, path=s.path)
     pairs = match_steps(ref.steps, oth.steps)
     if not pairs:
-        raise ConfigurationError(f"no step of {ref.path} matches one of {oth.path} in level (the force, or the "
-                                 f"response both held; within "
-                         f"{100 * LEVEL_TOL:g} %), frequency (within {100 * FREQ_TOL:g} %) and direction")
+        raise words.refused(ConfigurationError, CompareSaid.NO_MATCH, reference=ref.path, other=oth.path,
+                            level_pct=100 * LEVEL_TOL, freq_pct=100 * FREQ_TOL)
     steps = []
     for i, j in pairs:
         r, o = ref.steps[i], oth.steps[j]
@@ -232,51 +247,9 @@ def compare_sources(reference, other, tolerance: float = 0.02, min_coverage: flo
                 steps=steps)
 
 
-def _pct(x) -> str:
-    return "n/a" if x is None else f"{100 * x:.3g} %"
-
-
-def coverage_text(cov: dict) -> list[str]:
-    """The coverage in words: how many of the reference's usable steps were compared, which
-    were not and why, and whether they are the resonance."""
-    lines = [f"coverage: {cov['matched']} of the reference's {cov['reference_steps']} usable steps matched "
-             f"({100 * cov['fraction']:.3g} %; needed {100 * cov['min_coverage']:.3g} %)"]
-    if cov["unmatched"]:
-        res = cov["resonance_unmatched"]
-        if res:
-            lines.append(f"{len(res)} of the unmatched steps are at the resonance (within the half-power band of "
-                         f"their level's peak compliance), where the rig differs most: {', '.join(res)}")
-        for m in cov["unmatched"]:
-            lines.append(f"  unmatched {m['step']} ({m.get('level') or format(m['level_N'], '.3g') + ' N'}, "
-                         f"{m['freq_Hz']:.4g} Hz"
-                         f"{', ' + m['direction'] if m['direction'] else ''}"
-                         f"{', resonance' if m['resonance'] else ''}): {m['why']}")
-    return lines
-
-
 def summary(result: dict) -> str:
-    o = result["overall"]
-    cov = result["coverage"]
-    by = (result.get("matching") or {}).get("level")
-    lines = [f"{result['matched']} steps matched{' by ' + by if by else ''} ({len(result['unmatched_reference'])} of "
-             f"the reference and {len(result['unmatched_other'])} of the other unmatched)"] + coverage_text(cov)
-    for q in QUANTITIES:
-        x = o[q]
-        lines.append(f"{q:>11}: rms difference {_pct(x['rms_rel_diff'])} over the {x['judged']} steps precise enough "
-                     f"to judge ({_pct(x['rms_rel_diff_all'])} over all; magnitude {x['rms_mag_diff_pct']:.3g} %, "
-                     f"phase {x['rms_phase_diff_deg']:.3g} deg; {x['rms_noise_units']:.3g} x noise), "
-                     f"largest judged {_pct(x['max_rel_diff'])}")
-    if o["rms_rel_diff"] is None:
-        lines.append(f"OUTSIDE: no step is precise enough to judge a difference of {100 * result['tolerance']:g} % "
-                     f"(its noise alone would give more than {100 * JUDGED_NOISE * result['tolerance']:g} %)")
-    else:
-        lines.append(f"{'within' if o['within_tolerance'] else 'OUTSIDE'} the tolerance of "
-                     f"{100 * result['tolerance']:g} % (larger rms {_pct(o['rms_rel_diff'])})")
-    if not cov["covered"]:
-        lines.append(f"NOT PASSED: only {100 * cov['fraction']:.3g} % of the reference's usable steps were compared "
-                     f"(--min-coverage {cov['min_coverage']:g})"
-                     + (", the resonance among the missing" if cov["resonance_unmatched"] else ""))
-    return "\n".join(lines) + "\n"
+    """The comparison in words (what ``bench compare`` prints)."""
+    return words.said(CompareSaid.SUMMARY, result=result, quantities=QUANTITIES, judged_noise=JUDGED_NOISE)
 
 
 def default_out_dir(other: Path) -> Path:

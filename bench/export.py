@@ -28,6 +28,7 @@ from __future__ import annotations
 import csv
 import logging
 import math
+from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
@@ -35,8 +36,24 @@ import numpy as np
 from procedures.kind import FORCE, QUANTITIES, ProcedureKind, of_stored_plan
 
 from .storage import RunStore
+from .words import terminal_data as words
 
 log = logging.getLogger(__name__)
+
+
+class ExportSaid(StrEnum):
+    """``bench export``'s log lines and the ID lines of frf.uff and time.uff (words:
+    :data:`bench.words.terminal_data.EXPORT`; modes.uff's: :class:`bench.export_modes.ModeId`)."""
+
+    ONE_STEP = "one_step"                   # level, direction, key: a level with one readable step
+    PHASE_RESONANCE = "phase_resonance"     # run: no FRF along frequency
+    NO_FRF = "no_frf"                       # run: no level has two readable steps
+    NO_STEPS = "no_steps_to_export"         # run
+    ID_TOO_LONG = "id_too_long"             # line
+    FRF_ID1 = "frf_id1"                     # kind ("X" or "A"), level, direction
+    FRF_ID2 = "frf_id2"                     # plan, rig: their names
+    FRF_ID5 = "frf_id5"                     # kind, quantity: the level's, labels
+    TIME_ID1 = "time_id1"                   # channel, unit, key
 
 CSV_COLUMNS = (
     "key", "index", "level_index", "target_force_N", "direction", "freq_Hz", "force_N",
@@ -100,7 +117,7 @@ def write_csv(results: list[dict], path: Path) -> Path:
 def _tags(**kw) -> str:
     s = " ".join([TAG] + [f"{k}={v}" for k, v in kw.items()])
     if len(s) > 80:
-        raise ValueError(f"UFF ID line longer than 80 characters: {s!r}")
+        raise words.refused(ValueError, ExportSaid.ID_TOO_LONG, line=s)
     return s
 
 
@@ -138,30 +155,21 @@ def frf_datasets(meta: dict, results: list[dict]) -> list[dict]:
         steps = sorted(steps, key=lambda s: s["freq_Hz"])
         level = levels[li] if li < len(levels) else steps[0]["target_force_N"]
         if len(steps) < 2:        # an FRF record needs two abscissa values (pyuff, and the format)
-            log.warning("export: level %s %s has one readable step (%s): no FRF record in frf.uff; "
-                        "it is in steps.csv", q.format(level), d, steps[0]["key"])
+            log.warning("%s", words.said(ExportSaid.ONE_STEP, level=q.format(level), direction=d, key=steps[0]["key"]))
             continue
         H = np.array([complex(s["compliance_m_per_N"]["re"], s["compliance_m_per_N"]["im"]) for s in steps])
         A = np.array([s["accelerance_abs_kg_inv"] * np.exp(1j * s["accelerance_phase_rad"]) for s in steps])
         unit_tag = {} if q == FORCE else {"unit": q.unit}
-        for kind, data, what, sdt, unit, how in (
-                ("X", H, "compliance X/F", 8, "m", "X1/F1, probe"),
-                ("A", A, "accelerance A/F", 12, "m/s^2", "A1/F1, drive point")):
+        for kind, data, sdt, unit in (("X", H, 8, "m"), ("A", A, 12, "m/s^2")):
             out.append(_dset58(
                 func_type=FUNC_FRF, func_id=len(out) + 1, x=[s["freq_Hz"] for s in steps], data=data,
-                id1=f"{what}, {q.format(level)}, {d} sweep",
-                id2=f"{plan.get('name', '')} on {(meta.get('rig') or {}).get('name', '')}",
+                id1=words.said(ExportSaid.FRF_ID1, kind=kind, level=q.format(level), direction=d),
+                id2=words.said(ExportSaid.FRF_ID2, plan=plan.get("name", ""), rig=(meta.get("rig") or {}).get("name", "")),
                 id3=str(meta.get("started", "")),
                 id4=_tags(level=f"{level:g}", L=li, dir=d, n=len(steps), q=kind, **unit_tag),
-                id5=f"{how}, {q.name} amplitude held at the level; {_labels(meta)}",
+                id5=words.said(ExportSaid.FRF_ID5, kind=kind, quantity=q.name, labels=meta.get("labels") or {}),
                 abscissa=(SDT_FREQ, "Hz"), ordinate=(sdt, unit), denominator=(13, "N")))
     return out
-
-
-def _labels(meta: dict) -> str:
-    """The run's labels (bench run --label k=v) for a UFF ID line."""
-    labels = meta.get("labels") or {}
-    return "labels: " + (", ".join(f"{k}={v}" for k, v in labels.items()) if labels else "none")
 
 
 def time_datasets(store: RunStore, meta: dict, results: list[dict]) -> list[dict]:
@@ -174,7 +182,7 @@ def time_datasets(store: RunStore, meta: dict, results: list[dict]) -> list[dict
             x = raw[rk]
             out.append(_dset58(
                 func_type=FUNC_TIME, func_id=len(out) + 1, x=np.arange(x.size) / fs, data=np.asarray(x, dtype=float),
-                id1=f"{ch} ({unit}), step {r['key']}",
+                id1=words.said(ExportSaid.TIME_ID1, channel=ch, unit=unit, key=r["key"]),
                 id2=f"{(meta.get('plan') or {}).get('name', '')}",
                 id3=str(meta.get("started", "")),
                 id4=_tags(step=r["key"], ch=ch, level=f"{r['target_force_N']:g}", dir=r["direction"]),
@@ -203,16 +211,15 @@ def export_run(run_dir: Path, out_dir: Path | None = None, *, time_records: bool
     paths = [write_csv(results, out / "steps.csv")]
     if results:
         if of_stored_plan(meta.get("plan") or {})[0] is ProcedureKind.PHASE_RESONANCE:
-            log.warning("%s: phase resonance: one locked point per level, no FRF along frequency, so no frf.uff; "
-                        "the points are in steps.csv and modes.uff", run_dir)
+            log.warning("%s", words.said(ExportSaid.PHASE_RESONANCE, run=run_dir))
         elif dsets := frf_datasets(meta, results):
             paths.append(_write_uff(out / "frf.uff", dsets))
         else:
-            log.warning("%s: no level has two readable steps, so no frf.uff", run_dir)
+            log.warning("%s", words.said(ExportSaid.NO_FRF, run=run_dir))
         from .export_modes import export_modes
         paths += export_modes(store.path, out, _write_uff)
         if time_records:
             paths.append(_write_uff(out / "time.uff", time_datasets(store, meta, results)))
     else:
-        log.warning("%s: no completed steps; only the CSV header was written", run_dir)
+        log.warning("%s", words.said(ExportSaid.NO_STEPS, run=run_dir))
     return paths

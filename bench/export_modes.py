@@ -24,11 +24,23 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
 
+from .words import terminal_data as words
+
 MODE_NUMBER = {"feed": 1, "pitch": 2}
+
+
+class ModeId(StrEnum):
+    """The ID lines of a mode's record in modes.uff (words: :data:`bench.words.terminal_data.EXPORT`)."""
+
+    MODE_ID1 = "mode_id1"                   # mode, level_N, status, resonance_Hz, curve
+    MODE_ID2 = "mode_id2"                   # fit: the fit's damping ratio in per cent
+    MODE_ID3 = "mode_id3"                   # balance, half_power: theirs
+    MODE_ID5 = "mode_id5"                   # run, mass: the energy balance's
 
 
 def _pct(v: float, lo: float, hi: float) -> str:
@@ -54,22 +66,25 @@ def mode_datasets(runs) -> list[dict]:
             f_n = e.natural_Hz if math.isfinite(e.natural_Hz) else e.resonance_Hz
             zeta = e.damping_ratio if math.isfinite(e.damping_ratio) else 0.0
             lc = levels.index(e.level_N) + 1
-            tags = (f"bench mode={e.mode} level={e.level_N:g} status={e.status.replace(' ', '_')} "
-                    f"fr={e.resonance_Hz:.7g} lo={e.resonance_low_Hz:.7g} hi={e.resonance_high_Hz:.7g}")
+            tags = " ".join(["bench", f"mode={e.mode}", f"level={e.level_N:g}", f"status={e.status.replace(' ', '_')}",
+                             f"fr={e.resonance_Hz:.7g}", f"lo={e.resonance_low_Hz:.7g}", f"hi={e.resonance_high_Hz:.7g}"])
             out.append(dict(
                 type=55, model_type=1, analysis_type=2, data_ch=2, spec_data_type=8, data_type=2,
                 n_data_per_node=3, load_case=lc, mode_n=MODE_NUMBER.get(e.mode, 3),
                 freq=float(f_n), modal_m=mass, modal_damp_vis=float(zeta), modal_damp_his=0.0,
                 node_nums=np.array([1]), r1=np.array([1 / math.sqrt(mass) if mass else 1.0]),
                 r2=np.array([0.0]), r3=np.array([0.0]),
-                id1=f"{e.mode} mode {e.level_N:g} N ({e.status}): resonance {e.resonance_Hz:.6g} Hz, peak of "
-                    f"{e.curve}"[:80],
-                id2=(f"freq = fit's undamped natural frequency (Hz); zeta fit %: "
-                     f"{_pct(z['damping_fit_fraction'], z['damping_fit_low_fraction'], z['damping_fit_high_fraction'])}")[:80],
-                id3=(f"zeta % energy balance {_pct(z['damping_energy_balance_fraction'], z['damping_energy_balance_low_fraction'], z['damping_energy_balance_high_fraction'])}"
-                     f" half-power {_pct(z['damping_half_power_fraction'], z['damping_half_power_low_fraction'], z['damping_half_power_high_fraction'])}")[:80],
+                id1=words.said(ModeId.MODE_ID1, mode=e.mode, level_N=e.level_N, status=e.status,
+                               resonance_Hz=e.resonance_Hz, curve=e.curve)[:80],
+                id2=words.said(ModeId.MODE_ID2, fit=_pct(z["damping_fit_fraction"], z["damping_fit_low_fraction"],
+                                                             z["damping_fit_high_fraction"]))[:80],
+                id3=words.said(ModeId.MODE_ID3,
+                               balance=_pct(z["damping_energy_balance_fraction"], z["damping_energy_balance_low_fraction"],
+                                            z["damping_energy_balance_high_fraction"]),
+                               half_power=_pct(z["damping_half_power_fraction"], z["damping_half_power_low_fraction"],
+                                               z["damping_half_power_high_fraction"]))[:80],
                 id4=tags[:80],
-                id5=(f"run {run.label}; modal mass kg: {z['energy_balance_mass'] or 'unknown'}")[:80]))
+                id5=words.said(ModeId.MODE_ID5, run=run.label, mass=z["energy_balance_mass"])[:80]))
     return out
 
 

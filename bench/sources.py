@@ -44,6 +44,7 @@ import logging
 import math
 import re
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
@@ -56,13 +57,43 @@ from sim.records import PeriodicRecords
 from sim.step_record import quality_of, records_of
 
 from .storage import RunStore
+from .words import terminal_data as words
 
 log = logging.getLogger(__name__)
 
 SDT = {13: "force", 12: "accel", 8: "disp"}      # UFF58 record 8 ordinate specific data type
-SDT_NAME = {13: "force (type 13)", 12: "acceleration (type 12)", 8: "displacement (type 8)"}
 FUNC_TIME = 1
 TAG = "bench"
+
+
+class SourceProblem(StrEnum):
+    """What is wrong with a source (a refusal) or with one of its steps (the step's rejection
+    reason), the reader's log lines and a step's level in words; words:
+    :data:`bench.words.terminal_data.SOURCE`."""
+
+    NO_SUCH_SOURCE = "no_such_source"       # path
+    RUN_UNREADABLE = "run_unreadable"       # path, detail: the reader's error
+    DAMAGED = "damaged"                     # detail: the run directory's problem in words
+    RAW_UNREADABLE = "raw_unreadable"       # error (its type), detail
+    RAW_LACKS = "raw_lacks"                 # missing: the raw block's keys
+    NOT_UFF = "not_uff"                     # path, error (its type), detail
+    NOT_A_DATASET = "not_a_dataset"         # found: the type pyuff returned
+    RECORD_UNREADABLE = "record_unreadable"  # record (1-based), error (its type), detail
+    NO_DATASET_58 = "no_dataset_58"         # path, types: the file's dataset types
+    NOT_A_QUANTITY = "not_a_quantity"       # record, sdt: its ordinate data type
+    TWO_RECORDS = "two_records"             # sdt, first, second: the file's records
+    MISSING_RECORDS = "missing_records"     # sdts: the data types missing
+    UNEVEN_SPACING = "uneven_spacing"       # record
+    COMPLEX_RECORD = "complex_record"       # channel
+    LENGTHS_DIFFER = "lengths_differ"       # sizes: channel -> samples
+    NO_SAMPLE_RATE = "no_sample_rate"
+    RATES_DIFFER = "rates_differ"           # rates: channel -> S/s
+    NOT_FINITE = "not_finite"               # channel
+    NO_STEPS_TO_IDENTIFY = "no_steps_to_identify"   # path (bench identify, an identification batch)
+    NOT_TIME_RECORDS = "not_time_records"   # path, count (a log line)
+    STEP_REJECTED = "step_rejected"         # path, step, reason (a log line)
+    LEVEL_HELD = "level_held"               # level, unit, force_N: a step's level in words (not a problem)
+    LEVEL_FORCE = "level_force"             # force_N
 
 
 @dataclass
@@ -83,8 +114,8 @@ class MeasuredStep:
 
     def level_text(self) -> str:
         """The step's level in words: the force, and the response it held if it held one."""
-        return (f"{self.held[0]:g} {self.held[1]} held, {self.level_N:.3g} N" if self.held
-                else f"{self.level_N:.3g} N")
+        return (words.said(SourceProblem.LEVEL_HELD, level=self.held[0], unit=self.held[1], force_N=self.level_N)
+                if self.held else words.said(SourceProblem.LEVEL_FORCE, force_N=self.level_N))
 
 
 @dataclass
@@ -130,7 +161,7 @@ def load_source(path: Path) -> Source:
     if path.is_dir():
         return _load_run(path)
     if not path.is_file():
-        raise ConfigurationError(f"{path}: no such run directory or file")
+        raise words.refused(ConfigurationError, SourceProblem.NO_SUCH_SOURCE, path=path)
     return _load_uff(path)
 
 
@@ -184,8 +215,9 @@ def _load_run(path: Path) -> Source:
         src = Source(path=path, kind="run", metadata=store.metadata)
         results = store.results()
     except (OSError, ValueError) as e:         # json.JSONDecodeError is a ValueError
-        raise RunDirectoryError(f"{path}: cannot read the run's metadata or step results: {e}") from e
-    src.rejected += [Rejected(p.key or p.path.name, f"damaged: {p}") for p in store.problems]
+        raise words.refused(RunDirectoryError, SourceProblem.RUN_UNREADABLE, path=path, detail=str(e)) from e
+    src.rejected += [Rejected(p.key or p.path.name, words.said(SourceProblem.DAMAGED, detail=str(p)))
+                     for p in store.problems]
     order = []
     for r in results:
         key = str(r.get("key", "?"))
@@ -202,11 +234,12 @@ def _load_run(path: Path) -> Source:
         try:
             raw = store.raw(key)
         except Exception as e:  # noqa: BLE001 - a damaged block rejects its step, not the run
-            src.rejected.append(Rejected(key, f"raw block unreadable: {type(e).__name__}: {e}"))
+            src.rejected.append(Rejected(key, words.said(SourceProblem.RAW_UNREADABLE, error=type(e).__name__,
+                                                         detail=str(e))))
             continue
         missing = [k for k in ("force_N", "accel_m_s2", "disp_m", "fs_Hz") if k not in raw]
         if missing:
-            src.rejected.append(Rejected(key, f"raw block lacks {', '.join(missing)}"))
+            src.rejected.append(Rejected(key, words.said(SourceProblem.RAW_LACKS, missing=missing)))
             continue
         try:
             src.steps.append(measured_step(key, raw["force_N"], raw["accel_m_s2"], raw["disp_m"],
@@ -270,7 +303,8 @@ def _read_uff(path: Path) -> list[dict]:
         uff = pyuff.UFF(str(path))
         types = [int(t) for t in uff.get_set_types()]
     except Exception as e:  # noqa: BLE001 - pyuff raises many kinds
-        raise ConfigurationError(f"{path}: not a readable universal file ({type(e).__name__}: {e})") from e
+        raise words.refused(ConfigurationError, SourceProblem.NOT_UFF, path=path, error=type(e).__name__,
+                            detail=str(e)) from e
     out = []
     for i, t in enumerate(types):
         if t != 58:
@@ -278,15 +312,15 @@ def _read_uff(path: Path) -> list[dict]:
         try:
             ds = uff.read_sets(i)
             if not isinstance(ds, dict):
-                raise ValueError(f"pyuff gave a {type(ds).__name__}")
+                raise words.refused(ValueError, SourceProblem.NOT_A_DATASET, found=type(ds).__name__)
         except Exception as e:  # noqa: BLE001 - a damaged record costs its step only
-            reason = f"record {i + 1} of the file (dataset 58) cannot be read: {type(e).__name__}: {e}"
+            reason = words.said(SourceProblem.RECORD_UNREADABLE, record=i + 1, error=type(e).__name__, detail=str(e))
             log.warning("%s: %s", path, reason)
             ds = dict(_record_header(uff, path, i), _error=reason)
         ds["_record"] = i + 1
         out.append(ds)
     if not out:
-        raise ConfigurationError(f"{path}: no dataset 58 in the file (dataset types: {sorted(set(types))})")
+        raise words.refused(ConfigurationError, SourceProblem.NO_DATASET_58, path=path, types=sorted(set(types)))
     return out
 
 
@@ -348,36 +382,36 @@ def _uff_step(key: str, recs: list[dict]) -> MeasuredStep:
     for ds in recs:
         sdt = int(ds.get("ordinate_spec_data_type", -1))
         if sdt not in SDT:
-            raise ValueError(f"record {ds['_record']}: ordinate data type {sdt} is not force (13), "
-                             f"acceleration (12) or displacement (8)")
+            raise words.refused(ValueError, SourceProblem.NOT_A_QUANTITY, record=ds["_record"], sdt=sdt)
         if sdt in by:
-            raise ValueError(f"two {SDT_NAME[sdt]} records (file records {by[sdt]['_record']} and {ds['_record']})")
+            raise words.refused(ValueError, SourceProblem.TWO_RECORDS, sdt=sdt, first=by[sdt]["_record"],
+                                second=ds["_record"])
         by[sdt] = ds
-    missing = [SDT_NAME[t] for t in SDT if t not in by]
+    missing = [t for t in SDT if t not in by]
     if missing:
-        raise ValueError(f"missing record(s): {', '.join(missing)}")
+        raise words.refused(ValueError, SourceProblem.MISSING_RECORDS, sdts=missing)
     for ds in by.values():
         if int(ds.get("abscissa_spacing", 1)) != 1:
-            raise ValueError(f"record {ds['_record']}: uneven abscissa spacing (need a constant 1/fs)")
+            raise words.refused(ValueError, SourceProblem.UNEVEN_SPACING, record=ds["_record"])
     tags = {}
     for ds in by.values():
         tags.update(_tags(ds))
     data = {SDT[t]: np.asarray(by[t]["data"]) for t in SDT}
     for name, x in data.items():
         if np.iscomplexobj(x):
-            raise ValueError(f"{name} record holds complex values (need a real time record)")
+            raise words.refused(ValueError, SourceProblem.COMPLEX_RECORD, channel=name)
     sizes = {name: x.size for name, x in data.items()}
     if len(set(sizes.values())) != 1:
-        raise ValueError(f"records of different lengths: {sizes}")
+        raise words.refused(ValueError, SourceProblem.LENGTHS_DIFFER, sizes=sizes)
     rates = {SDT[t]: _fs(by[t], tags) for t in SDT}
     fs = rates["force"]
     if not (math.isfinite(fs) and fs > 0):
-        raise ValueError("no valid abscissa increment (sample rate) on the force record")
+        raise words.refused(ValueError, SourceProblem.NO_SAMPLE_RATE)
     if any(not (abs(r / fs - 1) < 1e-6) for r in rates.values()):
-        raise ValueError(f"records at different sample rates: { {k: f'{v:.6g} S/s' for k, v in rates.items()} }")
+        raise words.refused(ValueError, SourceProblem.RATES_DIFFER, rates=rates)
     for name, x in data.items():
         if not np.all(np.isfinite(x)):
-            raise ValueError(f"non-finite values in the {name} record")
+            raise words.refused(ValueError, SourceProblem.NOT_FINITE, channel=name)
     freq = float(tags["f"]) if "f" in tags else None
     level = float(tags["level"]) if "level" in tags else None
     direction = tags.get("dir", "")
@@ -393,8 +427,7 @@ def _load_uff(path: Path) -> Source:
     times = [ds for ds in records if int(ds.get("func_type", -1)) == FUNC_TIME
              or ("_error" in ds and "func_type" not in ds)]    # damaged beyond its header: rejected, not dropped
     if len(times) < len(records):
-        log.info("%s: %d dataset-58 functions not of type 1 (time response) ignored",
-                 path, len(records) - len(times))
+        log.info("%s", words.said(SourceProblem.NOT_TIME_RECORDS, path=path, count=len(records) - len(times)))
     src = Source(path=path, kind="uff58")
     groups = _group(times)
     for key, recs in groups:
@@ -409,4 +442,4 @@ def _load_uff(path: Path) -> Source:
 
 def _log_rejections(src: Source) -> None:
     for r in src.rejected:
-        log.warning("%s: step %s rejected: %s", src.path, r.step, r.reason)
+        log.warning("%s", words.said(SourceProblem.STEP_REJECTED, path=src.path, step=r.step, reason=r.reason))

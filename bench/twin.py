@@ -28,6 +28,7 @@ import logging
 import math
 import os
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
@@ -53,8 +54,9 @@ from .config import (
     rig_toml,
 )
 from .files import MAX_BYTES, read_file
-from .sources import Source, load_source
+from .sources import Source, SourceProblem, load_source
 from .storage import write_json
+from .words import terminal_data as words
 
 log = logging.getLogger(__name__)
 
@@ -63,6 +65,54 @@ PITCH_DRIVE_HEIGHT_M = 0.1     # h of a foreign rig's pitching mode (only h^2/J,
 FOREIGN_MIN_AMP_GAIN = 20.0    # N/V, the simulated rig's amplifier, raised if the largest level needs more than 5 V
 FOREIGN_SIGNAL_V = 5.0         # a foreign file's largest reading is put at this voltage (the DAQ clips at 10 V)
 FREQ_MERGE = 1e-3              # a file's step frequencies within 0.1 % are one plan frequency
+
+
+class NotInPlant(StrEnum):
+    """Why a cause the analysis named is not in the twin's plant (twin.json's ``not_in_plant``;
+    words: :data:`bench.words.terminal_data.NOT_IN_PLANT`)."""
+
+    UNSETTLED = "unsettled"                 # an unsettled transient: the rig's own free vibration
+    FREE_VIBRATION = "free_vibration"       # freq_Hz, steps: a line in too few steps, not mains
+    NO_FORM = "no_form"                     # no entry in CAUSE_KEYS
+    NO_PARAMETER = "no_parameter"           # parameter: the one the analysis does not give
+    NOT_IN_THIS_PLANT = "not_in_this_plant"  # absent: keys RigModel lacks; keys: the cause's
+    TAKEN = "taken"                         # taken: keys, owners: the causes that took them; keys
+    NOT_A_PLANT = "not_a_plant"             # detail: the rig loader's error
+    UNEXPLAINED = "unexplained"             # reasons: the analysis' first three
+
+
+class TwinNote(StrEnum):
+    """A default the twin used, and why (twin.json's ``notes``; words:
+    :data:`bench.words.terminal_data.TWIN_NOTE`)."""
+
+    LEVELS_OUT = "levels_out"               # levels, low, high (N)
+    FREQS_OUT = "freqs_out"                 # count, low, high (Hz)
+    DIRECTION_FROM_ORDER = "direction_from_order"   # direction
+    PLAN_DEFAULTS = "plan_defaults"
+    FOREIGN_RIG = "foreign_rig"
+    NO_DRIVE_VOLTAGE = "no_drive_voltage"   # gain (N/V)
+
+
+class TwinSaid(StrEnum):
+    """``bench twin``'s refusals and warning, and the names and comments of the files it
+    writes (words: :data:`bench.words.terminal_data.TWIN`)."""
+
+    NO_LEVEL_OR_FREQ = "no_level_or_freq"   # path, level_low, level_high, freq_low, freq_high
+    NO_ANALYSIS = "no_analysis"             # path
+    ANALYSIS_NOT_JSON = "analysis_not_json"  # path, detail: the parser's error
+    ANALYSIS_NOT_OBJECT = "analysis_not_object"     # path
+    ANALYSIS_SCHEMA = "analysis_schema"     # path, schema
+    NO_STEPS = "no_steps_for_twin"          # path
+    ANALYSIS_OF_ANOTHER = "analysis_of_another"     # analysis, of, source (a warning)
+    NO_TOML_FORM = "no_toml_form"           # name: the value's type
+    RIG_NAME = "rig_name"                   # source, plain
+    RIG_NOTES = "rig_notes"                 # source, rig: the source rig's name or None
+    PLAN_NAME = "plan_name"                 # name: the source plan's
+    RIG_LABEL = "rig_label"                 # the rig's name in its loader's errors
+    PLAN_LABEL = "plan_label"
+    RIG_HEADER = "rig_header"               # provenance
+    PLAN_HEADER = "plan_header"             # provenance
+    RIG_COMMENTS = "rig_comments"           # parameters, applied, shaker, not_in_plant, notes
 
 
 def _value(params: dict, name: str, scale: float = 1.0) -> float:
@@ -126,24 +176,27 @@ def check_model(model: dict) -> None:
     parse_rig(rig, "twin")
 
 
-def _free_vibration(cause: dict) -> str:
+def _free_vibration(cause: dict) -> tuple[NotInPlant, dict] | None:
     """Why ``cause`` is the measured rig's own free vibration, which a twin never builds in
-    (its plant rings by itself when its steps change), or '': an unsettled transient, or a
-    "line" no steady source explains (in fewer than ``REPEAT_STEPS`` steps and not mains: the
-    fundamental, or a harmonic in at least 2 steps; an analysis.json written before decision
-    0045 named those lines)."""
+    (its plant rings by itself when its steps change), as a code and its fields, or None: an
+    unsettled transient, or a "line" no steady source explains (in fewer than
+    ``REPEAT_STEPS`` steps and not mains: the fundamental, or a harmonic in at least 2 steps;
+    an analysis.json written before decision 0045 named those lines)."""
     if cause["id"] == "unsettled_transient":
-        return ("the measured rig's own free vibration, not yet settled at the record start: the twin's plant "
-                "rings by itself; settle longer rather than build it in")
+        return NotInPlant.UNSETTLED, {}
     if cause["id"] != "line_interference":
-        return ""
+        return None
     f = cause.get("parameters", {}).get("frequency", {}).get("value")
     steps = cause.get("evidence", {}).get("steps", [])
     src = mains_line(float(f)) if f is not None else None
     if f is None or len(steps) >= REPEAT_STEPS or (src is not None and (src[1] == 1 or len(steps) >= 2)):
-        return ""
-    return (f"a {float(f):.4g} Hz line in {len(steps)} step(s) only, not mains: the measured rig's own "
-            f"free vibration, not interference (decision 0045); not built into the twin")
+        return None
+    return NotInPlant.FREE_VIBRATION, dict(freq_Hz=float(f), steps=len(steps))
+
+
+def _missed(cause: str, code: NotInPlant, **fields) -> dict:
+    """A cause not in the plant, with its reason's words (twin.json's ``not_in_plant``)."""
+    return dict(cause=cause, reason=words.said(code, **fields))
 
 
 def apply_causes(model: dict, causes: list[dict], ctx: dict) -> tuple[dict, dict, list[dict]]:
@@ -156,11 +209,11 @@ def apply_causes(model: dict, causes: list[dict], ctx: dict) -> tuple[dict, dict
     for c in causes:
         cid = c["id"]
         why_not = _free_vibration(c)
-        if why_not:
-            missed.append(dict(cause=cid, reason=why_not))
+        if why_not is not None:
+            missed.append(_missed(cid, why_not[0], **why_not[1]))
             continue
         if cid not in CAUSE_KEYS:
-            missed.append(dict(cause=cid, reason="no plant or sensor form for this cause (bench.twin.CAUSE_KEYS)"))
+            missed.append(_missed(cid, NotInPlant.NO_FORM))
             continue
         params = dict(c.get("parameters", {}))
         if "channel" in c and "channel" not in params:     # an artefact's channel is the cause's, not a parameter
@@ -168,24 +221,22 @@ def apply_causes(model: dict, causes: list[dict], ctx: dict) -> tuple[dict, dict
         try:
             keys = CAUSE_KEYS[cid](params, ctx)
         except KeyError as e:
-            missed.append(dict(cause=cid, reason=f"the analysis gives no parameter {e} for it"))
+            missed.append(_missed(cid, NotInPlant.NO_PARAMETER, parameter=e.args[0]))
             continue
         absent = sorted(set(keys) - known)
         if absent:
-            missed.append(dict(cause=cid, reason=f"this version's plant has no {', '.join(absent)} "
-                                                 f"(keys {', '.join(f'{k} = {v}' for k, v in keys.items())})"))
+            missed.append(_missed(cid, NotInPlant.NOT_IN_THIS_PLANT, absent=absent, keys=keys))
             continue
         taken = {k: owner for owner, ks in applied.items() for k in ks if k in keys}
         if taken:
-            missed.append(dict(cause=cid, reason=f"the plant holds one {', '.join(sorted(taken))}, already "
-                                                 f"taken by {', '.join(sorted(set(taken.values())))} "
-                                                 f"(keys {', '.join(f'{k} = {v}' for k, v in keys.items())})"))
+            missed.append(_missed(cid, NotInPlant.TAKEN, taken=sorted(taken), owners=sorted(set(taken.values())),
+                                  keys=keys))
             continue
         trial = dict(model, **keys)
         try:
             check_model(trial)
         except ValueError as e:
-            missed.append(dict(cause=cid, reason=f"its identified values are not a valid plant: {e}"))
+            missed.append(_missed(cid, NotInPlant.NOT_A_PLANT, detail=str(e)))
             continue
         model = trial
         applied[cid] = keys
@@ -282,7 +333,7 @@ def plan_from_steps(src: Source) -> tuple[dict, list[str]]:
     levels = [_sig(float(np.median(levels_N[group == g])), 4) for g in np.unique(group)]
     out = [lv for lv in levels if not MIN_LEVEL_N <= lv <= MAX_LEVEL_N]
     if out:
-        notes.append(f"force levels {out} N outside the bench's range {MIN_LEVEL_N:g}-{MAX_LEVEL_N:g} N left out")
+        notes.append(words.said(TwinNote.LEVELS_OUT, levels=out, low=MIN_LEVEL_N, high=MAX_LEVEL_N))
         levels = [lv for lv in levels if MIN_LEVEL_N <= lv <= MAX_LEVEL_N]
     freqs: list[float] = []
     for f in sorted(s.freq_Hz for s in src.steps):
@@ -290,11 +341,11 @@ def plan_from_steps(src: Source) -> tuple[dict, list[str]]:
             freqs.append(f)
     out = [f for f in freqs if not MIN_FREQ_HZ <= f <= MAX_FREQ_HZ]
     if out:
-        notes.append(f"{len(out)} frequencies outside the bench's range {MIN_FREQ_HZ:g}-{MAX_FREQ_HZ:g} Hz left out")
+        notes.append(words.said(TwinNote.FREQS_OUT, count=len(out), low=MIN_FREQ_HZ, high=MAX_FREQ_HZ))
     freqs = [_sig(f) for f in freqs if MIN_FREQ_HZ <= f <= MAX_FREQ_HZ]
     if not (levels and freqs):
-        raise ConfigurationError(f"{src.path}: no force level or frequency within the bench's range "
-                                 f"({MIN_LEVEL_N:g}-{MAX_LEVEL_N:g} N, {MIN_FREQ_HZ:g}-{MAX_FREQ_HZ:g} Hz)")
+        raise words.refused(ConfigurationError, TwinSaid.NO_LEVEL_OR_FREQ, path=src.path, level_low=MIN_LEVEL_N,
+                            level_high=MAX_LEVEL_N, freq_low=MIN_FREQ_HZ, freq_high=MAX_FREQ_HZ)
     dirs = {s.direction for s in src.steps if s.direction}
     if dirs:
         direction = "both" if dirs >= {"up", "down"} else dirs.pop()
@@ -304,15 +355,15 @@ def plan_from_steps(src: Source) -> tuple[dict, list[str]]:
             fs = [s.freq_Hz for s, gg in zip(src.steps, group) if gg == g]
             trend += int(np.sign(np.sum(np.sign(np.diff(fs))))) if len(fs) > 1 else 0
         direction = "down" if trend < 0 else "up"
-        notes.append(f"sweep direction '{direction}' from the order of the steps in the file (no tags)")
+        notes.append(words.said(TwinNote.DIRECTION_FROM_ORDER, direction=direction))
     periods = [s.periods for s in src.steps if s.periods > 0]
     fs_min = min(s.fs_Hz for s in src.steps)
     min_rate = float(min(204800.0, max(25600.0, _sig(fs_min, 4))))
     nyquist = math.ceil(min_rate / (2 * max(freqs))) - 1
     control = dict(settle_cycles=20, measure_cycles=int(np.median(periods)) if periods else 10,
                    min_sample_rate_Hz=min_rate, harmonics=int(max(1, min(9, nyquist))))
-    notes.append("settle cycles (20) and force control from the plan defaults: a file does not record them")
-    plan = dict(name=f"twin of {src.path.name}", levels_N=levels, infeasible="skip",
+    notes.append(words.said(TwinNote.PLAN_DEFAULTS))
+    plan = dict(name=words.said(TwinSaid.PLAN_NAME, name=src.path.name), levels_N=levels, infeasible="skip",
                 frequencies=dict(list_Hz=freqs, direction=direction), control=control)
     return plan, notes
 
@@ -338,9 +389,7 @@ def _foreign_rig(src: Source, params: dict, noise: dict) -> tuple[dict, list[str
     limits = dict(drive_V=10.0, force_N=_sig(min(1000.0, 2 * Fp), 4),
                   disp_m=_sig(min(0.01, max(2 * env_disp, 3 * peak["disp_m"])), 4),
                   accel_m_s2=_sig(min(1e4, max(2 * Fp / m, 3 * peak["accel_m_s2"])), 4))
-    notes = ["a foreign file: calibration from bench/defaults/sim_rig.toml (sensitivities lowered so the largest "
-             "reading is at most 5 V), amplifier gain reaching the largest level with 5 V, limits twice the plan's "
-             "envelope and three times the largest measured peaks, drive limit 10 V"]
+    notes = [words.said(TwinNote.FOREIGN_RIG)]
     return dict(calibration=cal, limits=limits), notes
 
 
@@ -351,15 +400,15 @@ def load_analysis(path: Path) -> dict:
     p = Path(path)
     f = p / "analysis.json" if p.is_dir() else p
     if not f.is_file():
-        raise ConfigurationError(f"{path}: no analysis.json (run `bench analyze SOURCE` or leave --analysis out)")
+        raise words.refused(ConfigurationError, TwinSaid.NO_ANALYSIS, path=path)
     try:
         d = json.loads(read_file(f, MAX_BYTES["analysis.json"]))
     except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as e:
-        raise ConfigurationError(f"{f}: not valid JSON: {e}") from None
+        raise words.refused(ConfigurationError, TwinSaid.ANALYSIS_NOT_JSON, path=f, detail=str(e)) from None
     if not isinstance(d, dict):
-        raise ConfigurationError(f"{f}: not an analysis.json (a JSON object was expected)")
+        raise words.refused(ConfigurationError, TwinSaid.ANALYSIS_NOT_OBJECT, path=f)
     if not str(d.get("schema", "")).startswith("guideway-bench/analysis/"):
-        raise ConfigurationError(f"{f}: not an analysis.json (schema {d.get('schema')!r})")
+        raise words.refused(ConfigurationError, TwinSaid.ANALYSIS_SCHEMA, path=f, schema=d.get("schema"))
     return stored_analysis(d)
 
 
@@ -370,7 +419,7 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source
     source = Path(source)
     src = src if src is not None else load_source(source)
     if not src.steps:
-        raise ConfigurationError(f"{source}: no usable steps to build a twin from")
+        raise words.refused(ConfigurationError, TwinSaid.NO_STEPS, path=source)
     params = analysis["base"]["parameters"] if plain else analysis["parameters"]
     causes = [] if plain else list(analysis.get("causes", []))
     notes: list[str] = []
@@ -388,8 +437,8 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source
         rig.update(expected=dict(mass_kg=_sig(params["mass_kg"]["value"]), x_s_m=_sig(params["x_s_m"]["value"]),
                                  F_s_N=_sig(params["F_s_N"]["value"]), n=_sig(min(10.0, max(0.05, params["n"]["value"])))))
         notes += n
-    rig["name"] = f"twin of {source.name}" + (" (plain Masing)" if plain else "")
-    rig["notes"] = f"bench twin of {source}" + (f" (rig '{meta_rig['name']}')" if meta_rig else " (foreign file)")
+    rig["name"] = words.said(TwinSaid.RIG_NAME, source=source.name, plain=plain)
+    rig["notes"] = words.said(TwinSaid.RIG_NOTES, source=source, rig=meta_rig["name"] if meta_rig else None)
     rig["simulated"] = True
     cal = rig["calibration"]
 
@@ -404,8 +453,7 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source
     if shaker.note:
         notes.append(shaker.note)
     if not ratio.size:
-        notes.append(f"no drive voltage in the source (a file): amp_gain_N_per_V is the calibration's single gain "
-                     f"{cal['amp_gain_N_per_V']:g} N/V, an ideal amplifier (no shaker fitted)")
+        notes.append(words.said(TwinNote.NO_DRIVE_VOLTAGE, gain=cal["amp_gain_N_per_V"]))
     if "amp_force_limit_N" in src_model:
         model["amp_force_limit_N"] = src_model["amp_force_limit_N"]
     model["amp_force_limit_N"] = max(model.get("amp_force_limit_N", RigModel.amp_force_limit_N),
@@ -421,14 +469,13 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source
     not_in_plant += missed
     if analysis.get("unexplained") and not plain:
         reasons = analysis.get("base", {}).get("diagnostics", {}).get("unexplained_reasons", [])
-        not_in_plant.append(dict(cause="unexplained", reason="structure the analysis could not name"
-                                 + (f": {'; '.join(reasons[:3])}" if reasons else "")))
+        not_in_plant.append(_missed("unexplained", NotInPlant.UNEXPLAINED, reasons=reasons[:3]))
     rig["model"] = {k: (_sig(v, 8) if isinstance(v, float) else v) for k, v in model.items()}
 
     # plan
     if src.kind == "run":
         plan = plan_toml(src.metadata["plan"])
-        plan["name"] = f"twin of {plan['name']}"
+        plan["name"] = words.said(TwinSaid.PLAN_NAME, name=plan["name"])
     else:
         plan, n = plan_from_steps(src)
         notes += n
@@ -444,8 +491,8 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source
                              for f, r, z in zip(f_r, ratio, Zs)],
                 shaker=shaker.as_dict() if ratio.size else {})
     # both files must load as the commands will load them
-    parse_rig(twin.rig, "twin rig.toml")
-    parse_plan(twin.plan, "twin plan.toml")
+    parse_rig(twin.rig, words.said(TwinSaid.RIG_LABEL))
+    parse_plan(twin.plan, words.said(TwinSaid.PLAN_LABEL))
     return twin
 
 
@@ -463,7 +510,7 @@ def _toml_value(v) -> str:
         return json.dumps(v)          # a JSON string is a valid TOML basic string
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    raise TypeError(f"no TOML form for {type(v).__name__}")
+    raise words.refused(TypeError, TwinSaid.NO_TOML_FORM, name=type(v).__name__)
 
 
 def to_toml(data: dict, prefix: str = "") -> str:
@@ -481,42 +528,15 @@ def to_toml(data: dict, prefix: str = "") -> str:
     return out
 
 
-def _header(twin: Twin, what: str) -> str:
-    p = twin.provenance
-    lines = [f"# {what}, written by `bench twin` (decision record 0026)",
-             f"# source: {p['source']} ({p['source_kind']}, {p['steps_used']} steps used, "
-             f"{p['steps_rejected']} rejected)",
-             f"# source sha256: {p['source_sha256']}",
-             f"# analysis: software {p['analysis_software_version'] or 'unknown'}; bench twin: software "
-             f"{p['software_version']}" + ("; plain Masing twin (base parameters only)" if p["plain"] else "")]
-    return "\n".join(lines) + "\n"
-
-
-def _rig_comments(twin: Twin) -> str:
-    v = twin.parameters
-    lines = ["# identified (95 %): " + ", ".join(
-        f"{k} {v[k]['value']:.5g} [{v[k]['low']:.5g}, {v[k]['high']:.5g}]" for k in ("F_s_N", "x_s_m", "n", "mass_kg"))]
-    for cid, keys in twin.applied.items():
-        lines.append(f"# cause {cid} -> " + ", ".join(f"{k} = {val:.5g}" if isinstance(val, float) else f"{k} = {val}"
-                                                       for k, val in keys.items()))
-    for name, q in twin.shaker.get("parameters", {}).items() if twin.shaker.get("keys") else ():
-        lines.append(f"# shaker {name} {q['value']:.5g} " + (f"[{q['low']:.5g}, {q['high']:.5g}] (95 %)" if q["fitted"]
-                                                             else "(fixed at the default)"))
-    for item in twin.not_in_plant:
-        lines.append(f"# NOT IN THE PLANT: {item['cause']}: {item['reason']}")
-    for n in twin.notes:
-        lines.append(f"# note: {n}")
-    lines.append("# channel noise (force_noise_N, accel_noise_m_s2, disp_noise_m): median per-sample rms of the source")
-    return "\n".join(lines) + "\n"
-
-
 def write_twin(twin: Twin, out: Path) -> dict[str, Path]:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     paths = dict(rig=out / "rig.toml", plan=out / "plan.toml", twin=out / "twin.json")
-    paths["rig"].write_text(_header(twin, "Simulated twin of a measured rig") + _rig_comments(twin) + "\n"
-                            + to_toml(twin.rig))
-    paths["plan"].write_text(_header(twin, "The source's plan, to run on its twin") + "\n" + to_toml(twin.plan))
+    paths["rig"].write_text(words.said(TwinSaid.RIG_HEADER, provenance=twin.provenance)
+                            + words.said(TwinSaid.RIG_COMMENTS, parameters=twin.parameters, applied=twin.applied,
+                                         shaker=twin.shaker, not_in_plant=twin.not_in_plant, notes=twin.notes)
+                            + "\n" + to_toml(twin.rig))
+    paths["plan"].write_text(words.said(TwinSaid.PLAN_HEADER, provenance=twin.provenance) + "\n" + to_toml(twin.plan))
     write_json(paths["twin"], twin.to_dict())
     return paths
 
@@ -532,13 +552,14 @@ def make_twin(source: Path, analysis_dir: Path | None = None, out: Path | None =
     build the twin and write rig.toml, plan.toml and twin.json to OUT."""
     source = Path(source)
     if not source.exists():
-        raise ConfigurationError(f"{source}: no such run directory or file")
+        raise words.refused(ConfigurationError, SourceProblem.NO_SUCH_SOURCE, path=source)
     out = Path(out) if out else default_out_dir(source)
     src = src if src is not None else load_source(source)
     if analysis_dir is not None:
         analysis = load_analysis(analysis_dir)
         if analysis.get("source") and Path(analysis["source"]).resolve() != source.resolve():
-            log.warning("the analysis in %s is of %s, not of %s", analysis_dir, analysis["source"], source)
+            log.warning("%s", words.said(TwinSaid.ANALYSIS_OF_ANOTHER, analysis=analysis_dir, of=analysis["source"],
+                                         source=source))
     else:
         analysis = analyze_source(source, out / "analysis", src=src)
     twin = build_twin(source, analysis, plain=plain, src=src)

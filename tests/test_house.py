@@ -51,7 +51,10 @@ WORDLESS = ("bench/step_files.py", "bench/runlock.py", "sim/artefacts/causes.py"
             "bench/toml_tables.py", "bench/commands/run.py", "bench/session.py", "bench/durable.py", "bench/signals.py",
             "bench/storage.py", "bench/files.py", "bench/accounting.py",
             "bench/warmup.py", "bench/demo.py", "bench/cli.py", "bench/watch/server.py", "bench/watch/stop.py",
-            "bench/watch/snapshot.py")
+            "bench/watch/snapshot.py", "bench/sources.py", "bench/twin.py", "bench/compare.py", "bench/export.py",
+            "bench/export_modes.py", "bench/analyze.py", "bench/commands/tools.py", "bench/commands/results.py",
+            "bench/studies/engine.py", "bench/studies/montecarlo.py", "bench/studies/maps.py", "bench/studies/batch.py",
+            "bench/studies/__init__.py")
 
 
 # modules that start `bench` in a process of their own on purpose (decision 0057)

@@ -11,6 +11,7 @@ from sim.errors import ConfigurationError
 
 from ..terminal import Progress
 from ..words import terminal
+from ..words import terminal_data as words
 from . import ExitCode
 from .run import _latch, _report
 
@@ -47,21 +48,21 @@ def cmd_identify(args) -> int:
     from ..analyze import default_out_dir
     from ..config import DEFAULTS, load_rig, parse_rig, rig_toml
     from ..numbers import number
-    from ..sources import load_source
+    from ..sources import SourceProblem, load_source
     from ..storage import RunStore
 
     source = Path(args.source)
     if not source.exists():
-        raise FileNotFoundError(2, "no such file or directory (expected a run directory or a UFF58 file)", str(source))
+        raise FileNotFoundError(2, say_result(ResultLine.NO_SOURCE), str(source))
     src = load_source(source)
     if src.kind == "run":
         rig = parse_rig({"rig": rig_toml(src.metadata["rig"])}, f"{source}/run.json")
     else:
         rig = load_rig(Path(args.rig) if args.rig else DEFAULTS / "sim_rig.toml")
     for r in src.rejected:
-        print(f"step {r.step} rejected: {r.reason}")
+        print(say_result(ResultLine.STEP_REJECTED, step=r.step, reason=r.reason))
     if not src.steps:
-        raise ConfigurationError(f"{source}: no steps with force, acceleration and displacement to identify from")
+        raise words.refused(ConfigurationError, SourceProblem.NO_STEPS_TO_IDENTIFY, path=source)
     guess = rig.guess()
     analysis_json = default_out_dir(source) / "analysis.json"
     extra: tuple[str, ...] = ()
@@ -69,24 +70,24 @@ def cmd_identify(args) -> int:
         try:
             extra = analysis_effects(json.loads(analysis_json.read_text()))
         except (OSError, ValueError) as e:
-            print(f"warning: {analysis_json} cannot be read ({e}); the analysis' causes are not in the model")
+            print(say_result(ResultLine.ANALYSIS_UNREADABLE, path=analysis_json, detail=str(e)))
     est = identify_steps(src.steps, guess, rig.model, extra, MAX_HARMONICS)
     check_finite(est)
     if src.kind == "run":
         RunStore.open(source).update(identification=est)
     effects = est.get("model", {}).get("effects") or []
-    print(f"model: Masing friction and the moving mass{' with ' + ', '.join(effects) if effects else ''} "
-          f"({est.get('source', 'final fit')})")
-    print(f"{'parameter':>10} {'estimate':>12} {'95 % interval':>28}")
+    print(say_result(ResultLine.MODEL, effects=effects, source=est.get("source"), named="source" in est))
+    print(say_result(ResultLine.TABLE_HEAD))
     for k, v in est["values"].items():
         print(f"{k:>10} {number(v, fmt='.6g'):>12} [{number(est['low'][k], fmt='.6g'):>12}, "
               f"{number(est['high'][k], fmt='.6g'):>12}]")
     for k, p in (est.get("model", {}).get("parameters") or {}).items():
         print(f"{k:>10} {number(p['value'], fmt='.6g'):>12} [{number(p['low'], fmt='.6g'):>12}, "
               f"{number(p['high'], fmt='.6g'):>12}]")
-    print(f"{len(src.steps)} steps ({len(src.rejected)} rejected), reduced chi^2 {number(est['reduced_chi2'], fmt='.3g')}")
+    print(say_result(ResultLine.FIT, steps=len(src.steps), rejected=len(src.rejected),
+                     chi2=number(est["reduced_chi2"], fmt=".3g")))
     for w in est["warnings"]:
-        print(f"warning: {w}")
+        print(say_result(ResultLine.WARNING, text=w))
     return 0
 
 
@@ -100,8 +101,8 @@ def cmd_analyze(args) -> int:
     result = analyze_source(source, Path(args.out) if args.out else None, Path(args.rig) if args.rig else None)
     out = Path(args.out) if args.out else default_out_dir(source)
     print(result["verdict"])
-    print(f"causes: {', '.join(c['id'] for c in result['causes']) or 'none'}; "
-          f"unexplained: {'yes' if result['unexplained'] else 'no'}; written to {out}")
+    print(say_result(ResultLine.ANALYZED, causes=[c["id"] for c in result["causes"]], unexplained=result["unexplained"],
+                     out=out))
     return 0
 
 
@@ -172,6 +173,25 @@ class ModeLine(StrEnum):
     WROTE = "wrote"                     # files
 
 
+class ResultLine(StrEnum):
+    """The lines ``bench identify``, ``analyze`` and ``compare`` print, and their refusals
+    (words: :data:`bench.words.terminal_data.RESULTS`)."""
+
+    NO_SOURCE = "no_source"                 # the FileNotFoundError's strerror
+    STEP_REJECTED = "step_rejected_here"    # step, reason
+    ANALYSIS_UNREADABLE = "analysis_unreadable"     # path, detail: the reader's error
+    MODEL = "model"                         # effects, source, named: whether the estimate names its source
+    TABLE_HEAD = "table_head"
+    FIT = "fit"                             # steps, rejected, chi2: formatted
+    WARNING = "warning"                     # text: the identification's warning
+    ANALYZED = "analyzed"                   # causes: ids, unexplained, out
+    COMPARED = "compared"                   # out
+
+
+def say_result(code: ResultLine, **fields) -> str:
+    return words.said(code, **fields)
+
+
 def say_mode(code: ModeLine, **fields) -> str:
     return terminal.say(terminal.MODES, code, fields)
 
@@ -206,7 +226,7 @@ def cmd_compare(args) -> int:
     result, out = write_compare(Path(args.reference), Path(args.other), Path(args.out) if args.out else None,
                                 args.tolerance, args.min_coverage)
     print(summary(result), end="")
-    print(f"written to {out}/compare.json and compare.html")
+    print(say_result(ResultLine.COMPARED, out=out))
     return ExitCode.OK if result["overall"]["passed"] else ExitCode.FAILURE
 
 

@@ -5,14 +5,40 @@ from __future__ import annotations
 
 import logging
 import sys
+from enum import StrEnum
 from pathlib import Path
 
 from sim.errors import ConfigurationError
 
 from ..terminal import Progress
+from ..words import terminal_data as words
 from . import ExitCode
 
 log = logging.getLogger(__name__)
+
+
+class ToolLine(StrEnum):
+    """What these commands print, and their refusals (words:
+    :data:`bench.words.terminal_data.TOOLS`)."""
+
+    PAPER_PROGRESS = "paper_progress"       # the progress line's label
+    PAPER_WROTE = "paper_wrote"             # count, out
+    BAD_POINTS = "bad_points"               # points
+    FRF_PROGRESS = "frf_progress"           # gamma0, n, engine
+    FRF_PEAK = "frf_peak"                   # kind, beta, G
+    COMPILING = "compiling"
+    COMPILED = "compiled"                   # seconds
+    NOT_SIMULATED = "not_simulated"         # rig: its file
+    STOPPING_TWINS = "stopping_twins"
+    TWIN_PARAMETERS = "twin_parameters"     # parameters: {name: {value, ...}}
+    TWIN_APPLIED = "twin_applied"           # cause, keys: written to [rig.model]
+    TWIN_NOT_IN_PLANT = "twin_not_in_plant"  # cause, reason
+    TWIN_WROTE = "twin_wrote"               # rig, plan, twin: the paths
+    TWIN_RUN_IT = "twin_run_it"             # rig, plan
+
+
+def say(code: ToolLine, **fields) -> str:
+    return words.said(code, **fields)
 
 
 def cmd_paper(args) -> int:
@@ -31,9 +57,9 @@ def cmd_paper(args) -> int:
         for r in args.runs:
             rm = run_modes(Path(r), model=False)
             measured.append({"label": rm.label, "rows": rm.rows()})
-    files = reproduce(out, quick=args.quick, progress=Progress("paper figures"), pitch_model=pitch_model,
+    files = reproduce(out, quick=args.quick, progress=Progress(say(ToolLine.PAPER_PROGRESS)), pitch_model=pitch_model,
                       measured=measured, pitch_name=name, other_models=others)
-    print(f"wrote {len(files)} files to {out}/ (start with {out}/README.md)")
+    print(say(ToolLine.PAPER_WROTE, count=len(files), out=out))
     return 0
 
 
@@ -44,9 +70,9 @@ def cmd_frf(args) -> int:
     from sim.shooting import frf_shooting
 
     if args.points < 1:
-        raise ConfigurationError(f"--points must be >= 1, got {args.points}")
+        raise words.refused(ConfigurationError, ToolLine.BAD_POINTS, points=args.points)
     betas = np.linspace(args.beta_min, args.beta_max, args.points)
-    prog = Progress(f"FRF gamma0={args.gamma0} n={args.n} ({args.engine})")
+    prog = Progress(say(ToolLine.FRF_PROGRESS, gamma0=args.gamma0, n=args.n, engine=args.engine))
     if args.engine == "shooting":
         fr, _ = frf_shooting(betas, args.gamma0, args.n, progress=prog)
     else:
@@ -55,7 +81,7 @@ def cmd_frf(args) -> int:
     for b, G, c in zip(fr.beta, fr.G, fr.converged):
         print(f"{b:.6g},{G:.6g},{int(c)}")
     for p in find_peaks(fr):
-        print(f"# {p.kind} resonance: beta={p.beta:.4f} G={p.G:.4f}", file=sys.stderr)
+        print(say(ToolLine.FRF_PEAK, kind=p.kind, beta=p.beta, G=p.G), file=sys.stderr)
     return 0
 
 
@@ -63,8 +89,8 @@ def cmd_warmup(args) -> int:
     from ..warmup import warm_up
     if not args.verbose:
         logging.getLogger().setLevel(logging.ERROR)     # the warm-up run's chatter is noise here
-    print("compiling the simulation kernels (once per machine and change of sim/) ...", flush=True)
-    print(f"kernels compiled and cached in {warm_up():.0f} s")
+    print(say(ToolLine.COMPILING), flush=True)
+    print(say(ToolLine.COMPILED, seconds=warm_up()))
     return 0
 
 
@@ -75,14 +101,14 @@ def cmd_twins(args) -> int:
     from ..config import DEFAULTS, load_rig
     rig = load_rig(Path(args.rig) if args.rig else DEFAULTS / "sim_rig.toml")
     if not rig.simulated:
-        raise ConfigurationError(f"{args.rig}: not a simulated rig (simulated = true is needed)")
+        raise words.refused(ConfigurationError, ToolLine.NOT_SIMULATED, rig=args.rig)
     import threading
 
     from ..signals import ENDING, handling
     stop = threading.Event()          # serving until a signal is this command's work: it ends it, exit 0
     with handling(lambda signum, frame: stop.set(), *ENDING):
         run_standalone(SimulatedRig(rig.model), args.host, serial_ports=args.serial, stop=stop)
-    print("stopping twins")
+    print(say(ToolLine.STOPPING_TWINS))
     return 0
 
 
@@ -91,15 +117,13 @@ def cmd_twin(args) -> int:
     from ..twin import make_twin
     twin, paths = make_twin(Path(args.source), Path(args.analysis) if args.analysis else None,
                             Path(args.out) if args.out else None, plain=args.plain)
-    v = twin.parameters
-    print("twin: " + ", ".join(f"{k} {v[k]['value']:.4g}" for k in ("F_s_N", "x_s_m", "n", "mass_kg")))
+    print(say(ToolLine.TWIN_PARAMETERS, parameters=twin.parameters))
     for cid, keys in twin.applied.items():
-        print(f"cause {cid} -> " + ", ".join(f"{k} = {x:.4g}" if isinstance(x, float) else f"{k} = {x}"
-                                             for k, x in keys.items()))
+        print(say(ToolLine.TWIN_APPLIED, cause=cid, keys=keys))
     if twin.shaker.get("note"):
         print(twin.shaker["note"])
     for item in twin.not_in_plant:
-        print(f"not in the plant: {item['cause']}: {item['reason']}")
-    print(f"wrote {paths['rig']}, {paths['plan']} and {paths['twin']}")
-    print(f"run it: bench run --plan {paths['plan']} --rig {paths['rig']} --out RUN")
+        print(say(ToolLine.TWIN_NOT_IN_PLANT, cause=item["cause"], reason=item["reason"]))
+    print(say(ToolLine.TWIN_WROTE, rig=paths["rig"], plan=paths["plan"], twin=paths["twin"]))
+    print(say(ToolLine.TWIN_RUN_IT, rig=paths["rig"], plan=paths["plan"]))
     return ExitCode.OK

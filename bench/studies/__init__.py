@@ -14,6 +14,9 @@ parts that exist.  Names are imported lazily: ``bench --help`` need not load das
 """
 
 import importlib
+from enum import StrEnum
+
+from ..words import terminal_data as words
 
 _PUBLIC = {"Engine": "engine", "Outcome": "engine", "Study": "engine", "task_seed": "engine",
            "MapSpec": "maps", "compliance_map": "maps", "McSpec": "montecarlo",
@@ -22,7 +25,13 @@ _PUBLIC = {"Engine": "engine", "Outcome": "engine", "Study": "engine", "task_see
 __all__ = sorted(_PUBLIC)
 
 
+class StudiesSaid(StrEnum):
+    """The package's own refusal (words: :data:`bench.words.terminal_data.STUDIES`)."""
+
+    NO_ATTRIBUTE = "no_attribute"           # module, name
+
+
 def __getattr__(name):
     if name in _PUBLIC:
         return getattr(importlib.import_module(f".{_PUBLIC[name]}", __name__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    raise words.refused(AttributeError, StudiesSaid.NO_ATTRIBUTE, module=__name__, name=name)

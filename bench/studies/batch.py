@@ -21,15 +21,26 @@ import importlib
 import logging
 import re
 from collections.abc import Callable
+from enum import StrEnum
 from pathlib import Path
 
 import pyarrow.parquet as pq
 
 from sim.errors import ConfigurationError
 
+from ..words import terminal_data as words
 from .engine import Engine, Outcome, Study
 
 log = logging.getLogger(__name__)
+
+
+class BatchSaid(StrEnum):
+    """A batch's bad paths and a source whose modes could not be estimated (words:
+    :data:`bench.words.terminal_data.STUDIES`)."""
+
+    NO_SUCH_PATH = "no_such_path"           # path
+    NO_SOURCES_IN = "no_sources_in"         # path: a directory with no run or UFF58 file
+    NO_MODES = "no_modes"                   # path, detail (a log line)
 
 ANALYZE = "bench.analyze:analyze_source"
 IDENTIFY = "bench.studies.batch:identify_source"
@@ -41,7 +52,7 @@ def find_sources(paths: list[Path]) -> list[Path]:
     out: list[Path] = []
     for p in map(Path, paths):
         if not p.exists():
-            raise ConfigurationError(f"{p}: no such file or directory")
+            raise words.refused(ConfigurationError, BatchSaid.NO_SUCH_PATH, path=p)
         if p.is_file() or (p / "run.json").exists():
             out.append(p)
             continue
@@ -51,7 +62,7 @@ def find_sources(paths: list[Path]) -> list[Path]:
                 and not runs.intersection(q.parents)}
         found = sorted(runs | uffs)
         if not found:
-            raise ConfigurationError(f"{p}: no run directories (run.json) or UFF58 files (.uff, .unv) in it")
+            raise words.refused(ConfigurationError, BatchSaid.NO_SOURCES_IN, path=p)
         out.extend(found)
     seen, unique = set(), []
     for s in out:
@@ -121,7 +132,7 @@ def mode_columns(source: Path) -> dict:
         from bench.reports import run_modes
         modes = run_modes(source, model=False).modes
     except Exception as e:  # noqa: BLE001 - the summary row comes out without the modes
-        log.warning("%s: modes could not be estimated: %s", source, e)
+        log.warning("%s", words.said(BatchSaid.NO_MODES, path=source, detail=e))
         return out
     for mode in ("feed", "pitch"):
         ms = [e for e in modes if e.mode == mode]
@@ -138,7 +149,7 @@ def identify_source(source: Path, out_dir: Path | None = None, rig: Path | None 
     where the full analysis is not needed.  Guesses from the run's rig, else from ``rig``
     (default: the simulated rig's file); writes identification.json into ``out_dir``."""
     from bench.config import DEFAULTS, load_rig, stored_rig
-    from bench.sources import load_source
+    from bench.sources import SourceProblem, load_source
     from bench.storage import write_json
     from procedures.online_id import MAX_HARMONICS
     from sim.discrepancy.rigfit import identify_steps
@@ -147,7 +158,7 @@ def identify_source(source: Path, out_dir: Path | None = None, rig: Path | None 
     rr = (stored_rig(src.metadata["rig"], f"{source}/run.json") if src.kind == "run"
           else load_rig(rig or DEFAULTS / "sim_rig.toml"))
     if not src.steps:
-        raise ConfigurationError(f"{source}: no steps with force, acceleration and displacement to identify from")
+        raise words.refused(ConfigurationError, SourceProblem.NO_STEPS_TO_IDENTIFY, path=source)
     est = identify_steps(src.steps, rr.guess(), rr.model, harmonics=MAX_HARMONICS)
     out = dict(schema="guideway-bench/identification/1", source=str(source), kind=src.kind,
                parameters={k: dict(value=est["values"][k], low=est["low"][k], high=est["high"][k])

@@ -36,6 +36,7 @@ import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 
 import pyarrow as pa
@@ -44,9 +45,26 @@ from distributed import Client, LocalCluster, WorkerPlugin, as_completed
 
 from bench.signals import SignalLatch
 from bench.storage import atomic_write, now_iso
+from bench.words import terminal_data as words
 from sim.errors import ConfigurationError
 
 log = logging.getLogger(__name__)
+
+
+class StudySaid(StrEnum):
+    """A study's refusals, log lines and progress notes, and the software version it stores
+    (words: :data:`bench.words.terminal_data.STUDIES`)."""
+
+    VERSION = "version"                     # version: the installed package's
+    NOT_INSTALLED = "not_installed"
+    NO_SCHEDULER = "no_scheduler"           # scheduler, detail: the connection's error
+    SAME_INPUTS = "same_inputs"             # kind
+    DIFFERENT_STUDY = "different_study"     # path, kind, seed, spec: the study the directory holds
+    ALREADY_DONE = "already_done"           # path, done, total, todo
+    RESUMED = "resumed"                     # the progress line's note
+    FAILED_SO_FAR = "failed_so_far"         # count (the progress line's note)
+    TASK_FAILED = "task_failed"             # key, inputs, error
+    CANCELLING = "cancelling"               # path, count
 
 SCHEMA = "guideway-bench/study/1"
 
@@ -54,9 +72,9 @@ SCHEMA = "guideway-bench/study/1"
 def software_version() -> str:
     from importlib import metadata
     try:
-        return f"guideway-bench {metadata.version('guideway-bench')}"
+        return words.said(StudySaid.VERSION, version=metadata.version("guideway-bench"))
     except metadata.PackageNotFoundError:
-        return "guideway-bench (not installed)"
+        return words.said(StudySaid.NOT_INSTALLED)
 
 
 def task_key(inputs: dict) -> str:
@@ -127,7 +145,8 @@ class Engine:
                 try:
                     self.client = Client(self.scheduler, timeout=f"{self.connect_timeout_s}s")
                 except OSError as e:
-                    raise ConfigurationError(f"cannot reach the dask scheduler at {self.scheduler}: {e}") from e
+                    raise words.refused(ConfigurationError, StudySaid.NO_SCHEDULER, scheduler=self.scheduler,
+                                        detail=str(e)) from e
             else:
                 n = self.workers or os.cpu_count() or 1
                 self.cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
@@ -209,7 +228,7 @@ class Study:
         self.tasks = tasks
         self.keys = [task_key(t) for t in tasks]
         if len(set(self.keys)) != len(self.keys):
-            raise ConfigurationError(f"{kind} study: two tasks have the same inputs")
+            raise words.refused(ConfigurationError, StudySaid.SAME_INPUTS, kind=kind)
         self.parts = self.dir / "parts"
         self.manifest = self.dir / "study.json"
 
@@ -219,9 +238,8 @@ class Study:
             old = json.loads(self.manifest.read_text())
             if old.get("kind") != self.kind or old.get("spec") != json.loads(json.dumps(self.spec)) \
                     or old.get("seed") != self.seed:
-                raise ConfigurationError(
-                    f"{self.dir} holds a different study ({old.get('kind')}, seed {old.get('seed')}, "
-                    f"spec {old.get('spec')}); use a new directory or the same inputs to resume it")
+                raise words.refused(ConfigurationError, StudySaid.DIFFERENT_STUDY, path=self.dir, kind=old.get("kind"),
+                                    seed=old.get("seed"), spec=old.get("spec"))
             return old
         return dict(schema=SCHEMA, kind=self.kind, spec=self.spec, seed=self.seed,
                     software_version=software_version(), created=now_iso(),
@@ -252,8 +270,8 @@ class Study:
         todo = [(k, t) for k, t in zip(self.keys, self.tasks) if k not in done]
         out = Outcome(self.dir, skipped=len(self.tasks) - len(todo), workers=engine.n_workers)
         if out.skipped:
-            log.info("%s: %d of %d tasks already done, %d to compute", self.dir, out.skipped,
-                     len(self.tasks), len(todo))
+            log.info("%s", words.said(StudySaid.ALREADY_DONE, path=self.dir, done=out.skipped, total=len(self.tasks),
+                                      todo=len(todo)))
         client = engine.client
         futures = {}
         for k, t in todo:
@@ -262,7 +280,7 @@ class Study:
             futures[fut] = (k, t)
         total, finished = len(self.tasks), out.skipped
         if progress and finished:
-            progress(finished, total, "(resumed)")
+            progress(finished, total, words.said(StudySaid.RESUMED))
         latch = SignalLatch()       # SIGTERM as Ctrl-C; one dropped in a finalizer acts after the next task
         try:
             with latch.installed():
@@ -273,16 +291,17 @@ class Study:
                         rows = fut.result()
                     except Exception as e:  # noqa: BLE001 - one task's failure must not stop the study
                         msg = f"{type(e).__name__}: {e}"
-                        log.error("task %s failed with inputs %s: %s", k, t, msg)
+                        log.error("%s", words.said(StudySaid.TASK_FAILED, key=k, inputs=t, error=msg))
                         out.failures.append(dict(task=k, inputs=t, error=msg))
                     else:
                         _write_part(self.parts / f"{k}.parquet", _rows_table(rows, t, k, version))
                         out.computed += 1
                     finished += 1
                     if progress:
-                        progress(finished, total, f"{len(out.failures)} failed" if out.failures else "")
+                        progress(finished, total,
+                                 words.said(StudySaid.FAILED_SO_FAR, count=len(out.failures)) if out.failures else "")
         except BaseException:
-            log.warning("%s: cancelling %d pending tasks", self.dir, sum(not f.done() for f in futures))
+            log.warning("%s", words.said(StudySaid.CANCELLING, path=self.dir, count=sum(not f.done() for f in futures)))
             client.cancel(list(futures))
             raise
         finally:

@@ -15,14 +15,28 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from enum import StrEnum
 
 import numpy as np
 
 from sim.errors import ConfigurationError
 
+from ..words import terminal_data as words
 from .engine import Engine, Outcome, Study
 
 log = logging.getLogger(__name__)
+
+
+class MapRefusal(StrEnum):
+    """A map's bad inputs, and a case with no peaks (words: :data:`bench.words.terminal_data.STUDIES`)."""
+
+    NO_N_OR_GAMMA0 = "no_n_or_gamma0"
+    BAD_N = "bad_n"                         # n
+    BAD_GAMMA0 = "bad_gamma0"               # gamma0
+    BAD_BETA_RANGE = "bad_beta_range"       # low, high
+    BAD_BETA_POINTS = "bad_beta_points"     # points
+    BAD_ENGINE = "bad_engine"               # engine
+    NO_PEAKS = "no_peaks"                   # n, gamma0, detail (a log line)
 
 JUMP_RTOL = 0.02      # sweeps differing by more than this (relative) mark a jump region
 
@@ -40,19 +54,19 @@ class MapSpec:
 
     def __post_init__(self):
         if not self.n or not self.gamma0:
-            raise ConfigurationError("a map needs at least one n and one gamma0")
+            raise words.refused(ConfigurationError, MapRefusal.NO_N_OR_GAMMA0)
         for n in self.n:
             if not (n > 0 and abs(n - 1) > 1e-9):
-                raise ConfigurationError(f"n must be > 0 and != 1, got {n!r}")
+                raise words.refused(ConfigurationError, MapRefusal.BAD_N, n=n)
         for g in self.gamma0:
             if not (0 < g < 1):
-                raise ConfigurationError(f"gamma0 must lie in (0, 1) (above 1 the carriage rolls away), got {g!r}")
+                raise words.refused(ConfigurationError, MapRefusal.BAD_GAMMA0, gamma0=g)
         if not (0 < self.beta_min < self.beta_max):
-            raise ConfigurationError(f"need 0 < beta_min < beta_max, got {self.beta_min!r}, {self.beta_max!r}")
+            raise words.refused(ConfigurationError, MapRefusal.BAD_BETA_RANGE, low=self.beta_min, high=self.beta_max)
         if self.beta_points < 3:
-            raise ConfigurationError(f"beta_points must be >= 3, got {self.beta_points!r}")
+            raise words.refused(ConfigurationError, MapRefusal.BAD_BETA_POINTS, points=self.beta_points)
         if self.engine not in ("shooting", "rk4"):
-            raise ConfigurationError(f"engine must be 'shooting' or 'rk4', got {self.engine!r}")
+            raise words.refused(ConfigurationError, MapRefusal.BAD_ENGINE, engine=self.engine)
 
     def betas(self) -> np.ndarray:
         return np.geomspace(self.beta_min, self.beta_max, self.beta_points)
@@ -88,7 +102,7 @@ def map_row(inputs: dict, seed: int = 0) -> list[dict]:
         for p in find_peaks(up):
             peak[int(np.argmin(np.abs(np.log(betas / p.beta))))] = p.kind
     except ValueError as e:
-        log.warning("n=%g gamma0=%g: no peaks (%s)", n, g, e)
+        log.warning("%s", words.said(MapRefusal.NO_PEAKS, n=n, gamma0=g, detail=e))
     return [dict(n=float(n), gamma0=float(g), beta=float(b), G_up=float(up.G[i]), G_down=float(down.G[i]),
                  jump_region=bool(differ[i]), peak=str(peak[i]),
                  converged=bool(up.converged[i] and down.converged[i]),

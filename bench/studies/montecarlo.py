@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, replace
+from enum import StrEnum
 
 import numpy as np
 
@@ -25,9 +26,20 @@ from drivers import plan_block
 from sim.errors import ConfigurationError
 from sim.rig import RigModel, SimulatedRig
 
+from ..words import terminal_data as words
 from .engine import Engine, Outcome, Study
 
 log = logging.getLogger(__name__)
+
+
+class McRefusal(StrEnum):
+    """A Monte-Carlo study's bad inputs (words: :data:`bench.words.terminal_data.STUDIES`)."""
+
+    BAD_SAMPLES = "bad_samples"             # samples
+    BAD_SPREAD = "bad_spread"               # spread
+    NEGATIVE_SPREAD = "negative_spread"     # n_spread or noise_scale below 0
+    NOT_SIMULATED = "not_simulated_rig"
+    NO_N_DRAWN = "no_n_drawn"               # n, spread: the expected n and its spread
 
 PARAMS = ("F_s_N", "x_s_m", "n", "mass_kg")
 # Harmonics a sample's steps record (the DAQ sampling fast enough to keep them below Nyquist
@@ -107,11 +119,11 @@ class McSpec:
 
     def __post_init__(self):
         if self.samples < 1:
-            raise ConfigurationError(f"samples must be >= 1, got {self.samples!r}")
+            raise words.refused(ConfigurationError, McRefusal.BAD_SAMPLES, samples=self.samples)
         if not self.spread >= 1:
-            raise ConfigurationError(f"spread is a factor >= 1, got {self.spread!r}")
+            raise words.refused(ConfigurationError, McRefusal.BAD_SPREAD, spread=self.spread)
         if not (self.n_spread >= 0 and self.noise_scale >= 0):
-            raise ConfigurationError("n_spread and noise_scale must be >= 0")
+            raise words.refused(ConfigurationError, McRefusal.NEGATIVE_SPREAD)
         _configs(self.plan, self.rig)          # validates both now, not on a worker
 
     def tasks(self) -> list[dict]:
@@ -128,7 +140,7 @@ def _configs(plan: dict, rig: dict):
     p = parse_plan(plan)
     r = parse_rig(rig)
     if not r.simulated:
-        raise ConfigurationError("a Monte-Carlo study needs a simulated rig (simulated = true, [rig.model])")
+        raise words.refused(ConfigurationError, McRefusal.NOT_SIMULATED)
     # RECORD_HARMONICS below Nyquist at the top frequency: the DAQ samples faster if it must
     top = max(p.freqs_Hz)
     rate = min(max(p.min_sample_rate_Hz, 2 * top * (RECORD_HARMONICS + 1)), MAX_SAMPLE_RATE_HZ)
@@ -146,7 +158,7 @@ def draw_rig(expected: dict, spread: float, n_spread: float, rng: np.random.Gene
             break
         n = expected["n"] + rng.uniform(-n_spread, n_spread)
     else:
-        raise ConfigurationError(f"expected n {expected['n']} +- {n_spread} leaves no n > 0.2 away from 1")
+        raise words.refused(ConfigurationError, McRefusal.NO_N_DRAWN, n=expected["n"], spread=n_spread)
     truth["n"] = n
     return truth
 

@@ -23,15 +23,21 @@ import bench.words
 import bench.words.page as page_words
 import bench.words.report as report_words
 import bench.words.terminal as terminal_words
+import bench.words.terminal_data as data_words
 import bench.words.terminal_run as terminal_run_words
 import sim.artefacts.sentences as sentences
 import sim.records as records
 from bench.accounting import AccountLine, AccountRefusal
+from bench.analyze import AnalyzeSaid
 from bench.cli import CliLine, ExitCode, main
-from bench.commands.results import CheckLine, ModeLine
+from bench.commands.results import CheckLine, ModeLine, ResultLine
 from bench.commands.run import DryRunLine, ResumeLine, RunLine, RunRefusal, SequenceLine, WatchLine
+from bench.commands.tools import ToolLine
+from bench.compare import CompareSaid
 from bench.demo import MANIFEST, DemoLine, OutDirRefusal
 from bench.durable import WriteRefusal
+from bench.export import ExportSaid
+from bench.export_modes import ModeId
 from bench.files import FileKind, FileRefusal
 from bench.reports._markdown import accounting_md, flagged_reasons
 from bench.reports._overall import Concern, Verdict, overall
@@ -39,9 +45,16 @@ from bench.reports._run import load_run
 from bench.runlock import LOCK_NAME, LockRefusal
 from bench.session import EnvelopeProblem, EnvelopeRefusal, SessionLine
 from bench.signals import Doing, SignalLine
+from bench.sources import SourceProblem
 from bench.step_files import Problem
 from bench.storage import RunDirRefusal, RunStore, StoreLine
+from bench.studies import StudiesSaid
+from bench.studies.batch import BatchSaid
+from bench.studies.engine import StudySaid
+from bench.studies.maps import MapRefusal
+from bench.studies.montecarlo import McRefusal
 from bench.toml_tables import ConfigProblem
+from bench.twin import NotInPlant, TwinNote, TwinSaid
 from bench.verdict import Kept, Short
 from bench.warmup import WarmupLine
 from bench.watch.server import PageError, ServerLine
@@ -174,6 +187,14 @@ def test_every_code_has_words_in_its_renderers():
                          (run.REFUSAL, (*RunRefusal, *EnvelopeRefusal, *WriteRefusal, *FileRefusal,
                                                                   *AccountRefusal))):
         assert set(words) == {str(c) for c in codes}, codes
+    data = {"SOURCE": SourceProblem, "NOT_IN_PLANT": NotInPlant, "TWIN_NOTE": TwinNote, "TWIN": TwinSaid,
+            "COMPARE": CompareSaid, "EXPORT": (*ExportSaid, *ModeId), "ANALYZE": AnalyzeSaid, "TOOLS": ToolLine,
+            "RESULTS": ResultLine, "STUDIES": (*StudiesSaid, *StudySaid, *MapRefusal, *McRefusal, *BatchSaid)}
+    for name, codes in data.items():
+        assert set(getattr(data_words, name)) == {str(c) for c in codes}, name
+    assert set(data) == set(data_words._MAPPINGS)       # said() finds each code in one mapping only
+    every = [str(c) for codes in data.values() for c in codes]
+    assert len(every) == len(set(every))
 
 
 def _refusals(run, outs, capsys) -> list:
@@ -450,3 +471,43 @@ def test_rewording_a_runs_words_changes_no_envelope_decision(tmp_path, capsys, m
     assert str(refusal.value) == "<not_held>" and refusal.value.code == EnvelopeRefusal.NOT_HELD
     bad = [p for p in refusal.value.fields["points"] if p.problems]
     assert [(p.level, p.freq_Hz, [s.code for s in p.problems]) for p in bad] == [(30.0, 20.0, ["displacement"])]
+def _twin_and_source_decisions(tmp_path, capsys) -> tuple:
+    """What the twin decides of three causes (not in the plant: the rig's own transient, a
+    line in one step that is not mains, a cause with no plant form; a viscous damping built
+    in), what the UFF58 reader decides of a step missing two records, and ``bench analyze``
+    of a file that holds no dataset 58 (exit status, and its one line)."""
+    from bench.config import DEFAULTS, load_rig
+    from bench.sources import _uff_step
+    from bench.twin import apply_causes
+    model = {k: v for k, v in vars(load_rig(DEFAULTS / "sim_rig.toml").model).items() if not k.startswith("_")}
+    causes = [dict(id="unsettled_transient"), dict(id="mystery"), dict(id="viscous_damping", parameters=dict(c=dict(value=3.0))),
+              dict(id="line_interference", channel="disp", parameters=dict(frequency=dict(value=37.3), amplitude=dict(value=1e-8)),
+                   evidence=dict(steps=["s1"]))]
+    _, applied, missed = apply_causes(dict(model), causes, dict(mass_kg=model["mass_kg"], drive_height_m=None))
+    with pytest.raises(ValueError) as e:
+        _uff_step("s1", [dict(ordinate_spec_data_type=13, _record=1, data=np.zeros(8))])
+    (tmp_path / "junk.uff").write_text("not a universal file\n")
+    code = main(["analyze", str(tmp_path / "junk.uff")])
+    return applied, missed, (e.value.code, e.value.fields, str(e.value)), code, capsys.readouterr().err.strip()
+
+
+def test_rewording_the_data_commands_words_changes_no_decision(tmp_path, capsys, monkeypatch):
+    """The twin's causes not in its plant, a UFF58 step's missing records and ``bench
+    analyze``'s refusal of a file with no dataset 58 are codes with fields; said as codes
+    (bench.words.terminal_data), the twin builds in and leaves out the same causes (a line in
+    one step is the rig's own vibration by its code, no longer by whether its words are
+    empty) and the command exits the same."""
+    applied, missed, (code, fields, said), status, err = _twin_and_source_decisions(tmp_path, capsys)
+    assert list(applied) == ["viscous_damping"] and [m["cause"] for m in missed] == ["unsettled_transient", "mystery",
+                                                                                     "line_interference"]
+    assert missed[2]["reason"].startswith("a 37.3 Hz line in 1 step(s) only, not mains")
+    assert (code, fields) == (SourceProblem.MISSING_RECORDS, {"sdts": [12, 8]})
+    assert said == "missing record(s): acceleration (type 12), displacement (type 8)"
+    assert status == ExitCode.USAGE and "junk.uff: no dataset 58 in the file (dataset types: []) (" in err, err
+    _codes_only(monkeypatch)
+    after = _twin_and_source_decisions(tmp_path, capsys)
+    assert after[0] == applied and [m["cause"] for m in after[1]] == [m["cause"] for m in missed]
+    assert [m["reason"] for m in after[1]] == ["<unsettled>", "<no_form>", "<free_vibration>"]
+    assert after[2] == (code, fields, "<missing_records>") and after[3] == status and "<no_dataset_58> (" in after[4]
+    monkeypatch.setattr(data_words, "NOT_IN_PLANT", {c: lambda **_: "" for c in data_words.NOT_IN_PLANT})
+    assert _twin_and_source_decisions(tmp_path, capsys)[:2] == (applied, [dict(m, reason="") for m in missed])
