@@ -508,6 +508,6 @@ def test_rewording_the_data_commands_words_changes_no_decision(tmp_path, capsys,
     after = _twin_and_source_decisions(tmp_path, capsys)
     assert after[0] == applied and [m["cause"] for m in after[1]] == [m["cause"] for m in missed]
     assert [m["reason"] for m in after[1]] == ["<unsettled>", "<no_form>", "<free_vibration>"]
-    assert after[2] == (code, fields, "<missing_records>") and after[3] == status and "<no_dataset_58> (" in after[4]
+    assert after[2] == (code, fields, "<missing_records>") and after[3] == status and "<no_dataset_58>" in after[4]
     monkeypatch.setattr(data_words, "NOT_IN_PLANT", {c: lambda **_: "" for c in data_words.NOT_IN_PLANT})
     assert _twin_and_source_decisions(tmp_path, capsys)[:2] == (applied, [dict(m, reason="") for m in missed])
