@@ -23,15 +23,18 @@ import bench.words
 import bench.words.page as page_words
 import bench.words.report as report_words
 import bench.words.terminal as terminal_words
+import bench.words.terminal_config as terminal_config_words
 import sim.artefacts.sentences as sentences
 import sim.records as records
 from bench.cli import ExitCode, main
 from bench.commands.results import CheckLine, ModeLine
 from bench.commands.run import RunLine
+from bench.config import ConfigRule, RangeNote
 from bench.demo import MANIFEST, OutDirRefusal
 from bench.reports._markdown import accounting_md, flagged_reasons
 from bench.reports._overall import Concern, Verdict, overall
 from bench.reports._run import load_run
+from bench.rig_config import RigRule
 from bench.runlock import LOCK_NAME, LockRefusal
 from bench.step_files import Problem
 from bench.storage import RunDirRefusal, RunStore
@@ -146,8 +149,10 @@ def test_every_code_has_words_in_its_renderers():
         assert set(module.PROBLEM) == {str(c) for c in Problem}, module.__name__
     assert set(page_words.WARNING) == {str(c) for c in PageWarning}
     assert set(terminal_words.REFUSAL) == {str(c) for c in (*LockRefusal, *OutDirRefusal, *RunDirRefusal,
-                                                           *ConfigProblem)}
-    assert set(terminal_words.CONFIG) == {str(c) for c in ConfigProblem}
+                                                           *ConfigProblem, *ConfigRule, *RigRule)}
+    assert set(terminal_words.CONFIG) == {str(c) for c in (*ConfigProblem, *ConfigRule, *RigRule)}
+    assert set(terminal_config_words.RULE) == {str(c) for c in (*ConfigRule, *RigRule)}
+    assert set(terminal_config_words.NOTE) == {str(c) for c in RangeNote}
     assert set(terminal_words.PROMISE) == {str(c) for c in (*Kept, *Short)}
     assert set(report_words.CONCERN) == {str(c) for c in (*Concern, *Kept, *Short)}
     assert set(report_words.OVERALL) == {str(c) for c in Verdict}
@@ -372,6 +377,36 @@ def test_a_plans_problems_are_codes_with_fields_and_rewording_them_changes_no_ex
     after = said()
     assert after[0] == before[0] == ExitCode.USAGE and "levls: unknown key" in before[1]
     assert "<unknown_key>" in after[1] and "<out_of_range>" in after[1] and "levls" not in after[1]
+
+
+def test_a_plans_rules_across_keys_are_codes_with_fields(monkeypatch):
+    """The rules a plan breaks across its keys (bench.config.ConfigRule) and a stored plan's own
+    problems are codes with fields (a dwell without the refinement, harmonics above Nyquist, a
+    grid not in ascending order); said as codes, the same problems in the same order; a range's
+    note is a code too (bench.config.RangeNote)."""
+    from bench.config import FORCE_RANGE, ConfigError, parse_plan, parse_stored_plan
+    plan = {"plan": {"levels_N": [1.0], "frequencies": {"list_Hz": [900.0]}, "control": {"harmonics": 30},
+                     "resonance": {"dwell_cycles": 10}}}
+
+    def problems():
+        with pytest.raises(ConfigError) as e:
+            parse_plan(plan, "p.toml")
+        return [(p.code, dict(p.fields)) for p in e.value.fields["problems"]], str(e.value)
+    before, said = problems()
+    assert [c for c, _ in before] == [ConfigRule.DWELL_NEEDS_REFINE, ConfigRule.ABOVE_NYQUIST], before
+    assert before[1][1] == {"source": "p.toml", "table": "plan.control", "most": 14, "top_Hz": 900.0,
+                            "rate_Hz": 25600.0, "value": 30}
+    assert said.splitlines() == ["p.toml: [plan.resonance] dwell_cycles: needs refine = true (the dwell is at the "
+                                 "refined resonance)", "p.toml: [plan.control] harmonics: must be <= 14 (below "
+                                 "Nyquist at 900 Hz with min_sample_rate_Hz = 25600), got 30"]
+    assert terminal_config_words.range_note(FORCE_RANGE) == " (the bench's force range, 0.1-100 N)"
+    _codes_only(monkeypatch)
+    assert problems() == (before, "<dwell_needs_refine>\n<above_nyquist>")
+    with pytest.raises(ConfigError) as stored:
+        parse_stored_plan({"levels_N": [1.0], "freqs_Hz": [40.0, 30.0]}, "run.json")
+    assert (str(stored.value), stored.value.code, stored.value.fields["key"]) == (
+        "<not_ascending>", ConfigRule.NOT_ASCENDING, "freqs_Hz")
+    assert terminal_config_words.range_note(FORCE_RANGE) == "<force_range>"
 
 
 def test_a_broken_promise_said_as_codes_still_exits_1(tmp_path, capsys, monkeypatch):

@@ -1,0 +1,100 @@
+"""The terminal's words of a plan's and a rig's own rules (decision 0067): what a plan or rig
+file breaks across its keys, by code.
+
+``RULE``: a plan's rules across keys and a stored plan's problems
+(:class:`bench.config.ConfigRule`) and the rig's (:class:`bench.rig_config.RigRule`); a
+key's rule has the fields source (the file), table and key where it names one.
+:data:`bench.words.terminal.CONFIG` holds them beside the problems of a single key, so a
+ConfigError that collects a file's problems says them in order.
+
+``NOTE``: what a range's bounds are (:class:`bench.config.RangeNote`), said after the
+bounds of a value out of range (``terminal.CONFIG["out_of_range"]``, its field ``note``: a
+:class:`bench.words.Said`).
+
+:func:`where`: a key's place in a plan or rig file (the file, the table and the key), the
+start of every line that names a key.
+"""
+
+from __future__ import annotations
+
+from . import Said, Words, say
+
+__all__ = ["NOTE", "RULE", "range_note", "where"]
+
+
+def where(source: str, table: str, key: str) -> str:
+    """Where in a plan or rig file a key is: the file, the table and the key."""
+    return f"{source}: [{table}] {key}"
+
+
+def range_note(said: Said | None) -> str:
+    """A range's note (a :class:`bench.words.Said` of a RangeNote; none: no words)."""
+    return say(NOTE, said.code, said.fields) if said else ""
+
+
+# why a value's range is what it is (bench.config.RangeNote), after its bounds
+NOTE: Words = {
+    "force_range": lambda low, high: f" (the bench's force range, {low:g}-{high:g} N)",
+    "frequency_range": lambda low, high: f" (the bench's frequency range, {low:g}-{high:g} Hz)",
+    "phase": lambda response: f" (response = \"{response}\": the phase against the force, degrees)",
+    "slope_estimated": lambda: " (0 = estimated; the phase falls with frequency through a resonance)",
+    "max_step_default": lambda: " (0 = 5 % of start_Hz)",
+    "min_Hz_default": lambda: " (0 = start_Hz / 2, at least 20 Hz)",
+    "max_Hz_default": lambda: " (0 = 2 x start_Hz, at most 1000 Hz)",
+    "response_level": lambda unit: f" ({unit}, the response fundamental's amplitude)",
+}
+
+# what a key (or a table) not used with a procedure is replaced by (ConfigRule.NOT_USED)
+_INSTEAD = {"levels_N": " (give [plan.response] levels, response amplitudes)",
+            "plan.frequencies": " (the controller finds the frequency; give [plan.backbone] start_Hz)",
+            "refine": " (the loop finds the resonance itself)"}
+
+
+def _not_used(source: str, table: str, key: str | None, procedure: str) -> str:
+    said = f"not used with procedure = \"{procedure}\"{_INSTEAD.get(key or table, '')}"
+    return f"{source}: [{table}] is {said}" if key is None else f"{where(source, table, key)}: {said}"
+
+
+def _quoted(word: str) -> str:
+    return f'"{word}"'
+
+
+def _steps(source: str, levels: int, frequencies: int, both: bool, steps: int, most: int) -> str:
+    return (f"{source}: [plan] {levels} levels x {frequencies} frequencies{' x 2 directions' if both else ''} = "
+            f"{steps} steps; at most {most} (split the test into several plans)")
+
+
+def _window(source: str, table: str, min_Hz: float, max_Hz: float, start_Hz: float, probe_step: float, low: float,
+            high: float) -> str:
+    return (f"{where(source, table, 'min_Hz')} / max_Hz: the window {min_Hz:g}-{max_Hz:g} Hz must hold start_Hz "
+            f"{start_Hz:g} Hz and its probe blocks (x (1 -+ probe_step {probe_step:g})) inside the bench's range "
+            f"{low:g}-{high:g} Hz")
+
+
+# a plan's rules across keys, a stored plan's problems (bench.config.ConfigRule), the rig's
+# (bench.rig_config.RigRule)
+RULE: Words = {
+    "window_outside": _window,
+    "band_above_lost": lambda source, table, band, lost: (f"{where(source, table, 'phase_band_deg')}: {band:g} deg "
+                                                          f"must be below lost_phase_deg {lost:g} deg"),
+    "not_used": _not_used,
+    "needs_procedure": lambda source, table, procedure: (f"{source}: [{table}] needs procedure = \"{procedure}\" "
+                                                         "in [plan]"),
+    "repeated_frequencies": lambda source, table: f"{where(source, table, 'frequencies')}: grid has repeated frequencies",
+    "too_many_steps": _steps,
+    "not_modes": lambda source, table, key, allowed, value: (f"{where(source, table, key)}: must be a non-empty list "
+                                                             f"of {', '.join(map(_quoted, allowed))}, got "
+                                                             f"{value!r}"),
+    "dwell_needs_refine": lambda source, table: (f"{where(source, table, 'dwell_cycles')}: needs refine = true (the "
+                                                 "dwell is at the refined resonance)"),
+    "above_nyquist": lambda source, table, most, top_Hz, rate_Hz, value: (
+        f"{where(source, table, 'harmonics')}: must be <= {most} (below Nyquist at {top_Hz:g} Hz with "
+        f"min_sample_rate_Hz = {rate_Hz:g}), got {value}"),
+    "no_stored_plan": lambda source, got: f"{source}: no plan stored ([plan] missing or not a table: {got})",
+    "not_ascending": lambda source, table, key: (f"{where(source, table, key)}: not in ascending order (the step "
+                                                 "keys number them so)"),
+    "not_a_stored_plan": lambda source, error, detail: f"{source}: [plan] not a stored plan ({error}: {detail})",
+    "bad_skip": lambda source, table, key, got: (f"{where(source, table, key)}: must be a list of [level index, "
+                                                 f"frequency index] pairs within the plan, got {got}"),
+    "model_not_simulated": lambda source: f"{source}: [rig.model] is only allowed with simulated = true",
+}
