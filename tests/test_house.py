@@ -43,13 +43,15 @@ CODED = {"Problem": (("bench/step_files.py", "bench/storage.py", "bench/accounti
          "ModeLine": (("bench/commands/results.py",), {"say_mode": 0}),
          "ConfigProblem": (("bench/toml_tables.py",), {"refused": 1, "self._bad": 0, "self.coded": 0,
                                                           "ConfigError": None}),
-         "ConfigRule": (("bench/config.py", "bench/rig_config.py"), {"ConfigError": None})}
+         "ConfigRule": (("bench/config.py", "bench/rig_config.py"), {"ConfigError": None}),
+         "SequenceProblem": (("bench/sequence.py",), {"refused": 1, "bad": 0, "ConfigurationError": None,
+                                                      "RunDirectoryError": None})}
 
 # modules converted whole: they decide and make no sentence (docstrings aside); their words are
 # made by a renderer (bench/words/, or sim/artefacts/sentences.py for the words a step file stores)
 WORDLESS = ("bench/step_files.py", "bench/runlock.py", "sim/artefacts/causes.py", "sim/artefacts/cleaning.py",
             "sim/artefacts/decision.py", "sim/artefacts/quality.py", "bench/verdict.py", "bench/reports/_overall.py",
-            "bench/toml_tables.py", "bench/config.py", "bench/rig_config.py")
+            "bench/toml_tables.py", "bench/config.py", "bench/rig_config.py", "bench/sequence.py")
 
 
 # modules that start `bench` in a process of their own on purpose (decision 0057)

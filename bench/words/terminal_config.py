@@ -7,6 +7,10 @@ key's rule has the fields source (the file), table and key where it names one.
 :data:`bench.words.terminal.CONFIG` holds them beside the problems of a single key, so a
 ConfigError that collects a file's problems says them in order.
 
+``SEQUENCE``: a sequence file's or directory's problems (:class:`bench.sequence.SequenceProblem`,
+refusals: :data:`bench.words.terminal.REFUSAL` holds them); ``SEQUENCE_LOG``: what a
+sequence logs (:class:`bench.sequence.SequenceLine`).
+
 ``NOTE``: what a range's bounds are (:class:`bench.config.RangeNote`), said after the
 bounds of a value out of range (``terminal.CONFIG["out_of_range"]``, its field ``note``: a
 :class:`bench.words.Said`).
@@ -19,7 +23,7 @@ from __future__ import annotations
 
 from . import Said, Words, say
 
-__all__ = ["NOTE", "RULE", "range_note", "where"]
+__all__ = ["NOTE", "RULE", "SEQUENCE", "SEQUENCE_LOG", "range_note", "sequence_line", "where"]
 
 
 def where(source: str, table: str, key: str) -> str:
@@ -98,3 +102,44 @@ RULE: Words = {
                                                  f"frequency index] pairs within the plan, got {got}"),
     "model_not_simulated": lambda source: f"{source}: [rig.model] is only allowed with simulated = true",
 }
+
+
+def _entry(path, entry: int) -> str:
+    return f"{path}: [[sequence.entry]] {entry}"
+
+
+# a sequence file's or directory's problems (bench.sequence.SequenceProblem); what a sequence
+# logs (bench.sequence.SequenceLine): SEQUENCE_LOG
+SEQUENCE: Words = {
+    "sequence_not_found": lambda path: f"{path}: no such sequence file",
+    "sequence_not_toml": lambda path, detail: f"{path}: not a readable TOML file ({detail})",
+    "sequence_no_table": lambda path: f"{path}: no [sequence] table",
+    "sequence_unknown_key": lambda path, key, known: f"{path}: [sequence] {key}: unknown key (known: {', '.join(known)})",
+    "sequence_unknown_table": lambda path, table, known: f"{path}: {table}: unknown table (known: {', '.join(known)})",
+    "sequence_no_entry": lambda path: f"{path}: [[sequence.entry]]: at least one entry is needed",
+    "entry_not_table": lambda path, entry: f"{_entry(path, entry)}: not a table",
+    "entry_unknown_key": lambda path, entry, key, known: (f"{_entry(path, entry)}: {key}: unknown key (known: "
+                                                          f"{', '.join(known)})"),
+    "entry_bad_name": lambda path, entry, name: (f"{_entry(path, entry)}: name: expected a directory name (letters, "
+                                                 f"digits, '.', '_', '-'), got {name!r}"),
+    "entry_name_used": lambda path, entry, name: f"{_entry(path, entry)}: name: {name!r} is used by an earlier entry",
+    "entry_bad_labels": lambda path, entry: (f"{_entry(path, entry)}: labels: expected a table of strings, e.g. "
+                                             "{ lubricant = \"ISO VG 32\" }"),
+    "entry_no_file": lambda path, entry, key: f"{_entry(path, entry)}: {key}: the path of a {key} file is needed",
+    "entry_file": lambda path, entry, key, detail: f"{_entry(path, entry)}: {key}: {detail}",
+    "entry_envelope": lambda path, entry, detail: f"{_entry(path, entry)}: {detail}",
+    "sequence_several": lambda problems: "\n".join(say(SEQUENCE, p.code, p.fields) for p in problems),
+    "not_a_sequence_dir": lambda out, file, detail: f"{out}: not a sequence directory ({file}: {detail})",
+    "sequence_out_not_empty": lambda out: (f"{out}: exists and is not empty (a sequence starts in a new directory; "
+                                           f"bench resume {out} goes on with one)"),
+}
+
+SEQUENCE_LOG: Words = {
+    "sequence_entry": lambda sequence, entry, entries, name, resumed: (f"sequence {sequence}: entry {entry}/{entries} "
+                                                                       f"{name} ({'resumed' if resumed else 'started'})"),
+}
+
+
+def sequence_line(code: str, **fields) -> str:
+    """A sequence's line in words (what it logs)."""
+    return say(SEQUENCE_LOG, code, fields)

@@ -36,6 +36,7 @@ from bench.reports._overall import Concern, Verdict, overall
 from bench.reports._run import load_run
 from bench.rig_config import RigRule
 from bench.runlock import LOCK_NAME, LockRefusal
+from bench.sequence import SequenceLine, SequenceProblem
 from bench.step_files import Problem
 from bench.storage import RunDirRefusal, RunStore
 from bench.toml_tables import ConfigProblem
@@ -149,10 +150,12 @@ def test_every_code_has_words_in_its_renderers():
         assert set(module.PROBLEM) == {str(c) for c in Problem}, module.__name__
     assert set(page_words.WARNING) == {str(c) for c in PageWarning}
     assert set(terminal_words.REFUSAL) == {str(c) for c in (*LockRefusal, *OutDirRefusal, *RunDirRefusal,
-                                                           *ConfigProblem, *ConfigRule, *RigRule)}
+                                                           *ConfigProblem, *ConfigRule, *RigRule, *SequenceProblem)}
     assert set(terminal_words.CONFIG) == {str(c) for c in (*ConfigProblem, *ConfigRule, *RigRule)}
     assert set(terminal_config_words.RULE) == {str(c) for c in (*ConfigRule, *RigRule)}
     assert set(terminal_config_words.NOTE) == {str(c) for c in RangeNote}
+    assert set(terminal_config_words.SEQUENCE) == {str(c) for c in SequenceProblem}
+    assert set(terminal_config_words.SEQUENCE_LOG) == {str(c) for c in SequenceLine}
     assert set(terminal_words.PROMISE) == {str(c) for c in (*Kept, *Short)}
     assert set(report_words.CONCERN) == {str(c) for c in (*Concern, *Kept, *Short)}
     assert set(report_words.OVERALL) == {str(c) for c in Verdict}
@@ -407,6 +410,35 @@ def test_a_plans_rules_across_keys_are_codes_with_fields(monkeypatch):
     assert (str(stored.value), stored.value.code, stored.value.fields["key"]) == (
         "<not_ascending>", ConfigRule.NOT_ASCENDING, "freqs_Hz")
     assert terminal_config_words.range_note(FORCE_RANGE) == "<force_range>"
+
+
+def test_a_sequences_problems_are_codes_with_fields(tmp_path, capsys, monkeypatch):
+    """A sequence file's problems (bench.sequence.SequenceProblem: an unknown key, an entry's
+    name used twice, an entry without its files) are codes with fields, in order; said as
+    codes, ``bench sequence`` refuses it with the same exit status and writes nothing."""
+    from bench.sequence import load_sequence
+    from sim.errors import ConfigurationError
+    seq = tmp_path / "seq.toml"
+    seq.write_text('[sequence]\nnme = "x"\n[[sequence.entry]]\nname = "a"\n[[sequence.entry]]\nname = "a"\n')
+
+    def refused():
+        with pytest.raises(ConfigurationError) as e:
+            load_sequence(seq)
+        return e.value
+    e = refused()
+    assert e.code is SequenceProblem.SEVERAL
+    assert [(p.code, p.fields.get("entry"), p.fields.get("key", p.fields.get("name"))) for p in e.fields["problems"]] == [
+        (SequenceProblem.UNKNOWN_KEY, None, "nme"), (SequenceProblem.ENTRY_NO_FILE, 1, "plan"),
+        (SequenceProblem.ENTRY_NO_FILE, 1, "rig"), (SequenceProblem.ENTRY_NAME_USED, 2, "a"),
+        (SequenceProblem.ENTRY_NO_FILE, 2, "plan"), (SequenceProblem.ENTRY_NO_FILE, 2, "rig")]
+    assert str(e).splitlines()[3] == f"{seq}: [[sequence.entry]] 2: name: 'a' is used by an earlier entry"
+    said = lambda: (main(["sequence", str(seq), "--out", str(tmp_path / "out")]), capsys.readouterr().err)  # noqa: E731
+    before = said()
+    _codes_only(monkeypatch)
+    assert str(refused()) == "<sequence_several>"
+    after = said()
+    assert after[0] == before[0] == ExitCode.USAGE and "is used by an earlier entry" in before[1]
+    assert "<sequence_several>" in after[1] and not (tmp_path / "out").exists()
 
 
 def test_a_broken_promise_said_as_codes_still_exits_1(tmp_path, capsys, monkeypatch):
