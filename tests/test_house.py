@@ -45,13 +45,15 @@ CODED = {"Problem": (("bench/step_files.py", "bench/storage.py", "bench/accounti
                                                           "ConfigError": None}),
          "ConfigRule": (("bench/config.py", "bench/rig_config.py"), {"ConfigError": None}),
          "SequenceProblem": (("bench/sequence.py",), {"refused": 1, "bad": 0, "ConfigurationError": None,
-                                                      "RunDirectoryError": None})}
+                                                      "RunDirectoryError": None}),
+         "PaperRule": (("bench/rig_model.py",), {"refused": 1, "ConfigurationError": None})}
 
 # modules converted whole: they decide and make no sentence (docstrings aside); their words are
 # made by a renderer (bench/words/, or sim/artefacts/sentences.py for the words a step file stores)
 WORDLESS = ("bench/step_files.py", "bench/runlock.py", "sim/artefacts/causes.py", "sim/artefacts/cleaning.py",
             "sim/artefacts/decision.py", "sim/artefacts/quality.py", "bench/verdict.py", "bench/reports/_overall.py",
-            "bench/toml_tables.py", "bench/config.py", "bench/rig_config.py", "bench/sequence.py")
+            "bench/toml_tables.py", "bench/config.py", "bench/rig_config.py", "bench/sequence.py",
+            "bench/plan_time.py", "bench/rig_model.py")
 
 
 # modules that start `bench` in a process of their own on purpose (decision 0057)

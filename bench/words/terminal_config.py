@@ -2,7 +2,8 @@
 file breaks across its keys, by code.
 
 ``RULE``: a plan's rules across keys and a stored plan's problems
-(:class:`bench.config.ConfigRule`) and the rig's (:class:`bench.rig_config.RigRule`); a
+(:class:`bench.config.ConfigRule`), the rig's (:class:`bench.rig_config.RigRule`) and what
+``bench paper --rig`` needs of a rig (:class:`bench.rig_model.PaperRule`); a
 key's rule has the fields source (the file), table and key where it names one.
 :data:`bench.words.terminal.CONFIG` holds them beside the problems of a single key, so a
 ConfigError that collects a file's problems says them in order.
@@ -10,6 +11,9 @@ ConfigError that collects a file's problems says them in order.
 ``SEQUENCE``: a sequence file's or directory's problems (:class:`bench.sequence.SequenceProblem`,
 refusals: :data:`bench.words.terminal.REFUSAL` holds them); ``SEQUENCE_LOG``: what a
 sequence logs (:class:`bench.sequence.SequenceLine`).
+
+``PLANNED_STEP``: what chooses a step of ``bench dry-run --steps`` online
+(:class:`bench.plan_time.Online`), said after the step (:func:`planned_step` makes the line).
 
 ``NOTE``: what a range's bounds are (:class:`bench.config.RangeNote`), said after the
 bounds of a value out of range (``terminal.CONFIG["out_of_range"]``, its field ``note``: a
@@ -21,9 +25,12 @@ start of every line that names a key.
 
 from __future__ import annotations
 
+import math
+
 from . import Said, Words, say
 
-__all__ = ["NOTE", "RULE", "SEQUENCE", "SEQUENCE_LOG", "range_note", "sequence_line", "where"]
+__all__ = ["NOTE", "RULE", "SEQUENCE", "SEQUENCE_LOG", "PLANNED_STEP", "planned_step", "range_note",
+           "sequence_line", "where"]
 
 
 def where(source: str, table: str, key: str) -> str:
@@ -76,7 +83,7 @@ def _window(source: str, table: str, min_Hz: float, max_Hz: float, start_Hz: flo
 
 
 # a plan's rules across keys, a stored plan's problems (bench.config.ConfigRule), the rig's
-# (bench.rig_config.RigRule)
+# (bench.rig_config.RigRule), what `bench paper --rig` needs of a rig (bench.rig_model.PaperRule)
 RULE: Words = {
     "window_outside": _window,
     "band_above_lost": lambda source, table, band, lost: (f"{where(source, table, 'phase_band_deg')}: {band:g} deg "
@@ -101,6 +108,9 @@ RULE: Words = {
     "bad_skip": lambda source, table, key, got: (f"{where(source, table, key)}: must be a list of [level index, "
                                                  f"frequency index] pairs within the plan, got {got}"),
     "model_not_simulated": lambda source: f"{source}: [rig.model] is only allowed with simulated = true",
+    "paper_no_model": lambda source: f"{source}: no [rig.model]: bench paper --rig needs a simulated rig's model",
+    "paper_no_pitch": lambda source: (f"{source}: [rig.model] has no pitching mode (pitch_inertia_kg_m2 = 0): Figs. 15 "
+                                      "and 17 need one"),
 }
 
 
@@ -143,3 +153,23 @@ SEQUENCE_LOG: Words = {
 def sequence_line(code: str, **fields) -> str:
     """A sequence's line in words (what it logs)."""
     return say(SEQUENCE_LOG, code, fields)
+
+
+# what chooses a step of `bench dry-run --steps` online (bench.plan_time.Online), with its fields
+PLANNED_STEP: Words = {
+    "adaptive": lambda chosen, of, low_Hz, high_Hz: (f"{chosen} of these {of} frequencies {low_Hz:.4g}-{high_Hz:.4g} "
+                                                     "Hz, chosen online"),
+    "refined": lambda mode, steps, tolerance: (f"{mode} mode: up to {steps} refinement steps, tolerance "
+                                               f"{100 * tolerance:g} %"),
+    "dwell": lambda mode, cycles: (f"{mode} mode: dwell of {cycles} cycles at its refined resonance (none without a "
+                                   "peak inside the grid)"),
+}
+
+
+def planned_step(key: str, level_N: float, freq_Hz: float, online: str, detail) -> str:
+    """A line of ``bench dry-run --steps`` (bench.plan_time.PlannedStep): the key, the level,
+    the frequency or what chooses it online, and its note."""
+    f = (f"{freq_Hz:10.4g} Hz" if math.isfinite(freq_Hz) else "   refined, chosen online"
+         if online in ("refined", "dwell") else "          chosen online")
+    note = say(PLANNED_STEP, online, detail) if online else ""
+    return f"{key:24s} {level_N:8g} N {f}" + (f"  ({note})" if note else "")

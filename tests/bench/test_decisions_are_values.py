@@ -31,10 +31,12 @@ from bench.commands.results import CheckLine, ModeLine
 from bench.commands.run import RunLine
 from bench.config import ConfigRule, RangeNote
 from bench.demo import MANIFEST, OutDirRefusal
+from bench.plan_time import Online, planned_step_list, rig_time_bound_s
 from bench.reports._markdown import accounting_md, flagged_reasons
 from bench.reports._overall import Concern, Verdict, overall
 from bench.reports._run import load_run
 from bench.rig_config import RigRule
+from bench.rig_model import PaperRule
 from bench.runlock import LOCK_NAME, LockRefusal
 from bench.sequence import SequenceLine, SequenceProblem
 from bench.step_files import Problem
@@ -150,12 +152,14 @@ def test_every_code_has_words_in_its_renderers():
         assert set(module.PROBLEM) == {str(c) for c in Problem}, module.__name__
     assert set(page_words.WARNING) == {str(c) for c in PageWarning}
     assert set(terminal_words.REFUSAL) == {str(c) for c in (*LockRefusal, *OutDirRefusal, *RunDirRefusal,
-                                                           *ConfigProblem, *ConfigRule, *RigRule, *SequenceProblem)}
-    assert set(terminal_words.CONFIG) == {str(c) for c in (*ConfigProblem, *ConfigRule, *RigRule)}
-    assert set(terminal_config_words.RULE) == {str(c) for c in (*ConfigRule, *RigRule)}
+                                                           *ConfigProblem, *ConfigRule, *RigRule, *PaperRule,
+                                                           *SequenceProblem)}
+    assert set(terminal_words.CONFIG) == {str(c) for c in (*ConfigProblem, *ConfigRule, *RigRule, *PaperRule)}
+    assert set(terminal_config_words.RULE) == {str(c) for c in (*ConfigRule, *RigRule, *PaperRule)}
     assert set(terminal_config_words.NOTE) == {str(c) for c in RangeNote}
     assert set(terminal_config_words.SEQUENCE) == {str(c) for c in SequenceProblem}
     assert set(terminal_config_words.SEQUENCE_LOG) == {str(c) for c in SequenceLine}
+    assert set(terminal_config_words.PLANNED_STEP) == {str(c) for c in Online}
     assert set(terminal_words.PROMISE) == {str(c) for c in (*Kept, *Short)}
     assert set(report_words.CONCERN) == {str(c) for c in (*Concern, *Kept, *Short)}
     assert set(report_words.OVERALL) == {str(c) for c in Verdict}
@@ -439,6 +443,28 @@ def test_a_sequences_problems_are_codes_with_fields(tmp_path, capsys, monkeypatc
     after = said()
     assert after[0] == before[0] == ExitCode.USAGE and "is used by an earlier entry" in before[1]
     assert "<sequence_several>" in after[1] and not (tmp_path / "out").exists()
+
+
+def test_the_dry_runs_step_lines_are_made_of_values(monkeypatch):
+    """``bench dry-run --steps``: what chooses a step online is a code with fields
+    (bench.plan_time.Online); said as codes, the same steps, counts and rig-time bound."""
+    from bench.config import parse_plan
+    plan = parse_plan({"plan": {"levels_N": [1.0], "adaptive_per_sweep": 2, "frequencies": {
+        "start_Hz": 40.0, "stop_Hz": 160.0, "points": 4}, "resonance": {"refine": True, "modes": ["pitch"],
+                                                                         "max_steps": 3, "dwell_cycles": 100}}})
+
+    def planned():
+        steps = planned_step_list(plan)
+        return [(p.key, p.count, p.online, dict(p.detail)) for p in steps], rig_time_bound_s(plan), [p.line() for p in steps]
+    before = planned()
+    assert [p[2] for p in before[0]] == [Online.ADAPTIVE, Online.REFINED, Online.DWELL]
+    assert before[2][0] == "00000-L00F***-up                1 N           chosen online  (2 of these 4 frequencies 40-160 Hz, chosen online)"
+    assert before[2][2].endswith("  (pitch mode: dwell of 100 cycles at its refined resonance (none without a peak "
+                                 "inside the grid))")
+    _codes_only(monkeypatch)
+    after = planned()
+    assert after[:2] == before[:2] and [ln.rsplit("  ", 1)[1] for ln in after[2]] == ["(<adaptive>)", "(<refined>)",
+                                                                                     "(<dwell>)"]
 
 
 def test_a_broken_promise_said_as_codes_still_exits_1(tmp_path, capsys, monkeypatch):
