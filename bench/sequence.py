@@ -37,7 +37,6 @@ from pathlib import Path
 from procedures.plan import Plan, Rig
 from sim.errors import BenchError, ConfigurationError, RunDirectoryError
 
-from .storage import NOT_STARTED
 from .words import Said
 from .words.terminal import refused
 from .words.terminal_config import sequence_line
@@ -72,6 +71,12 @@ class SequenceProblem(StrEnum):
     SEVERAL = "sequence_several"                    # problems: each a Said, in order
     NOT_A_SEQUENCE_DIR = "not_a_sequence_dir"       # out, file, detail (the reader's words)
     OUT_NOT_EMPTY = "sequence_out_not_empty"        # out
+
+
+class EntryStatus(StrEnum):
+    """An entry's status besides its run's (bench.storage.RunStatus, run.json's ``status``)."""
+
+    NOT_STARTED = "not started"     # its directory holds no run yet (never stored)
 
 
 class SequenceLine(StrEnum):
@@ -216,7 +221,7 @@ def _status(run_dir: Path) -> str:
     try:
         return str(RunStore.open(run_dir).metadata.get("status", "unknown"))
     except RunDirectoryError:
-        return NOT_STARTED
+        return EntryStatus.NOT_STARTED
 
 
 def _go(out: Path, name: str, entries: list[Entry], *, progress, report: bool) -> SequenceResult:
@@ -230,9 +235,9 @@ def _go(out: Path, name: str, entries: list[Entry], *, progress, report: bool) -
             if status == "completed":
                 continue
             log.warning(sequence_line(SequenceLine.ENTRY, sequence=name, entry=i + 1, entries=len(entries),
-                                      name=e.name, resumed=status != NOT_STARTED))
+                                      name=e.name, resumed=status != EntryStatus.NOT_STARTED))
             cb = progress(e.name) if progress else None
-            if status == NOT_STARTED:
+            if status == EntryStatus.NOT_STARTED:
                 execute(e.plan, e.rig, d, progress=cb, labels={**e.labels, "sequence": name, "entry": e.name})
             else:
                 execute(replace(e.plan, skip=()), e.rig, d, resume=True, progress=cb)
@@ -255,7 +260,7 @@ def _rows(out: Path, entries: list[Entry]) -> list[dict]:
         row = {"name": e.name, "status": _status(d), "steps_done": 0, "steps_total": 0,
                "report": f"{e.name}/report/report.md" if (d / "report" / "report.md").is_file() else "",
                "plan_file": e.plan_file, "rig_file": e.rig_file, "labels": e.labels}
-        if row["status"] != NOT_STARTED:
+        if row["status"] != EntryStatus.NOT_STARTED:
             meta = RunStore.open(d).metadata
             row["steps_done"], row["steps_total"] = meta.get("steps_done", 0) or 0, meta.get("steps_total", 0) or 0
         rows.append(row)
@@ -266,6 +271,6 @@ def _write_report(out: Path, name: str, entries: list[Entry]) -> Path:
     from .reports import sequence_md
     from .storage import atomic_write
     path = out / "report.md"
-    text = sequence_md(out, name, _rows(out, entries)).encode()
+    text = sequence_md(out, name, _rows(out, entries), EntryStatus.NOT_STARTED).encode()
     atomic_write(path, lambda fh: fh.write(text))
     return path

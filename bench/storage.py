@@ -94,9 +94,6 @@ class RunStatus(enum.StrEnum):
     FAILED = "failed"                      # any other error
 
 
-NOT_STARTED = "not started"     # the status of a directory that holds no run yet (never stored; bench sequence)
-
-
 
 
 RunDirError = RunDirectoryError    # not a readable run directory (missing, or run.json damaged)

@@ -6,11 +6,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..storage import NOT_STARTED
 
-
-def sequence_md(out: Path, name: str, rows: list[dict]) -> str:
-    """The sequence report's markdown: how many entries completed, and a row per entry."""
+def sequence_md(out: Path, name: str, rows: list[dict], not_started: str) -> str:
+    """The sequence report's markdown: how many entries completed, and a row per entry (its
+    steps unless its status is ``not_started``)."""
     done = sum(r["status"] == "completed" for r in rows)
     lines = [f"# Sequence: {name}", "",
              f"{done} of {len(rows)} entries completed"
@@ -19,7 +18,7 @@ def sequence_md(out: Path, name: str, rows: list[dict]) -> str:
     for i, r in enumerate(rows, 1):
         labels = ", ".join(f"{k}={v}" for k, v in r["labels"].items())
         link = f"[report]({r['report']})" if r["report"] else ""
-        steps = f"{r['steps_done']}/{r['steps_total']}" if r["status"] != NOT_STARTED else ""
+        steps = f"{r['steps_done']}/{r['steps_total']}" if r["status"] != not_started else ""
         lines.append(f"| {i} | {r['name']} | {r['plan_file']} | {r['rig_file']} | {labels} | {r['status']} | {steps} "
                      f"| {link} |")
     return "\n".join(lines) + "\n"
