@@ -46,14 +46,18 @@ CODED = {"Problem": (("bench/step_files.py", "bench/storage.py", "bench/accounti
          "ConfigRule": (("bench/config.py", "bench/rig_config.py"), {"ConfigError": None}),
          "SequenceProblem": (("bench/sequence.py",), {"refused": 1, "bad": 0, "ConfigurationError": None,
                                                       "RunDirectoryError": None}),
-         "PaperRule": (("bench/rig_model.py",), {"refused": 1, "ConfigurationError": None})}
+         "PaperRule": (("bench/rig_model.py",), {"refused": 1, "ConfigurationError": None}),
+         "ApiRefusal": (("bench/api.py",), {"refused": 1, "TypeError": None, "ConfigurationError": None}),
+         "PluginRefusal": (("bench/testing.py",), {"refused": 1, "ValueError": None}),
+         "_Missing": (("bench/__init__.py",), {"refused": 1, "AttributeError": None})}
 
 # modules converted whole: they decide and make no sentence (docstrings aside); their words are
 # made by a renderer (bench/words/, or sim/artefacts/sentences.py for the words a step file stores)
 WORDLESS = ("bench/step_files.py", "bench/runlock.py", "sim/artefacts/causes.py", "sim/artefacts/cleaning.py",
             "sim/artefacts/decision.py", "sim/artefacts/quality.py", "bench/verdict.py", "bench/reports/_overall.py",
             "bench/toml_tables.py", "bench/config.py", "bench/rig_config.py", "bench/sequence.py",
-            "bench/plan_time.py", "bench/rig_model.py")
+            "bench/plan_time.py", "bench/rig_model.py",
+            "bench/api.py", "bench/testing.py", "bench/numbers.py", "bench/backbone.py", "bench/__init__.py")
 
 
 # modules that start `bench` in a process of their own on purpose (decision 0057)
@@ -147,6 +151,10 @@ def test_a_converted_module_makes_no_sentence():
         docs = {id(n.body[0].value) for n in ast.walk(tree)
                 if isinstance(n, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
                 and n.body and isinstance(n.body[0], ast.Expr)}
+        # an attribute's docstring: a string statement right after a module's or a class's assignment
+        docs |= {id(b.value) for n in ast.walk(tree) if isinstance(n, (ast.Module, ast.ClassDef))
+                 for a, b in zip(n.body, n.body[1:]) if isinstance(a, (ast.Assign, ast.AnnAssign))
+                 and isinstance(b, ast.Expr) and isinstance(b.value, ast.Constant)}
         parts = {id(v) for n in ast.walk(tree) if isinstance(n, ast.JoinedStr) for v in n.values}
         # a StrEnum member's value is a code, stored as it is (RunStatus.INSTRUMENT_ERROR = "instrument error")
         codes = {id(a.value) for n in ast.walk(tree) if isinstance(n, ast.ClassDef)

@@ -15,6 +15,13 @@ sequence logs (:class:`bench.sequence.SequenceLine`).
 ``PLANNED_STEP``: what chooses a step of ``bench dry-run --steps`` online
 (:class:`bench.plan_time.Online`), said after the step (:func:`planned_step` makes the line).
 
+``API``: the Python API's and the pytest plugin's refusals (:class:`bench.api.ApiRefusal`,
+:class:`bench.testing.PluginRefusal`, ``bench._Missing``); ``LOG``: what the API logs and the
+phase-resonance lock's progress note (:class:`bench.api.ApiLine`,
+:class:`bench.backbone.BackboneLine`); ``PLUGIN``: the pytest plugin's options' help
+(:class:`bench.testing.PluginOption`); ``NUMBER``: a number that is not a measurement, named
+(:class:`bench.numbers.Shown`).
+
 ``NOTE``: what a range's bounds are (:class:`bench.config.RangeNote`), said after the
 bounds of a value out of range (``terminal.CONFIG["out_of_range"]``, its field ``note``: a
 :class:`bench.words.Said`).
@@ -29,8 +36,8 @@ import math
 
 from . import Said, Words, say
 
-__all__ = ["NOTE", "RULE", "SEQUENCE", "SEQUENCE_LOG", "PLANNED_STEP", "planned_step", "range_note",
-           "sequence_line", "where"]
+__all__ = ["NOTE", "RULE", "SEQUENCE", "SEQUENCE_LOG", "PLANNED_STEP", "API", "LOG", "PLUGIN", "NUMBER",
+           "line", "option", "planned_step", "range_note", "sequence_line", "shown", "where"]
 
 
 def where(source: str, table: str, key: str) -> str:
@@ -173,3 +180,55 @@ def planned_step(key: str, level_N: float, freq_Hz: float, online: str, detail) 
          if online in ("refined", "dwell") else "          chosen online")
     note = say(PLANNED_STEP, online, detail) if online else ""
     return f"{key:24s} {level_N:8g} N {f}" + (f"  ({note})" if note else "")
+
+
+# the Python API's and the pytest plugin's refusals (bench.api.ApiRefusal, bench.testing.PluginRefusal,
+# bench's missing name: bench._Missing)
+API: Words = {
+    "api_not_a_plan": lambda got: f"plan: expected a bench Plan or the path of a plan file, got {got}",
+    "api_not_a_rig": lambda got: f"rig: expected a bench Rig or the path of a rig file, got {got}",
+    "api_bad_label": lambda key: f"labels: a key must be a non-empty string, got {key!r}",
+    "no_attribute": lambda module, name: f"module {module!r} has no attribute {name!r}",
+    "plugin_bad_instrument": lambda call, allowed, got: (f"{call}: instrument must be one of {', '.join(allowed)}, "
+                                                         f"got {got!r}"),
+    "plugin_not_simulated": lambda rig_file: (f"{rig_file}: not a simulated rig (simulated = true is needed for its "
+                                              "[rig.model])"),
+    "plugin_unknown_limits": lambda limits: f"with_limits: unknown limit(s) {', '.join(limits)}",
+}
+
+# what the API logs (bench.api.ApiLine) and what a phase-resonance run says of its lock in the
+# progress line (bench.backbone.BackboneLine)
+LOG: Words = {
+    "kernels_compiling": lambda: "compiling the simulation kernels (first run only; `make setup` does it ahead)",
+    "kernels_compiled": lambda seconds: f"kernels compiled in {seconds:.0f} s",
+    "locking": lambda level_N, freq_Hz, phase_error_deg, periods: (f"locking {level_N:g} N: {freq_Hz:.3f} Hz, phase "
+                                                                   f"error {phase_error_deg:+.2f} deg, {periods} periods "
+                                                                   "in band"),
+}
+
+# the pytest plugin's options (bench.testing.PluginOption): their help
+PLUGIN: Words = {
+    "group": lambda: "the simulated rig of guideway-bench",
+    "rig_file": lambda: "rig file (simulated = true) for the sim_rig fixture",
+}
+
+# how a number that is not a measurement is shown (bench.numbers.Shown, decision 0042)
+NUMBER: Words = {
+    "nan": lambda: "not a number",
+    "absurd": lambda: "absurd (fit failed)",
+}
+
+
+def line(code: str, **fields) -> str:
+    """A line the API logs or the progress line says (LOG), in words."""
+    return say(LOG, code, fields)
+
+
+def shown(code: str) -> str:
+    """A number that is not a measurement, named (NUMBER)."""
+    return say(NUMBER, code, {})
+
+
+def option(code: str) -> str:
+    """A pytest option's help (PLUGIN)."""
+    return say(PLUGIN, code, {})

@@ -26,11 +26,14 @@ import bench.words.terminal as terminal_words
 import bench.words.terminal_config as terminal_config_words
 import sim.artefacts.sentences as sentences
 import sim.records as records
+from bench.api import ApiLine, ApiRefusal
+from bench.backbone import BackboneLine
 from bench.cli import ExitCode, main
 from bench.commands.results import CheckLine, ModeLine
 from bench.commands.run import RunLine
 from bench.config import ConfigRule, RangeNote
 from bench.demo import MANIFEST, OutDirRefusal
+from bench.numbers import Shown
 from bench.plan_time import Online, planned_step_list, rig_time_bound_s
 from bench.reports._markdown import accounting_md, flagged_reasons
 from bench.reports._overall import Concern, Verdict, overall
@@ -41,6 +44,7 @@ from bench.runlock import LOCK_NAME, LockRefusal
 from bench.sequence import SequenceLine, SequenceProblem
 from bench.step_files import Problem
 from bench.storage import RunDirRefusal, RunStore
+from bench.testing import PluginOption, PluginRefusal
 from bench.toml_tables import ConfigProblem
 from bench.verdict import Kept, Short
 from bench.watch.snapshot import PageWarning, RunReader
@@ -153,13 +157,18 @@ def test_every_code_has_words_in_its_renderers():
     assert set(page_words.WARNING) == {str(c) for c in PageWarning}
     assert set(terminal_words.REFUSAL) == {str(c) for c in (*LockRefusal, *OutDirRefusal, *RunDirRefusal,
                                                            *ConfigProblem, *ConfigRule, *RigRule, *PaperRule,
-                                                           *SequenceProblem)}
+                                                           *SequenceProblem, *ApiRefusal, *PluginRefusal,
+                                                           *bench._Missing)}
     assert set(terminal_words.CONFIG) == {str(c) for c in (*ConfigProblem, *ConfigRule, *RigRule, *PaperRule)}
     assert set(terminal_config_words.RULE) == {str(c) for c in (*ConfigRule, *RigRule, *PaperRule)}
     assert set(terminal_config_words.NOTE) == {str(c) for c in RangeNote}
     assert set(terminal_config_words.SEQUENCE) == {str(c) for c in SequenceProblem}
     assert set(terminal_config_words.SEQUENCE_LOG) == {str(c) for c in SequenceLine}
     assert set(terminal_config_words.PLANNED_STEP) == {str(c) for c in Online}
+    assert set(terminal_config_words.API) == {str(c) for c in (*ApiRefusal, *PluginRefusal, *bench._Missing)}
+    assert set(terminal_config_words.LOG) == {str(c) for c in (*ApiLine, *BackboneLine)}
+    assert set(terminal_config_words.PLUGIN) == {str(c) for c in PluginOption}
+    assert set(terminal_config_words.NUMBER) == {str(c) for c in Shown}
     assert set(terminal_words.PROMISE) == {str(c) for c in (*Kept, *Short)}
     assert set(report_words.CONCERN) == {str(c) for c in (*Concern, *Kept, *Short)}
     assert set(report_words.OVERALL) == {str(c) for c in Verdict}
@@ -465,6 +474,33 @@ def test_the_dry_runs_step_lines_are_made_of_values(monkeypatch):
     after = planned()
     assert after[:2] == before[:2] and [ln.rsplit("  ", 1)[1] for ln in after[2]] == ["(<adaptive>)", "(<refined>)",
                                                                                      "(<dwell>)"]
+
+
+def test_the_apis_refusals_and_a_failed_fits_number_are_codes(monkeypatch):
+    """The Python API's refusals, bench's missing name and a number that is not a measurement
+    are codes (their words: bench.words.terminal_config); said as codes, the same exception
+    types and the same decisions (hasattr, what is named instead of printed)."""
+    from bench.api import _as_plan, _checked_labels
+    from bench.words.numbers import number, percent
+
+    def said():
+        out = []
+        for call in (lambda: _as_plan(3), lambda: _checked_labels({"": 1}), lambda: bench.nothing_here):
+            with pytest.raises(Exception) as e:
+                call()
+            out.append((type(e.value).__name__, getattr(e.value, "code", None), str(e.value)))
+        return out, hasattr(bench, "nothing_here"), [number(v) for v in (float("nan"), -1e31, 1e-31, 1.5)], percent(1e5)
+    before = said()
+    assert before[0] == [("TypeError", ApiRefusal.NOT_A_PLAN, "plan: expected a bench Plan or the path of a plan "
+                                                              "file, got int"),
+                         ("ConfigurationError", ApiRefusal.BAD_LABEL, "labels: a key must be a non-empty string, "
+                                                                      "got ''"),
+                         ("AttributeError", "no_attribute", "module 'bench' has no attribute 'nothing_here'")]
+    assert before[1:] == (False, ["not a number", "absurd (fit failed)", "absurd (fit failed)", "1.5"],
+                          "absurd (fit failed)")
+    _codes_only(monkeypatch)
+    assert said() == ([(t, c, f"<{c}>") for t, c, _ in before[0]], False, ["<nan>", "<absurd>", "<absurd>", "1.5"],
+                      "<absurd>")
 
 
 def test_a_broken_promise_said_as_codes_still_exits_1(tmp_path, capsys, monkeypatch):
