@@ -26,13 +26,16 @@ from .toml_tables import (
     MAX_FILE_BYTES,
     ConfigError,
     ConfigProblem,
+    Line,
     _collecting,
+    _error,
     _load,
+    _problems,
     _Section,
     _short,
     read_toml,
 )
-from .words import Said
+from .words import Said, terminal
 from .words.terminal import refused
 
 __all__ = ["DEFAULTS", "KEYS", "MAX_FILE_BYTES", "MAX_FREQUENCIES", "MAX_LEVELS", "MAX_STEPS", "ConfigError",
@@ -309,6 +312,20 @@ def plan_toml(p: dict) -> dict:
     return out
 
 
+def _as_stored(e: ConfigError) -> ConfigError:
+    """``e``, a stored plan's problems, with the plan file's frequency list named as run.json
+    names it (``[plan] freqs_Hz``, its fields: the words follow), each problem's code kept."""
+    lines = []
+    for said in _problems(e):
+        fields = dict(said.fields)
+        key = str(fields.get("key", ""))
+        if said.code is not None and fields.get("table") == "plan.frequencies" and key.startswith("list_Hz"):
+            fields.update(table="plan", key="freqs_Hz" + key.removeprefix("list_Hz"))
+        lines.append(Line(terminal.config(said.code, **fields), said.code, fields) if said.code is not None
+                     else Line(fields["text"]))
+    return _error("\n".join(lines), lines)
+
+
 def parse_stored_plan(p, source: str) -> Plan:
     """The plan stored in a run's ``run.json`` (``Plan.to_dict()``), checked by the same
     validator as a plan file (:func:`parse_plan`: ranges, bounds, the harmonics below
@@ -329,7 +346,7 @@ def parse_stored_plan(p, source: str) -> Plan:
     try:
         plan = parse_plan({"plan": plan_toml(dict({"name": DEFAULT_NAME, "direction": "up"}, **p))}, source)
     except ConfigError as e:               # name run.json's key, not the plan file's
-        raise ConfigError(str(e).replace("[plan.frequencies] list_Hz", "[plan] freqs_Hz")) from None
+        raise _as_stored(e) from None
     except (TypeError, AttributeError, KeyError) as e:
         raise refused(ConfigError, ConfigRule.NOT_A_STORED_PLAN, source=source, error=type(e).__name__,
                       detail=str(e)) from None

@@ -399,7 +399,8 @@ def test_a_plans_rules_across_keys_are_codes_with_fields(monkeypatch):
     """The rules a plan breaks across its keys (bench.config.ConfigRule) and a stored plan's own
     problems are codes with fields (a dwell without the refinement, harmonics above Nyquist, a
     grid not in ascending order); said as codes, the same problems in the same order; a range's
-    note is a code too (bench.config.RangeNote)."""
+    note is a code too (bench.config.RangeNote); a stored plan's frequency out of range keeps
+    its code and names run.json's key in its fields."""
     from bench.config import FORCE_RANGE, ConfigError, parse_plan, parse_stored_plan
     plan = {"plan": {"levels_N": [1.0], "frequencies": {"list_Hz": [900.0]}, "control": {"harmonics": 30},
                      "resonance": {"dwell_cycles": 10}}}
@@ -416,7 +417,15 @@ def test_a_plans_rules_across_keys_are_codes_with_fields(monkeypatch):
                                  "refined resonance)", "p.toml: [plan.control] harmonics: must be <= 14 (below "
                                  "Nyquist at 900 Hz with min_sample_rate_Hz = 25600), got 30"]
     assert terminal_config_words.range_note(FORCE_RANGE) == " (the bench's force range, 0.1-100 N)"
+
+    def stored_frequency():             # run.json's key named by the fields, not by rewriting the words
+        with pytest.raises(ConfigError) as e:
+            parse_stored_plan({"levels_N": [1.0], "freqs_Hz": [3.0]}, "run.json")
+        return e.value.code, e.value.fields["table"], e.value.fields["key"], str(e.value)
+    assert stored_frequency() == (ConfigProblem.OUT_OF_RANGE, "plan", "freqs_Hz[0]", "run.json: [plan] freqs_Hz[0]: "
+                                  "must be >= 20 and <= 1000 (the bench's frequency range, 20-1000 Hz), got 3.0")
     _codes_only(monkeypatch)
+    assert stored_frequency() == (ConfigProblem.OUT_OF_RANGE, "plan", "freqs_Hz[0]", "<out_of_range>")
     assert problems() == (before, "<dwell_needs_refine>\n<above_nyquist>")
     with pytest.raises(ConfigError) as stored:
         parse_stored_plan({"levels_N": [1.0], "freqs_Hz": [40.0, 30.0]}, "run.json")
