@@ -214,7 +214,7 @@ class Line(str):
     code: StrEnum | None
     fields: dict
 
-    def __new__(cls, text: str, code: ConfigProblem | None = None, fields: dict | None = None):
+    def __new__(cls, text: str, code: StrEnum | None = None, fields: dict | None = None):
         line = super().__new__(cls, text)
         line.code, line.fields = code, dict(fields or {})
         return line
