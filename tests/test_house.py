@@ -49,7 +49,8 @@ CODED = {"Problem": (("bench/step_files.py", "bench/storage.py", "bench/accounti
          "PaperRule": (("bench/rig_model.py",), {"refused": 1, "ConfigurationError": None}),
          "ApiRefusal": (("bench/api.py",), {"refused": 1, "TypeError": None, "ConfigurationError": None}),
          "PluginRefusal": (("bench/testing.py",), {"refused": 1, "ValueError": None}),
-         "_Missing": (("bench/__init__.py",), {"refused": 1, "AttributeError": None})}
+         "_Missing": (("bench/__init__.py",), {"refused": 1, "AttributeError": None}),
+         "StudyArgs": (("bench/studies/cli.py",), {"refused": 1, "ConfigurationError": None})}
 
 # modules converted whole: they decide and make no sentence (docstrings aside); their words are
 # made by a renderer (bench/words/, or sim/artefacts/sentences.py for the words a step file stores)
@@ -57,7 +58,8 @@ WORDLESS = ("bench/step_files.py", "bench/runlock.py", "sim/artefacts/causes.py"
             "sim/artefacts/decision.py", "sim/artefacts/quality.py", "bench/verdict.py", "bench/reports/_overall.py",
             "bench/toml_tables.py", "bench/config.py", "bench/rig_config.py", "bench/sequence.py",
             "bench/plan_time.py", "bench/rig_model.py",
-            "bench/api.py", "bench/testing.py", "bench/numbers.py", "bench/backbone.py", "bench/__init__.py")
+            "bench/api.py", "bench/testing.py", "bench/numbers.py", "bench/backbone.py", "bench/__init__.py",
+            "bench/studies/cli.py")
 
 
 # modules that start `bench` in a process of their own on purpose (decision 0057)

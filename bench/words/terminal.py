@@ -19,7 +19,7 @@ from __future__ import annotations
 from typing import TypeVar
 
 from . import Words, say
-from .terminal_config import API, RULE, SEQUENCE, range_note, where
+from .terminal_config import API, RULE, SEQUENCE, STUDY, range_note, where
 
 __all__ = ["CHECK", "CONFIG", "MODES", "PROBLEM", "PROMISE", "REFUSAL", "RUN", "Words", "problem", "promised", "refused", "say"]
 
@@ -261,6 +261,7 @@ CONFIG.update(RULE)         # a plan's and a rig's rules across keys (bench.word
 REFUSAL.update(CONFIG)
 REFUSAL.update(SEQUENCE)    # a sequence file's problems (bench.words.terminal_config)
 REFUSAL.update(API)         # the API's and the pytest plugin's (bench.words.terminal_config)
+REFUSAL.update(STUDY)       # the studies' (bench.words.terminal_config)
 
 
 def config(code: str, **fields) -> str:

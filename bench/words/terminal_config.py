@@ -22,6 +22,12 @@ phase-resonance lock's progress note (:class:`bench.api.ApiLine`,
 (:class:`bench.testing.PluginOption`); ``NUMBER``: a number that is not a measurement, named
 (:class:`bench.numbers.Shown`).
 
+``STUDY``: what ``bench study`` and the batch mode of ``bench analyze`` refuse of their
+arguments (:class:`bench.studies.cli.StudyArgs`; :data:`bench.words.terminal.REFUSAL` holds
+them); ``STUDY_OUT``: what they print and their progress lines' labels
+(:class:`bench.studies.cli.StudyOut`).  (The studies' own modules' words: H5's
+``bench.words.terminal_data.STUDIES``.)
+
 ``NOTE``: what a range's bounds are (:class:`bench.config.RangeNote`), said after the
 bounds of a value out of range (``terminal.CONFIG["out_of_range"]``, its field ``note``: a
 :class:`bench.words.Said`).
@@ -36,8 +42,9 @@ import math
 
 from . import Said, Words, say
 
-__all__ = ["NOTE", "RULE", "SEQUENCE", "SEQUENCE_LOG", "PLANNED_STEP", "API", "LOG", "PLUGIN", "NUMBER",
-           "line", "option", "planned_step", "range_note", "sequence_line", "shown", "where"]
+__all__ = ["NOTE", "RULE", "SEQUENCE", "SEQUENCE_LOG", "PLANNED_STEP", "API", "LOG", "PLUGIN", "NUMBER", "STUDY",
+           "STUDY_OUT", "line", "option", "planned_step", "range_note", "sequence_line", "shown", "study_out",
+           "where"]
 
 
 def where(source: str, table: str, key: str) -> str:
@@ -232,3 +239,34 @@ def shown(code: str) -> str:
 def option(code: str) -> str:
     """A pytest option's help (PLUGIN)."""
     return say(PLUGIN, code, {})
+
+
+
+_SIMULATED = "a Monte-Carlo study needs a simulated rig (simulated = true, [rig.model])"
+
+# what `bench study` and the batch mode of `bench analyze` refuse of their arguments
+# (bench.studies.cli.StudyArgs)
+STUDY: Words = {
+    "study_not_numbers": lambda text: f"expected numbers like '0.5,1.5' or 'start:stop:count', got {text!r}",
+    "batch_needs_out": lambda: "analysing several sources needs --out DIR (the summary table and one report per source)",
+    "study_mc_rig_not_simulated": lambda path: f"{path}: {_SIMULATED}",
+}
+
+# what `bench study` and the batch mode of `bench analyze` print, and their progress lines'
+# labels (bench.studies.cli.StudyOut)
+STUDY_OUT: Words = {
+    "study_figure": lambda path: f"figure: {path}",
+    "study_outcome": lambda computed, skipped, failed, seconds, workers, table: (
+        f"{computed} tasks computed, {skipped} already done, {failed} failed in {seconds:.1f} s on {workers} "
+        f"workers; table: {table}"),
+    "study_failed": lambda task, shown, error: f"FAILED {task} {shown}: {error}",
+    "batch_summary": lambda parquet, csv, reports: f"summary: {parquet}, {csv}; reports under {reports}/",
+    "study_map_label": lambda rows: f"map {rows} rows",
+    "study_mc_label": lambda samples: f"identification MC {samples} rigs",
+    "batch_label": lambda: "batch analysis",
+}
+
+
+def study_out(code: str, **fields) -> str:
+    """A line ``bench study`` prints or a progress line's label (STUDY_OUT), in words."""
+    return say(STUDY_OUT, code, fields)

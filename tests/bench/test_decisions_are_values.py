@@ -44,6 +44,7 @@ from bench.runlock import LOCK_NAME, LockRefusal
 from bench.sequence import SequenceLine, SequenceProblem
 from bench.step_files import Problem
 from bench.storage import RunDirRefusal, RunStore
+from bench.studies.cli import StudyArgs, StudyOut
 from bench.testing import PluginOption, PluginRefusal
 from bench.toml_tables import ConfigProblem
 from bench.verdict import Kept, Short
@@ -158,7 +159,7 @@ def test_every_code_has_words_in_its_renderers():
     assert set(terminal_words.REFUSAL) == {str(c) for c in (*LockRefusal, *OutDirRefusal, *RunDirRefusal,
                                                            *ConfigProblem, *ConfigRule, *RigRule, *PaperRule,
                                                            *SequenceProblem, *ApiRefusal, *PluginRefusal,
-                                                           *bench._Missing)}
+                                                           *bench._Missing, *StudyArgs)}
     assert set(terminal_words.CONFIG) == {str(c) for c in (*ConfigProblem, *ConfigRule, *RigRule, *PaperRule)}
     assert set(terminal_config_words.RULE) == {str(c) for c in (*ConfigRule, *RigRule, *PaperRule)}
     assert set(terminal_config_words.NOTE) == {str(c) for c in RangeNote}
@@ -169,6 +170,8 @@ def test_every_code_has_words_in_its_renderers():
     assert set(terminal_config_words.LOG) == {str(c) for c in (*ApiLine, *BackboneLine)}
     assert set(terminal_config_words.PLUGIN) == {str(c) for c in PluginOption}
     assert set(terminal_config_words.NUMBER) == {str(c) for c in Shown}
+    assert set(terminal_config_words.STUDY) == {str(c) for c in StudyArgs}
+    assert set(terminal_config_words.STUDY_OUT) == {str(c) for c in StudyOut}
     assert set(terminal_words.PROMISE) == {str(c) for c in (*Kept, *Short)}
     assert set(report_words.CONCERN) == {str(c) for c in (*Concern, *Kept, *Short)}
     assert set(report_words.OVERALL) == {str(c) for c in Verdict}
@@ -510,6 +513,46 @@ def test_the_apis_refusals_and_a_failed_fits_number_are_codes(monkeypatch):
     _codes_only(monkeypatch)
     assert said() == ([(t, c, f"<{c}>") for t, c, _ in before[0]], False, ["<nan>", "<absurd>", "<absurd>", "1.5"],
                       "<absurd>")
+
+
+def test_the_study_commands_refusals_and_outcome_are_codes_with_fields(tmp_path, capsys, monkeypatch):
+    """What ``bench study`` and the batch mode of ``bench analyze`` refuse of their arguments (a
+    grid that is not numbers, a batch without --out, a Monte-Carlo study on a real rig's file)
+    and the outcome they print are codes with fields (bench.studies.cli); said as codes, the
+    same exit status, nothing written, and the outcome's exit status still says whether a task
+    failed."""
+    from bench.studies.cli import _report
+    from bench.studies.engine import Outcome
+
+    from .test_config import RIG, write
+    real = write(tmp_path, "real_rig.toml", RIG)
+    outcome = Outcome(tmp_path / "s", computed=1, skipped=2, failures=[dict(task="k1", inputs={"a": 1}, error="E: x"),
+                      dict(task="k2", inputs={"source": "/p/bad.uff", "pad": "x" * 300}, error="E: y")],
+                      seconds=1.25, workers=2)
+    commands = (["study", "map", "--n", "a,b", "--out", str(tmp_path / "m")],
+                ["analyze", str(tmp_path / "x"), str(tmp_path / "y")],
+                ["study", "mc", "--rig", str(real), "--out", str(tmp_path / "mc")])
+
+    def said():
+        out = []
+        for args in commands:
+            out.append((main(args), capsys.readouterr().err))
+        return out, _report(outcome), capsys.readouterr().out
+    before = said()
+    assert [status for status, _ in before[0]] == [ExitCode.USAGE] * 3
+    assert "expected numbers like '0.5,1.5' or 'start:stop:count', got 'a,b'" in before[0][0][1]
+    assert "analysing several sources needs --out DIR" in before[0][1][1]
+    assert f"{real}: a Monte-Carlo study needs a simulated rig (simulated = true, [rig.model])" in before[0][2][1]
+    assert before[1:] == (1, f"1 tasks computed, 2 already done, 2 failed in 1.2 s on 2 workers; table: "
+                             f"{tmp_path / 's' / 'results.parquet'}\nFAILED k1 {{'a': 1}}: E: x\n"
+                             "FAILED k2 /p/bad.uff: E: y\n")
+    _codes_only(monkeypatch)
+    after = said()
+    assert [status for status, _ in after[0]] == [ExitCode.USAGE] * 3
+    assert [f"<{code}>" in err for (_, err), code in zip(after[0], (StudyArgs.NOT_NUMBERS, StudyArgs.NEEDS_OUT,
+                                                                    StudyArgs.MC_RIG_NOT_SIMULATED))] == [True] * 3
+    assert after[1:] == (1, f"<{StudyOut.OUTCOME}>\n<{StudyOut.FAILED}>\n<{StudyOut.FAILED}>\n")
+    assert not [p for p in ("m", "mc") if (tmp_path / p).exists()]
 
 
 def test_a_broken_promise_said_as_codes_still_exits_1(tmp_path, capsys, monkeypatch):
