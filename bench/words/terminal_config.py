@@ -25,8 +25,8 @@ phase-resonance lock's progress note (:class:`bench.api.ApiLine`,
 ``STUDY``: what ``bench study`` and the batch mode of ``bench analyze`` refuse of their
 arguments (:class:`bench.studies.cli.StudyArgs`; :data:`bench.words.terminal.REFUSAL` holds
 them); ``STUDY_OUT``: what they print and their progress lines' labels
-(:class:`bench.studies.cli.StudyOut`).  (The studies' own modules' words: H5's
-``bench.words.terminal_data.STUDIES``.)
+(:class:`bench.studies.cli.StudyOut`).  (The study modules' own words are
+``bench.words.terminal_data.STUDIES``'s.)
 
 ``NOTE``: what a range's bounds are (:class:`bench.config.RangeNote`), said after the
 bounds of a value out of range (``terminal.CONFIG["out_of_range"]``, its field ``note``: a
