@@ -12,6 +12,8 @@ catches the ending signals before numpy and the rest are imported (decision 0051
 Everything not listed in ``__all__`` is private.
 """
 
+from enum import StrEnum
+
 # name -> the module that defines it
 _API = {name: "bench.api" for name in ("Run", "STEP_COLUMNS", "load_plan", "load_rig", "open_run",
                                         "plan_from_dict", "rig_from_dict", "run")}
@@ -21,6 +23,12 @@ _API.update({"Plan": "procedures.plan", "Rig": "procedures.plan", "Limits": "pro
              "StorageError": "sim.errors"})
 
 __all__ = sorted(_API)          # and __version__
+
+
+class _Missing(StrEnum):
+    """A name ``bench`` does not have (its words: bench.words.terminal_config.API)."""
+
+    NO_ATTRIBUTE = "no_attribute"           # module, name
 
 
 def _version() -> str:
@@ -38,7 +46,8 @@ def __getattr__(name: str):
         import importlib
         value = getattr(importlib.import_module(_API[name]), name)
     else:
-        raise AttributeError(f"module 'bench' has no attribute {name!r}")
+        from .words.terminal import refused
+        raise refused(AttributeError, _Missing.NO_ATTRIBUTE, module=__name__, name=name)
     globals()[name] = value           # once
     return value
 

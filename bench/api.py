@@ -22,11 +22,15 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Mapping
 from dataclasses import replace
+from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from procedures.plan import Plan, Rig
 from sim.errors import ConfigurationError
+
+from .words.terminal import refused
+from .words.terminal_config import line
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -72,12 +76,27 @@ def plan_from_dict(data: Mapping[str, Any], source: str = "plan") -> Plan:
     return parse_plan(dict(data) if "plan" in data else {"plan": dict(data)}, source)
 
 
+class ApiRefusal(StrEnum):
+    """What the Python API refuses (its words: bench.words.terminal_config.API)."""
+
+    NOT_A_PLAN = "api_not_a_plan"       # got (the type's name)
+    NOT_A_RIG = "api_not_a_rig"         # got (the type's name)
+    BAD_LABEL = "api_bad_label"         # key
+
+
+class ApiLine(StrEnum):
+    """What the Python API logs (its words: bench.words.terminal_config.LOG)."""
+
+    COMPILING = "kernels_compiling"
+    COMPILED = "kernels_compiled"       # seconds
+
+
 def _as_plan(plan: Plan | PathLike) -> Plan:
     if isinstance(plan, Plan):
         return plan
     if isinstance(plan, str | Path):
         return load_plan(plan)
-    raise TypeError(f"plan: expected a bench Plan or the path of a plan file, got {type(plan).__name__}")
+    raise refused(TypeError, ApiRefusal.NOT_A_PLAN, got=type(plan).__name__)
 
 
 def _as_rig(rig: Rig | PathLike) -> Rig:
@@ -85,7 +104,7 @@ def _as_rig(rig: Rig | PathLike) -> Rig:
         return rig
     if isinstance(rig, str | Path):
         return load_rig(rig)
-    raise TypeError(f"rig: expected a bench Rig or the path of a rig file, got {type(rig).__name__}")
+    raise refused(TypeError, ApiRefusal.NOT_A_RIG, got=type(rig).__name__)
 
 
 def run(plan: Plan | PathLike, rig: Rig | PathLike, out: PathLike, *, labels: Mapping[str, str] | None = None,
@@ -141,7 +160,7 @@ def _checked_labels(labels: Mapping[str, str]) -> dict[str, str]:
     out = {}
     for k, v in labels.items():
         if not isinstance(k, str) or not k.strip():
-            raise ConfigurationError(f"labels: a key must be a non-empty string, got {k!r}")
+            raise refused(ConfigurationError, ApiRefusal.BAD_LABEL, key=k)
         out[k.strip()] = str(v).strip()
     return out
 
@@ -152,8 +171,8 @@ def warm_if_simulated(rig: Rig) -> None:
     if rig.simulated:
         from .warmup import kernels_warm, warm_up
         if not kernels_warm():
-            log.warning("compiling the simulation kernels (first run only; `make setup` does it ahead)")
-            log.info("kernels compiled in %.0f s", warm_up())
+            log.warning(line(ApiLine.COMPILING))
+            log.info(line(ApiLine.COMPILED, seconds=warm_up()))
 
 
 def _frame(rows: list[dict], columns: tuple[str, ...]) -> pd.DataFrame:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 import io
 import logging
+from enum import StrEnum
 from pathlib import Path
 
 from procedures.factory import procedure_for
@@ -20,6 +21,7 @@ from sim.step_result import StepResult
 
 from .config import Rig
 from .storage import RunStore, atomic_write
+from .words.terminal_config import line
 
 log = logging.getLogger(__name__)
 
@@ -64,6 +66,12 @@ def model_backbone(rig: Rig, amplitudes_m) -> list:
     return [backbone_point(X, p["mass_kg"], p["F_s_N"], p["x_s_m"], p["n"], **linear) for X in amplitudes_m]
 
 
+class BackboneLine(StrEnum):
+    """What a phase-resonance run says of its lock (its words: bench.words.terminal_config.LOG)."""
+
+    LOCKING = "locking"     # level_N, freq_Hz, phase_error_deg, periods (settled in the band)
+
+
 def run_backbone(plan: Plan, rig: Rig, store: RunStore, gen, daq, sensor_check, *, marker, drive_limit_V: float,
                  noise_floor_m: float, progress=None) -> None:
     """The phase-resonance test: each point stored as it completes, backbone.csv after each."""
@@ -76,8 +84,8 @@ def run_backbone(plan: Plan, rig: Rig, store: RunStore, gen, daq, sensor_check, 
                     settled_periods=state["settled_periods"])
         if progress:
             progress(len(store.done_keys()), total,
-                     f"locking {state['level_N']:g} N: {state['freq_Hz']:.3f} Hz, phase error "
-                     f"{state['phase_error_deg']:+.2f} deg, {state['settled_periods']} periods in band")
+                     line(BackboneLine.LOCKING, level_N=state["level_N"], freq_Hz=state["freq_Hz"],
+                          phase_error_deg=state["phase_error_deg"], periods=state["settled_periods"]))
 
     proc = procedure_for(plan, gen, daq, amp_gain_N_per_V=rig.amp_gain_N_per_V, mass_kg=rig.expected_mass_kg,
                          sensor_check=sensor_check, marker=marker, drive_limit_V=drive_limit_V,

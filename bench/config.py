@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import replace
+from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
@@ -20,11 +21,26 @@ from procedures.kind import ProcedureKind
 from procedures.plan import Backbone, Plan, Rig
 
 from .rig_config import LIMIT_KEYS, RIG_KEYS, _limits, load_rig, model_schema, parse_rig, rig_toml, stored_rig
-from .toml_tables import _REQUIRED, MAX_FILE_BYTES, ConfigError, _collecting, _load, _Section, _short, read_toml
+from .toml_tables import (
+    _REQUIRED,
+    MAX_FILE_BYTES,
+    ConfigError,
+    ConfigProblem,
+    Line,
+    _collecting,
+    _error,
+    _load,
+    _problems,
+    _Section,
+    _short,
+    read_toml,
+)
+from .words import Said, terminal
+from .words.terminal import refused
 
 __all__ = ["DEFAULTS", "KEYS", "MAX_FILE_BYTES", "MAX_FREQUENCIES", "MAX_LEVELS", "MAX_STEPS", "ConfigError",
-           "Plan", "Rig", "load_plan", "load_rig", "model_schema", "parse_plan", "parse_rig", "parse_stored_plan",
-           "plan_toml", "read_toml", "rig_toml", "stored_rig"]
+           "ConfigRule", "Plan", "RangeNote", "Rig", "load_plan", "load_rig", "model_schema", "parse_plan",
+           "parse_rig", "parse_stored_plan", "plan_toml", "read_toml", "rig_toml", "stored_rig"]
 
 log = logging.getLogger(__name__)
 
@@ -32,9 +48,45 @@ log = logging.getLogger(__name__)
 # force levels 0.1-100 N (force amplitude, half peak-to-peak), frequencies 20-1000 Hz.
 MIN_LEVEL_N, MAX_LEVEL_N = 0.1, 100.0
 MIN_FREQ_HZ, MAX_FREQ_HZ = 20.0, 1000.0
-FORCE_RANGE = f" (the bench's force range, {MIN_LEVEL_N:g}-{MAX_LEVEL_N:g} N)"
-FREQ_RANGE = f" (the bench's frequency range, {MIN_FREQ_HZ:g}-{MAX_FREQ_HZ:g} Hz)"
 DEFAULTS = Path(__file__).with_name("defaults")
+DEFAULT_NAME = ProcedureKind.STEPPED_SINE.label    # a plan's name when it gives none
+
+
+class RangeNote(StrEnum):
+    """Why a value's range is what it is, said after its bounds (the field ``note`` of
+    ConfigProblem.OUT_OF_RANGE, a Said; its words: bench.words.terminal_config.NOTE)."""
+
+    FORCE_RANGE = "force_range"             # low, high (N)
+    FREQUENCY_RANGE = "frequency_range"     # low, high (Hz)
+    PHASE = "phase"                         # response (the quantity the phase is of)
+    SLOPE_ESTIMATED = "slope_estimated"     # (0 stands for the estimate)
+    MAX_STEP_DEFAULT = "max_step_default"   # (0 stands for the default)
+    MIN_HZ_DEFAULT = "min_Hz_default"
+    MAX_HZ_DEFAULT = "max_Hz_default"
+    RESPONSE_LEVEL = "response_level"       # unit
+
+
+class ConfigRule(StrEnum):
+    """A plan's rule across keys, or a stored plan's problem (its words:
+    bench.words.terminal_config.RULE); fields source, table and, where it names one, key."""
+
+    WINDOW_OUTSIDE = "window_outside"             # min_Hz, max_Hz, start_Hz, probe_step, low, high (the bench's)
+    BAND_ABOVE_LOST = "band_above_lost"           # band, lost (deg)
+    NOT_USED = "not_used"                         # key (None: the table), procedure
+    NEEDS_PROCEDURE = "needs_procedure"           # procedure (the table's)
+    REPEATED_FREQUENCIES = "repeated_frequencies"
+    TOO_MANY_STEPS = "too_many_steps"             # levels, frequencies, both (directions), steps, most
+    NOT_MODES = "not_modes"                       # key, allowed, value
+    DWELL_NEEDS_REFINE = "dwell_needs_refine"
+    ABOVE_NYQUIST = "above_nyquist"               # most, top_Hz, rate_Hz, value
+    NO_STORED_PLAN = "no_stored_plan"             # got (what run.json holds, shortened)
+    NOT_ASCENDING = "not_ascending"               # key
+    NOT_A_STORED_PLAN = "not_a_stored_plan"       # error (its type's name), detail (its words)
+    BAD_SKIP = "bad_skip"                         # key, got (shortened)
+
+
+FORCE_RANGE = Said(RangeNote.FORCE_RANGE, {"low": MIN_LEVEL_N, "high": MAX_LEVEL_N})
+FREQ_RANGE = Said(RangeNote.FREQUENCY_RANGE, {"low": MIN_FREQ_HZ, "high": MAX_FREQ_HZ})
 
 # Bounds on a plan's size (decision record 0041; README, docs/run-format.md): checked before
 # anything is expanded, so a 10-million-step plan is refused in microseconds.  At a few
@@ -72,30 +124,28 @@ def _backbone(sec: _Section) -> Backbone:
     b = Backbone(
         start_Hz=start, mode=sec.text("mode", "feed") or "feed", response=response,
         phase_deg=sec.number("phase_deg", default_phase, lo, hi, lo_open=True,
-                             note=f" (response = \"{response}\": the phase against the force, degrees)"),
+                             note=Said(RangeNote.PHASE, {"response": response})),
         gain=sec.number("gain", 0.7, 0, 1, lo_open=True),
-        slope_deg_per_Hz=sec.number("slope_deg_per_Hz", 0.0, -1e4, 0, note=" (0 = estimated; the phase falls "
-                                    "with frequency through a resonance)"),
+        slope_deg_per_Hz=sec.number("slope_deg_per_Hz", 0.0, -1e4, 0, note=Said(RangeNote.SLOPE_ESTIMATED)),
         probe_step=sec.number("probe_step", 0.02, 0.001, 0.2),
         block_periods=sec.number("block_periods", 10, 2, 1000, integer=True),
         phase_band_deg=sec.number("phase_band_deg", 1.0, 0, 30, lo_open=True),
         amplitude_band=sec.number("amplitude_band", 0.01, 0, 0.5, lo_open=True),
         settle_periods=sec.number("settle_periods", 20, 1, 10000, integer=True),
-        max_step_Hz=sec.number("max_step_Hz", 0.0, 0, MAX_FREQ_HZ, note=" (0 = 5 % of start_Hz)"),
-        min_Hz=sec.number("min_Hz", 0.0, 0, MAX_FREQ_HZ, note=" (0 = start_Hz / 2, at least 20 Hz)"),
-        max_Hz=sec.number("max_Hz", 0.0, 0, MAX_FREQ_HZ, note=" (0 = 2 x start_Hz, at most 1000 Hz)"),
+        max_step_Hz=sec.number("max_step_Hz", 0.0, 0, MAX_FREQ_HZ, note=Said(RangeNote.MAX_STEP_DEFAULT)),
+        min_Hz=sec.number("min_Hz", 0.0, 0, MAX_FREQ_HZ, note=Said(RangeNote.MIN_HZ_DEFAULT)),
+        max_Hz=sec.number("max_Hz", 0.0, 0, MAX_FREQ_HZ, note=Said(RangeNote.MAX_HZ_DEFAULT)),
         max_blocks=sec.number("max_blocks", 60, 3, 100000, integer=True),
         lost_phase_deg=sec.number("lost_phase_deg", 45.0, 1, 180),
         collapse=sec.number("collapse", 0.2, 0, 1, lo_open=True)).resolved()
     if not MIN_FREQ_HZ <= b.min_Hz < b.start_Hz * (1 - b.probe_step) < b.start_Hz * (1 + b.probe_step) < b.max_Hz \
             <= MAX_FREQ_HZ:
-        sec.rule(f"{sec.where('min_Hz')} / max_Hz: the window {b.min_Hz:g}-{b.max_Hz:g} Hz must hold "
-                 f"start_Hz {b.start_Hz:g} Hz and its probe blocks (x (1 -+ probe_step {b.probe_step:g})) "
-                 f"inside the bench's range {MIN_FREQ_HZ:g}-{MAX_FREQ_HZ:g} Hz",
-                 *((sec, k) for k in ("min_Hz", "max_Hz", "start_Hz", "probe_step")))
+        sec.rule(ConfigRule.WINDOW_OUTSIDE, *((sec, k) for k in ("min_Hz", "max_Hz", "start_Hz", "probe_step")),
+                 source=sec.source, table=sec.path, min_Hz=b.min_Hz, max_Hz=b.max_Hz, start_Hz=b.start_Hz,
+                 probe_step=b.probe_step, low=MIN_FREQ_HZ, high=MAX_FREQ_HZ)
     if b.phase_band_deg >= b.lost_phase_deg:
-        sec.rule(f"{sec.where('phase_band_deg')}: {b.phase_band_deg:g} deg must be below "
-                 f"lost_phase_deg {b.lost_phase_deg:g} deg", (sec, "phase_band_deg"), (sec, "lost_phase_deg"))
+        sec.rule(ConfigRule.BAND_ABOVE_LOST, (sec, "phase_band_deg"), (sec, "lost_phase_deg"), source=sec.source,
+                 table=sec.path, band=b.phase_band_deg, lost=b.lost_phase_deg)
     sec.done()
     return b
 
@@ -104,7 +154,7 @@ def _response_levels(rc: _Section) -> tuple[list[float], str]:
     """[plan.response] levels, in the unit of its quantity; the table's keys checked."""
     quantity = rc.choice("quantity", "disp", ("disp", "accel"))
     lo, hi, unit = (1e-9, 1e-3, "m") if quantity == "disp" else (1e-4, 1e3, "m/s^2")
-    levels = rc.numbers("levels", _REQUIRED, lo, hi, note=f" ({unit}, the response fundamental's amplitude)",
+    levels = rc.numbers("levels", _REQUIRED, lo, hi, note=Said(RangeNote.RESPONSE_LEVEL, {"unit": unit}),
                         most=MAX_LEVELS)
     rc.done()
     return levels, quantity
@@ -129,11 +179,11 @@ def _parse_plan(data: dict, source: str, errors: list[str]) -> Plan:
     if procedure == "response_controlled":
         if "levels_N" in p.data:
             p.used.add("levels_N")
-            p.problem(f"{p.where('levels_N')}: not used with procedure = \"response_controlled\" "
-                      f"(give [plan.response] levels, response amplitudes)")
+            p.coded(ConfigRule.NOT_USED, source=source, table=p.path, key="levels_N", procedure=procedure)
         levels, quantity = _response_levels(rc)
     elif rc.data:
-        p.rule(f"{source}: [plan.response] needs procedure = \"response_controlled\" in [plan]", (p, "procedure"))
+        p.rule(ConfigRule.NEEDS_PROCEDURE, (p, "procedure"), source=source, table=rc.path,
+               procedure=ProcedureKind.RESPONSE_CONTROLLED)
         _response_levels(rc)            # its values' own problems too
     if procedure != "response_controlled":
         levels = p.numbers("levels_N", _REQUIRED, MIN_LEVEL_N, MAX_LEVEL_N, note=FORCE_RANGE, most=MAX_LEVELS)
@@ -142,13 +192,13 @@ def _parse_plan(data: dict, source: str, errors: list[str]) -> Plan:
     backbone = None
     if procedure == "phase_resonance":
         if fr.data:
-            p.problem(f"{source}: [plan.frequencies] is not used with procedure = \"phase_resonance\" "
-                      f"(the controller finds the frequency; give [plan.backbone] start_Hz)")
+            p.coded(ConfigRule.NOT_USED, source=source, table=fr.path, key=None, procedure=procedure)
             fr = _Section(source, "plan.frequencies", {}, errors=p.errors)
         backbone = _backbone(bb)
         freqs = [backbone.start_Hz]
     elif bb.data:
-        p.rule(f"{source}: [plan.backbone] needs procedure = \"phase_resonance\" in [plan]", (p, "procedure"))
+        p.rule(ConfigRule.NEEDS_PROCEDURE, (p, "procedure"), source=source, table=bb.path,
+               procedure=ProcedureKind.PHASE_RESONANCE)
         if "start_Hz" in bb.data:       # its values' own problems too
             _backbone(bb)
         else:
@@ -166,24 +216,24 @@ def _parse_plan(data: dict, source: str, errors: list[str]) -> Plan:
         grid = np.geomspace(start, stop, points) if spacing == "log" else np.linspace(start, stop, points)
         freqs = [float(f"{f:.6g}") for f in grid]
     if len(set(freqs)) != len(freqs):
-        fr.problem(f"{fr.where('frequencies')}: grid has repeated frequencies")
+        fr.coded(ConfigRule.REPEATED_FREQUENCIES, source=source, table=fr.path)
         freqs = sorted(set(freqs))
     direction = fr.choice("direction", "up", ("up", "down", "both"))
     steps = len(levels) * len(freqs) * (2 if direction == "both" else 1)
     if steps > MAX_STEPS:                     # nothing is expanded after this
-        raise ConfigError(f"{source}: [plan] {len(levels)} levels x {len(freqs)} frequencies"
-                          f"{' x 2 directions' if direction == 'both' else ''} = {steps} steps; at most {MAX_STEPS} "
-                          f"(split the test into several plans)")
+        raise refused(ConfigError, ConfigRule.TOO_MANY_STEPS, source=source, levels=len(levels),
+                      frequencies=len(freqs), both=direction == "both", steps=steps, most=MAX_STEPS)
     fr.done()
     c = p.table("control")
     lim = p.table("limits")
     res = p.table("resonance")
     modes = res._get("modes", ["feed", "pitch"])
     if not isinstance(modes, list) or not modes or any(m not in ("feed", "pitch") for m in modes):
-        res.problem(f"{res.where('modes')}: must be a non-empty list of \"feed\", \"pitch\", got {modes!r}")
+        res.coded(ConfigRule.NOT_MODES, source=source, table=res.path, key="modes", allowed=["feed", "pitch"],
+                  value=modes)
         modes = ["feed", "pitch"]
     plan = Plan(
-        name=p.text("name", "stepped sine"), levels_N=tuple(levels), freqs_Hz=tuple(freqs),
+        name=p.text("name", DEFAULT_NAME), levels_N=tuple(levels), freqs_Hz=tuple(freqs),
         direction=direction,
         settle_cycles=c.number("settle_cycles", 20, 0, 1e6, integer=True),
         min_settle_s=c.number("min_settle_s", 0.05, 0, 3600),
@@ -207,22 +257,19 @@ def _parse_plan(data: dict, source: str, errors: list[str]) -> Plan:
         procedure=ProcedureKind(procedure), backbone=backbone, response=quantity)
     res.done()
     if plan.dwell_cycles and not plan.refine:
-        res.rule(f"{res.where('dwell_cycles')}: needs refine = true (the dwell is at the refined resonance)",
-                 (res, "refine"))
+        res.rule(ConfigRule.DWELL_NEEDS_REFINE, (res, "refine"), source=source, table=res.path)
     if backbone is not None and plan.adaptive_per_sweep:
-        p.problem(f"{p.where('adaptive_per_sweep')}: not used with procedure = \"phase_resonance\"")
+        p.coded(ConfigRule.NOT_USED, source=source, table=p.path, key="adaptive_per_sweep", procedure=procedure)
     if backbone is not None and plan.refine:
-        p.problem(f"{res.where('refine')}: not used with procedure = \"phase_resonance\" (the loop finds the "
-                  f"resonance itself)")
+        p.coded(ConfigRule.NOT_USED, source=source, table=res.path, key="refine", procedure=procedure)
     # every fitted harmonic must stay below Nyquist at the highest frequency (the DAQ samples
     # at >= min_sample_rate_Hz); above it harmonics alias and the fit's amplitudes are wrong;
     # phase resonance: anywhere in its frequency window
     top = backbone.max_Hz if backbone is not None else max(plan.freqs_Hz)
     max_harmonics = math.ceil(plan.min_sample_rate_Hz / (2 * top)) - 1
     if plan.harmonics > max_harmonics:
-        c.rule(f"{c.where('harmonics')}: must be <= {max_harmonics} (below Nyquist at "
-               f"{top:g} Hz with min_sample_rate_Hz = {plan.min_sample_rate_Hz:g}), "
-               f"got {plan.harmonics}", (c, "harmonics"), (c, "min_sample_rate_Hz"))
+        c.rule(ConfigRule.ABOVE_NYQUIST, (c, "harmonics"), (c, "min_sample_rate_Hz"), source=source, table=c.path,
+               most=max_harmonics, top_Hz=top, rate_Hz=plan.min_sample_rate_Hz, value=plan.harmonics)
     if not (p.bad | fr.bad | bb.bad | c.bad | res.bad):   # a stand-in for a bad value makes blocks no plan asks for
         _instrument_capacity(p, plan, source)
     c.done()
@@ -265,6 +312,20 @@ def plan_toml(p: dict) -> dict:
     return out
 
 
+def _as_stored(e: ConfigError) -> ConfigError:
+    """``e``, a stored plan's problems, with the plan file's frequency list named as run.json
+    names it (``[plan] freqs_Hz``, its fields: the words follow), each problem's code kept."""
+    lines = []
+    for said in _problems(e):
+        fields = dict(said.fields)
+        key = str(fields.get("key", ""))
+        if said.code is not None and fields.get("table") == "plan.frequencies" and key.startswith("list_Hz"):
+            fields.update(table="plan", key="freqs_Hz" + key.removeprefix("list_Hz"))
+        lines.append(Line(terminal.config(said.code, **fields), said.code, fields) if said.code is not None
+                     else Line(fields["text"]))
+    return _error("\n".join(lines), lines)
+
+
 def parse_stored_plan(p, source: str) -> Plan:
     """The plan stored in a run's ``run.json`` (``Plan.to_dict()``), checked by the same
     validator as a plan file (:func:`parse_plan`: ranges, bounds, the harmonics below
@@ -272,25 +333,26 @@ def parse_stored_plan(p, source: str) -> Plan:
     ``source`` and the key: nothing is counted, reported or resumed against a plan that a
     plan file could not hold."""
     if not isinstance(p, dict):
-        raise ConfigError(f"{source}: no plan stored ([plan] missing or not a table: {_short(p)})")
+        raise refused(ConfigError, ConfigRule.NO_STORED_PLAN, source=source, got=_short(p))
     for key in ("levels_N", "freqs_Hz"):
         if key not in p:
-            raise ConfigError(f"{source}: [plan] {key}: missing (required)")
+            raise refused(ConfigError, ConfigProblem.MISSING, source=source, table="plan", key=key)
     freqs = p["freqs_Hz"]
     if isinstance(freqs, list) and len(freqs) > MAX_FREQUENCIES:
-        raise ConfigError(f"{source}: [plan] freqs_Hz: {len(freqs)} values; at most {MAX_FREQUENCIES}")
+        raise refused(ConfigError, ConfigProblem.TOO_MANY, source=source, table="plan", key="freqs_Hz",
+                      count=len(freqs), most=MAX_FREQUENCIES)
     if isinstance(freqs, list) and all(isinstance(f, (int, float)) for f in freqs) and freqs != sorted(freqs):
-        raise ConfigError(f"{source}: [plan] freqs_Hz: not in ascending order (the step keys number them so)")
+        raise refused(ConfigError, ConfigRule.NOT_ASCENDING, source=source, table="plan", key="freqs_Hz")
     try:
-        plan = parse_plan({"plan": plan_toml(dict({"name": "stepped sine", "direction": "up"}, **p))}, source)
+        plan = parse_plan({"plan": plan_toml(dict({"name": DEFAULT_NAME, "direction": "up"}, **p))}, source)
     except ConfigError as e:               # name run.json's key, not the plan file's
-        raise ConfigError(str(e).replace("[plan.frequencies] list_Hz", "[plan] freqs_Hz")) from None
+        raise _as_stored(e) from None
     except (TypeError, AttributeError, KeyError) as e:
-        raise ConfigError(f"{source}: [plan] not a stored plan ({type(e).__name__}: {e})") from None
+        raise refused(ConfigError, ConfigRule.NOT_A_STORED_PLAN, source=source, error=type(e).__name__,
+                      detail=str(e)) from None
     skip = p.get("skip") or []
     if not isinstance(skip, list) or not all(
             isinstance(s, list) and len(s) == 2 and all(isinstance(i, int) and not isinstance(i, bool) for i in s)
             and 0 <= s[0] < len(plan.levels_N) and 0 <= s[1] < len(plan.freqs_Hz) for s in skip):
-        raise ConfigError(f"{source}: [plan] skip: must be a list of [level index, frequency index] pairs "
-                          f"within the plan, got {_short(skip)}")
+        raise refused(ConfigError, ConfigRule.BAD_SKIP, source=source, table="plan", key="skip", got=_short(skip))
     return replace(plan, skip=tuple(tuple(s) for s in skip))

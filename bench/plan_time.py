@@ -18,10 +18,15 @@ typical figure.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from enum import StrEnum
+from typing import Any
 
 from procedures.plan import Plan
 from procedures.stepped_sine import MAX_SETTLE_WAIT_S
+
+from .words.terminal_config import planned_step
 
 REST_S = 0.1               # the session's reference block at rest, output off (10 periods at 100 Hz)
 
@@ -55,22 +60,29 @@ def extra_block_seconds_max(plan: Plan, f: float, dwell_cycles: int = 0) -> floa
     return (max(settle, math.ceil(MAX_SETTLE_WAIT_S * f)) + block) / f
 
 
+class Online(StrEnum):
+    """What chooses a planned step's frequency online (its words, with the step's ``detail``:
+    bench.words.terminal_config.PLANNED_STEP)."""
+
+    ADAPTIVE = "adaptive"       # chosen (per sweep), of (the sweep's frequencies), low_Hz, high_Hz
+    REFINED = "refined"         # mode, steps (at most), tolerance
+    DWELL = "dwell"             # mode, cycles
+
+
 @dataclass(frozen=True)
 class PlannedStep:
     """One line of ``bench dry-run --steps``: the key (a pattern for steps chosen online),
-    the level, the frequency (NaN: chosen online) and what chooses it."""
+    the level, the frequency (NaN: chosen online), what chooses it and its fields."""
 
     key: str
     level_N: float
     freq_Hz: float
-    note: str = ""
     count: int = 1                       # steps this line stands for (at most)
-    online: str = ""                     # what chooses it online: "adaptive", "refined", "dwell" ("": the plan)
+    online: Online | str = ""            # what chooses it online ("": the plan)
+    detail: Mapping[str, Any] = field(default_factory=dict)
 
     def line(self) -> str:
-        f = f"{self.freq_Hz:10.4g} Hz" if math.isfinite(self.freq_Hz) else "   refined, chosen online" \
-            if self.online in ("refined", "dwell") else "          chosen online"
-        return f"{self.key:24s} {self.level_N:8g} N {f}" + (f"  ({self.note})" if self.note else "")
+        return planned_step(self.key, self.level_N, self.freq_Hz, self.online, self.detail)
 
 
 def planned_step_list(plan: Plan) -> list[PlannedStep]:
@@ -86,25 +98,23 @@ def planned_step_list(plan: Plan) -> list[PlannedStep]:
         for d in dict.fromkeys(s.direction for s in mine):
             sw = [s for s in mine if s.direction == d]
             if plan.adaptive_per_sweep and plan.adaptive_per_sweep < len(sw):
-                out.append(PlannedStep(f"{sw[0].key[:9]}F***-{d}", sw[0].force_N, math.nan,
-                                       f"{plan.adaptive_per_sweep} of these {len(sw)} frequencies "
-                                       f"{min(s.freq_Hz for s in sw):.4g}-{max(s.freq_Hz for s in sw):.4g} Hz, "
-                                       "chosen online", plan.adaptive_per_sweep, online="adaptive"))
+                out.append(PlannedStep(f"{sw[0].key[:9]}F***-{d}", sw[0].force_N, math.nan, plan.adaptive_per_sweep,
+                                       Online.ADAPTIVE, {"chosen": plan.adaptive_per_sweep, "of": len(sw),
+                                                         "low_Hz": min(s.freq_Hz for s in sw),
+                                                         "high_Hz": max(s.freq_Hz for s in sw)}))
             else:
                 out += [PlannedStep(s.key, s.force_N, s.freq_Hz) for s in sw]
         if plan.refine and mine:
             last = mine[-1]
             for mode in plan.refine_modes:
                 out.append(PlannedStep(f"{last.index:05d}-L{li:02d}-R{mode[0].upper()}***-{last.direction}",
-                                       last.force_N, math.nan, f"{mode} mode: up to {plan.refine_steps} refinement "
-                                       f"steps, tolerance {100 * plan.refine_tolerance:g} %", plan.refine_steps,
-                                       online="refined"))
+                                       last.force_N, math.nan, plan.refine_steps, Online.REFINED,
+                                       {"mode": mode, "steps": plan.refine_steps, "tolerance": plan.refine_tolerance}))
             if plan.dwell_cycles:
                 for mode in plan.refine_modes:
                     out.append(PlannedStep(f"{last.index:05d}-L{li:02d}-W{mode[0].upper()}000-{last.direction}",
-                                           last.force_N, math.nan, f"{mode} mode: dwell of {plan.dwell_cycles} "
-                                           "cycles at its refined resonance (none without a peak inside the grid)",
-                                           online="dwell"))
+                                           last.force_N, math.nan, 1, Online.DWELL,
+                                           {"mode": mode, "cycles": plan.dwell_cycles}))
     return out
 
 
@@ -119,7 +129,7 @@ def rig_time_bound_s(plan: Plan, *, extra_settle: bool = True) -> float:
         online = not math.isfinite(p.freq_Hz)
         f = f_lo if online else p.freq_Hz
         from_rest = online or sweep != sweep_prev or p.count > 1
-        dwell = plan.dwell_cycles if p.online == "dwell" else 0
+        dwell = plan.dwell_cycles if p.online == Online.DWELL else 0
         t += p.count * step_seconds_max(plan, f, from_rest=from_rest, dwell_cycles=dwell,
                                         f_before=f_lo if online or f_prev is None else f_prev,
                                         extra_settle=extra_settle)
@@ -135,7 +145,7 @@ def backbone_time_bound_s(plan: Plan) -> float:
     measured and given its extra settle blocks; every period at the lowest frequency it may
     have (the window's, less the probe's step below it)."""
     bb = plan.backbone
-    assert bb is not None, "a phase-resonance plan"
+    assert bb is not None                                   # a phase-resonance plan
     bb = bb.resolved()
     f_lo = bb.min_Hz * (1 - bb.probe_step)
     probe = 3 * 2 * bb.block_periods / f_lo                 # three probe points: a wait and a block each

@@ -5,6 +5,7 @@ declaration, decision 0058).  Every error names the file, the key and the allowe
 from __future__ import annotations
 
 from dataclasses import replace
+from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -12,9 +13,17 @@ from drivers import check_daq_url, check_generator_url, check_sensor_url
 from procedures.plan import Limits, Rig
 
 from .toml_tables import _REQUIRED, ConfigError, _collecting, _load, _Section
+from .words.terminal import refused
 
 if TYPE_CHECKING:      # sim.rig compiles the plant's kernels: imported when a model is parsed
     from sim.rig import RigModel
+
+
+class RigRule(StrEnum):
+    """A rig file's rule across keys (its words: bench.words.terminal_config.RULE)."""
+
+    MODEL_NOT_SIMULATED = "model_not_simulated"     # source: a [rig.model] of a rig that is not simulated
+
 
 LIMIT_KEYS = ("drive_V", "force_N", "disp_m", "accel_m_s2")
 RIG_KEYS = {
@@ -111,7 +120,7 @@ def _parse_rig(data: dict, source: str, errors: list[str]) -> Rig:
         expected_n=exp.number("n", 1.5, 0.05, 10))
     r.used.add("model")
     if r.data.get("model") and not simulated:
-        raise ConfigError(f"{source}: [rig.model] is only allowed with simulated = true")
+        raise refused(ConfigError, RigRule.MODEL_NOT_SIMULATED, source=source)
     if simulated:
         rig = replace(rig, model=_check_model(r.table("model")))
     cal.done()

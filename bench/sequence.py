@@ -31,15 +31,58 @@ import logging
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 
 from procedures.plan import Plan, Rig
 from sim.errors import BenchError, ConfigurationError, RunDirectoryError
 
+from .words import Said
+from .words.terminal import refused
+from .words.terminal_config import sequence_line
+
 log = logging.getLogger(__name__)
 
 SEQUENCE_FILE = "sequence.json"
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+KEYS = ("name", "entry")                        # [sequence]
+ENTRY_KEYS = ("name", "plan", "rig", "labels")  # each [[sequence.entry]]
+TABLES = ("sequence",)
+
+
+class SequenceProblem(StrEnum):
+    """A sequence file's or directory's problem (its words: bench.words.terminal_config.SEQUENCE);
+    fields path (the file) and, for an entry's, entry (its number from 1)."""
+
+    NOT_FOUND = "sequence_not_found"
+    NOT_TOML = "sequence_not_toml"                  # detail (the reader's or the TOML parser's words)
+    NO_TABLE = "sequence_no_table"
+    UNKNOWN_KEY = "sequence_unknown_key"            # key, known
+    UNKNOWN_TABLE = "sequence_unknown_table"        # table, known
+    NO_ENTRY = "sequence_no_entry"
+    ENTRY_NOT_TABLE = "entry_not_table"
+    ENTRY_UNKNOWN_KEY = "entry_unknown_key"         # key, known
+    ENTRY_BAD_NAME = "entry_bad_name"               # name (what the file gives)
+    ENTRY_NAME_USED = "entry_name_used"             # name
+    ENTRY_BAD_LABELS = "entry_bad_labels"
+    ENTRY_NO_FILE = "entry_no_file"                 # key (plan or rig)
+    ENTRY_FILE = "entry_file"                       # key, detail (the plan's or rig's ConfigError, its words)
+    ENTRY_ENVELOPE = "entry_envelope"               # detail (the envelope's refusal, its words)
+    SEVERAL = "sequence_several"                    # problems: each a Said, in order
+    NOT_A_SEQUENCE_DIR = "not_a_sequence_dir"       # out, file, detail (the reader's words)
+    OUT_NOT_EMPTY = "sequence_out_not_empty"        # out
+
+
+class EntryStatus(StrEnum):
+    """An entry's status besides its run's (bench.storage.RunStatus, run.json's ``status``)."""
+
+    NOT_STARTED = "not started"     # its directory holds no run yet (never stored)
+
+
+class SequenceLine(StrEnum):
+    """What a sequence logs (its words: bench.words.terminal_config.SEQUENCE)."""
+
+    ENTRY = "sequence_entry"        # sequence, entry (from 1), entries, name, resumed
 
 
 @dataclass(frozen=True)
@@ -63,57 +106,64 @@ def load_sequence(path: Path) -> tuple[str, list[Entry]]:
     try:
         data = tomllib.loads(path.read_text())
     except FileNotFoundError:
-        raise ConfigurationError(f"{path}: no such sequence file") from None
+        raise refused(ConfigurationError, SequenceProblem.NOT_FOUND, path=path) from None
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
-        raise ConfigurationError(f"{path}: not a readable TOML file ({e})") from None
-    problems: list[str] = []
+        raise refused(ConfigurationError, SequenceProblem.NOT_TOML, path=path, detail=str(e)) from None
+    problems: list[Said] = []
+
+    def bad(code: SequenceProblem, **fields) -> None:
+        problems.append(Said(code, {"path": path, **fields}))
     seq = data.get("sequence")
     if not isinstance(seq, dict):
-        raise ConfigurationError(f"{path}: no [sequence] table")
-    problems += [f"{path}: [sequence] {k}: unknown key (known: name, entry)" for k in seq if k not in ("name", "entry")]
-    problems += [f"{path}: {k}: unknown table (known: sequence)" for k in data if k != "sequence"]
+        raise refused(ConfigurationError, SequenceProblem.NO_TABLE, path=path)
+    for k in seq:
+        if k not in KEYS:
+            bad(SequenceProblem.UNKNOWN_KEY, key=k, known=KEYS)
+    for k in data:
+        if k not in TABLES:
+            bad(SequenceProblem.UNKNOWN_TABLE, table=k, known=TABLES)
     raw = seq.get("entry")
     if not isinstance(raw, list) or not raw:
-        problems.append(f"{path}: [[sequence.entry]]: at least one entry is needed")
+        bad(SequenceProblem.NO_ENTRY)
         raw = []
     entries, names = [], set()
-    for i, e in enumerate(raw):
-        where = f"{path}: [[sequence.entry]] {i + 1}"
+    for i, e in enumerate(raw, 1):
         if not isinstance(e, dict):
-            problems.append(f"{where}: not a table")
+            bad(SequenceProblem.ENTRY_NOT_TABLE, entry=i)
             continue
-        problems += [f"{where}: {k}: unknown key (known: name, plan, rig, labels)" for k in e
-                     if k not in ("name", "plan", "rig", "labels")]
+        for k in e:
+            if k not in ENTRY_KEYS:
+                bad(SequenceProblem.ENTRY_UNKNOWN_KEY, entry=i, key=k, known=ENTRY_KEYS)
         name = e.get("name")
         if not isinstance(name, str) or not NAME.fullmatch(name):
-            problems.append(f"{where}: name: expected a directory name (letters, digits, '.', '_', '-'), got {name!r}")
+            bad(SequenceProblem.ENTRY_BAD_NAME, entry=i, name=name)
         elif name in names:
-            problems.append(f"{where}: name: {name!r} is used by an earlier entry")
+            bad(SequenceProblem.ENTRY_NAME_USED, entry=i, name=name)
         names.add(name if isinstance(name, str) else "")
         labels = e.get("labels", {})
         if not isinstance(labels, dict) or not all(isinstance(v, str | int | float) for v in labels.values()):
-            problems.append(f"{where}: labels: expected a table of strings, e.g. {{ lubricant = \"ISO VG 32\" }}")
+            bad(SequenceProblem.ENTRY_BAD_LABELS, entry=i)
             labels = {}
         files = {}
         for key, loader in (("plan", load_plan), ("rig", load_rig)):
             rel = e.get(key)
             if not isinstance(rel, str) or not rel:
-                problems.append(f"{where}: {key}: the path of a {key} file is needed")
+                bad(SequenceProblem.ENTRY_NO_FILE, entry=i, key=key)
                 continue
             try:
                 files[key] = (rel, loader((path.parent / rel).resolve()))
             except ConfigurationError as err:
-                problems.append(f"{where}: {key}: {err}")
+                bad(SequenceProblem.ENTRY_FILE, entry=i, key=key, detail=str(err))
         if len(files) == 2:
             try:          # the rig's limits hold the plan: refused now, not at 3 a.m. before entry 4
                 check_envelope(files["plan"][1], files["rig"][1])
             except BenchError as err:
-                problems.append(f"{where}: {err}")
+                bad(SequenceProblem.ENTRY_ENVELOPE, entry=i, detail=str(err))
         if len(files) == 2:
             entries.append(Entry(str(name), files["plan"][1], files["rig"][1], {str(k): str(v) for k, v in labels.items()},
                                  files["plan"][0], files["rig"][0]))
     if problems:
-        raise ConfigurationError("\n".join(problems))
+        raise refused(ConfigurationError, SequenceProblem.SEVERAL, problems=problems)
     return str(seq.get("name") or path.stem), entries
 
 
@@ -133,7 +183,8 @@ def _stored(out: Path) -> tuple[str, list[Entry]]:
     try:
         data = json.loads((out / SEQUENCE_FILE).read_text())
     except (OSError, ValueError) as e:
-        raise RunDirectoryError(f"{out}: not a sequence directory ({SEQUENCE_FILE}: {e})") from None
+        raise refused(RunDirectoryError, SequenceProblem.NOT_A_SEQUENCE_DIR, out=out, file=SEQUENCE_FILE,
+                      detail=str(e)) from None
     entries = [Entry(e["name"], parse_stored_plan(e["plan"], f"{out}/{SEQUENCE_FILE}"),
                      parse_rig({"rig": rig_toml(e["rig"])}, f"{out}/{SEQUENCE_FILE}"), e.get("labels") or {},
                      e.get("plan_file", ""), e.get("rig_file", "")) for e in data["entries"]]
@@ -151,8 +202,7 @@ def run_sequence(seq_file: Path, out: Path, *, progress: Callable[[str], Callabl
     name, entries = load_sequence(seq_file)
     out = Path(out)
     if out.exists() and any(out.iterdir()):
-        raise ConfigurationError(f"{out}: exists and is not empty (a sequence starts in a new directory; "
-                                 f"bench resume {out} goes on with one)")
+        raise refused(ConfigurationError, SequenceProblem.OUT_NOT_EMPTY, out=out)
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / SEQUENCE_FILE, {"name": name, "source": str(Path(seq_file).resolve()), "entries": [
         {"name": e.name, "plan": e.plan.to_dict(), "rig": e.rig.to_dict(), "labels": e.labels,
@@ -171,7 +221,7 @@ def _status(run_dir: Path) -> str:
     try:
         return str(RunStore.open(run_dir).metadata.get("status", "unknown"))
     except RunDirectoryError:
-        return "not started"
+        return EntryStatus.NOT_STARTED
 
 
 def _go(out: Path, name: str, entries: list[Entry], *, progress, report: bool) -> SequenceResult:
@@ -184,10 +234,10 @@ def _go(out: Path, name: str, entries: list[Entry], *, progress, report: bool) -
             status = _status(d)
             if status == "completed":
                 continue
-            log.warning("sequence %s: entry %d/%d %s (%s)", name, i + 1, len(entries), e.name,
-                        "resumed" if status != "not started" else "started")
+            log.warning(sequence_line(SequenceLine.ENTRY, sequence=name, entry=i + 1, entries=len(entries),
+                                      name=e.name, resumed=status != EntryStatus.NOT_STARTED))
             cb = progress(e.name) if progress else None
-            if status == "not started":
+            if status == EntryStatus.NOT_STARTED:
                 execute(e.plan, e.rig, d, progress=cb, labels={**e.labels, "sequence": name, "entry": e.name})
             else:
                 execute(replace(e.plan, skip=()), e.rig, d, resume=True, progress=cb)
@@ -210,7 +260,7 @@ def _rows(out: Path, entries: list[Entry]) -> list[dict]:
         row = {"name": e.name, "status": _status(d), "steps_done": 0, "steps_total": 0,
                "report": f"{e.name}/report/report.md" if (d / "report" / "report.md").is_file() else "",
                "plan_file": e.plan_file, "rig_file": e.rig_file, "labels": e.labels}
-        if row["status"] != "not started":
+        if row["status"] != EntryStatus.NOT_STARTED:
             meta = RunStore.open(d).metadata
             row["steps_done"], row["steps_total"] = meta.get("steps_done", 0) or 0, meta.get("steps_total", 0) or 0
         rows.append(row)
@@ -218,20 +268,9 @@ def _rows(out: Path, entries: list[Entry]) -> list[dict]:
 
 
 def _write_report(out: Path, name: str, entries: list[Entry]) -> Path:
+    from .reports import sequence_md
     from .storage import atomic_write
-    rows = _rows(out, entries)
-    done = sum(r["status"] == "completed" for r in rows)
-    lines = [f"# Sequence: {name}", "",
-             f"{done} of {len(rows)} entries completed"
-             + ("." if done == len(rows) else f"; `bench resume {out}` goes on at the first that did not."), "",
-             "| # | entry | plan | rig | labels | status | steps | report |", "|---|---|---|---|---|---|---|---|"]
-    for i, r in enumerate(rows, 1):
-        labels = ", ".join(f"{k}={v}" for k, v in r["labels"].items())
-        link = f"[report]({r['report']})" if r["report"] else ""
-        steps = f"{r['steps_done']}/{r['steps_total']}" if r["status"] != "not started" else ""
-        lines.append(f"| {i} | {r['name']} | {r['plan_file']} | {r['rig_file']} | {labels} | {r['status']} | {steps} "
-                     f"| {link} |")
     path = out / "report.md"
-    text = ("\n".join(lines) + "\n").encode()
+    text = sequence_md(out, name, _rows(out, entries), EntryStatus.NOT_STARTED).encode()
     atomic_write(path, lambda fh: fh.write(text))
     return path

@@ -41,10 +41,14 @@ import time
 from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass, replace
+from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import pytest
+
+from .words.terminal import refused
+from .words.terminal_config import option
 
 if TYPE_CHECKING:
     from drivers import Twins
@@ -52,6 +56,21 @@ if TYPE_CHECKING:
     from sim.rig import RigModel
 
 INSTRUMENTS = ("generator", "daq")      # what drop_out can take away
+
+
+class PluginRefusal(StrEnum):
+    """What the plugin's helpers refuse (their words: bench.words.terminal_config.API)."""
+
+    BAD_INSTRUMENT = "plugin_bad_instrument"    # call, allowed, got
+    NOT_SIMULATED = "plugin_not_simulated"      # rig_file
+    UNKNOWN_LIMITS = "plugin_unknown_limits"    # limits (sorted)
+
+
+class PluginOption(StrEnum):
+    """The plugin's option group and option (their help: bench.words.terminal_config.PLUGIN)."""
+
+    GROUP = "group"
+    RIG_FILE = "rig_file"
 
 
 @dataclass
@@ -73,7 +92,8 @@ class SimServers:
         elif instrument == "daq":
             self.twins.daq.close()
         else:
-            raise ValueError(f"drop_out: instrument must be one of {', '.join(INSTRUMENTS)}, got {instrument!r}")
+            raise refused(ValueError, PluginRefusal.BAD_INSTRUMENT, call="drop_out", allowed=INSTRUMENTS,
+                          got=instrument)
 
     def close(self) -> None:
         self.twins.close()
@@ -91,7 +111,7 @@ def start_sim_rig(rig_file: str | Path | None = None, *, seed: int | None = None
     from .config import DEFAULTS, load_rig, parse_rig, rig_toml
     base = load_rig(Path(rig_file) if rig_file else DEFAULTS / "sim_rig.toml")
     if not base.simulated:
-        raise ValueError(f"{rig_file}: not a simulated rig (simulated = true is needed for its [rig.model])")
+        raise refused(ValueError, PluginRefusal.NOT_SIMULATED, rig_file=rig_file)
     plant = base.model or RigModel()
     if model:     # the same checks and named errors as the rig file's [rig.model]
         data = rig_toml(base.to_dict())
@@ -142,7 +162,7 @@ def with_limits(rig: Rig, **limits: float) -> Rig:
     ``accel_m_s2``), e.g. a force limit the plan's top level will trip."""
     unknown = set(limits) - {"drive_V", "force_N", "disp_m", "accel_m_s2"}
     if unknown:
-        raise ValueError(f"with_limits: unknown limit(s) {', '.join(sorted(unknown))}")
+        raise refused(ValueError, PluginRefusal.UNKNOWN_LIMITS, limits=sorted(unknown))
     return replace(rig, limits=replace(rig.limits, **limits))
 
 
@@ -190,7 +210,8 @@ def drop_out_after(servers: SimServers, out: str | Path, steps: int, instrument:
                    timeout_s: float = 600) -> AbstractContextManager[threading.Event]:
     """Within the block, ``servers.drop_out(instrument)`` once ``out`` holds ``steps`` steps."""
     if instrument not in INSTRUMENTS:
-        raise ValueError(f"drop_out_after: instrument must be one of {', '.join(INSTRUMENTS)}, got {instrument!r}")
+        raise refused(ValueError, PluginRefusal.BAD_INSTRUMENT, call="drop_out_after", allowed=INSTRUMENTS,
+                      got=instrument)
     return _when_stored(out, steps, lambda: servers.drop_out(instrument), timeout_s)
 
 
@@ -198,9 +219,9 @@ def drop_out_after(servers: SimServers, out: str | Path, steps: int, instrument:
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
-    group = parser.getgroup("guideway-bench", "the simulated rig of guideway-bench")
-    group.addoption("--guideway-rig", default=None, help="rig file (simulated = true) for the sim_rig fixture")
-    parser.addini("guideway_rig", "rig file (simulated = true) for the sim_rig fixture", default="")
+    group = parser.getgroup("guideway-bench", option(PluginOption.GROUP))
+    group.addoption("--guideway-rig", default=None, help=option(PluginOption.RIG_FILE))
+    parser.addini("guideway_rig", option(PluginOption.RIG_FILE), default="")
 
 
 def _rig_file(config: pytest.Config) -> str | None:

@@ -31,7 +31,7 @@ class ConfigProblem(StrEnum):
     UNKNOWN_KEYS = "unknown_keys"           # source, table, keys, allowed (keys no procedure uses)
     MISSING = "missing"
     NOT_A_NUMBER = "not_a_number"           # integer, value, unit ("": none named)
-    OUT_OF_RANGE = "out_of_range"           # value, low, low_open, high, note, unit
+    OUT_OF_RANGE = "out_of_range"           # value, low, low_open, high, note (a Said of a RangeNote, or ""), unit
     NOT_A_LIST = "not_a_list"               # got (the value, shortened)
     TOO_MANY = "too_many"                   # count, most
     NOT_ONE_OF = "not_one_of"               # allowed, value
@@ -75,7 +75,7 @@ class _Section:
             raise _error(message)
         self.errors.append(message)
 
-    def coded(self, code: ConfigProblem, **fields) -> None:
+    def coded(self, code: StrEnum, **fields) -> None:
         """A problem of this file named by its code and fields (its words: terminal.CONFIG)."""
         self.problem(Line(terminal.config(code, **fields), code, fields))
 
@@ -93,11 +93,12 @@ class _Section:
             self.bad.add(key)
             return fallback
 
-    def rule(self, message: str, *keys: tuple[_Section, str]) -> None:
-        """A problem across keys: collected, unless one of ``keys`` ((section, key) pairs)
-        already had its own problem (its value here was a stand-in; its own line names it)."""
+    def rule(self, code: StrEnum, *keys: tuple[_Section, str], **fields) -> None:
+        """A problem across keys (``code`` and its ``fields``: a rule of bench.config or
+        bench.rig_config): collected, unless one of ``keys`` ((section, key) pairs) already had
+        its own problem (its value here was a stand-in; its own line names it)."""
         if not any(key in sec.bad for sec, key in keys):
-            self.problem(message)
+            self.coded(code, **fields)
 
     def unknown(self, keys) -> None:
         """Name every key outside ``keys``, with the close valid one when there is one."""
@@ -206,13 +207,14 @@ _REQUIRED = object()
 
 
 class Line(str):
-    """One problem's line of a ConfigError, with its ``code`` and ``fields`` (None: a line
-    still made where it is decided, in bench.config or bench.rig_config)."""
+    """One problem's line of a ConfigError, with its ``code`` and ``fields`` (a ConfigProblem,
+    or a rule's code of bench.config or bench.rig_config; None: a line whose words a layer
+    below made, an instrument's capacity or a model's own check)."""
 
-    code: ConfigProblem | None
+    code: StrEnum | None
     fields: dict
 
-    def __new__(cls, text: str, code: ConfigProblem | None = None, fields: dict | None = None):
+    def __new__(cls, text: str, code: StrEnum | None = None, fields: dict | None = None):
         line = super().__new__(cls, text)
         line.code, line.fields = code, dict(fields or {})
         return line

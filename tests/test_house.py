@@ -42,7 +42,15 @@ CODED = {"Problem": (("bench/step_files.py", "bench/storage.py", "bench/accounti
          "RunLine": (("bench/commands/run.py",), {"say": 0}),
          "ModeLine": (("bench/commands/results.py",), {"say_mode": 0}),
          "ConfigProblem": (("bench/toml_tables.py",), {"refused": 1, "self._bad": 0, "self.coded": 0,
-                                                          "ConfigError": None})}
+                                                          "ConfigError": None}),
+         "ConfigRule": (("bench/config.py", "bench/rig_config.py"), {"ConfigError": None}),
+         "SequenceProblem": (("bench/sequence.py",), {"refused": 1, "bad": 0, "ConfigurationError": None,
+                                                      "RunDirectoryError": None}),
+         "PaperRule": (("bench/rig_model.py",), {"refused": 1, "ConfigurationError": None}),
+         "ApiRefusal": (("bench/api.py",), {"refused": 1, "TypeError": None, "ConfigurationError": None}),
+         "PluginRefusal": (("bench/testing.py",), {"refused": 1, "ValueError": None}),
+         "_Missing": (("bench/__init__.py",), {"refused": 1, "AttributeError": None}),
+         "StudyArgs": (("bench/studies/cli.py",), {"refused": 1, "ConfigurationError": None})}
 
 # modules converted whole: they decide and make no sentence (docstrings aside); their words are
 # made by a renderer (bench/words/, or sim/artefacts/sentences.py for the words a step file stores)
@@ -54,7 +62,10 @@ WORDLESS = ("bench/step_files.py", "bench/runlock.py", "sim/artefacts/causes.py"
             "bench/watch/snapshot.py", "bench/sources.py", "bench/twin.py", "bench/compare.py", "bench/export.py",
             "bench/export_modes.py", "bench/analyze.py", "bench/commands/tools.py", "bench/commands/results.py",
             "bench/studies/engine.py", "bench/studies/montecarlo.py", "bench/studies/maps.py", "bench/studies/batch.py",
-            "bench/studies/__init__.py")
+            "bench/studies/__init__.py", "bench/config.py", "bench/rig_config.py", "bench/sequence.py",
+            "bench/plan_time.py", "bench/rig_model.py",
+            "bench/api.py", "bench/testing.py", "bench/numbers.py", "bench/backbone.py", "bench/__init__.py",
+            "bench/studies/cli.py")
 
 
 # modules that start `bench` in a process of their own on purpose (decision 0057)
@@ -148,6 +159,10 @@ def test_a_converted_module_makes_no_sentence():
         docs = {id(n.body[0].value) for n in ast.walk(tree)
                 if isinstance(n, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
                 and n.body and isinstance(n.body[0], ast.Expr)}
+        # an attribute's docstring: a string statement right after a module's or a class's assignment
+        docs |= {id(b.value) for n in ast.walk(tree) if isinstance(n, (ast.Module, ast.ClassDef))
+                 for a, b in zip(n.body, n.body[1:]) if isinstance(a, (ast.Assign, ast.AnnAssign))
+                 and isinstance(b, ast.Expr) and isinstance(b.value, ast.Constant)}
         parts = {id(v) for n in ast.walk(tree) if isinstance(n, ast.JoinedStr) for v in n.values}
         # a StrEnum member's value is a code, stored as it is (RunStatus.INSTRUMENT_ERROR = "instrument error")
         codes = {id(a.value) for n in ast.walk(tree) if isinstance(n, ast.ClassDef)

@@ -47,9 +47,9 @@ def cmd_identify(args) -> int:
 
     from ..analyze import default_out_dir
     from ..config import DEFAULTS, load_rig, parse_rig, rig_toml
-    from ..numbers import number
     from ..sources import SourceProblem, load_source
     from ..storage import RunStore
+    from ..words.numbers import number
 
     source = Path(args.source)
     if not source.exists():

@@ -67,7 +67,7 @@ class WatchLine(StrEnum):
     APPEARED = "appeared"                   # path
 
 
-class SequenceLine(StrEnum):
+class SequenceEndLine(StrEnum):
     """``bench sequence``'s lines at its end (:data:`bench.words.terminal_run.SEQUENCE`)."""
 
     ENTRY = "entry"                         # name, status, done, total
@@ -353,9 +353,9 @@ def _sequence(args, resume: bool) -> int:
                run_sequence(Path(args.sequence), Path(args.out), progress=progress, report=not args.no_report))
     end_line()
     for e in res.entries:
-        print(_said(terminal_run.SEQUENCE, SequenceLine.ENTRY, name=e["name"], status=e["status"], done=e["steps_done"],
+        print(_said(terminal_run.SEQUENCE, SequenceEndLine.ENTRY, name=e["name"], status=e["status"], done=e["steps_done"],
                     total=e["steps_total"]))
-    print(_said(terminal_run.SEQUENCE, SequenceLine.REPORT, path=res.path / "report.md"))
+    print(_said(terminal_run.SEQUENCE, SequenceEndLine.REPORT, path=res.path / "report.md"))
     statuses = [e["status"] for e in res.entries]
     if res.completed:
         return ExitCode.OK

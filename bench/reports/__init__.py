@@ -18,8 +18,9 @@ from ._modes import COLUMNS as MODES_COLUMNS
 from ._modes import RunModes, run_modes, write_modes
 from ._modes import write_csv as write_modes_csv
 from ._run import RunData, load_run
+from ._sequence import sequence_md
 from ._steps import UNSETTLED_RESIDUAL, residual_ratio
 
 __all__ = ["ID_PARAMS", "UNSETTLED_RESIDUAL", "IdentificationData", "MODES_COLUMNS", "RunData", "RunModes", "analysis_estimate", "damping_row", "identification_data", "load_run",
-           "plot_identification", "render_analysis_html", "render_compare_html", "residual_ratio", "run_modes", "write_analysis_html",
+           "plot_identification", "render_analysis_html", "render_compare_html", "residual_ratio", "run_modes", "sequence_md", "write_analysis_html",
            "write_compare_html", "write_modes", "write_modes_csv", "write_report"]

@@ -24,8 +24,8 @@ import numpy as np
 from procedures.kind import ProcedureKind
 from sim.discrepancy.rounding import round_to_interval
 
-from ..numbers import number, percent
 from ..words import report as words
+from ..words.numbers import number, percent
 from . import _figures as figures
 from . import _figures_modes as mode_figures
 from ._analysis import analysis_data
@@ -40,7 +40,7 @@ log = logging.getLogger(__name__)
 
 
 def _num(v, scale: float = 1.0) -> str:
-    """The one number formatter (bench.numbers): never an overflowed or absurd number."""
+    """The one number formatter (bench.words.numbers): never an overflowed or absurd number."""
     return number(v, scale)
 
 

@@ -4,11 +4,34 @@ printing only; the work is in the sibling modules)."""
 from __future__ import annotations
 
 import logging
+from enum import StrEnum
 from pathlib import Path
 
+from bench.words.terminal import refused
+from bench.words.terminal_config import study_out
 from sim.errors import ConfigurationError
 
 log = logging.getLogger(__name__)
+
+
+class StudyArgs(StrEnum):
+    """What the study commands refuse of their arguments (their words: bench.words.terminal_config.STUDY)."""
+
+    NOT_NUMBERS = "study_not_numbers"       # text
+    NEEDS_OUT = "batch_needs_out"
+    MC_RIG_NOT_SIMULATED = "study_mc_rig_not_simulated"     # path (the rig file)
+
+
+class StudyOut(StrEnum):
+    """What the study commands print and their progress labels (their words: bench.words.terminal_config.STUDY_OUT)."""
+
+    FIGURE = "study_figure"                 # path
+    OUTCOME = "study_outcome"               # computed, skipped, failed, seconds, workers, table
+    FAILED = "study_failed"                 # task, shown (its inputs, or its source where they are long), error
+    SUMMARY = "batch_summary"               # parquet, csv, reports
+    MAP_LABEL = "study_map_label"           # rows
+    MC_LABEL = "study_mc_label"             # samples
+    BATCH_LABEL = "batch_label"
 
 
 def _floats(text: str) -> tuple[float, ...]:
@@ -20,7 +43,7 @@ def _floats(text: str) -> tuple[float, ...]:
             return tuple(float(x) for x in np.round(np.linspace(float(a), float(b), int(k)), 12))
         return tuple(float(x) for x in text.split(",") if x.strip())
     except ValueError:
-        raise ConfigurationError(f"expected numbers like '0.5,1.5' or 'start:stop:count', got {text!r}") from None
+        raise refused(ConfigurationError, StudyArgs.NOT_NUMBERS, text=text) from None
 
 
 def _dask_info(record: logging.LogRecord) -> bool:
@@ -41,11 +64,11 @@ def _engine_args(s) -> None:
 
 
 def _report(out) -> int:
-    print(f"{out.computed} tasks computed, {out.skipped} already done, {len(out.failures)} failed "
-          f"in {out.seconds:.1f} s on {out.workers} workers; table: {out.table_path}")
+    print(study_out(StudyOut.OUTCOME, computed=out.computed, skipped=out.skipped, failed=len(out.failures),
+                    seconds=out.seconds, workers=out.workers, table=out.table_path))
     for f in out.failures:
-        print(f"FAILED {f['task']} {f['inputs'] if len(str(f['inputs'])) < 300 else f['inputs'].get('source', f['task'])}: "
-              f"{f['error']}")
+        shown = f["inputs"] if len(str(f["inputs"])) < 300 else f["inputs"].get("source", f["task"])
+        print(study_out(StudyOut.FAILED, task=f["task"], shown=shown, error=f["error"]))
     return 1 if out.failures else 0
 
 
@@ -55,9 +78,9 @@ def cmd_study_map(args, progress) -> int:
     spec = MapSpec(n=_floats(args.n), gamma0=_floats(args.gamma0), beta_min=args.beta_min,
                    beta_max=args.beta_max, beta_points=args.beta_points, engine=args.engine)
     out = compliance_map(spec, Path(args.out), scheduler=args.scheduler, workers=args.workers,
-                         progress=progress(f"map {len(spec.tasks())} rows"))
+                         progress=progress(study_out(StudyOut.MAP_LABEL, rows=len(spec.tasks()))))
     if (Path(args.out) / "map.png").exists():
-        print(f"figure: {Path(args.out) / 'map.png'}")
+        print(study_out(StudyOut.FIGURE, path=Path(args.out) / "map.png"))
     return _report(out)
 
 
@@ -71,13 +94,13 @@ def cmd_study_mc(args, progress) -> int:
     plan, rig = read_toml(plan_path), read_toml(rig_path)
     parse_plan(plan, str(plan_path))          # errors name the file (McSpec checks again, unnamed)
     if not parse_rig(rig, str(rig_path)).simulated:
-        raise ConfigurationError(f"{rig_path}: a Monte-Carlo study needs a simulated rig (simulated = true, [rig.model])")
+        raise refused(ConfigurationError, StudyArgs.MC_RIG_NOT_SIMULATED, path=rig_path)
     spec = McSpec(plan=plan, rig=rig, samples=args.samples, spread=args.spread, n_spread=args.n_spread,
                   noise_scale=args.noise_scale, seed=args.seed)
     out = identification_mc(spec, Path(args.out), scheduler=args.scheduler, workers=args.workers,
-                            progress=progress(f"identification MC {spec.samples} rigs"))
+                            progress=progress(study_out(StudyOut.MC_LABEL, samples=spec.samples)))
     if (Path(args.out) / "errors.png").exists():
-        print(f"figure: {Path(args.out) / 'errors.png'}")
+        print(study_out(StudyOut.FIGURE, path=Path(args.out) / "errors.png"))
     return _report(out)
 
 
@@ -93,13 +116,13 @@ def is_batch(args) -> bool:
 def cmd_analyze_batch(args, progress) -> int:
     _quiet_dask()
     if not args.out:
-        raise ConfigurationError("analysing several sources needs --out DIR (the summary table and one report per source)")
+        raise refused(ConfigurationError, StudyArgs.NEEDS_OUT)
     from .batch import ANALYZE, IDENTIFY, analyze_batch
     out = analyze_batch([Path(s) for s in args.sources], Path(args.out), rig=Path(args.rig) if args.rig else None,
                         function=IDENTIFY if args.identify_only else ANALYZE, scheduler=args.scheduler,
-                        workers=args.workers, progress=progress("batch analysis"))
-    print(f"summary: {Path(args.out) / 'summary.parquet'}, {Path(args.out) / 'summary.csv'}; "
-          f"reports under {Path(args.out) / 'sources'}/")
+                        workers=args.workers, progress=progress(study_out(StudyOut.BATCH_LABEL)))
+    print(study_out(StudyOut.SUMMARY, parquet=Path(args.out) / "summary.parquet", csv=Path(args.out) / "summary.csv",
+                    reports=Path(args.out) / "sources"))
     return _report(out)
 
 

@@ -15,8 +15,8 @@ report's modes table) and the report's line under the modes.
 
 from __future__ import annotations
 
-from ..numbers import number
 from . import Said, Words, say
+from .numbers import number
 from .terminal import PROBLEM as _TERMINAL_PROBLEM
 from .terminal import PROMISE, promised
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 from typing import TypeVar
 
 from . import Words, say
+from .terminal_config import API, RULE, SEQUENCE, STUDY, range_note, where
 
 __all__ = ["CHECK", "CONFIG", "MODES", "PROBLEM", "PROMISE", "REFUSAL", "RUN", "Words", "problem", "promised", "refused", "say"]
 
@@ -212,11 +213,6 @@ MODES: Words = {
 }
 
 
-def where(source: str, table: str, key: str) -> str:
-    """Where in a plan or rig file a key is: the file, the table and the key."""
-    return f"{source}: [{table}] {key}"
-
-
 def _hint(near: str | None, allowed: list) -> str:
     return f"did you mean {near}?" if near else f"allowed: {allowed}"
 
@@ -239,7 +235,7 @@ CONFIG: Words = {
     "not_a_number": lambda source, table, key, integer, value, unit: (
         f"{where(source, table, key)}: must be {'an integer' if integer else 'a number'}, got {value!r}{_unit(unit)}"),
     "out_of_range": lambda source, table, key, value, low, low_open, high, note, unit: (
-        f"{where(source, table, key)}: must be {'>' if low_open else '>='} {low:g} and <= {high:g}{note}, got "
+        f"{where(source, table, key)}: must be {'>' if low_open else '>='} {low:g} and <= {high:g}{range_note(note)}, got "
         f"{value!r}{_unit(unit)}"),
     "not_a_list": lambda source, table, key, got: f"{where(source, table, key)}: must be a non-empty list of numbers, got {got}",
     "too_many": lambda source, table, key, count, most: f"{where(source, table, key)}: {count} values; at most {most}",
@@ -261,7 +257,11 @@ CONFIG: Words = {
     "several": lambda problems: "\n".join(say(CONFIG, p.code, p.fields) if p.code else p.fields["text"]
                                           for p in problems),
 }
+CONFIG.update(RULE)         # a plan's and a rig's rules across keys (bench.words.terminal_config)
 REFUSAL.update(CONFIG)
+REFUSAL.update(SEQUENCE)    # a sequence file's problems (bench.words.terminal_config)
+REFUSAL.update(API)         # the API's and the pytest plugin's (bench.words.terminal_config)
+REFUSAL.update(STUDY)       # the studies' (bench.words.terminal_config)
 
 
 def config(code: str, **fields) -> str:

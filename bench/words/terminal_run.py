@@ -3,7 +3,7 @@ through (decision 0067; issue 35 item 1), by code.
 
 ``bench`` commands: ``DRY_RUN`` (:class:`bench.commands.run.DryRunLine`), ``RESUME``
 (``ResumeLine``: what ``bench resume`` says before it measures), ``WATCH`` (``WatchLine``),
-``SEQUENCE`` (``SequenceLine``), ``CLI`` (:class:`bench.cli.CliLine`: the program's own lines
+``SEQUENCE`` (``SequenceEndLine``), ``CLI`` (:class:`bench.cli.CliLine`: the program's own lines
 about a command's end).
 
 A session: ``ENVELOPE`` (:class:`bench.session.EnvelopeProblem`, the ``problems`` of an
@@ -116,7 +116,7 @@ WATCH: Words = {
 }
 
 
-# `bench sequence`'s and a resumed sequence's lines at its end (bench.commands.run.SequenceLine)
+# `bench sequence`'s and a resumed sequence's lines at its end (bench.commands.run.SequenceEndLine)
 SEQUENCE: Words = {
     "entry": lambda name, status, done, total: (f"{name}: {status}"
                                                 + (f" ({done}/{total} steps)" if status != "not started" else "")),

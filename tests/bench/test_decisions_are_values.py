@@ -23,26 +23,35 @@ import bench.words
 import bench.words.page as page_words
 import bench.words.report as report_words
 import bench.words.terminal as terminal_words
+import bench.words.terminal_config as terminal_config_words
 import bench.words.terminal_data as data_words
 import bench.words.terminal_run as terminal_run_words
 import sim.artefacts.sentences as sentences
 import sim.records as records
 from bench.accounting import AccountLine, AccountRefusal
 from bench.analyze import AnalyzeSaid
+from bench.api import ApiLine, ApiRefusal
+from bench.backbone import BackboneLine
 from bench.cli import CliLine, ExitCode, main
 from bench.commands.results import CheckLine, ModeLine, ResultLine
-from bench.commands.run import DryRunLine, ResumeLine, RunLine, RunRefusal, SequenceLine, WatchLine
+from bench.commands.run import DryRunLine, ResumeLine, RunLine, RunRefusal, SequenceEndLine, WatchLine
 from bench.commands.tools import ToolLine
 from bench.compare import CompareSaid
+from bench.config import ConfigRule, RangeNote
 from bench.demo import MANIFEST, DemoLine, OutDirRefusal
 from bench.durable import WriteRefusal
 from bench.export import ExportSaid
 from bench.export_modes import ModeId
 from bench.files import FileKind, FileRefusal
+from bench.numbers import Shown
+from bench.plan_time import Online, planned_step_list, rig_time_bound_s
 from bench.reports._markdown import accounting_md, flagged_reasons
 from bench.reports._overall import Concern, Verdict, overall
 from bench.reports._run import load_run
+from bench.rig_config import RigRule
+from bench.rig_model import PaperRule
 from bench.runlock import LOCK_NAME, LockRefusal
+from bench.sequence import SequenceLine, SequenceProblem
 from bench.session import EnvelopeProblem, EnvelopeRefusal, SessionLine
 from bench.signals import Doing, SignalLine
 from bench.sources import SourceProblem
@@ -50,9 +59,11 @@ from bench.step_files import Problem
 from bench.storage import RunDirRefusal, RunStore, StoreLine
 from bench.studies import StudiesSaid
 from bench.studies.batch import BatchSaid
+from bench.studies.cli import StudyArgs, StudyOut
 from bench.studies.engine import StudySaid
 from bench.studies.maps import MapRefusal
 from bench.studies.montecarlo import McRefusal
+from bench.testing import PluginOption, PluginRefusal
 from bench.toml_tables import ConfigProblem
 from bench.twin import NotInPlant, TwinNote, TwinSaid
 from bench.verdict import Kept, Short
@@ -168,8 +179,21 @@ def test_every_code_has_words_in_its_renderers():
         assert set(module.PROBLEM) == {str(c) for c in Problem}, module.__name__
     assert set(page_words.WARNING) == {str(c) for c in PageWarning}
     assert set(terminal_words.REFUSAL) == {str(c) for c in (*LockRefusal, *OutDirRefusal, *RunDirRefusal,
-                                                           *ConfigProblem)}
-    assert set(terminal_words.CONFIG) == {str(c) for c in ConfigProblem}
+                                                           *ConfigProblem, *ConfigRule, *RigRule, *PaperRule,
+                                                           *SequenceProblem, *ApiRefusal, *PluginRefusal,
+                                                           *bench._Missing, *StudyArgs)}
+    assert set(terminal_words.CONFIG) == {str(c) for c in (*ConfigProblem, *ConfigRule, *RigRule, *PaperRule)}
+    assert set(terminal_config_words.RULE) == {str(c) for c in (*ConfigRule, *RigRule, *PaperRule)}
+    assert set(terminal_config_words.NOTE) == {str(c) for c in RangeNote}
+    assert set(terminal_config_words.SEQUENCE) == {str(c) for c in SequenceProblem}
+    assert set(terminal_config_words.SEQUENCE_LOG) == {str(c) for c in SequenceLine}
+    assert set(terminal_config_words.PLANNED_STEP) == {str(c) for c in Online}
+    assert set(terminal_config_words.API) == {str(c) for c in (*ApiRefusal, *PluginRefusal, *bench._Missing)}
+    assert set(terminal_config_words.LOG) == {str(c) for c in (*ApiLine, *BackboneLine)}
+    assert set(terminal_config_words.PLUGIN) == {str(c) for c in PluginOption}
+    assert set(terminal_config_words.NUMBER) == {str(c) for c in Shown}
+    assert set(terminal_config_words.STUDY) == {str(c) for c in StudyArgs}
+    assert set(terminal_config_words.STUDY_OUT) == {str(c) for c in StudyOut}
     assert set(terminal_words.PROMISE) == {str(c) for c in (*Kept, *Short)}
     assert set(report_words.CONCERN) == {str(c) for c in (*Concern, *Kept, *Short)}
     assert set(report_words.OVERALL) == {str(c) for c in Verdict}
@@ -178,7 +202,7 @@ def test_every_code_has_words_in_its_renderers():
     assert set(terminal_words.MODES) == {str(c) for c in ModeLine}
     run = terminal_run_words            # a run's words before and while it runs (bench run, resume, dry-run, watch)
     for words, codes in ((run.DRY_RUN, DryRunLine), (run.RESUME, ResumeLine), (run.WATCH, WatchLine),
-                         (run.SEQUENCE, SequenceLine), (run.ENVELOPE, EnvelopeProblem), (run.SESSION, SessionLine),
+                         (run.SEQUENCE, SequenceEndLine), (run.ENVELOPE, EnvelopeProblem), (run.SESSION, SessionLine),
                          (run.DOING, Doing), (run.SIGNAL, SignalLine), (run.STORE, StoreLine),
                          (run.FILE_KIND, FileKind), (run.ACCOUNT, AccountLine),
                          (run.WARMUP, WarmupLine), (run.DEMO, DemoLine), (run.CLI, CliLine),
@@ -413,6 +437,163 @@ def test_a_plans_problems_are_codes_with_fields_and_rewording_them_changes_no_ex
     after = said()
     assert after[0] == before[0] == ExitCode.USAGE and "levls: unknown key" in before[1]
     assert "<unknown_key>" in after[1] and "<out_of_range>" in after[1] and "levls" not in after[1]
+
+
+def test_a_plans_rules_across_keys_are_codes_with_fields(monkeypatch):
+    """The rules a plan breaks across its keys (bench.config.ConfigRule) and a stored plan's own
+    problems are codes with fields (a dwell without the refinement, harmonics above Nyquist, a
+    grid not in ascending order); said as codes, the same problems in the same order; a range's
+    note is a code too (bench.config.RangeNote); a stored plan's frequency out of range keeps
+    its code and names run.json's key in its fields."""
+    from bench.config import FORCE_RANGE, ConfigError, parse_plan, parse_stored_plan
+    plan = {"plan": {"levels_N": [1.0], "frequencies": {"list_Hz": [900.0]}, "control": {"harmonics": 30},
+                     "resonance": {"dwell_cycles": 10}}}
+
+    def problems():
+        with pytest.raises(ConfigError) as e:
+            parse_plan(plan, "p.toml")
+        return [(p.code, dict(p.fields)) for p in e.value.fields["problems"]], str(e.value)
+    before, said = problems()
+    assert [c for c, _ in before] == [ConfigRule.DWELL_NEEDS_REFINE, ConfigRule.ABOVE_NYQUIST], before
+    assert before[1][1] == {"source": "p.toml", "table": "plan.control", "most": 14, "top_Hz": 900.0,
+                            "rate_Hz": 25600.0, "value": 30}
+    assert said.splitlines() == ["p.toml: [plan.resonance] dwell_cycles: needs refine = true (the dwell is at the "
+                                 "refined resonance)", "p.toml: [plan.control] harmonics: must be <= 14 (below "
+                                 "Nyquist at 900 Hz with min_sample_rate_Hz = 25600), got 30"]
+    assert terminal_config_words.range_note(FORCE_RANGE) == " (the bench's force range, 0.1-100 N)"
+
+    def stored_frequency():             # run.json's key named by the fields, not by rewriting the words
+        with pytest.raises(ConfigError) as e:
+            parse_stored_plan({"levels_N": [1.0], "freqs_Hz": [3.0]}, "run.json")
+        return e.value.code, e.value.fields["table"], e.value.fields["key"], str(e.value)
+    assert stored_frequency() == (ConfigProblem.OUT_OF_RANGE, "plan", "freqs_Hz[0]", "run.json: [plan] freqs_Hz[0]: "
+                                  "must be >= 20 and <= 1000 (the bench's frequency range, 20-1000 Hz), got 3.0")
+    _codes_only(monkeypatch)
+    assert stored_frequency() == (ConfigProblem.OUT_OF_RANGE, "plan", "freqs_Hz[0]", "<out_of_range>")
+    assert problems() == (before, "<dwell_needs_refine>\n<above_nyquist>")
+    with pytest.raises(ConfigError) as stored:
+        parse_stored_plan({"levels_N": [1.0], "freqs_Hz": [40.0, 30.0]}, "run.json")
+    assert (str(stored.value), stored.value.code, stored.value.fields["key"]) == (
+        "<not_ascending>", ConfigRule.NOT_ASCENDING, "freqs_Hz")
+    assert terminal_config_words.range_note(FORCE_RANGE) == "<force_range>"
+
+
+def test_a_sequences_problems_are_codes_with_fields(tmp_path, capsys, monkeypatch):
+    """A sequence file's problems (bench.sequence.SequenceProblem: an unknown key, an entry's
+    name used twice, an entry without its files) are codes with fields, in order; said as
+    codes, ``bench sequence`` refuses it with the same exit status and writes nothing."""
+    from bench.sequence import load_sequence
+    from sim.errors import ConfigurationError
+    seq = tmp_path / "seq.toml"
+    seq.write_text('[sequence]\nnme = "x"\n[[sequence.entry]]\nname = "a"\n[[sequence.entry]]\nname = "a"\n')
+
+    def refused():
+        with pytest.raises(ConfigurationError) as e:
+            load_sequence(seq)
+        return e.value
+    e = refused()
+    assert e.code is SequenceProblem.SEVERAL
+    assert [(p.code, p.fields.get("entry"), p.fields.get("key", p.fields.get("name"))) for p in e.fields["problems"]] == [
+        (SequenceProblem.UNKNOWN_KEY, None, "nme"), (SequenceProblem.ENTRY_NO_FILE, 1, "plan"),
+        (SequenceProblem.ENTRY_NO_FILE, 1, "rig"), (SequenceProblem.ENTRY_NAME_USED, 2, "a"),
+        (SequenceProblem.ENTRY_NO_FILE, 2, "plan"), (SequenceProblem.ENTRY_NO_FILE, 2, "rig")]
+    assert str(e).splitlines()[3] == f"{seq}: [[sequence.entry]] 2: name: 'a' is used by an earlier entry"
+    said = lambda: (main(["sequence", str(seq), "--out", str(tmp_path / "out")]), capsys.readouterr().err)  # noqa: E731
+    before = said()
+    _codes_only(monkeypatch)
+    assert str(refused()) == "<sequence_several>"
+    after = said()
+    assert after[0] == before[0] == ExitCode.USAGE and "is used by an earlier entry" in before[1]
+    assert "<sequence_several>" in after[1] and not (tmp_path / "out").exists()
+
+
+def test_the_dry_runs_step_lines_are_made_of_values(monkeypatch):
+    """``bench dry-run --steps``: what chooses a step online is a code with fields
+    (bench.plan_time.Online); said as codes, the same steps, counts and rig-time bound."""
+    from bench.config import parse_plan
+    plan = parse_plan({"plan": {"levels_N": [1.0], "adaptive_per_sweep": 2, "frequencies": {
+        "start_Hz": 40.0, "stop_Hz": 160.0, "points": 4}, "resonance": {"refine": True, "modes": ["pitch"],
+                                                                         "max_steps": 3, "dwell_cycles": 100}}})
+
+    def planned():
+        steps = planned_step_list(plan)
+        return [(p.key, p.count, p.online, dict(p.detail)) for p in steps], rig_time_bound_s(plan), [p.line() for p in steps]
+    before = planned()
+    assert [p[2] for p in before[0]] == [Online.ADAPTIVE, Online.REFINED, Online.DWELL]
+    assert before[2][0] == "00000-L00F***-up                1 N           chosen online  (2 of these 4 frequencies 40-160 Hz, chosen online)"
+    assert before[2][2].endswith("  (pitch mode: dwell of 100 cycles at its refined resonance (none without a peak "
+                                 "inside the grid))")
+    _codes_only(monkeypatch)
+    after = planned()
+    assert after[:2] == before[:2] and [ln.rsplit("  ", 1)[1] for ln in after[2]] == ["(<adaptive>)", "(<refined>)",
+                                                                                     "(<dwell>)"]
+
+
+def test_the_apis_refusals_and_a_failed_fits_number_are_codes(monkeypatch):
+    """The Python API's refusals, bench's missing name and a number that is not a measurement
+    are codes (their words: bench.words.terminal_config); said as codes, the same exception
+    types and the same decisions (hasattr, what is named instead of printed)."""
+    from bench.api import _as_plan, _checked_labels
+    from bench.words.numbers import number, percent
+
+    def said():
+        out = []
+        for call in (lambda: _as_plan(3), lambda: _checked_labels({"": 1}), lambda: bench.nothing_here):
+            with pytest.raises(Exception) as e:
+                call()
+            out.append((type(e.value).__name__, getattr(e.value, "code", None), str(e.value)))
+        return out, hasattr(bench, "nothing_here"), [number(v) for v in (float("nan"), -1e31, 1e-31, 1.5)], percent(1e5)
+    before = said()
+    assert before[0] == [("TypeError", ApiRefusal.NOT_A_PLAN, "plan: expected a bench Plan or the path of a plan "
+                                                              "file, got int"),
+                         ("ConfigurationError", ApiRefusal.BAD_LABEL, "labels: a key must be a non-empty string, "
+                                                                      "got ''"),
+                         ("AttributeError", "no_attribute", "module 'bench' has no attribute 'nothing_here'")]
+    assert before[1:] == (False, ["not a number", "absurd (fit failed)", "absurd (fit failed)", "1.5"],
+                          "absurd (fit failed)")
+    _codes_only(monkeypatch)
+    assert said() == ([(t, c, f"<{c}>") for t, c, _ in before[0]], False, ["<nan>", "<absurd>", "<absurd>", "1.5"],
+                      "<absurd>")
+
+
+def test_the_study_commands_refusals_and_outcome_are_codes_with_fields(tmp_path, capsys, monkeypatch):
+    """What ``bench study`` and the batch mode of ``bench analyze`` refuse of their arguments (a
+    grid that is not numbers, a batch without --out, a Monte-Carlo study on a real rig's file)
+    and the outcome they print are codes with fields (bench.studies.cli); said as codes, the
+    same exit status, nothing written, and the outcome's exit status still says whether a task
+    failed."""
+    from bench.studies.cli import _report
+    from bench.studies.engine import Outcome
+
+    from .test_config import RIG, write
+    real = write(tmp_path, "real_rig.toml", RIG)
+    outcome = Outcome(tmp_path / "s", computed=1, skipped=2, failures=[dict(task="k1", inputs={"a": 1}, error="E: x"),
+                      dict(task="k2", inputs={"source": "/p/bad.uff", "pad": "x" * 300}, error="E: y")],
+                      seconds=1.25, workers=2)
+    commands = (["study", "map", "--n", "a,b", "--out", str(tmp_path / "m")],
+                ["analyze", str(tmp_path / "x"), str(tmp_path / "y")],
+                ["study", "mc", "--rig", str(real), "--out", str(tmp_path / "mc")])
+
+    def said():
+        out = []
+        for args in commands:
+            out.append((main(args), capsys.readouterr().err))
+        return out, _report(outcome), capsys.readouterr().out
+    before = said()
+    assert [status for status, _ in before[0]] == [ExitCode.USAGE] * 3
+    assert "expected numbers like '0.5,1.5' or 'start:stop:count', got 'a,b'" in before[0][0][1]
+    assert "analysing several sources needs --out DIR" in before[0][1][1]
+    assert f"{real}: a Monte-Carlo study needs a simulated rig (simulated = true, [rig.model])" in before[0][2][1]
+    assert before[1:] == (1, f"1 tasks computed, 2 already done, 2 failed in 1.2 s on 2 workers; table: "
+                             f"{tmp_path / 's' / 'results.parquet'}\nFAILED k1 {{'a': 1}}: E: x\n"
+                             "FAILED k2 /p/bad.uff: E: y\n")
+    _codes_only(monkeypatch)
+    after = said()
+    assert [status for status, _ in after[0]] == [ExitCode.USAGE] * 3
+    assert [f"<{code}>" in err for (_, err), code in zip(after[0], (StudyArgs.NOT_NUMBERS, StudyArgs.NEEDS_OUT,
+                                                                    StudyArgs.MC_RIG_NOT_SIMULATED))] == [True] * 3
+    assert after[1:] == (1, f"<{StudyOut.OUTCOME}>\n<{StudyOut.FAILED}>\n<{StudyOut.FAILED}>\n")
+    assert not [p for p in ("m", "mc") if (tmp_path / p).exists()]
 
 
 def test_a_broken_promise_said_as_codes_still_exits_1(tmp_path, capsys, monkeypatch):

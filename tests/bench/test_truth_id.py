@@ -12,11 +12,11 @@ import re
 import pytest
 
 from bench.config import DEFAULTS, load_rig, parse_plan
-from bench.numbers import number, percent
 from bench.reports import write_report
 from bench.session import run_plan
 from bench.storage import RunStore
 from bench.watch.snapshot import RunReader
+from bench.words.numbers import number, percent
 
 TRUTH = dict(F_s_N=12.0, x_s_m=7e-6, n=1.2, mass_kg=10.0)
 FAST = dict(settle_cycles=20, min_settle_s=0.0, measure_cycles=8, control_cycles=2, ramp_s=0.0)
