@@ -65,7 +65,12 @@ WORDLESS = ("bench/step_files.py", "bench/runlock.py", "sim/artefacts/causes.py"
             "bench/studies/__init__.py", "bench/config.py", "bench/rig_config.py", "bench/sequence.py",
             "bench/plan_time.py", "bench/rig_model.py",
             "bench/api.py", "bench/testing.py", "bench/numbers.py", "bench/backbone.py", "bench/__init__.py",
-            "bench/studies/cli.py")
+            "bench/studies/cli.py", "bench/__main__.py", "bench/commands/__init__.py", "bench/terminal.py",
+            "bench/watch/__init__.py")
+
+# the renderers (decision 0071): the modules that make the words of an output from values and
+# decide nothing that is stored or acted upon; every other module of bench/ is WORDLESS
+RENDERERS = ("bench/words/", "bench/reports/", "bench/studies/figures.py")
 
 
 # modules that start `bench` in a process of their own on purpose (decision 0057)
@@ -150,6 +155,13 @@ def _declared(tree: ast.AST) -> set[int]:
         if isinstance(call, ast.Call) and (getattr(call.func, "attr", None) or getattr(call.func, "id", None)) in DECLARING:
             out |= {id(n) for k in call.keywords if k.arg in DECLARED for n in ast.walk(k.value)}
     return out
+
+
+def test_every_module_of_the_application_is_a_renderer_or_makes_no_sentence():
+    """Issue 35 item 1: all wording lives in one renderer per output. A new module of bench/
+    is either a renderer (RENDERERS) or WORDLESS (and then held by the test below)."""
+    unsorted = [rel for rel, _ in _sources("bench") if rel not in WORDLESS and not rel.startswith(RENDERERS)]
+    assert not unsorted, "modules neither a renderer nor WORDLESS (decision 0071): " + ", ".join(unsorted)
 
 
 def test_a_converted_module_makes_no_sentence():

@@ -4,7 +4,8 @@ A decision is a value: a code (a ``StrEnum`` member, defined beside the code tha
 and its fields (numbers, keys, file names).  The words are made here, by one renderer per
 output, each a mapping from a code to a function of the fields that returns the words:
 
-- :mod:`bench.words.terminal`: what ``bench`` prints and logs (``bench check``'s lines, a
+- :mod:`bench.words.terminal` (with ``terminal_config``, ``terminal_run`` and ``terminal_data``, split by
+  subject, decision 0071): what ``bench`` prints and logs (``bench check``'s lines, a
   damaged step's one-line error);
 - :mod:`bench.words.report`: the report's markdown (the same words as the terminal's where
   the report names the same thing; the module says which);
