@@ -34,6 +34,10 @@ from .plan import Plan, StepSpec
 
 log = logging.getLogger(__name__)
 
+# a mode's peak as the search sees it: (estimate Hz, damping ratio, index of the measured
+# maximum, the curve, its measured noise or None; decision 0069)
+Found = tuple[float, float, int, np.ndarray, "np.ndarray | None"]
+
 # why a mode's refinement at a level ended (a code, stored as is; never parsed from words)
 END_REASONS = {
     "converged": "the peak is known within the tolerance",
@@ -135,27 +139,27 @@ class Refiner:
             out.append((mode, why if why in ("no_peak", "budget_spent") else "converged", done))
         return out
 
-    def _resonance(self, mode: str, d: LevelData) -> tuple[float, float, int, np.ndarray] | None:
+    def _resonance(self, mode: str, d: LevelData) -> Found | None:
         """(resonance estimate in Hz, damping ratio, index of the measured maximum, the
-        peak's magnitudes) of ``mode`` in ``d``, or None without a peak inside the grid."""
+        peak's magnitudes, their measured noise or None) of ``mode`` in ``d``, or None
+        without a peak inside the grid."""
         if mode == "feed":
             i = find_feed(d)
-            mag, H, kind, curve = d.compliance_pp, d.compliance, "receptance", d.compliance_pp
+            mag, H, kind, curve, sd = d.compliance_pp, d.compliance, "receptance", d.compliance_pp, d.compliance_pp_sd
         else:
             feed = find_feed(d)
             i = find_pitch(d, None, self.pitch_band_Hz, None if feed is None else float(d.f_Hz[feed]))
-            mag, H, kind, curve = np.abs(d.accelerance), d.accelerance, "accelerance", None
+            mag, H, kind, curve, sd = np.abs(d.accelerance), d.accelerance, "accelerance", None, d.accelerance_sd
         if i is None or i in (0, d.f_Hz.size - 1):
             return None                  # no peak inside the grid: nothing to bracket
-        est = estimate_mode(d.f_Hz, H, mode=mode, kind=kind, curve=curve, peak_index=i)
+        est = estimate_mode(d.f_Hz, H, mode=mode, kind=kind, curve=curve, peak_index=i, sd=sd)
         fr = est.resonance_Hz if est.ok else self._parabola(d.f_Hz, mag, i)
-        return fr, est.damping_ratio, i, mag
+        return fr, est.damping_ratio, i, mag, sd
 
-    def _next_from(self, found: tuple[float, float, int, np.ndarray], d: LevelData,
-                   last_Hz: float | None = None) -> float | None:
-        fr, zeta, i, mag = found
+    def _next_from(self, found: Found, d: LevelData, last_Hz: float | None = None) -> float | None:
+        fr, zeta, i, mag, sd = found
         return next_refinement_Hz(d.f_Hz, mag, i, fr, zeta, self.plan.refine_tolerance, self.f_min, self.f_max,
-                                  last_Hz)
+                                  last_Hz, sd)
 
     @staticmethod
     def _parabola(f: np.ndarray, mag: np.ndarray, i: int) -> float:
