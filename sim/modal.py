@@ -470,8 +470,8 @@ def estimate_mode(f_Hz: ArrayLike, H: ArrayLike, *, mode: str, kind: str, level_
         est.resonance_low_Hz, est.resonance_high_Hz = min(est.resonance_low_Hz, lo_b), max(est.resonance_high_Hz, hi_b)
         est.extra["plateau_Hz"] = (lo_b, hi_b)
         est.note = "; ".join(x for x in (
-            f"flat top: {rb - ra + 1} points {f[ra]:.5g}-{f[rb]:.5g} Hz within {NOISE_TIE:g} sd of the measured "
-            f"maximum's noise; the interval holds their plateau {lo_b:.5g}-{hi_b:.5g} Hz", est.note) if x)
+            f"flat top: the measured noise does not tell {rb - ra + 1} points {f[ra]:.5g}-{f[rb]:.5g} Hz from "
+            f"the maximum ({NOISE_TIE:g} sd); the interval holds their plateau {lo_b:.5g}-{hi_b:.5g} Hz", est.note) if x)
     est.damping_ratio, est.damping_ratio_low, est.damping_ratio_high = z, max(z - hw_z, 0.0), z + hw_z
     est.peak, est.peak_low, est.peak_high = hpk, hpk - t * sd_h, hpk + t * sd_h
     est.natural_Hz = fit.natural_Hz()[0]
