@@ -688,19 +688,24 @@ def next_refinement_Hz(f_Hz: ArrayLike, mag: ArrayLike, peak_index: int, estimat
     if sd is not None and z is not None:
         rel = float(np.asarray(sd, float)[o][ip] / np.asarray(mag, float)[o][ip])
         step = max(step, z * math.sqrt(2 * NOISE_TIE * math.sqrt(2) * rel))
-    gaps = [(g, a, b) for g, a, b in ((math.log(fa / lo), lo, fa), (math.log(hi / fb), fb, hi)) if g > 1.01 * step]
+    # the gaps beside the tied points and between them (two tied points either side of a
+    # sharp peak are no plateau: the peak may lie between them, higher)
+    pts = f[max(ra - 1, 0):min(rb + 1, f.size - 1) + 1]
+    gaps = [(g, float(a), float(b)) for g, a, b in zip(np.log(pts[1:] / pts[:-1]), pts[:-1], pts[1:])
+            if g > 1.01 * step]
     if not gaps:
         return None
     _, a, b = max(gaps)
     beside = float(fa * math.exp(-step) if b <= fa else fb * math.exp(step))
     margin = math.log1p(tolerance / 2)
-    if step > 1.0001 * math.log1p(tolerance):
-        # a plateau: its vertex when that lies in an open gap, else a step beside the plateau
-        # by the closing distance (tied: the plateau grows by half; not: that gap is closed)
+    if ra < rb or step > 1.0001 * math.log1p(tolerance):
+        # a plateau: its vertex when that lies in an open gap, else the widest open gap halved
+        # when it lies between tied points, else a step beside the plateau by the closing
+        # distance (tied: the plateau grows; not: that gap is closed)
         for g, a_v, b_v in gaps:
             if a_v < v < b_v and min(math.log(v / a_v), math.log(b_v / v)) >= margin:
                 return float(v)
-        return beside
+        return float(math.sqrt(a * b)) if fa <= a and b <= fb else beside
     # the last step became the maximum (or joined the points tied with it)
     moved = last_Hz is not None and any(abs(last_Hz / x - 1) < 1e-9 for x in f[ra:rb + 1])
     crawl = moved and min(fa / lo, hi / fb) - 1 <= 1.01 * tolerance
