@@ -7,7 +7,9 @@ A refinement step is an ordinary step (:class:`procedures.plan.StepSpec` with ``
 next one is depends only on the level's stored steps, so a resumed run chooses what an
 uninterrupted one would.  The peaks: the feed mode's compliance_pp maximum and the
 pitching mode's accelerance maximum, found and fitted by :mod:`sim.modal`; a maximum at
-the grid's edge is not a peak and is not chased.
+the grid's edge is not a peak and is not chased.  The steps' measured noise says which
+points are tied with the maximum: on a flat top their plateau is bracketed (decision
+record 0069).
 
 The dwell (``[plan.resonance] dwell_cycles`` > 0): once a level's refinement is over, one
 more step at each refined resonance (the estimate from the level's sweep and refinement

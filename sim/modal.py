@@ -22,7 +22,9 @@ is s^2 (J^T J)^-1 with s^2 the residual variance (so a misfit of the single-mode
 the nonlinearity's skew included, widens the intervals); intervals are +-t(0.975, dof) sd,
 plus how far the peak and zeta move between neighbouring fit windows (:func:`window_shift`;
 a skewed peak's misfit is systematic, decision 0061), and a fitted peak outside the measured
-maximum's neighbours is moved inside them, the interval holding both.
+maximum's neighbours is moved inside them, the interval holding both; on a flat top, points
+the measured noise does not tell from the maximum make a plateau whose bracket the interval
+holds (:func:`top_run`, decision 0069).
 The resonance is the peak of the fitted |H| inside the window (numerically), its interval
 by the delta method.  Half-power bandwidth (zeta ~ (f2 - f1) / (2 f_r), from the measured
 points) is the cross-check.
