@@ -7,7 +7,9 @@ A refinement step is an ordinary step (:class:`procedures.plan.StepSpec` with ``
 next one is depends only on the level's stored steps, so a resumed run chooses what an
 uninterrupted one would.  The peaks: the feed mode's compliance_pp maximum and the
 pitching mode's accelerance maximum, found and fitted by :mod:`sim.modal`; a maximum at
-the grid's edge is not a peak and is not chased.
+the grid's edge is not a peak and is not chased.  The steps' measured noise says which
+points are tied with the maximum: on a flat top their plateau is bracketed (decision
+record 0069).
 
 The dwell (``[plan.resonance] dwell_cycles`` > 0): once a level's refinement is over, one
 more step at each refined resonance (the estimate from the level's sweep and refinement
@@ -33,6 +35,10 @@ from sim.modal import LevelData, estimate_mode, find_feed, find_pitch, next_refi
 from .plan import Plan, StepSpec
 
 log = logging.getLogger(__name__)
+
+# a mode's peak as the search sees it: (estimate Hz, damping ratio, index of the measured
+# maximum, the curve, its measured noise or None; decision 0069)
+Found = tuple[float, float, int, np.ndarray, "np.ndarray | None"]
 
 # why a mode's refinement at a level ended (a code, stored as is; never parsed from words)
 END_REASONS = {
@@ -135,27 +141,27 @@ class Refiner:
             out.append((mode, why if why in ("no_peak", "budget_spent") else "converged", done))
         return out
 
-    def _resonance(self, mode: str, d: LevelData) -> tuple[float, float, int, np.ndarray] | None:
+    def _resonance(self, mode: str, d: LevelData) -> Found | None:
         """(resonance estimate in Hz, damping ratio, index of the measured maximum, the
-        peak's magnitudes) of ``mode`` in ``d``, or None without a peak inside the grid."""
+        peak's magnitudes, their measured noise or None) of ``mode`` in ``d``, or None
+        without a peak inside the grid."""
         if mode == "feed":
             i = find_feed(d)
-            mag, H, kind, curve = d.compliance_pp, d.compliance, "receptance", d.compliance_pp
+            mag, H, kind, curve, sd = d.compliance_pp, d.compliance, "receptance", d.compliance_pp, d.compliance_pp_sd
         else:
             feed = find_feed(d)
             i = find_pitch(d, None, self.pitch_band_Hz, None if feed is None else float(d.f_Hz[feed]))
-            mag, H, kind, curve = np.abs(d.accelerance), d.accelerance, "accelerance", None
+            mag, H, kind, curve, sd = np.abs(d.accelerance), d.accelerance, "accelerance", None, d.accelerance_sd
         if i is None or i in (0, d.f_Hz.size - 1):
             return None                  # no peak inside the grid: nothing to bracket
-        est = estimate_mode(d.f_Hz, H, mode=mode, kind=kind, curve=curve, peak_index=i)
+        est = estimate_mode(d.f_Hz, H, mode=mode, kind=kind, curve=curve, peak_index=i, sd=sd)
         fr = est.resonance_Hz if est.ok else self._parabola(d.f_Hz, mag, i)
-        return fr, est.damping_ratio, i, mag
+        return fr, est.damping_ratio, i, mag, sd
 
-    def _next_from(self, found: tuple[float, float, int, np.ndarray], d: LevelData,
-                   last_Hz: float | None = None) -> float | None:
-        fr, zeta, i, mag = found
+    def _next_from(self, found: Found, d: LevelData, last_Hz: float | None = None) -> float | None:
+        fr, zeta, i, mag, sd = found
         return next_refinement_Hz(d.f_Hz, mag, i, fr, zeta, self.plan.refine_tolerance, self.f_min, self.f_max,
-                                  last_Hz)
+                                  last_Hz, sd)
 
     @staticmethod
     def _parabola(f: np.ndarray, mag: np.ndarray, i: int) -> float:

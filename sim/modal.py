@@ -22,7 +22,9 @@ is s^2 (J^T J)^-1 with s^2 the residual variance (so a misfit of the single-mode
 the nonlinearity's skew included, widens the intervals); intervals are +-t(0.975, dof) sd,
 plus how far the peak and zeta move between neighbouring fit windows (:func:`window_shift`;
 a skewed peak's misfit is systematic, decision 0061), and a fitted peak outside the measured
-maximum's neighbours is moved inside them, the interval holding both.
+maximum's neighbours is moved inside them, the interval holding both; on a flat top, points
+the measured noise does not tell from the maximum make a plateau whose bracket the interval
+holds (:func:`top_run`, decision 0069).
 The resonance is the peak of the fitted |H| inside the window (numerically), its interval
 by the delta method.  Half-power bandwidth (zeta ~ (f2 - f1) / (2 f_r), from the measured
 points) is the cross-check.
@@ -48,6 +50,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import optimize, stats
 
+from .records import harmonic_sigma
+
 MODES = ("feed", "pitch")
 KINDS = ("receptance", "accelerance")
 MIN_POINTS = 4              # 8 real equations for 6 parameters
@@ -57,6 +61,7 @@ MIN_IN_BAND = 3             # a resolved peak: at least this many measured point
 OTHER_MODE_GAP = 1.3        # a pitching peak lies at least this factor above the feed mode
 PEAK_SD_FLOOR = 0.5         # the peak's sd is at least this x the pole's natural frequency's sd
 MISFIT_WIDENING = True      # the shape's misfit widens the intervals (window_shift, the bracket; decision 0061)
+NOISE_TIE = 2.0             # a point within this many sd (of its difference) of the maximum is tied with it (decision 0069)
 
 
 @dataclass(frozen=True)
@@ -281,6 +286,26 @@ def local_maxima(f: np.ndarray, mag: np.ndarray, min_prominence: float = 0.02) -
     return out
 
 
+def top_run(mag: np.ndarray, sd: np.ndarray | None, ip: int) -> tuple[int, int]:
+    """(first, last) index of the contiguous run of points about the maximum ``ip`` (of
+    ``mag``, sorted by frequency) that the measured noise does not tell from it: each
+    within NOISE_TIE standard deviations of the difference (``sd``: each point's absolute
+    sd; None: the maximum alone).  On a flat, noisy top the peak's location is known only
+    to this plateau and its outer neighbours, whichever point noise made the largest
+    (decision record 0069)."""
+    lo = hi = ip
+    if sd is None:
+        return lo, hi
+
+    def tied(j: int) -> bool:
+        return bool(mag[ip] - mag[j] <= NOISE_TIE * math.hypot(sd[ip], sd[j]))
+    while lo > 0 and tied(lo - 1):
+        lo -= 1
+    while hi < mag.size - 1 and tied(hi + 1):
+        hi += 1
+    return lo, hi
+
+
 def _window(f: np.ndarray, mag: np.ndarray, ip: int) -> np.ndarray:
     """The fit's points: the contiguous run around the peak ``ip`` above WINDOW_LEVEL of
     it (the half-power band: there the single-mode shape holds best on a nonlinear
@@ -350,16 +375,20 @@ def _nearest(f: np.ndarray, idx: list[int], target: float) -> int:
 
 def estimate_mode(f_Hz: ArrayLike, H: ArrayLike, *, mode: str, kind: str, level_N: float = math.nan,
                   curve: ArrayLike | None = None, curve_name: str = "", peak_index: int | None = None,
-                  guess_zeta: float = 0.05) -> ModeEstimate:
+                  guess_zeta: float = 0.05, sd: ArrayLike | None = None) -> ModeEstimate:
     """The mode whose maximum of ``curve`` (default |H|) is at ``peak_index`` (default the
     curve's largest value), from the complex FRF ``H`` at ``f_Hz`` (any order; one value
     per frequency).  The fit sees ``curve`` with the phase of ``H`` (module docstring); a
-    peak at the first or last frequency is reported as lying beyond the edge."""
+    peak at the first or last frequency is reported as lying beyond the edge.  ``sd``: the
+    measured noise (standard deviation) of each point of the curve; points the noise does
+    not tell from the maximum make a plateau (:func:`top_run`) whose bracket the interval
+    holds (decision record 0069)."""
     f = np.asarray(f_Hz, float)
     Hc = np.asarray(H, complex)
     mag = np.abs(Hc) if curve is None else np.asarray(curve, float)
     o = np.argsort(f)
     f, Hc, mag = f[o], Hc[o], mag[o]
+    sdv = None if sd is None else np.asarray(sd, float)[o]
     name = curve_name or ("|A1/F1|" if kind == "accelerance" else "|X1/F1|")
     est = ModeEstimate(mode, float(level_N), "ok", name)
     if f.size == 0:
@@ -408,15 +437,19 @@ def estimate_mode(f_Hz: ArrayLike, H: ArrayLike, *, mode: str, kind: str, level_
         est.note = f"the fitted peak {fpk:.4g} Hz lies at the edge of its window {f[sel[0]]:.4g}-{f[sel[-1]]:.4g} Hz"
         return est
     z, sd_z = fit.damping()
+    # the bracket of the measured maximum: its neighbours (a bracket that holds for any
+    # single peak of noise-free data), or those of the plateau of points the measured
+    # noise does not tell from it (decision 0069)
+    ra, rb = top_run(mag, sdv, ip)
+    lo_b, hi_b = float(f[max(ra - 1, 0)]), float(f[min(rb + 1, f.size - 1)])
     in_band = int(np.sum(mag >= hpk / math.sqrt(2)))
     if in_band < MIN_IN_BAND:
         # the grid does not resolve the peak: the fit extrapolates from its flanks, and its
-        # covariance knows nothing of the shape it did not see.  The peak lies between the
-        # measured maximum's neighbours (a bracket that holds for any single peak); no
-        # damping ratio.
+        # covariance knows nothing of the shape it did not see.  The peak lies in the
+        # measured maximum's bracket; no damping ratio.
         est.status = "coarse"
-        est.resonance_Hz = min(max(fpk, float(f[ip - 1])), float(f[ip + 1]))
-        est.resonance_low_Hz, est.resonance_high_Hz = float(f[ip - 1]), float(f[ip + 1])
+        est.resonance_Hz = min(max(fpk, lo_b), hi_b)
+        est.resonance_low_Hz, est.resonance_high_Hz = lo_b, hi_b
         est.peak, est.n_points, est.window_Hz = float(mag[ip]), int(sel.size), (float(f[sel[0]]), float(f[sel[-1]]))
         est.note = (f"{in_band} measured point(s) in the peak's half-power band: the grid does not resolve it; "
                     f"the interval is the bracket of the measured maximum (refine: [plan.resonance])")
@@ -425,7 +458,6 @@ def estimate_mode(f_Hz: ArrayLike, H: ArrayLike, *, mode: str, kind: str, level_
     hw_f, hw_z = t * sd_f + shift_f, t * sd_z + shift_z
     est.extra["window_shift_Hz"] = shift_f
     est.resonance_Hz, est.resonance_low_Hz, est.resonance_high_Hz = fpk, fpk - hw_f, fpk + hw_f
-    lo_b, hi_b = float(f[ip - 1]), float(f[ip + 1])
     if MISFIT_WIDENING and not lo_b <= fpk <= hi_b:
         # the fitted peak lies outside the bracket of the measured maximum: the shape does not
         # fit the peak (a skewed nonlinear peak; decision 0061).  The estimate stays inside
@@ -434,6 +466,14 @@ def estimate_mode(f_Hz: ArrayLike, H: ArrayLike, *, mode: str, kind: str, level_
         est.resonance_low_Hz, est.resonance_high_Hz = min(fpk - hw_f, lo_b), max(fpk + hw_f, hi_b)
         est.note = (f"the single-mode fit's peak {fpk:.4g} Hz lies outside the measured maximum's neighbours "
                     f"{lo_b:.4g}-{hi_b:.4g} Hz: the shape misfits the peak; the interval holds both")
+    if rb > ra:
+        # a flat top: the noise does not tell these points from the maximum, so the peak is
+        # known only to their plateau and its outer neighbours, never to a point (decision 0069)
+        est.resonance_low_Hz, est.resonance_high_Hz = min(est.resonance_low_Hz, lo_b), max(est.resonance_high_Hz, hi_b)
+        est.extra["plateau_Hz"] = (lo_b, hi_b)
+        est.note = "; ".join(x for x in (
+            f"flat top: the measured noise does not tell {rb - ra + 1} points {f[ra]:.5g}-{f[rb]:.5g} Hz from "
+            f"the maximum ({NOISE_TIE:g} sd); the interval holds their plateau {lo_b:.5g}-{hi_b:.5g} Hz", est.note) if x)
     est.damping_ratio, est.damping_ratio_low, est.damping_ratio_high = z, max(z - hw_z, 0.0), z + hw_z
     est.peak, est.peak_low, est.peak_high = hpk, hpk - t * sd_h, hpk + t * sd_h
     est.natural_Hz = fit.natural_Hz()[0]
@@ -446,18 +486,21 @@ def estimate_mode(f_Hz: ArrayLike, H: ArrayLike, *, mode: str, kind: str, level_
 @dataclass(frozen=True)
 class LevelData:
     """One force level's steps: frequency, complex compliance X1/F1 and accelerance A1/F1,
-    compliance_pp (seed Eq. 9)."""
+    compliance_pp (seed Eq. 9); the measured noise (standard deviation) of compliance_pp
+    and of |A1/F1| at each frequency, None where the steps do not say (decision 0069)."""
 
     level_N: float
     f_Hz: np.ndarray
     compliance: np.ndarray
     accelerance: np.ndarray
     compliance_pp: np.ndarray
+    compliance_pp_sd: np.ndarray | None = None
+    accelerance_sd: np.ndarray | None = None
 
     @classmethod
     def from_steps(cls, level_N: float, steps: Sequence[dict]) -> LevelData:
         """From stored step results (one per frequency: a frequency measured twice, in an
-        up and a down sweep, keeps its mean)."""
+        up and a down sweep, keeps its mean, its noise divided by sqrt(2))."""
         by_f: dict[float, list[dict]] = {}
         for s in steps:
             by_f.setdefault(float(s["freq_Hz"]), []).append(s)
@@ -468,7 +511,27 @@ class LevelData:
         X = mean(lambda s: complex(s["compliance_m_per_N"]["re"], s["compliance_m_per_N"]["im"]))
         A = mean(lambda s: s["accelerance_abs_kg_inv"] * np.exp(1j * s["accelerance_phase_rad"]))
         pp = mean(lambda s: s["compliance_pp_m_per_N"])
-        return cls(float(level_N), f, X, A, pp)
+        try:
+            sd = [[_step_sd(s) for s in by_f[x]] for x in f]
+        except (KeyError, IndexError, TypeError, ValueError):
+            return cls(float(level_N), f, X, A, pp)
+        pp_sd = np.array([math.sqrt(sum(v[0] ** 2 for v in g)) / len(g) for g in sd])
+        a_sd = np.array([math.sqrt(sum(v[1] ** 2 for v in g)) / len(g) for g in sd])
+        return cls(float(level_N), f, X, A, pp, pp_sd, a_sd)
+
+
+def _step_sd(s: dict) -> tuple[float, float]:
+    """(sd of compliance_pp, sd of |A1/F1|) of one stored step, from its record's noise: each
+    harmonic's standard error (sim.records.harmonic_sigma of the channel's noise rms over
+    the record's samples) relative to the fundamentals it divides, in quadrature."""
+    n = int(s["n_samples"])
+    F1 = float(s["force"]["amplitude"][0])
+    A1 = float(s["accel"]["amplitude"][0])
+    sf = harmonic_sigma(float(s["force"]["noise_rms"]), n) / F1
+    sa = harmonic_sigma(float(s["accel"]["noise_rms"]), n) / A1
+    pp = float(s["compliance_pp_m_per_N"])
+    sx = harmonic_sigma(float(s["disp"]["noise_rms"]), n) / (pp * F1)    # pp / 2 = compliance_pp F1
+    return pp * math.hypot(sx, sf), float(s["accelerance_abs_kg_inv"]) * math.hypot(sa, sf)
 
 
 def find_feed(d: LevelData, predicted_Hz: float | None = None) -> int | None:
@@ -513,7 +576,7 @@ def level_modes(d: LevelData, *, feed_predicted_Hz: float | None = None, pitch: 
         feed = ModeEstimate("feed", d.level_N, "not found", "compliance_pp", note="no compliance_pp maximum")
     else:
         feed = estimate_mode(d.f_Hz, d.compliance, mode="feed", kind="receptance", level_N=d.level_N,
-                             curve=d.compliance_pp, curve_name="compliance_pp", peak_index=i)
+                             curve=d.compliance_pp, curve_name="compliance_pp", peak_index=i, sd=d.compliance_pp_sd)
     out.append(feed)
     if pitch:
         # the feed mode's frequency: its estimate (a coarse one too), its edge, else its
@@ -526,7 +589,7 @@ def level_modes(d: LevelData, *, feed_predicted_Hz: float | None = None, pitch: 
                                     note="no accelerance maximum where the pitching mode can be"))
         else:
             est = estimate_mode(d.f_Hz, d.accelerance, mode="pitch", kind="accelerance", level_N=d.level_N,
-                                peak_index=j, guess_zeta=0.02)
+                                peak_index=j, guess_zeta=0.02, sd=d.accelerance_sd)
             if est.ok:
                 est.extra["compliance_pp"] = float(np.interp(est.resonance_Hz, d.f_Hz, d.compliance_pp))
             out.append(est)
@@ -574,12 +637,16 @@ def pitch_band_Hz(model) -> tuple[float, float] | None:
 
 def next_refinement_Hz(f_Hz: ArrayLike, mag: ArrayLike, peak_index: int, estimate_Hz: float,
                        zeta: float, tolerance: float, f_min: float, f_max: float,
-                       last_Hz: float | None = None) -> float | None:
+                       last_Hz: float | None = None, sd: ArrayLike | None = None) -> float | None:
     """The next frequency to measure to know a peak within ``tolerance`` (relative), or
     None when it is known: the measured maximum (``peak_index`` into ``f_Hz``, the maximum
     of the curve ``mag``) has measured neighbours within ``tolerance`` on both sides (the
-    peak lies between them).  A safeguarded line search on that bracket, like Brent's
-    (decision record 0063); a gap beside the maximum wider than the tolerance is "open":
+    peak lies between them).  With the points' measured noise ``sd``, the "maximum" is the
+    plateau of points the noise does not tell from it (:func:`top_run`, decision record
+    0069): converged when the plateau's outer neighbours are within the tolerance of its
+    ends, whichever of its points noise made the largest.  A safeguarded line search on
+    that bracket, like Brent's (decision record 0063); a gap beside the maximum (the
+    plateau) wider than the tolerance is "open":
 
     1. a half-power point (vertex x (1 -+ zeta), the fit's window), when no point lies
        between vertex x (1 -+ zeta/2) and vertex x (1 -+ 2 zeta) on its side (a zeta
@@ -588,7 +655,8 @@ def next_refinement_Hz(f_Hz: ArrayLike, mag: ArrayLike, peak_index: int, estimat
        vertex (``estimate_Hz``: the fit's, else a parabola's) is at the maximum (within
        tolerance/2) or in no open gap; not when the maximum is the last refinement step
        (``last_Hz``) and already has a neighbour within the tolerance (it was such a step
-       and came out higher: the vertex lags the data, and tolerance steps would crawl);
+       and came out higher: the vertex lags the data, and tolerance steps would crawl),
+       nor beside a plateau (tolerance steps would crawl along it);
     3. the vertex, when it lies inside an open gap, tolerance/2 or more from its ends and,
        once the last step became the maximum, at least a fifth of the gap (log) from either
        end (the gap shrinks to at most 0.8 of itself);
@@ -604,7 +672,9 @@ def next_refinement_Hz(f_Hz: ArrayLike, mag: ArrayLike, peak_index: int, estimat
     fp = f[ip]
     if ip in (0, f.size - 1):
         return None                       # not a peak inside the grid (the caller's case)
-    lo, hi = float(f[ip - 1]), float(f[ip + 1])
+    ra, rb = top_run(np.asarray(mag, float)[o], None if sd is None else np.asarray(sd, float)[o], ip)
+    fa, fb = float(f[ra]), float(f[rb])   # the plateau's ends (the maximum itself without noise)
+    lo, hi = float(f[max(ra - 1, 0)]), float(f[min(rb + 1, f.size - 1)])
     v = estimate_Hz if math.isfinite(estimate_Hz) and lo < estimate_Hz < hi else fp
     z = zeta if math.isfinite(zeta) and 2 * tolerance < zeta < 0.3 else None
     if z is not None:
@@ -612,16 +682,37 @@ def next_refinement_Hz(f_Hz: ArrayLike, mag: ArrayLike, peak_index: int, estimat
             r = side * np.log(f / v)                  # how far out on that side, log
             if f_min <= x <= f_max and not np.any((r >= math.log1p(z / 2)) & (r <= math.log1p(2 * z))):
                 return float(x)
-    closed = math.log1p(1.01 * tolerance)
-    gaps = [(g, a, b) for g, a, b in ((math.log(fp / lo), lo, fp), (math.log(hi / fp), fp, hi)) if g > closed]
+    # a gap is closed within the tolerance or, on a flat top, within what the noise resolves:
+    # half the measured plateau's span, or the half-width over which a single mode of the
+    # fit's zeta stays within the noise of its peak (|H| falls by (df/f)^2 / (2 zeta^2));
+    # closer points would be ordered by the noise, not the curve (decision 0069)
+    step = max(math.log1p(tolerance), 0.5 * math.log(fb / fa))
+    if sd is not None and z is not None:
+        rel = float(np.asarray(sd, float)[o][ip] / np.asarray(mag, float)[o][ip])
+        step = max(step, z * math.sqrt(2 * NOISE_TIE * math.sqrt(2) * rel))
+    # the gaps beside the tied points and between them (two tied points either side of a
+    # sharp peak are no plateau: the peak may lie between them, higher)
+    pts = f[max(ra - 1, 0):min(rb + 1, f.size - 1) + 1]
+    gaps = [(g, float(a), float(b)) for g, a, b in zip(np.log(pts[1:] / pts[:-1]), pts[:-1], pts[1:])
+            if g > 1.01 * step]
     if not gaps:
         return None
     _, a, b = max(gaps)
-    moved = last_Hz is not None and abs(last_Hz / fp - 1) < 1e-9      # the last step became the maximum
-    crawl = moved and min(fp / lo, hi / fp) - 1 <= 1.01 * tolerance
-    if (abs(v / fp - 1) <= tolerance / 2 or not any(a_v < v < b_v for _, a_v, b_v in gaps)) and not crawl:
-        return float(fp * (1 - tolerance) if a < fp else fp * (1 + tolerance))
+    beside = float(fa * math.exp(-step) if b <= fa else fb * math.exp(step))
     margin = math.log1p(tolerance / 2)
+    if ra < rb or step > 1.0001 * math.log1p(tolerance):
+        # a plateau: its vertex when that lies in an open gap, else the widest open gap halved
+        # when it lies between tied points, else a step beside the plateau by the closing
+        # distance (tied: the plateau grows; not: that gap is closed)
+        for g, a_v, b_v in gaps:
+            if a_v < v < b_v and min(math.log(v / a_v), math.log(b_v / v)) >= margin:
+                return float(v)
+        return float(math.sqrt(a * b)) if fa <= a and b <= fb else beside
+    # the last step became the maximum (or joined the points tied with it)
+    moved = last_Hz is not None and any(abs(last_Hz / x - 1) < 1e-9 for x in f[ra:rb + 1])
+    crawl = moved and min(fa / lo, hi / fb) - 1 <= 1.01 * tolerance
+    if (abs(v / fp - 1) <= tolerance / 2 or not any(a_v < v < b_v for _, a_v, b_v in gaps)) and not crawl:
+        return beside
     for g, a_v, b_v in gaps:
         if a_v < v < b_v and min(math.log(v / a_v), math.log(b_v / v)) >= margin \
                 and (not moved or 0.2 <= math.log(v / a_v) / g <= 0.8):
