@@ -554,3 +554,50 @@ def test_the_line_fit_finds_the_least_squares_minimum_of_an_independent_fit(deca
     if with_decay:
         assert abs(ln.decay - p[1]) < 0.01 * se[1] and ln.decay_se == pytest.approx(se[1], rel=0.01)
         assert abs(ln.decay - decay_per_s) < 4 * se[1]
+
+
+def test_a_decaying_fit_beside_a_growing_component_ends_at_no_decay_where_a_bounded_fit_does(monkeypatch):
+    """Issue 33 item 5, decision 0070: a weak line beside a stronger component switched on late in
+    the record (what a strong hum's leakage and the carriage's ringing leave on a humming rig).
+    With the decay rate itself MINPACK's parameter, the decaying fit's path ran from the line into
+    a component that grows (e^5 over the record where it ended) and used all its 40 evaluations
+    (as half the decaying fits of the fresh humming case, seed 22, did: its time), ending where
+    the 40th evaluation was.  The decay rate is now >= 0 by construction (its logarithm the
+    parameter): the fit ends where an independent least squares bounded to sigma >= 0 (scipy's
+    trust-region fit) ends, on the bound, i.e. the steady line, in fewer than half the evaluations."""
+    from scipy.optimize import least_squares
+
+    from sim.artefacts import detectors
+    from sim.artefacts.detectors import _fit_sinusoid
+
+    fs, n = 11010.25, 5309
+    t = np.arange(n) / fs
+    late = np.where(t > 0.7 * n / fs, 0.5 * np.sin(2 * np.pi * 49.0 * t), 0.0)
+    r = 0.05 * np.sin(2 * np.pi * 47.0 * t + 0.4) + late + 0.3 * np.random.default_rng(3).standard_normal(n)
+    evaluations = []
+    leastsq = detectors.leastsq
+
+    def counted(fun, p0, **kw):
+        def each(p):
+            evaluations.append(1)
+            return fun(p)
+        return leastsq(each, p0, **kw)
+
+    monkeypatch.setattr(detectors, "leastsq", counted)
+    steady = _fit_sinusoid(r, fs, 47.0, with_decay=False)
+    assert steady is not None
+    evaluations.clear()
+    ln = _fit_sinusoid(r, fs, steady.freq_Hz, with_decay=True)
+    assert ln is not None and len(evaluations) < 20, len(evaluations)
+
+    def resid(p):
+        return np.exp(-p[1] * t) * (p[2] * np.sin(2 * np.pi * p[0] * t) + p[3] * np.cos(2 * np.pi * p[0] * t)) + p[4] - r
+
+    p0 = np.array([steady.freq_Hz, 0.0, steady.amp, 0.0, 0.0])
+    ref = least_squares(resid, p0, bounds=([0, 0, -np.inf, -np.inf, -np.inf], np.inf), method="trf",
+                        xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    assert ref.x[1] < 1e-6 * ln.decay_se                                     # the bound: no decay
+    assert 0 <= ln.decay < 1e-6 * ln.decay_se                               # so is the line fit's end: no transient
+    cov = float(ref.fun @ ref.fun) / (n - 5) * np.linalg.inv(ref.jac.T @ ref.jac)
+    se_f, se_a = math.sqrt(cov[0, 0]), math.sqrt(min(cov[2, 2], cov[3, 3]))
+    assert abs(ln.freq_Hz - ref.x[0]) < 0.01 * se_f and abs(ln.amp - math.hypot(*ref.x[2:4])) < 0.01 * se_a
