@@ -23,8 +23,6 @@ _BLOCK = 128                 # samples: exp((-sigma + i w) t) as the outer produ
 TREND_Z = 6.0                 # offset drift: sqrt(chi-square, 2 dof) of the trend coefficients
 DECAY_Z = 6.0                 # a line's decay rate, in standard errors, above which it is a transient
 DECAY_FRACTION = 0.8          # ... and its amplitude at the end / at the start below this
-DECAY_START = 1e-2            # a decaying fit's start: sigma T (its amplitude 1 % lower at the end)
-DECAY_EVALUATIONS = 200       # a decaying fit's evaluations at most: it runs to convergence (decision 0070)
 DROPOUT_FALSE_ALARM = 1e-4       # per record and channel
 DROPOUT_MIN_SAMPLES = 4          # shortest run of identical samples examined
 
@@ -320,16 +318,9 @@ class _Line:
     decay_bound: float = math.nan   # a steady line: its decay rate's upper bound (fit + 2 standard errors), 1/s
 
 
-def _decay_of(log_sigma_T: float) -> float:
-    """sigma T of a decaying fit's parameter log(sigma T) (decision 0070): >= 0 by construction."""
-    return math.exp(min(max(log_sigma_T, -40.0), 20.0))
-
-
 def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Line | None:
     """Least squares of e^(-sigma t) (a sin wt + b cos wt) + c on ``r`` from the frequency
-    ``f0`` (sigma = 0 unless ``with_decay``); t from the record start.  A decaying fit's
-    parameter is log(sigma T): sigma >= 0 by construction, so the fit never follows a
-    component that grows and ends where the data puts a decay rate, at least 0 (decision 0070)."""
+    ``f0`` (sigma = 0 unless ``with_decay``); t from the record start."""
     n = r.size
     scale = float(np.std(r)) or 1.0
     r = r / scale
@@ -347,7 +338,7 @@ def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Lin
         key = p.tobytes()
         if last[0] != key:
             w = w0 + p[0] / T
-            sig = _decay_of(p[1]) / T if with_decay else 0.0
+            sig = p[1] / T if with_decay else 0.0
             # e^((-sigma + i w) t) as the outer product of its values at the block starts and
             # within a block: the same numbers to rounding as sin, cos and exp of every sample,
             # at a fraction of their time (decision 0068)
@@ -359,13 +350,13 @@ def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Lin
         _, _, s, c = parts(p)
         return p[nd] * s + p[nd + 1] * c + p[nd + 2] - r
 
-    def jac(p, by_log=True):
+    def jac(p):
         _, _, s, c = parts(p)
         a, b = p[nd], p[nd + 1]
         J = np.empty((nd + 3, n))          # the Jacobian's columns as rows (col_deriv): no transposed copy
         np.multiply(tt, a * c - b * s, out=J[0])
         if with_decay:
-            np.multiply(tt, -(a * s + b * c) * (_decay_of(p[1]) if by_log else 1.0), out=J[1])
+            np.multiply(tt, -(a * s + b * c), out=J[1])
         J[nd], J[nd + 1], J[nd + 2] = s, c, 1.0
         return J
 
@@ -373,7 +364,7 @@ def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Lin
         return None
     # the start: a, b, c by linear least squares at f0, from the normal equations (their sums
     # from e^(i w0 t): sin^2 and cos^2 from e^(2 i w0 t), whose sines add to n)
-    _, _, s0, c0 = parts(np.array([0.0, -math.inf, 0.0, 0.0, 0.0]) if with_decay else np.zeros(4))   # sigma = 0
+    _, _, s0, c0 = parts(np.zeros(nd + 3))
     z0 = c0 + 1j * s0
     sz, sz2 = complex(z0.sum()), complex(np.dot(z0, z0))
     G = np.array([[(n - sz2.real) / 2, sz2.imag / 2, sz.imag], [sz2.imag / 2, (n + sz2.real) / 2, sz.real],
@@ -382,18 +373,15 @@ def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Lin
         ab = np.linalg.solve(G, np.array([s0 @ r, c0 @ r, r.sum()]))
     except np.linalg.LinAlgError:
         return None
-    p0 = np.concatenate([[0.0, math.log(DECAY_START)] if with_decay else [0.0], ab])
+    p0 = np.concatenate([np.zeros(nd), ab])
     try:
         # MINPACK's lmder as least_squares(method="lm", x_scale="jac", max_nfev=40) calls it (the
         # same arguments and tolerances), without the wrappers least_squares puts around every
-        # evaluation (a third of the time of a case with a strong hum on every step, issue 33);
-        # the decaying fit, its decay rate >= 0 by construction, runs to convergence: with sigma
-        # itself the parameter, half the decaying fits on a strong hum went into a growing
-        # component and ended wherever their 40th evaluation was (decision 0070)
+        # evaluation (a third of the time of a case with a strong hum on every step, issue 33)
         p, _, info, _, _ = leastsq(resid, p0, Dfun=jac, full_output=True, col_deriv=True, ftol=1e-8, xtol=1e-8,
-                                   gtol=1e-8, maxfev=DECAY_EVALUATIONS if with_decay else 40)
+                                   gtol=1e-8, maxfev=40)
         fun = info["fvec"]
-        J = jac(p, by_log=False)           # sigma's standard error at the end, not log sigma's
+        J = jac(p)
         cov = float(fun @ fun) / max(1, n - p0.size) * np.linalg.pinv(J @ J.T)
     except (ValueError, np.linalg.LinAlgError):
         return None
@@ -403,12 +391,6 @@ def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Lin
     return _Line(freq_Hz=w / (2 * np.pi), amp=scale * float(math.hypot(p[nd], p[nd + 1])), decay=sig,
                  decay_se=math.sqrt(max(cov[1, 1], 0.0)) / T if with_decay else 0.0,
                  model=scale * (p[nd] * s + p[nd + 1] * c))
-
-
-def _decays(ln: _Line, record_s: float) -> bool:
-    """A decaying fit is a transient: its decay rate ``DECAY_Z`` standard errors above zero and
-    its amplitude at the record's end below ``DECAY_FRACTION`` of that at its start."""
-    return ln.decay > DECAY_Z * ln.decay_se and math.exp(-ln.decay * record_s) < DECAY_FRACTION
 
 
 NO_FREQUENCIES = np.zeros(0)     # no aliased harmonics (read only)
@@ -457,7 +439,8 @@ def _find_lines(q: np.ndarray, fs: float, f: float,
         if steady is None:
             break
         decaying = _fit_sinusoid(q - found, fs, steady.freq_Hz, with_decay=True)
-        is_transient = decaying is not None and _decays(decaying, n / fs)
+        is_transient = (decaying is not None and decaying.decay > DECAY_Z * decaying.decay_se
+                        and math.exp(-decaying.decay * n / fs) < DECAY_FRACTION)
         ln = decaying if is_transient and decaying is not None else steady
         if not is_transient and decaying is not None and decaying.decay_se > 0:
             ln = replace(ln, decay_bound=max(decaying.decay, 0.0) + 2 * decaying.decay_se)
@@ -475,10 +458,7 @@ def _find_lines(q: np.ndarray, fs: float, f: float,
         for group, decay in ((lines, False), (transients, True)):
             for i, ln in enumerate(group):
                 again = _fit_sinusoid(q - (found - ln.model), fs, ln.freq_Hz, with_decay=decay)
-                # a transient's refit that ends on no decay (sigma >= 0 by construction, decision
-                # 0070) is no transient: the first fit stays
-                if (again is not None and abs(again.freq_Hz - ln.freq_Hz) <= guard
-                        and (not decay or _decays(again, n / fs))):
+                if again is not None and abs(again.freq_Hz - ln.freq_Hz) <= guard:
                     found = found - ln.model + again.model
                     group[i] = again
     return lines, transients
