@@ -558,11 +558,11 @@ def test_the_line_fit_finds_the_least_squares_minimum_of_an_independent_fit(deca
 
 def test_a_decaying_fit_that_runs_into_a_growing_component_stops_there_and_finds_no_transient(monkeypatch):
     """Issue 33 item 5, decision 0070: a weak line beside a stronger component switched on late in
-    the record (what a strong hum's leakage and the carriage's ringing leave on a humming rig).
-    From the line, MINPACK's path of the decaying fit runs into a component growing e^9-e^18
-    over the record and uses all its 40 evaluations there (half the decaying fits of the humming
-    case, its time); it ends growing, so no transient.  The fit stops where its component would
-    grow e^4 over the record: the same answer, no transient, in fewer than half the evaluations."""
+    the record.  From the line, MINPACK's path of the decaying fit runs into a component that
+    grows (e^5 over the record where it ends) and uses all its 40 evaluations (as half the
+    decaying fits of the fresh humming case, seed 22, do: its time); it ends growing, so no
+    transient.  The fit stops where its component would grow e^4 over the record: the same
+    answer, no transient, in fewer than half the evaluations."""
     from sim.artefacts import detectors
     from sim.artefacts.detectors import _fit_sinusoid
 
