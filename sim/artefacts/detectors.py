@@ -23,6 +23,7 @@ _BLOCK = 128                 # samples: exp((-sigma + i w) t) as the outer produ
 TREND_Z = 6.0                 # offset drift: sqrt(chi-square, 2 dof) of the trend coefficients
 DECAY_Z = 6.0                 # a line's decay rate, in standard errors, above which it is a transient
 DECAY_FRACTION = 0.8          # ... and its amplitude at the end / at the start below this
+GROWTH_LIMIT = 4.0            # a decaying fit stops where its component would grow e^4 (55) x over the record
 DROPOUT_FALSE_ALARM = 1e-4       # per record and channel
 DROPOUT_MIN_SAMPLES = 4          # shortest run of identical samples examined
 
@@ -318,9 +319,15 @@ class _Line:
     decay_bound: float = math.nan   # a steady line: its decay rate's upper bound (fit + 2 standard errors), 1/s
 
 
+class _Growing(Exception):
+    """A decaying fit whose path has left the line for a component that grows (decision 0070)."""
+
+
 def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Line | None:
     """Least squares of e^(-sigma t) (a sin wt + b cos wt) + c on ``r`` from the frequency
-    ``f0`` (sigma = 0 unless ``with_decay``); t from the record start."""
+    ``f0`` (sigma = 0 unless ``with_decay``); t from the record start.  None when it fails,
+    or when the decaying fit's search reaches a component growing by more than
+    e^``GROWTH_LIMIT`` over the record: not a line that decays (decision 0070)."""
     n = r.size
     scale = float(np.std(r)) or 1.0
     r = r / scale
@@ -347,6 +354,11 @@ def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Lin
         return last[1]
 
     def resid(p):
+        # a line that grows by e^4 over the record is no line of the record: where MINPACK's path
+        # goes there (half the decaying fits on a strong hum beside the carriage's ringing), it
+        # wanders on to its 40th evaluation and ends anywhere; stopped here, it is no transient
+        if with_decay and p[1] < -GROWTH_LIMIT:
+            raise _Growing
         _, _, s, c = parts(p)
         return p[nd] * s + p[nd + 1] * c + p[nd + 2] - r
 
@@ -383,7 +395,7 @@ def _fit_sinusoid(r: np.ndarray, fs: float, f0: float, with_decay: bool) -> _Lin
         fun = info["fvec"]
         J = jac(p)
         cov = float(fun @ fun) / max(1, n - p0.size) * np.linalg.pinv(J @ J.T)
-    except (ValueError, np.linalg.LinAlgError):
+    except (ValueError, np.linalg.LinAlgError, _Growing):
         return None
     w, sig, s, c = parts(p)
     if not (math.isfinite(w) and w > 0):

@@ -554,3 +554,38 @@ def test_the_line_fit_finds_the_least_squares_minimum_of_an_independent_fit(deca
     if with_decay:
         assert abs(ln.decay - p[1]) < 0.01 * se[1] and ln.decay_se == pytest.approx(se[1], rel=0.01)
         assert abs(ln.decay - decay_per_s) < 4 * se[1]
+
+
+def test_a_decaying_fit_that_runs_into_a_growing_component_stops_there_and_finds_no_transient(monkeypatch):
+    """Issue 33 item 5, decision 0070: a weak line beside a stronger component switched on late in
+    the record.  From the line, MINPACK's path of the decaying fit runs into a component that
+    grows (e^5 over the record where it ends) and uses all its 40 evaluations (as half the
+    decaying fits of the fresh humming case, seed 22, do: its time); it ends growing, so no
+    transient.  The fit stops where its component would grow e^4 over the record: the same
+    answer, no transient, in fewer than half the evaluations."""
+    from sim.artefacts import detectors
+    from sim.artefacts.detectors import _fit_sinusoid
+
+    fs, n = 11010.25, 5309
+    t = np.arange(n) / fs
+    late = np.where(t > 0.7 * n / fs, 0.5 * np.sin(2 * np.pi * 49.0 * t), 0.0)
+    r = 0.05 * np.sin(2 * np.pi * 47.0 * t + 0.4) + late + 0.3 * np.random.default_rng(3).standard_normal(n)
+    evaluations = []
+    leastsq = detectors.leastsq
+
+    def counted(fun, p0, **kw):
+        def each(p):
+            evaluations.append(1)
+            return fun(p)
+        return leastsq(each, p0, **kw)
+
+    monkeypatch.setattr(detectors, "leastsq", counted)
+    steady = _fit_sinusoid(r, fs, 47.0, with_decay=False)
+    assert steady is not None
+    evaluations.clear()
+    assert _fit_sinusoid(r, fs, steady.freq_Hz, with_decay=True) is None        # stopped: no transient
+    assert len(evaluations) < 20, len(evaluations)
+    monkeypatch.setattr(detectors, "GROWTH_LIMIT", math.inf)                    # MINPACK's whole path
+    evaluations.clear()
+    full = _fit_sinusoid(r, fs, steady.freq_Hz, with_decay=True)
+    assert len(evaluations) >= 40 and full is not None and full.decay < 0        # ends growing: no transient either
