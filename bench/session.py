@@ -310,8 +310,6 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
     or later is kept for the caller to decide, decision 0051); by default the run's own."""
     plan = check_envelope(plan, rig)
     warnings = identifiability(plan, rig) if plan.procedure is ProcedureKind.STEPPED_SINE else []
-    for w in warnings:
-        log.warning(said(SessionLine.IDENTIFIABILITY, warning=w))
     latch = latch or SignalLatch()
     out = Path(out)
     if not resume:
@@ -330,6 +328,8 @@ def run_plan(plan: Plan, rig: Rig, out: Path, *, resume: bool = False, progress=
             store.update(labels=labels)
         log_handler = _log_to(store.path / "bench.log")
         try:
+            for w in warnings:              # judged before the run, said once its log is open
+                log.warning(said(SessionLine.IDENTIFIABILITY, warning=w))
             _supervised(plan, rig, store, latch, progress=progress, sim_seed=sim_seed, identify=identify,
                         retry_skipped=retry_skipped)
         finally:

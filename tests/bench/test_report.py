@@ -234,6 +234,14 @@ def test_identification_section_lists_times_chi2_and_warnings(report, run_dir):
         assert f"  - {w}" in section
 
 
+def test_the_runs_log_holds_its_identifiability_warnings(run_dir):
+    """They were logged before the run's bench.log was opened: the terminal showed them, the
+    run directory's log did not."""
+    log = (run_dir / "bench.log").read_text()
+    warned = RunStore.open(run_dir).metadata["identifiability_warnings"]
+    assert warned and all(f"WARNING bench.session: identifiability: {w}" in log for w in warned)
+
+
 def test_simulated_rig_identification_recovers_the_true_parameters(report, run_dir):
     """The truth is the rig model's (an independent fact), not the identifier's own output.
     With 20 steps the final fit's 95 % half-widths are at most 0.5 % (x_s) and the estimates
