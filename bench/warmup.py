@@ -22,6 +22,7 @@ from pathlib import Path
 
 from sim.kernel_cache import invalidate_stale_kernels, sources_hash
 
+from .terminal import PROJECT
 from .words import say, terminal_run
 
 log = logging.getLogger(__name__)
@@ -76,7 +77,11 @@ def warm_up() -> float:
     # the warm-up's own two steps say what a user's run would of them (identifiability, an
     # unsettled step, poorly determined parameters): warnings about a plan nobody asked for,
     # printed before the user's run as if they were its; errors still pass
-    logging.disable(logging.WARNING)
+    # (the project's loggers only: a script's own warnings meanwhile still pass)
+    loggers = [logging.getLogger(name) for name in PROJECT]
+    levels = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(logging.ERROR)
     try:
         with tempfile.TemporaryDirectory(prefix="bench-warmup-") as tmp:
             store = run_plan(parse_plan(_PLAN, _said(WarmupLine.SOURCE)), load_rig(DEFAULTS / "sim_rig.toml"),
@@ -84,7 +89,8 @@ def warm_up() -> float:
             if store.metadata["status"] != RunStatus.COMPLETED:
                 raise RuntimeError(_said(WarmupLine.ENDED, status=store.metadata["status"]))
     finally:
-        logging.disable(logging.NOTSET)
+        for lg, level in zip(loggers, levels):
+            lg.setLevel(level)
     try:
         STAMP.parent.mkdir(exist_ok=True)
         STAMP.write_text(compiled)

@@ -30,7 +30,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from sim.modal import LevelData, estimate_mode, find_feed, find_pitch, next_refinement_Hz
+from sim.modal import LevelData, estimate_mode, find_feed, find_pitch, level_modes, next_refinement_Hz
 
 from .plan import Plan, StepSpec
 
@@ -176,13 +176,8 @@ class Refiner:
         key = (level_index - 1, len(steps))
         if key not in self._tracked:
             d = LevelData.from_steps(self.plan.levels_N[level_index - 1], steps)
-            i = find_feed(d, self._feed_Hz_before(level_index - 1))
-            fr = None
-            if i is not None and 0 < i < d.f_Hz.size - 1:
-                est = estimate_mode(d.f_Hz, d.compliance, mode="feed", kind="receptance", curve=d.compliance_pp,
-                                    peak_index=i, sd=d.compliance_pp_sd)
-                fr = est.resonance_Hz if math.isfinite(est.resonance_Hz) else float(d.f_Hz[i])
-            self._tracked[key] = fr
+            feed = level_modes(d, feed_predicted_Hz=self._feed_Hz_before(level_index - 1))[0]
+            self._tracked[key] = feed.resonance_Hz if math.isfinite(feed.resonance_Hz) else None
         return self._tracked[key]
 
     def _next_from(self, found: Found, d: LevelData, last_Hz: float | None = None) -> float | None:

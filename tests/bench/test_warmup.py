@@ -8,14 +8,16 @@ from __future__ import annotations
 
 import logging
 
+from bench.terminal import PROJECT
 from bench.warmup import warm_up
 
 
 def test_the_warm_up_s_own_run_says_no_warning_and_leaves_logging_as_it_was(caplog):
+    before = {name: logging.getLogger(name).level for name in PROJECT}
     with caplog.at_level(logging.INFO):
         assert warm_up() > 0
     said = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
     assert not said, said
-    assert logging.root.manager.disable == logging.NOTSET
+    assert {name: logging.getLogger(name).level for name in PROJECT} == before
     logging.getLogger("bench.test").warning("heard")
     assert caplog.records[-1].getMessage() == "heard"
