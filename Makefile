@@ -14,7 +14,7 @@ $(VENV)/.installed: pyproject.toml
 setup: $(VENV)/.installed system-deps $(VENV)/.kernels
 
 # numba compiles the kernels on first use (~45 s); do it here, not in the first run
-$(VENV)/.kernels: $(VENV)/.installed $(wildcard sim/*.py)
+$(VENV)/.kernels: $(VENV)/.installed $(wildcard sim/*.py sim/*/*.py)
 	$(VENV)/bin/bench warmup
 	touch $@
 

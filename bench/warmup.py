@@ -20,6 +20,8 @@ import time
 from enum import StrEnum
 from pathlib import Path
 
+import numpy as np
+
 from sim.kernel_cache import invalidate_stale_kernels, sources_hash
 
 from .terminal import PROJECT
@@ -58,6 +60,7 @@ def kernels_warm() -> bool:
 
 def warm_up() -> float:
     """Compile and cache every kernel; returns the seconds it took."""
+    from sim.friction import MODELS
     from sim.rig import RigModel, SimulatedRig
 
     from .config import DEFAULTS, load_rig, parse_plan
@@ -74,6 +77,9 @@ def warm_up() -> float:
         rig = SimulatedRig(model)
         rig.set_generator(freq_Hz=100.0, amplitude_Vpp=0.2, output_on=True)
         rig.run(256, 25600.0)
+    path = 1e-6 * np.sin(np.linspace(0.0, 2 * np.pi, 64, endpoint=False))[None, :]
+    for friction in MODELS.values():          # the analysis fits every friction model
+        friction.periodic_force(friction.typical(), path, np.array([300.0]))
     # the warm-up's own two steps say what a user's run would of them (identifiability, an
     # unsettled step, poorly determined parameters): warnings about a plan nobody asked for,
     # printed before the user's run as if they were its; errors still pass

@@ -3,10 +3,12 @@
 numba keys a cached kernel on the file of the jitted function only (its modification time
 and size): ``_kernel.rk4_run`` inlines the Masing and virgin-curve functions of
 ``masing.py`` and ``virgin.py``, so after an edit to either, the cache still serves the
-old machine code, and the old physics.  Here the cache is keyed on a SHA-256 of every
-``*.py`` of the package (the kernels inline from anywhere in it; hashing a few files
-costs well under a millisecond): when it differs from the one stored beside the cache,
-every ``*.nbi``/``*.nbc`` of the package is deleted and numba compiles afresh.
+old machine code, and the old physics (the friction models' loops in ``sim/friction``
+inline the templates of ``sim/friction/_periodic.py`` the same way).  Here the cache is
+keyed on a SHA-256 of every ``*.py`` of the package and its subpackages (the kernels
+inline from anywhere in it; hashing them costs about a millisecond): when it differs from
+the one stored beside the cache, every ``*.nbi``/``*.nbc`` of the package's
+``__pycache__`` folders is deleted and numba compiles afresh.
 
 Called by ``bench warmup`` (and so by a simulated run that finds the kernels cold) and by
 the tests' set-up (``tests/conftest.py``).  Only the in-tree cache (``__pycache__`` beside
@@ -27,10 +29,11 @@ STAMP_NAME = "kernels.sha256"
 
 
 def sources_hash(package_dir: Path = SIM_DIR) -> str:
-    """SHA-256 over the names and contents of the package's ``*.py`` files."""
+    """SHA-256 over the paths and contents of the ``*.py`` files of the package and its subpackages."""
     h = hashlib.sha256()
-    for p in sorted(Path(package_dir).glob("*.py")):
-        h.update(p.name.encode() + b"\0" + p.read_bytes() + b"\0")
+    root = Path(package_dir)
+    for p in sorted(root.rglob("*.py")):
+        h.update(p.relative_to(root).as_posix().encode() + b"\0" + p.read_bytes() + b"\0")
     return h.hexdigest()
 
 
@@ -47,7 +50,7 @@ def invalidate_stale_kernels(package_dir: Path = SIM_DIR) -> bool:
         pass
     try:
         removed = 0
-        for p in list(cache.glob("*.nbi")) + list(cache.glob("*.nbc")):
+        for p in list(Path(package_dir).rglob("__pycache__/*.nbi")) + list(Path(package_dir).rglob("__pycache__/*.nbc")):
             p.unlink(missing_ok=True)
             removed += 1
         cache.mkdir(exist_ok=True)

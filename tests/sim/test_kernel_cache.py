@@ -71,6 +71,20 @@ def test_the_hash_covers_every_source_of_sim():
     assert {"masing.py", "virgin.py", "_kernel.py", "_plant_kernel.py", "identify.py"} <= names
 
 
+def test_an_edit_in_a_subpackage_clears_every_cached_kernel_of_the_package(tmp_path):
+    # sim/friction's models inline the templates of sim/friction/_periodic.py
+    sub = tmp_path / "friction"
+    (sub / "__pycache__").mkdir(parents=True)
+    (sub / "_periodic.py").write_text("x = 1\n")
+    assert invalidate_stale_kernels(tmp_path) is True
+    cached = sub / "__pycache__" / "dahl.dahl_rows-1.py311.nbi"
+    cached.write_text("")
+    assert invalidate_stale_kernels(tmp_path) is False
+    (sub / "_periodic.py").write_text("x = 2\n")
+    assert invalidate_stale_kernels(tmp_path) is True
+    assert not cached.exists()
+
+
 def test_the_hash_follows_content_not_times(tmp_path):
     (tmp_path / "a.py").write_text("x = 1\n")
     first = sources_hash(tmp_path)
