@@ -20,6 +20,8 @@ import math
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from benchtools.uff_time_records import add_noise, step_sets, write_sets
+
 
 class MasingCarriage:
     """Dimensionless state: u = x/x_s, time t' = omega_s t, force in units of F_s."""
@@ -194,8 +196,6 @@ def generate_uff(path, F_s_N, x_s_m, n, mass_kg, levels_N, freqs_Hz, *, fs_Hz=No
     simulation's own clock (not locked to the drive); a short ``settle`` leaves the
     transient of each frequency change in the record (``settle_first``: of the first step of
     each level, which starts from rest)."""
-    import pyuff
-
     rng = np.random.default_rng(seed)
     w_s = math.sqrt(F_s_N / (x_s_m * mass_kg))
     fs = fs_Hz or 128.0 * max(freqs_Hz) * 1.037       # not a multiple of any step frequency
@@ -222,23 +222,7 @@ def generate_uff(path, F_s_N, x_s_m, n, mass_kg, levels_N, freqs_Hz, *, fs_Hz=No
             disp = u * x_s_m * (1.0 + disp_gain_error)
             if line_m:
                 disp = disp + line_m * np.sin(2 * math.pi * line_Hz * t_dim / w_s + line_phase)
-            force = force + noise[0] * F_s_N * rng.standard_normal(force.size)
-            accel = accel + noise[1] * np.std(accel) * rng.standard_normal(accel.size)
-            disp = disp + noise[2] * x_s_m * rng.standard_normal(disp.size)
-            for sdt, unit, label, x in ((13, "N", "force", force), (12, "m/s^2", "acceleration", accel),
-                                        (8, "m", "displacement", disp)):
-                sets.append(dict(type=58, func_type=1, func_id=len(sets) + 1, ver_num=0, load_case_id=case,
-                                 id1=f"{label} time response", id2="independent simulator",
-                                 id3="NONE", id4="NONE", id5="NONE",
-                                 rsp_ent_name="carriage", rsp_node=1, rsp_dir=1,
-                                 ref_ent_name="shaker", ref_node=1, ref_dir=1,
-                                 abscissa_spacing=1, abscissa_min=0.0, abscissa_inc=1.0 / fs,
-                                 abscissa_spec_data_type=17, abscissa_axis_lab="time",
-                                 abscissa_axis_units_lab="s",
-                                 ordinate_spec_data_type=sdt, ordinate_axis_lab=label,
-                                 ordinate_axis_units_lab=unit,
-                                 orddenom_spec_data_type=0, orddenom_axis_units_lab="NONE",
-                                 x=np.arange(x.size) / fs, data=x.astype(float)))
-    uff = pyuff.UFF(str(path))
-    uff.write_sets(sets, mode="overwrite")
+            force, accel, disp = add_noise(force, accel, disp, noise, F_s_N, x_s_m, rng)
+            sets += step_sets(case, len(sets) + 1, fs, force, accel, disp)
+    write_sets(path, sets)
     return case
