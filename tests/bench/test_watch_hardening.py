@@ -109,6 +109,8 @@ def test_connections_and_streams_are_capped(small_run, monkeypatch):
         wait_until(lambda: server.connections == 3, 5, "the third connection served")
         # a fourth: on the stop reserve, which answers nothing but a stop
         assert statuses(exchange(server, b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")) == [503]
+        # its handler gives the reserve slot back just after the client sees the close
+        wait_until(lambda: server.connections == 3, 5, "the refused request's reserve slot back")
         reserve = [socket.create_connection(addr, timeout=5) for _ in range(watch_server.STOP_RESERVE)]
         wait_until(lambda: server.connections == 3 + watch_server.STOP_RESERVE, 5, "the reserve full")
         assert exchange(server, b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n") == b""   # beyond it: closed
