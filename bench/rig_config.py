@@ -60,12 +60,30 @@ def model_schema() -> dict:
 
 def _check_model(sec: _Section) -> RigModel | None:
     """Each [rig.model] key against its unit and range, then the model's own rules: the
-    parsed sim.rig.RigModel, or None when a key's problem was collected."""
+    parsed sim.rig.RigModel, or None when a key's problem was collected.  A friction model's
+    parameters are checked against that model's own declaration (sim.friction.Parameter,
+    decision 0075); a parameter of another model than the one named is refused."""
     from sim import rig as sim_rig
+    from sim import rig_friction
+    from sim.friction import MODELS
 
     schema = model_schema()
-    sec.unknown(set(schema))
+    sec.unknown(set(schema) | set(rig_friction.parameter_owners()))
+    friction = sec.choice("friction", rig_friction.MASING, schema["friction"].choices)
+    named = "friction" not in sec.bad        # a model not in the list: its parameters are not judged
+    own = rig_friction.own_parameters(friction) if named else ()
+    misplaced = rig_friction.misplaced(friction, [k for k in sec.data if k not in sec.named]) if named else []
+    for key, owners in misplaced:
+        sec.bad.add(key)
+        sec.coded(rig_friction.FrictionKey.NOT_OF_MODEL, source=sec.source, key=key, model=friction,
+                  owners=list(owners))
+    for p in (MODELS[friction].parameters if own else ()):
+        sec.number(p.name, _REQUIRED, p.lo, p.hi, lo_open=p.lo_open, unit=p.unit)
+    owned = rig_friction.parameter_owners()
     for key in sec.data:
+        if key in sec.bad or key in own or key in sec.named or key == "friction" or key not in schema \
+                or (not named and key in owned):
+            continue
         spec = schema[key]
         if spec.choices:
             sec.choice(key, None, spec.choices)

@@ -196,8 +196,9 @@ class Rig:
         return {k: getattr(self, f"expected_{k}") for k in GUESS_KEYS}
 
     def to_dict(self) -> dict:
-        """The stored layout (run.json's ``rig``): the model as every one of its keys."""
-        return asdict(self)
+        """The stored layout (run.json's ``rig``): the model as every one of its keys
+        (:meth:`sim.rig.RigModel.keys`: flat, a friction model's parameters among them)."""
+        return dict(asdict(self), model=self.model.keys() if self.model else None)
 
 
 def stored_model(rig: Mapping | None) -> RigModel | None:

@@ -109,11 +109,13 @@ def mass_matrix(model) -> np.ndarray:
     return M
 
 
-def coefficients(model) -> np.ndarray | None:
-    """The kernel's coefficient array (layout in :mod:`sim._plant_kernel`), or None."""
-    if not any_on(model):
+def coefficients(model, physical: bool = False) -> np.ndarray | None:
+    """The kernel's coefficient array (layout in :mod:`sim._plant_kernel`), or None.
+    ``physical``: in newtons and metres (F_s = x_s = 1), whatever is on, for the contact
+    kernel of a friction model other than Masing (:mod:`sim._contact_kernel`)."""
+    if not (physical or any_on(model)):
         return None
-    F_s, x_s = model.F_s_N, model.x_s_m
+    F_s, x_s = (1.0, 1.0) if physical else (model.F_s_N, model.x_s_m)
     c = np.zeros(N_COEF)
     if pitch_on(model):
         inv = np.linalg.inv(mass_matrix(model))

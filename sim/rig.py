@@ -50,9 +50,10 @@ from typing import Any
 
 import numpy as np
 
-from . import _kernel, _plant_kernel, plant_effects
+from . import _contact_kernel, _kernel, _plant_kernel, plant_effects, rig_friction
 from .dynamics import FrictionState
 from .errors import ConfigurationError
+from .friction import MODELS
 from .masing import LAMBDA_MASING
 from .virgin import SakaiCurve, check_positive_finite
 
@@ -70,6 +71,7 @@ REVERSAL_RESOLUTION = 16      # extra RK4 steps at small-force n < 1 reversals
 # in the plant" list, the plant-effect fields and what the drawn lines leave out are read
 # from here.
 GROUPS = {
+    "friction": "the friction model of the contact (decision 0075)",
     "masing": "the Masing carriage",
     "drive": "amplifier and shaker as a force source",
     "sensor": "sensor sensitivities",
@@ -125,8 +127,14 @@ def model_keys(*groups: str, model: type | None = None) -> dict[str, ModelKey]:
 @dataclass(frozen=True)
 class RigModel:
     """Physical parameters of the simulated rig (SI units).  Each field is a [rig.model] key
-    declared with :func:`model_key`: adding an effect is one field here and its physics."""
+    declared with :func:`model_key`: adding an effect is one field here and its physics.
+    ``friction`` names the contact's model (:data:`sim.friction.MODELS`); a model other than
+    Masing keeps its parameters, as that model declares them, in ``friction_parameters``
+    (decision 0075; Masing's are the fields F_s_N, x_s_m and n)."""
 
+    friction: str = model_key(rig_friction.MASING, "", 0, 0, "the friction model of the contact; a model other "
+                              "than masing takes its parameters as keys of this table (the friction models' "
+                              "table below)", "friction", choices=tuple(MODELS))
     F_s_N: float = model_key(10.0, "N", 0, 1e4, "F_s, the friction force the Masing curve saturates at",
                              "masing", lo_open=True)
     x_s_m: float = model_key(10e-6, "m", 0, 1e-2, "x_s, the starting rolling displacement", "masing", lo_open=True)
@@ -194,9 +202,12 @@ class RigModel:
     steps_per_period: int = model_key(400, "steps", 20, 1e5, "RK4 steps per drive period (minimum)", "numerics",
                                       integer=True)
     seed: int = model_key(0, "", 0, 2**63 - 1, "seed of the sensor noise", "numerics", integer=True)
+    # a friction model other than Masing: its parameters, (name, value) in its declared order
+    friction_parameters: tuple[tuple[str, float], ...] = ()
 
     def __post_init__(self):
         SakaiCurve(self.n)  # validates n (> 0 and not 1), with its own words
+        self._validate_friction()
         # from the declarations (decision 0066): a range open at 0 must be > 0, one closed at
         # 0 >= 0; effect, shaker and line keys are checked by their own validators below
         for f in fields(self):
@@ -221,13 +232,58 @@ class RigModel:
         if self.line_channel and not self.line_freq_Hz > 0:
             raise ValueError(f"line_freq_Hz must be > 0 when line_channel is set, got {self.line_freq_Hz!r}")
 
+    def _validate_friction(self) -> None:
+        model = MODELS.get(self.friction)
+        if model is None:
+            raise ConfigurationError(f"friction must be one of {list(MODELS)}, got {self.friction!r}")
+        given = dict(self.friction_parameters)
+        if self.friction == rig_friction.MASING:
+            if given:
+                raise ConfigurationError(f"friction parameters {sorted(given)} are not masing's (its parameters "
+                                         "are the fields F_s_N, x_s_m and n)")
+            return
+        problems = model.problems(given)
+        if problems:
+            raise ConfigurationError(f"{self.friction} parameters refused: "
+                                     + ", ".join(f"{p.name} ({p.problem}, got {p.value!r})" for p in problems))
+
+    @property
+    def friction_values(self) -> dict[str, float]:
+        """The friction model's parameters by name (Masing's from its fields)."""
+        if self.friction == rig_friction.MASING:
+            return {"F_s_N": self.F_s_N, "x_s_m": self.x_s_m, "n": self.n}
+        return dict(self.friction_parameters)
+
+    @property
+    def friction_level_N(self) -> float:
+        """The force (N) the friction saturates at: F_s for Masing, the model's own otherwise."""
+        return float(MODELS[self.friction].friction_level(self.friction_values))
+
     @classmethod
     def from_dict(cls, d: dict) -> RigModel:
-        known = {f.name for f in fields(cls)}
+        """The model of flat [rig.model] keys (as :meth:`keys` gives them): a friction model's
+        parameters among them; one that is not the named model's is refused."""
+        d = dict(d)
+        friction = d.get("friction", rig_friction.MASING)
+        pairs = tuple((k, d.pop(k)) for k in rig_friction.own_parameters(friction) if k in d)
+        wrong = rig_friction.misplaced(friction, [k for k in d if k != "friction"])
+        if wrong:
+            raise ConfigurationError("rig model keys of another friction model than " + repr(friction) + ": "
+                                     + ", ".join(f"{k} ({' or '.join(o)})" for k, o in wrong))
+        known = {f.name for f in fields(cls) if "key" in f.metadata}
         unknown = set(d) - known
         if unknown:
             raise ConfigurationError(f"unknown rig model keys {sorted(unknown)}; allowed: {sorted(known)}")
-        return cls(**d)
+        return cls(**d, friction_parameters=pairs) if pairs else cls(**d)
+
+    def keys(self) -> dict:
+        """The model as flat [rig.model] keys (run.json's ``rig.model``): every declared key in
+        field order, then a friction model's parameters; Masing's model as it was before
+        decision 0075 (no ``friction`` key), another without Masing's keys."""
+        masing = self.friction == rig_friction.MASING
+        skip = {"friction"} if masing else set(MODELS[rig_friction.MASING].names)
+        out = {f.name: getattr(self, f.name) for f in fields(self) if "key" in f.metadata and f.name not in skip}
+        return {**out, **dict(self.friction_parameters)}
 
     @property
     def omega_s(self) -> float:
@@ -266,6 +322,15 @@ class SimulatedRig:
         self.pitch_rate_rad_s = 0.0
         self.coil_force_N = 0.0         # Bl i (shaker model with an inductance only)
         self._coef = plant_effects.coefficients(self.model)
+        # a friction model other than Masing: its contact's state (state.u, state.v in m, m/s)
+        self.contact: rig_friction.Contact | None = None
+        self.contact_state = np.zeros(0)
+        self.contact_force_N = 0.0
+        self.contact_direction = 0.0
+        if self.model.friction != rig_friction.MASING:
+            self.contact = rig_friction.contact(self.model.friction, self.model.friction_values)
+            self.contact_state = np.zeros(self.contact.state_size)
+            self._coef = plant_effects.coefficients(self.model, physical=True)
         self._resolution_key: float | None = None
         self._resolution = 1.0
         self.gen = _Generator()
@@ -315,7 +380,7 @@ class SimulatedRig:
 
     def gap_m(self) -> float:
         with self.lock:
-            return self.model.probe_standoff_m + self.state.u * self.model.x_s_m
+            return self.model.probe_standoff_m + self.state.u * (self.model.x_s_m if self.contact is None else 1.0)
 
     def run(self, n_samples: int, fs_Hz: float) -> RigBlock:
         """Advance the plant by ``n_samples / fs_Hz`` seconds and sample the sensors."""
@@ -351,6 +416,8 @@ class SimulatedRig:
         return self._resolution
 
     def _run(self, n: int, fs: float) -> RigBlock:
+        if self.contact is not None:
+            return self._sensors(n, fs, *self._run_contact(n, fs))
         m, st = self.model, self.state
         P_amp, P_dc = self.drive_force()
         omega = 2 * math.pi * self.gen.freq_Hz
@@ -384,7 +451,38 @@ class SimulatedRig:
             force = rec[:, 6] * m.F_s_N
         else:
             force = P_amp * np.sin(omega * t_rel + self._phase) + P_dc
-        disp = rec[:, 1] * m.x_s_m
+        return self._sensors(n, fs, force, accel, rec[:, 1] * m.x_s_m, omega)
+
+    def _run_contact(self, n: int, fs: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """The plant with a friction model other than Masing on the contact kernel (physical
+        units): (force, acceleration, displacement, omega) of ``n`` samples at ``fs``."""
+        m, st, c = self.model, self.state, self.contact
+        assert c is not None and self._coef is not None
+        P_amp, P_dc = self.drive_force()
+        omega = 2 * math.pi * self.gen.freq_Hz
+        f_nat = plant_effects.highest_linear_frequency_Hz(m, c.stiffness_N_per_m + m.spring_N_per_m)
+        sub = max(1, math.ceil(m.steps_per_period * max(self.gen.freq_Hz, f_nat) / fs))
+        if plant_effects.shaker_on(m) and m.shaker_inductance_H > 0:   # RK4 step <= L/R / 2
+            sub = max(sub, math.ceil(2.0 * m.shaker_resistance_ohm / (m.shaker_inductance_H * fs)))
+        rec = np.empty((n, 7))
+        (st.u, st.v, self.pitch_rad, self.pitch_rate_rad_s, self.coil_force_N, self.contact_force_N,
+         self.contact_direction) = _contact_kernel.contact_run(
+            type(c.model).advance, c.params, self.contact_state, np.empty(c.state_size), st.u, st.v,
+            self.pitch_rad, self.pitch_rate_rad_s, self.coil_force_N, self.contact_force_N, self.contact_direction,
+            0.0, P_amp, omega, self._phase, P_dc, self._coef, 1.0 / (fs * sub), n * sub, sub, rec)
+        accel = rec[:, 3] + m.drive_height_m * rec[:, 4]
+        if plant_effects.shaker_on(m):
+            force = rec[:, 6]
+        else:
+            force = P_amp * np.sin(omega * np.arange(n) / fs + self._phase) + P_dc
+        return force, accel, rec[:, 1], omega
+
+    def _sensors(self, n: int, fs: float, force: np.ndarray, accel: np.ndarray, disp: np.ndarray,
+                 omega: float) -> RigBlock:
+        """The true force, acceleration and displacement through the sensors (delay, line,
+        noise, gain errors, clipping); the rig's clock and the drive's phase moved on."""
+        m = self.model
+        t_rel = np.arange(n) / fs
         if m.disp_delay_s > 0:
             disp = self._delayed(disp, fs)
         if m.line_channel and m.line_amplitude > 0:      # on the sensor, at the rig's absolute time

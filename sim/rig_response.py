@@ -33,6 +33,7 @@ import numpy as np
 
 from . import plant_effects
 from .rig import RigModel, SimulatedRig, model_keys
+from .rig_friction import MASING
 
 log = logging.getLogger(__name__)
 
@@ -62,14 +63,15 @@ def plain_masing(model: RigModel) -> bool:
     """True when nothing beyond F_s, x_s, n, m acts on the measured response (the shooting
     engine's problem)."""
     return not (plant_effects.any_on(model) or model.viscous_N_s_per_m or model.spring_N_per_m
-                or model.disp_delay_s or model.force_gain_error or model.accel_gain_error or model.disp_gain_error)
+                or model.disp_delay_s or model.force_gain_error or model.accel_gain_error or model.disp_gain_error
+                or model.friction != MASING)
 
 
 def single_mode(model: RigModel) -> bool:
     """True when the Masing carriage with a linear spring and a viscous damper is all there is
     (what :mod:`sim.backbone`'s single-harmonic balance describes)."""
     return not (plant_effects.any_on(model) or model.disp_delay_s or model.force_gain_error
-                or model.accel_gain_error or model.disp_gain_error)
+                or model.accel_gain_error or model.disp_gain_error or model.friction != MASING)
 
 
 @dataclass(frozen=True)
@@ -100,11 +102,13 @@ class _Sweep:
 
     def save(self) -> tuple:
         r = self.rig
-        return r.state.copy(), r.pitch_rad, r.pitch_rate_rad_s, r._phase, self.f
+        return (r.state.copy(), r.contact_state.copy(), r.pitch_rad, r.pitch_rate_rad_s, r._phase, self.f,
+                r.contact_force_N, r.contact_direction)
 
     def restore(self, saved: tuple) -> None:
         r = self.rig
-        r.state, r.pitch_rad, r.pitch_rate_rad_s, r._phase, self.f = saved[0].copy(), *saved[1:]
+        r.pitch_rad, r.pitch_rate_rad_s, r._phase, self.f, r.contact_force_N, r.contact_direction = saved[2:]
+        r.state, r.contact_state = saved[0].copy(), saved[1].copy()
 
     def _chunk(self, f: float) -> tuple[complex, complex, np.ndarray, int]:
         """Run one look's worth of periods (at least CHUNK_PERIODS and CHUNK_S); the force's

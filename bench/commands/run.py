@@ -36,9 +36,9 @@ class RunLine(StrEnum):
 class DryRunLine(StrEnum):
     """``bench dry-run``'s lines (their words: :data:`bench.words.terminal_run.DRY_RUN`)."""
 
-    BACKBONE_PLAN = "backbone_plan"         # name, levels (count), start_Hz, min_Hz, max_Hz, rig, simulated
+    BACKBONE_PLAN = "backbone_plan"         # name, levels (count), start_Hz, min_Hz, max_Hz, rig, simulated, friction
     BACKBONE_TIME = "backbone_time"         # bound_s, max_blocks
-    PLAN = "plan"                           # name, procedure, levels, freqs, direction, steps, rig, simulated,
+    PLAN = "plan"                           # name, procedure, levels, freqs, direction, steps, rig, simulated, friction,
     #                                         measured, per_sweep, refined, refine_steps, modes, tolerance, dwell_cycles
     LEVELS = "levels"                       # levels, unit, quantity, held (a response's level)
     TIME = "time"                           # quantity, bound_s, without_extra_s, block_s, blocks, typical_s, refined
@@ -105,7 +105,7 @@ def cmd_dry_run(args) -> int:
 
     plan, rig = _load_configs(args)
     steps = plan.schedule()
-    named = dict(name=plan.name, rig=rig.name, simulated=rig.simulated)
+    named = dict(name=plan.name, rig=rig.name, simulated=rig.simulated, friction=_rival_friction(rig))
     if plan.backbone:
         b = plan.backbone
         _dry(DryRunLine.BACKBONE_PLAN, levels=len(plan.levels_N), start_Hz=b.start_Hz, min_Hz=b.min_Hz,
@@ -138,6 +138,14 @@ def cmd_dry_run(args) -> int:
     for w in identifiability(runnable, rig) if plan.procedure is ProcedureKind.STEPPED_SINE else []:
         _dry(DryRunLine.IDENTIFIABILITY, warning=w)
     return 0
+
+
+def _rival_friction(rig) -> str:
+    """The label of a simulated rig's friction model when it is not Masing, else ""."""
+    from sim.friction import MODELS
+    from sim.rig_friction import MASING
+    m = rig.model
+    return MODELS[m.friction].label if rig.simulated and m is not None and m.friction != MASING else ""
 
 
 def _dry(code: DryRunLine, **fields) -> None:

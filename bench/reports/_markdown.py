@@ -466,9 +466,14 @@ def _results_md(run: RunData, out: Path, files: list[tuple[str, str]]) -> list[s
     md += modes_md(run)
     if cmp:
         p = cmp.model
+        if p.friction == "masing":
+            truth = f"F_s = {p.F_s_N:g} N, x_s = {p.x_s_m:g} m, n = {p.n:g}"
+        else:                 # a rival friction model in the plant (decision 0075), its parameters by their keys
+            from sim.friction import MODELS
+            truth = (f"{MODELS[p.friction].label} friction (friction = \"{p.friction}\"), "
+                     + ", ".join(f"{k} = {v:g}" for k, v in p.friction_parameters))
         md += ["## Model vs measurement (simulated rig)", "",
-               f"Rig model (true parameters, defaults filled in): F_s = {p.F_s_N:g} N, x_s = {p.x_s_m:g} m, "
-               f"n = {p.n:g}, m = {p.mass_kg:g} kg.", ""]
+               f"Rig model (true parameters, defaults filled in): {truth}, m = {p.mass_kg:g} kg.", ""]
         md += [f"- {n}" for n in cmp.engine_notes]
         md += ["- relative difference = measured / model - 1 of the stored compliance_pp (from "
                f"{pp_source(results)}), over all steps; max = the value of largest magnitude.",

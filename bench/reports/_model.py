@@ -116,7 +116,7 @@ def model_comparison(meta: dict, results: list[dict], flagged: set[str] | None =
         by_level.setdefault(r["level_index"], []).append(r)
     for li, steps in sorted(by_level.items()):
         level = float(levels_N[li]) if li < len(levels_N) else float(steps[0]["target_force_N"])
-        gamma0 = level / model.F_s_N
+        gamma0 = level / model.friction_level_N
         notes = []
         if level > model.amp_force_limit_N:
             notes.append(f"level above the amplifier's force limit {model.amp_force_limit_N:g} N")

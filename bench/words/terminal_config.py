@@ -122,6 +122,9 @@ RULE: Words = {
     "bad_skip": lambda source, table, key, got: (f"{where(source, table, key)}: must be a list of [level index, "
                                                  f"frequency index] pairs within the plan, got {got}"),
     "model_not_simulated": lambda source: f"{source}: [rig.model] is only allowed with simulated = true",
+    "friction_not_of_model": lambda source, key, model, owners: (
+        f"{where(source, 'rig.model', key)}: a parameter of the friction model {' or '.join(map(_quoted, owners))}, "
+        f"not of friction = {_quoted(model)} (decision 0075)"),
     "paper_no_model": lambda source: f"{source}: no [rig.model]: bench paper --rig needs a simulated rig's model",
     "paper_no_pitch": lambda source: (f"{source}: [rig.model] has no pitching mode (pitch_inertia_kg_m2 = 0): Figs. 15 "
                                       "and 17 need one"),

@@ -44,8 +44,9 @@ def duration(seconds: float) -> str:
     return f"{h} h {m:02d} min" if h else f"{m} min {s:02d} s" if m else f"{s} s"
 
 
-def _simulated(simulated: bool) -> str:
-    return " (simulated)" if simulated else ""
+def _simulated(simulated: bool, friction: str = "") -> str:
+    """' (simulated)', with the plant's friction model when it is not Masing (decision 0075)."""
+    return (f" (simulated, {friction} friction)" if friction else " (simulated)") if simulated else ""
 
 
 def _measured(measured: int, per_sweep: int | None, refined: int, refine_steps: int, modes: list,
@@ -71,16 +72,16 @@ def _time(quantity, bound_s, without_extra_s, block_s, blocks, typical_s, refine
 
 # `bench dry-run`'s lines (bench.commands.run.DryRunLine)
 DRY_RUN: Words = {
-    "backbone_plan": lambda name, levels, start_Hz, min_Hz, max_Hz, rig, simulated: (
+    "backbone_plan": lambda name, levels, start_Hz, min_Hz, max_Hz, rig, simulated, friction: (
         f"plan '{name}': phase resonance, {levels} force levels (N) from {start_Hz:g} Hz in the window "
-        f"{min_Hz:g}-{max_Hz:g} Hz (envelope at both ends); rig '{rig}'{_simulated(simulated)}"),
+        f"{min_Hz:g}-{max_Hz:g} Hz (envelope at both ends); rig '{rig}'{_simulated(simulated, friction)}"),
     "backbone_time": lambda bound_s, max_blocks: (
         f"expected rig time: at most {duration(bound_s)} (every level probing its phase "
         f"slope and spending max_blocks = {max_blocks} controller blocks at the window's lowest frequency, "
         f"then settled, measured and re-measured to the plan's limits; a level that locks takes a few blocks)"),
-    "plan": lambda name, procedure, levels, freqs, direction, steps, rig, simulated, **measured: (
+    "plan": lambda name, procedure, levels, freqs, direction, steps, rig, simulated, friction, **measured: (
         f"plan '{name}': {procedure}, {levels} levels x {freqs} frequencies "
-        f"({direction}) = {steps} steps, {_measured(**measured)}; rig '{rig}'{_simulated(simulated)}"),
+        f"({direction}) = {steps} steps, {_measured(**measured)}; rig '{rig}'{_simulated(simulated, friction)}"),
     "levels": lambda levels, unit, quantity, held: (
         f"levels: {', '.join(f'{v:g} {unit}' for v in levels)} ({quantity} amplitude"
         + (", the response fundamental held at each frequency)" if held else ")")),
