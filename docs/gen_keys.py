@@ -113,6 +113,18 @@ def model_rows() -> list[str]:
     return rows
 
 
+def friction_rows() -> list[str]:
+    """One row per parameter of each friction model other than Masing (whose parameters are
+    the [rig.model] keys F_s_N, x_s_m, n above), from the model's own declaration (decision 0075)."""
+    from sim.friction import MODELS
+    rows = []
+    for name, model in MODELS.items():
+        for p in model.parameters if name != "masing" else ():
+            rows.append(f"| `{name}` | `{p.name}` | number {'>' if p.lo_open else '>='} {p.lo:g} and <= {p.hi:g} "
+                        f"({p.unit}) | {p.meaning.replace('|', chr(92) + '|')} |")
+    return rows
+
+
 def main(out: Path) -> int:
     for name in EXAMPLES:
         path = config.DEFAULTS / name
@@ -143,7 +155,12 @@ def main(out: Path) -> int:
     lines += ["## `[rig.model]` (simulated rigs)", "",
               "SI units; each key is a field of `sim.rig.RigModel`, which declares its unit, range, default and "
               "meaning (decision record 0058); the equations are in decision record 0013.", "",
-              "| key | type and range | default | meaning |", "|---|---|---|---|", *model_rows(), ""]
+              "| key | type and range | default | meaning |", "|---|---|---|---|", *model_rows(), "",
+              "### Friction models' parameters (`[rig.model]`, with `friction` = the model)", "",
+              "Each model of `sim.friction.MODELS` declares its parameters (decision records 0073, 0075); with "
+              "`friction` naming it they are keys of `[rig.model]`, every one required; a parameter of another "
+              "model than the one named is refused. Masing's are `F_s_N`, `x_s_m`, `n` above.", "",
+              "| friction | key | type and range | meaning |", "|---|---|---|---|", *friction_rows(), ""]
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(lines) + "\n")
     missing = [(t, k) for t in config.KEYS for k in config.KEYS[t] if f"{t}.{k}" not in config.KEYS

@@ -50,6 +50,7 @@ from bench.reports._overall import Concern, Verdict, overall
 from bench.reports._run import load_run
 from bench.rig_config import RigRule
 from bench.rig_model import PaperRule
+from sim.rig_friction import FrictionKey
 from bench.runlock import LOCK_NAME, LockRefusal
 from bench.sequence import SequenceLine, SequenceProblem
 from bench.session import EnvelopeProblem, EnvelopeRefusal, SessionLine
@@ -179,11 +180,11 @@ def test_every_code_has_words_in_its_renderers():
         assert set(module.PROBLEM) == {str(c) for c in Problem}, module.__name__
     assert set(page_words.WARNING) == {str(c) for c in PageWarning}
     assert set(terminal_words.REFUSAL) == {str(c) for c in (*LockRefusal, *OutDirRefusal, *RunDirRefusal,
-                                                           *ConfigProblem, *ConfigRule, *RigRule, *PaperRule,
+                                                           *ConfigProblem, *ConfigRule, *RigRule, *PaperRule, *FrictionKey,
                                                            *SequenceProblem, *ApiRefusal, *PluginRefusal,
                                                            *bench._Missing, *StudyArgs)}
-    assert set(terminal_words.CONFIG) == {str(c) for c in (*ConfigProblem, *ConfigRule, *RigRule, *PaperRule)}
-    assert set(terminal_config_words.RULE) == {str(c) for c in (*ConfigRule, *RigRule, *PaperRule)}
+    assert set(terminal_words.CONFIG) == {str(c) for c in (*ConfigProblem, *ConfigRule, *RigRule, *PaperRule, *FrictionKey)}
+    assert set(terminal_config_words.RULE) == {str(c) for c in (*ConfigRule, *RigRule, *PaperRule, *FrictionKey)}
     assert set(terminal_config_words.NOTE) == {str(c) for c in RangeNote}
     assert set(terminal_config_words.SEQUENCE) == {str(c) for c in SequenceProblem}
     assert set(terminal_config_words.SEQUENCE_LOG) == {str(c) for c in SequenceLine}
@@ -660,7 +661,7 @@ def _twin_and_source_decisions(tmp_path, capsys) -> tuple:
     from bench.config import DEFAULTS, load_rig
     from bench.sources import _uff_step
     from bench.twin import apply_causes
-    model = {k: v for k, v in vars(load_rig(DEFAULTS / "sim_rig.toml").model).items() if not k.startswith("_")}
+    model = load_rig(DEFAULTS / "sim_rig.toml").model.keys()     # the flat [rig.model] keys (decision 0075)
     causes = [dict(id="unsettled_transient"), dict(id="mystery"), dict(id="viscous_damping", parameters=dict(c=dict(value=3.0))),
               dict(id="line_interference", channel="disp", parameters=dict(frequency=dict(value=37.3), amplitude=dict(value=1e-8)),
                    evidence=dict(steps=["s1"]))]
