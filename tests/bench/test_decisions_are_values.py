@@ -50,7 +50,6 @@ from bench.reports._overall import Concern, Verdict, overall
 from bench.reports._run import load_run
 from bench.rig_config import RigRule
 from bench.rig_model import PaperRule
-from sim.rig_friction import FrictionKey
 from bench.runlock import LOCK_NAME, LockRefusal
 from bench.sequence import SequenceLine, SequenceProblem
 from bench.session import EnvelopeProblem, EnvelopeRefusal, SessionLine
@@ -74,6 +73,7 @@ from bench.watch.snapshot import PageMessage, PageWarning, RunReader, SnapshotLi
 from bench.watch.stop import StopLine
 from procedures.stepped_sine import unsettled_in
 from sim.artefacts import artefact_causes, assess_step
+from sim.rig_friction import FrictionKey
 
 F, FS = 37.0, 5120.0
 AMPS = {"force": [5.0, 0.0, 0.3], "accel": [20.0, 0.0, 3.0], "disp": [10e-6, 0.0, 1e-6]}
