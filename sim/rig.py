@@ -265,7 +265,8 @@ class RigModel:
         parameters among them; one that is not the named model's is refused."""
         d = dict(d)
         friction = d.get("friction", rig_friction.MASING)
-        pairs = tuple((k, d.pop(k)) for k in rig_friction.own_parameters(friction) if k in d)
+        given = tuple(tuple(kv) for kv in d.pop("friction_parameters", ()))   # asdict's layout of the same model
+        pairs = given + tuple((k, d.pop(k)) for k in rig_friction.own_parameters(friction) if k in d)
         wrong = rig_friction.misplaced(friction, [k for k in d if k != "friction"])
         if wrong:
             raise ConfigurationError("rig model keys of another friction model than " + repr(friction) + ": "
