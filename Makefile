@@ -88,6 +88,7 @@ bench: setup
 	$(PY) benchmarks/bench_analysis.py
 	$(PY) benchmarks/bench_analysis.py --source independent --cases 60 --levels 3 --freqs 10
 	$(PY) benchmarks/bench_analysis.py --source independent --cases 12 --settle 25
+	$(PY) benchmarks/bench_hum.py
 	$(PY) benchmarks/bench_artefacts.py
 	$(PY) benchmarks/bench_signals.py
 	$(PY) benchmarks/bench_identification.py

@@ -196,7 +196,25 @@ def generate_uff(path, F_s_N, x_s_m, n, mass_kg, levels_N, freqs_Hz, *, fs_Hz=No
     simulation's own clock (not locked to the drive); a short ``settle`` leaves the
     transient of each frequency change in the record (``settle_first``: of the first step of
     each level, which starts from rest)."""
-    rng = np.random.default_rng(seed)
+    return generate_uff_variants({path: (line_Hz, line_m)}, F_s_N, x_s_m, n, mass_kg, levels_N, freqs_Hz,
+                                 fs_Hz=fs_Hz, settle=settle, measure=measure, noise=noise, seed=seed,
+                                 cubic_N_per_m3=cubic_N_per_m3, quadratic_N_s2_per_m2=quadratic_N_s2_per_m2,
+                                 asymmetry=asymmetry, viscous_N_s_per_m=viscous_N_s_per_m,
+                                 spring_N_per_m=spring_N_per_m, friction_alpha=friction_alpha,
+                                 friction_v_ref_m_per_s=friction_v_ref_m_per_s, disp_delay_s=disp_delay_s,
+                                 disp_gain_error=disp_gain_error, pitch=pitch, rtol=rtol, settle_first=settle_first,
+                                 spring_centre_m=spring_centre_m)
+
+
+def generate_uff_variants(lines: dict, F_s_N, x_s_m, n, mass_kg, levels_N, freqs_Hz, *, fs_Hz=None, settle=25,
+                          measure=8, noise=(0.003, 0.005, 0.002), seed=0, cubic_N_per_m3=0.0,
+                          quadratic_N_s2_per_m2=0.0, asymmetry=0.0, viscous_N_s_per_m=0.0, spring_N_per_m=0.0,
+                          friction_alpha=0.0, friction_v_ref_m_per_s=1.0, disp_delay_s=0.0, disp_gain_error=0.0,
+                          pitch=None, rtol=1e-10, settle_first=None, spring_centre_m=0.0):
+    """:func:`generate_uff` for several lines on one simulated plant: ``lines`` maps each
+    output path to its probe line (``line_Hz``, ``line_m``; amplitude 0 = none).  The plant
+    is integrated once; each file is the one :func:`generate_uff` with that line and the same
+    ``seed`` writes (its own noise and line phase, drawn as there).  Returns the steps a file."""
     w_s = math.sqrt(F_s_N / (x_s_m * mass_kg))
     fs = fs_Hz or 128.0 * max(freqs_Hz) * 1.037       # not a multiple of any step frequency
     v_unit = x_s_m * w_s
@@ -209,8 +227,9 @@ def generate_uff(path, F_s_N, x_s_m, n, mass_kg, levels_N, freqs_Hz, *, fs_Hz=No
         J, h = pitch["J"], pitch["h"]
         effects["pitch"] = (mass_kg * h * h / J, pitch["e"] / h, pitch["k_th"] / (J * w_s ** 2),
                             pitch["c_th"] / (J * w_s))
-    line_phase = rng.uniform(0, 2 * math.pi)
-    sets = []
+    rngs = {path: np.random.default_rng(seed) for path in lines}
+    phases = {path: rngs[path].uniform(0, 2 * math.pi) for path in lines}
+    sets: dict = {path: [] for path in lines}
     case = 0
     for level in levels_N:
         betas = [2 * math.pi * f / w_s for f in sorted(freqs_Hz)]
@@ -219,10 +238,12 @@ def generate_uff(path, F_s_N, x_s_m, n, mass_kg, levels_N, freqs_Hz, *, fs_Hz=No
             case += 1
             force = P * F_s_N
             accel = acc * F_s_N / mass_kg
-            disp = u * x_s_m * (1.0 + disp_gain_error)
-            if line_m:
-                disp = disp + line_m * np.sin(2 * math.pi * line_Hz * t_dim / w_s + line_phase)
-            force, accel, disp = add_noise(force, accel, disp, noise, F_s_N, x_s_m, rng)
-            sets += step_sets(case, len(sets) + 1, fs, force, accel, disp)
-    write_sets(path, sets)
+            for path, (line_Hz, line_m) in lines.items():
+                disp = u * x_s_m * (1.0 + disp_gain_error)
+                if line_m:
+                    disp = disp + line_m * np.sin(2 * math.pi * line_Hz * t_dim / w_s + phases[path])
+                f_n, a_n, d_n = add_noise(force, accel, disp, noise, F_s_N, x_s_m, rngs[path])
+                sets[path] += step_sets(case, len(sets[path]) + 1, fs, f_n, a_n, d_n)
+    for path, path_sets in sets.items():
+        write_sets(path, path_sets)
     return case
