@@ -295,3 +295,24 @@ def test_the_element_models_fit_vector_and_kernel_array_follow_the_flat_paramete
     assert MODELS["gms"].state_length(GMS) == 9 and MODELS["masing_iwan"].state_length(IWAN) == 6
     with pytest.raises(NotImplementedError, match="state_length"):
         _ = MODELS["gms"].state_size
+
+
+def page_row(p) -> str:
+    """The row of docs/friction-models.md's table of a declared parameter."""
+    lo = ("(" if p.lo_open else "[") + f"{p.lo:g}"
+    ex = f" except {', '.join(f'{x:g}' for x in p.exclude)}" if p.exclude else ""
+    typical = ", ".join(f"{x:g}" for x in p.typical_elements) if p.elements else f"{p.typical:g}"
+    name = f"`{p.name}`" + (" (one per element)" if p.elements else "")
+    return f"| {name} | {p.unit} | {lo}, {p.hi:g}]{ex} | {typical} | {p.meaning} |"
+
+
+def test_the_friction_models_page_has_every_model_and_its_parameters_as_declared():
+    from benchtools import REPO
+
+    text = (REPO / "docs" / "friction-models.md").read_text()
+    sections = text.split("\n## ")
+    for name, model in MODELS.items():
+        section = next((s for s in sections if s.splitlines()[0].endswith(f"(`{name}`)")), None)
+        assert section is not None, f"no section for {name}"
+        missing = [page_row(p) for p in model.parameters if page_row(p) not in section]
+        assert not missing, f"{name}: write these rows in its table:\n" + "\n".join(missing)
