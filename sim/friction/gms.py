@@ -17,12 +17,15 @@ implementations that read it the same way.)
 
 Time-domain update (:func:`gms_advance`): the state is the N element forces, the N modes
 (0 sticking, 1 sliding) and the direction of the last motion (0 before any).  Over a
-segment of travel dx in time dt the velocity is its mean dx/dt and s is frozen there; a
-reversal (dx against the last direction) makes every element stick; a sticking element
-moves by k_i dx and, if that takes it past its share, slides from the point where it
-reached it (the fraction of the segment a uniform velocity gives) for the rest of the
-segment; a sliding element relaxes exactly for s frozen, F = a + (F_i - a) exp(-C t / s),
-a = alpha_i s sgn(dx).  The force is taken at the segment's end with its velocity v_end.
+segment of travel dx in time dt the velocity is taken linear in time, from
+2 dx/dt - v_end to v_end; a reversal (dx against the last direction) makes every element
+stick; a sticking element moves by k_i dx and, if that takes it past its share at the
+segment's end (alpha_i s(v_end): the share rises as the motion slows, and an element
+creeping up to a rising share must not be declared sliding early), slides from where its
+guard F_i sgn(v) - alpha_i s(v) crossed zero (interpolated linearly) for the rest of the
+segment; a sliding element relaxes exactly with s frozen at the mean velocity of the time it
+slides, F = a + (F_i - a) exp(-C t / s), a = alpha_i s sgn(dx) (second order in the
+segment's length).  The force is taken at the segment's end with its velocity v_end.
 The steady periodic force is that update run period by period to a periodic state
 (:func:`~sim.friction._periodic.periodic_row`): an element that slides in a period reaches
 its attractor and forgets its past, one that sticks throughout keeps the offset of where
@@ -53,6 +56,11 @@ SCALARS = 6         # F_c, F_s, v_s, delta, C, sigma_2 before the elements' k an
 SHARES_SUM_TOL = 1e-6
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _stribeck(F_c, F_s, v_s, delta, v):
+    return F_c + (F_s - F_c) * math.exp(-abs(v / v_s) ** delta)
+
+
 @njit(cache=True, nogil=True)
 def gms_advance(p, state, dx, dt, v_end):
     """The GMS force at the end of a travel ``dx`` (m) in ``dt`` (s), velocity ``v_end``
@@ -65,26 +73,32 @@ def gms_advance(p, state, dx, dt, v_end):
             for i in range(N):
                 state[N + i] = 0.0
             state[2 * N] = sg
-        s = F_c
-        if dt > 0.0:
-            s = F_c + (F_s - F_c) * math.exp(-abs(dx / (dt * v_s)) ** delta)
+        v_mean = dx / dt if dt > 0.0 else 0.0
+        v_start = 2.0 * v_mean - v_end          # the velocity taken linear in time over the segment
+        s = _stribeck(F_c, F_s, v_s, delta, v_mean)
+        s_end = _stribeck(F_c, F_s, v_s, delta, v_end)
+        s_start = _stribeck(F_c, F_s, v_s, delta, v_start)
         for i in range(N):
             k = p[SCALARS + i]
-            a = sg * p[SCALARS + N + i] * s     # the attractor in the direction of motion
+            alpha = p[SCALARS + N + i]
             Fi = state[i]
             t_slide = dt
+            s_slide = s
             if state[N + i] == 0.0:
                 Fn = Fi + k * dx
-                if sg * Fn <= sg * a:
+                after = sg * Fn - alpha * s_end     # the share's guard at the segment's end
+                if after <= 0.0:
                     state[i] = Fn
                     continue
-                frac = (a - Fi) / (k * dx)      # where, in the segment, it reached its share
-                frac = min(max(frac, 0.0), 1.0)
+                before = sg * Fi - alpha * s_start
+                frac = before / (before - after) if before < 0.0 else 0.0   # where the guard crossed zero
                 Fi = Fi + frac * k * dx
                 t_slide = (1.0 - frac) * dt
+                s_slide = _stribeck(F_c, F_s, v_s, delta, v_start + (v_end - v_start) * 0.5 * (1.0 + frac))
                 state[N + i] = 1.0
+            a = sg * alpha * s_slide            # the attractor in the direction of motion
             # t_slide is nan (0 x inf) only in the virgin call at an element just reaching its share
-            state[i] = a + (Fi - a) * (math.exp(-C * t_slide / s) if t_slide > 0.0 else 1.0)
+            state[i] = a + (Fi - a) * (math.exp(-C * t_slide / s_slide) if t_slide > 0.0 else 1.0)
     total = s2 * v_end
     for i in range(N):
         total += state[i]
