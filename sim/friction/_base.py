@@ -112,8 +112,11 @@ class FrictionModel:
     label: ClassVar[str]                  # short name for people ("Dahl")
     reference: ClassVar[str]              # where its equations come from
     rate_dependent: ClassVar[bool]        # does the loop depend on how fast it is run through?
-    advance: ClassVar[Any] = None         # compiled advance(p, state, dx, dt, v_end) -> force (N)
-    rows: ClassVar[Any] = None            # compiled rows(p, paths, vel, dts, state_size, scale, out)
+    # compiled advance(p, state, dx, dt, v_end) -> force (N) and rows(p, paths, vel, dts,
+    # state_size, scale, out), each a staticmethod: the same function from the class and from
+    # an instance (a bare numba dispatcher would bind the instance as its first argument)
+    advance: ClassVar[Any] = None
+    rows: ClassVar[Any] = None
     parameters: tuple[Parameter, ...] = ()
 
     @property

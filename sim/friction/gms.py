@@ -119,8 +119,8 @@ class GMS(FrictionModel):
     reference = ("F. Al-Bender, V. Lampaert, J. Swevers, The generalized Maxwell-slip model: a novel model for "
                  "friction simulation and compensation, IEEE Trans. Automatic Control 50(11), 1883-1887, 2005")
     rate_dependent = True
-    advance = gms_advance
-    rows = gms_rows
+    advance = staticmethod(gms_advance)
+    rows = staticmethod(gms_rows)
     parameters = (
         Parameter("F_c_N", "N", 0.0, 1e6, "Coulomb (sliding) friction force", 10.0),
         Parameter("F_s_N", "N", 0.0, 1e6, "breakaway (static) friction force, at least F_c", 12.0),

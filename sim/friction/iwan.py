@@ -129,8 +129,8 @@ class MasingIwan(FrictionModel):
     reference = ("W. D. Iwan, A distributed-element model for hysteresis and its steady-state dynamic response, "
                  "J. Applied Mechanics 33(4), 893-900, 1966")
     rate_dependent = False
-    advance = iwan_advance
-    rows = iwan_rows
+    advance = staticmethod(iwan_advance)
+    rows = staticmethod(iwan_rows)
     parameters = (
         Parameter("k_N_per_m", "N/m", 0.0, 1e12, "stiffness k_i of element i", 2e5, log=False, lo_open=False,
                   elements=True, typical_elements=(6e5, 4e5, 2.5e5, 1.7e5, 1e5, 6e4)),

@@ -75,8 +75,8 @@ class LuGre(FrictionModel):
     reference = ("C. Canudas de Wit, H. Olsson, K. J. Astrom, P. Lischinsky, A new model for control of systems "
                  "with friction, IEEE Trans. Automatic Control 40(3), 419-425, 1995")
     rate_dependent = True
-    advance = lugre_advance
-    rows = lugre_rows
+    advance = staticmethod(lugre_advance)
+    rows = staticmethod(lugre_rows)
     parameters = (
         Parameter("sigma0_N_per_m", "N/m", 0.0, 1e12, "bristle stiffness sigma_0: dF/dx at rest", 4e5),
         Parameter("sigma1_N_s_per_m", "N s/m", 0.0, 1e8, "bristle (micro-)damping sigma_1", 200.0, log=False,
