@@ -22,7 +22,8 @@ displacement d_i (metres: :func:`design_matrix`), and the virgin curve too
 (:func:`virgin_basis`).  Non-negative least squares (scipy.optimize.nnls) on the measured
 harmonics of ``design_matrix`` columns identifies k >= 0 with no nonlinear optimisation, and
 the virgin curve's interval follows from the covariance of k through ``virgin_basis``
-(:func:`values_from_grid` turns the grid and k into this model's parameters).
+(:func:`virgin_interval`; :func:`values_from_grid` turns the grid and k into this model's
+parameters).
 """
 
 from __future__ import annotations
@@ -107,6 +108,18 @@ def virgin_basis(x_m: np.ndarray, slip_m: np.ndarray) -> np.ndarray:
     x = np.atleast_1d(np.asarray(x_m, dtype=np.float64))[:, None]
     d = np.atleast_1d(np.asarray(slip_m, dtype=np.float64))[None, :]
     return np.clip(x, -d, d)
+
+
+def virgin_interval(x_m: np.ndarray, slip_m: np.ndarray, k_N_per_m: np.ndarray, cov_k: np.ndarray,
+                    z: float = 1.959964) -> tuple[np.ndarray, np.ndarray]:
+    """The identified virgin curve at ``x_m`` and the half-width of its interval (N):
+    ``virgin_basis(x, slip) @ k`` and z sqrt(diag(B cov B')) for the stiffnesses' covariance
+    ``cov_k`` (N x N, (N/m)^2; the curve is linear in k, so this is exact for a Gaussian k;
+    z = 1.96: 95 %)."""
+    B = virgin_basis(x_m, slip_m)
+    k = np.asarray(k_N_per_m, dtype=np.float64)
+    var = np.einsum("ij,jk,ik->i", B, np.asarray(cov_k, dtype=np.float64), B)
+    return B @ k, z * np.sqrt(np.maximum(var, 0.0))
 
 
 def virgin_force(values: Mapping[str, Any], x_m: np.ndarray) -> np.ndarray:

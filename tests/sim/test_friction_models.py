@@ -28,7 +28,7 @@ from benchtools import independent_friction as rival
 from benchtools.friction_cases import CASES
 from sim.errors import ConfigurationError
 from sim.friction import MODELS, ParameterProblem, friction_model
-from sim.friction.iwan import design_matrix, values_from_grid, virgin_basis, virgin_force
+from sim.friction.iwan import design_matrix, values_from_grid, virgin_basis, virgin_force, virgin_interval
 from sim.virgin import SakaiCurve
 
 M = 1024
@@ -256,6 +256,22 @@ def test_the_iwan_force_is_linear_in_the_stiffnesses_and_nnls_identifies_them_fr
     x = np.linspace(-80e-6, 80e-6, 33)
     np.testing.assert_allclose(virgin_basis(x, grid) @ k_fit, virgin_force(IWAN, x), rtol=0, atol=1e-5)
 
+
+
+def test_the_iwan_virgin_curves_interval_covers_the_curves_of_stiffnesses_drawn_from_their_covariance():
+    slip = np.array([2e-6, 6e-6, 20e-6, 50e-6])
+    k = np.array([5e5, 3e5, 1e5, 4e4])
+    rng = np.random.default_rng(4)
+    A = rng.normal(size=(4, 4))
+    cov = (A @ A.T + 4 * np.eye(4)) * 1e7                 # correlated, (3e3-1e4 N/m)^2
+    x = np.linspace(-70e-6, 70e-6, 15)
+    curve, half = virgin_interval(x, slip, k, cov)
+    np.testing.assert_allclose(curve, virgin_force(values_from_grid(slip, k), x), rtol=1e-12)
+    drawn = rng.multivariate_normal(k, cov, size=4000)
+    curves = np.array([virgin_force(values_from_grid(slip, kk), x) for kk in drawn])
+    inside = np.abs(curves - curve) <= half
+    assert inside[:, x != 0].mean() == pytest.approx(0.95, abs=0.015)
+    assert half[x == 0] == pytest.approx(0.0, abs=1e-12)   # every curve goes through 0
 
 def test_a_gms_of_one_element_without_a_stribeck_drop_is_a_spring_and_a_coulomb_slider_at_any_rate():
     k, F_c, s2 = 4e5, 8.0, 30.0
