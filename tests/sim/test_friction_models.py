@@ -346,6 +346,7 @@ def test_the_element_models_fit_vector_and_kernel_array_follow_the_flat_paramete
     assert [p.name for p in MODELS["masing_iwan"].flat_parameters(2)] == ["k_N_per_m[0]", "k_N_per_m[1]",
                                                                          "f_N[0]", "f_N[1]"]
     assert MODELS["gms"].state_length(GMS) == 9 and MODELS["masing_iwan"].state_length(IWAN) == 6
+    assert {n for n, m in MODELS.items() if m.has_elements} == {"gms", "masing_iwan"}
     with pytest.raises(NotImplementedError, match="state_length"):
         _ = MODELS["gms"].state_size
 
