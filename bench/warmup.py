@@ -61,6 +61,7 @@ def kernels_warm() -> bool:
 def warm_up() -> float:
     """Compile and cache every kernel; returns the seconds it took."""
     from sim.friction import MODELS
+    from sim.friction.iwan import design_matrix
     from sim.rig import RigModel, SimulatedRig
 
     from .config import DEFAULTS, load_rig, parse_plan
@@ -80,6 +81,7 @@ def warm_up() -> float:
     path = 1e-6 * np.sin(np.linspace(0.0, 2 * np.pi, 64, endpoint=False))[None, :]
     for friction in MODELS.values():          # the analysis fits every friction model
         friction.periodic_force(friction.typical(), path, np.array([300.0]))
+    design_matrix(path, np.array([1e-5]))      # the Iwan elements' linear fit (its own loop)
     # the warm-up's own two steps say what a user's run would of them (identifiability, an
     # unsettled step, poorly determined parameters): warnings about a plan nobody asked for,
     # printed before the user's run as if they were its; errors still pass

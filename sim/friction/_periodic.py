@@ -14,7 +14,11 @@ float: the period map is a contraction (affine for Dahl with exponent 1, where t
 step is exact), and a plain fixed-point iteration would need about F_c / (sigma X) periods
 at small amplitudes.  A larger state (elements) is iterated period by period: an element
 that slips in a period forgets where it started; one that sticks throughout carries a
-constant offset, which has no harmonics.
+constant offset, which has no harmonics.  The state starts virgin at x = 0 and is loaded
+quasi-statically (``dt`` infinite, ``v_end`` 0) to the path's first sample, so on a path
+centred on 0 such an element sits on its virgin line F_i = k_i x, symmetric, the Masing
+model's convention (:func:`sim.identify.path_friction`); an ``advance`` must accept that
+call.
 """
 
 from __future__ import annotations
@@ -52,9 +56,10 @@ def periodic_row(advance, p, x, v, dt, state_size, scale, out):
     that passes it on is inlined ("Cannot cache ... dynamic globals" otherwise)."""
     none = np.empty(0)
     s = np.zeros(state_size)
+    advance(p, s, x[0], math.inf, 0.0)          # virgin, quasi-static, from 0 to the first sample
     used = 0
     if state_size == 1:
-        a = 0.0                                  # secant on g(s) = period(s) - s
+        a = s[0]                                 # secant on g(s) = period(s) - s
         one_period(advance, p, s, x, v, dt, none)
         ga = s[0] - a
         b = s[0]

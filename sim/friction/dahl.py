@@ -62,8 +62,8 @@ class Dahl(FrictionModel):
     label = "Dahl"
     reference = "P. R. Dahl, A solid friction model, Aerospace Corp. TOR-0158(3107-18)-1, 1968; AIAA J. 14(9), 1976"
     rate_dependent = False
-    advance = dahl_advance
-    rows = dahl_rows
+    advance = staticmethod(dahl_advance)
+    rows = staticmethod(dahl_rows)
     parameters = (
         Parameter("F_c_N", "N", 0.0, 1e6, "Coulomb (sliding) friction force", 10.0),
         Parameter("sigma_N_per_m", "N/m", 0.0, 1e12, "rest stiffness: dF/dx at zero force", 1e6),
