@@ -345,7 +345,7 @@ def _rig_dict(rig) -> dict:
     return {"name": rig.name, "simulated": True, "calibration": _calibration(rig),
             "limits": {"drive_V": rig.limits.drive_V, "force_N": rig.limits.force_N,
                        "disp_m": rig.limits.disp_m, "accel_m_s2": rig.limits.accel_m_s2},
-            "model": dataclasses.asdict(rig.model)}
+            "model": rig.model.keys()}
 
 
 def _calibration(rig) -> dict:
