@@ -2,7 +2,7 @@
 of the feed motion, so every segment handed to a model's ``advance`` is monotone.  With the
 split the kernel is a fourth-order method on a Dahl contact (halving the step divides the
 error by about 16); without it the step across each reversal is wrong at first order in the
-step and the error stalls near 1e-3 of the friction level (measured: 6.5e-4 at 100 and 200
+step and the error stalls near 1e-3 of the friction level (measured: 6.5e-4 and 6.3e-4 at 100 and 200
 steps per period, against 5.7e-7 and 3.9e-8 with the split)."""
 
 from __future__ import annotations
