@@ -24,7 +24,16 @@ from enum import StrEnum
 from sim.errors import BenchError, ConfigurationError, EnvelopeError, LimitError, RunDirectoryError
 
 from .commands import ExitCode
-from .commands.results import cmd_analyze, cmd_check, cmd_compare, cmd_export, cmd_identify, cmd_modes, cmd_report
+from .commands.results import (
+    cmd_analyze,
+    cmd_check,
+    cmd_compare,
+    cmd_export,
+    cmd_identify,
+    cmd_import,
+    cmd_modes,
+    cmd_report,
+)
 from .commands.run import (
     cmd_demo,
     cmd_dry_run,
@@ -330,6 +339,14 @@ output is switched off on every exit.
     s.add_argument("--out", required=True, help="output directory for modes.csv and the figures")
     s.add_argument("--no-model", action="store_true", help="leave out the rig model's prediction (simulated rigs)")
     s.set_defaults(func=cmd_modes)
+
+    s = sub.add_parser("import", help="measured frequency responses (UFF58 FRF records, CSV, MATLAB .mat) into a run "
+                                      "directory that report, modes, compare and export read, recorded as imported")
+    s.add_argument("source", help="a .uff/.unv file of FRF records (function type 4), a .csv or a .mat (v5/v7) file")
+    s.add_argument("--out", required=True, help="new run directory")
+    s.add_argument("--mapping", help="TOML file: which field is what, units, response kind, level kind, mass "
+                                     "(docs/howto/measured-frfs.md)")
+    s.set_defaults(func=cmd_import)
 
     from .studies.cli import add_parsers as add_study_parsers
     add_study_parsers(sub, Progress)

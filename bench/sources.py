@@ -443,3 +443,52 @@ def _load_uff(path: Path) -> Source:
 def _log_rejections(src: Source) -> None:
     for r in src.rejected:
         log.warning("%s", words.said(SourceProblem.STEP_REJECTED, path=src.path, step=r.step, reason=r.reason))
+
+
+# ---------------------------------------------------------------------------- UFF58 FRF records
+
+FUNC_FRF, FUNC_SPECTRUM = 4, 12       # record 6: frequency response function, (linear) spectrum
+
+
+@dataclass(frozen=True)
+class FrfRecord:
+    """One dataset-58 record of a frequency-domain function as the file holds it (function
+    type 4, an FRF, or 12, a spectrum): read here, judged by :mod:`bench.frf_import`."""
+
+    record: int                 # 1-based, in the file's order of datasets 58
+    func_type: int
+    sdt: int                    # ordinate specific data type (record 9): 8 disp, 11 vel, 12 accel, 13 force
+    denominator: int            # record 10's (13: per newton)
+    f_Hz: np.ndarray
+    data: np.ndarray            # complex
+    ids: tuple[str, ...]        # id1..id5
+    load_case: int
+    rsp: tuple[int, int]        # response node, direction
+    ref: tuple[int, int]        # reference node, direction
+    unit: str                   # the ordinate's units label ("" when NONE)
+    tags: dict = field(default_factory=dict)    # our ``bench k=v`` tags (bench export)
+    error: str = ""             # a record pyuff could not read: why
+
+
+def read_frf_records(path: Path) -> list[FrfRecord]:
+    """Every dataset-58 record of function type 4 (FRF) or 12 (spectrum) in ``path``
+    (:class:`ConfigurationError` naming the file when it is not a universal file or holds
+    no dataset 58); the judging of what they hold is the importer's."""
+    out = []
+    for ds in _read_uff(Path(path)):
+        ft = int(ds.get("func_type", -1))
+        if "_error" in ds:
+            out.append(FrfRecord(ds["_record"], ft, -1, -1, np.zeros(0), np.zeros(0, complex), (), 0, (0, 0), (0, 0),
+                                 "", {}, ds["_error"]))
+            continue
+        if ft not in (FUNC_FRF, FUNC_SPECTRUM):
+            continue
+        unit = str(ds.get("ordinate_axis_units_lab", "") or "").strip()
+        out.append(FrfRecord(
+            ds["_record"], ft, int(ds.get("ordinate_spec_data_type", -1)), int(ds.get("orddenom_spec_data_type", 0) or 0),
+            np.asarray(ds.get("x", []), float), np.asarray(ds.get("data", []), complex),
+            tuple(str(ds.get(f"id{i}", "") or "") for i in range(1, 6)), int(ds.get("load_case_id", 0) or 0),
+            (int(ds.get("rsp_node", 0) or 0), int(ds.get("rsp_dir", 0) or 0)),
+            (int(ds.get("ref_node", 0) or 0), int(ds.get("ref_dir", 0) or 0)),
+            "" if unit.upper() == "NONE" else unit, _tags(ds)))
+    return out

@@ -230,6 +230,14 @@ def cmd_compare(args) -> int:
     return ExitCode.OK if result["overall"]["passed"] else ExitCode.FAILURE
 
 
+def cmd_import(args) -> int:
+    """Measured FRFs into a new run directory (bench.frf_run); every problem at once, exit 2."""
+    from ..frf_run import import_frfs, imported_line
+    out, imp = import_frfs(Path(args.source), Path(args.out), Path(args.mapping) if args.mapping else None)
+    print(imported_line(out, imp))
+    return ExitCode.OK
+
+
 def cmd_modes(args) -> int:
     """Each run's modes per level (in its quantity's unit) into OUT/modes.csv, with the seed's Figs. 13 and 17."""
     from ..reports import write_modes

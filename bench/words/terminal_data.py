@@ -351,8 +351,63 @@ STUDIES: Words = {
 }
 
 
+# ---------------------------------------------------------------------------- bench.frf_import, bench.frf_run
+
+
+def _where(where) -> str:
+    what, value = where
+    return f"{what} {value:g}" if isinstance(value, float) else f"{what} {value}"
+
+
+_LEVEL_KIND = {"force": "force amplitude held (N)", "disp": "displacement amplitude held (m)",
+               "accel": "acceleration amplitude held (m/s^2)"}
+_RESPONSE = {"disp": "compliance X/F", "vel": "mobility V/F", "accel": "accelerance A/F"}
+
+# bench import's problems, one line each (bench.frf_import.ImportProblem), and its lines (bench.frf_run.ImportLine)
+IMPORT: Words = {
+    "import_unknown_format": lambda path, suffix: (f"{path}: not a format bench import reads ({suffix or 'no suffix'}; "
+                                                   "it reads .uff/.unv (UFF58 FRF records), .csv and .mat)"),
+    "import_mat_v73": lambda path: (f"{path}: a MATLAB v7.3 file (HDF5), which bench import does not read (h5py is not "
+                                    "a dependency); save it as v7 in MATLAB: save('file.mat', 'tests', '-v7')"),
+    "import_unreadable": lambda path, error, detail: f"{path}: cannot be read ({error}: {detail})",
+    "import_mapping_key": lambda path, key: f"{path}: [{key}] is not a key of the mapping (docs/howto/measured-frfs.md)",
+    "import_mapping_value": lambda path, key, got, allowed: f"{path}: {key} = {got!r}; allowed: {allowed}",
+    "import_field_missing": lambda path, field: (f"{path}: {field}: not in the file and not in the mapping "
+                                                 f"(give it in --mapping, [import.fields] / [import.units] / [import])"),
+    "import_column_absent": lambda path, field, name: f"{path}: {field}: the mapping names {name!r}, which the file lacks",
+    "import_unit_unknown": lambda path, field, unit, allowed: (f"{path}: {field}: unit {unit!r} is not one bench import "
+                                                               f"knows ({', '.join(allowed)})"),
+    "import_unit_kind": lambda path, field, unit, kind, expected: (f"{path}: {field}: unit {unit!r} is of a "
+                                                                   f"{_RESPONSE.get(kind, kind)}, not of the "
+                                                                   f"{_RESPONSE.get(expected, expected)} declared"),
+    "import_not_a_number": lambda path, where, field, got: f"{path}: {_where(where)}, {field}: {got!r} is not a number",
+    "import_not_finite": lambda path, where, field, count: f"{path}: {_where(where)}: {count} {field} value(s) NaN or infinite",
+    "import_not_increasing": lambda path, where, at_Hz, after_Hz: (f"{path}: {_where(where)}: frequencies not increasing "
+                                                                   f"({at_Hz:.6g} Hz after {after_Hz:.6g} Hz)"),
+    "import_too_few": lambda path, where, points, need: (f"{path}: {_where(where)}: {points} frequencies; a mode fit "
+                                                         f"needs at least {need}"),
+    "import_no_level": lambda path, where: (f"{path}: {_where(where)}: no level (no bench tag; give level_from and "
+                                            "[import.levels] or level_pattern in --mapping)"),
+    "import_no_frf": lambda path: f"{path}: no frequency response in the file",
+    "import_record_kind": lambda path, where, sdt: (f"{path}: {_where(where)}: an FRF of ordinate data type {sdt}, not "
+                                                    "displacement (8), velocity (11) or acceleration (12)"),
+    "import_record_unreadable": lambda path, where, detail: f"{path}: {_where(where)}: {detail}",
+    "import_points": lambda path, where, nodes: (f"{path}: {_where(where)}: FRFs at nodes {nodes} and none at the "
+                                                 "reference (drive point); choose one with point = NODE in --mapping"),
+    "import_force_grid": lambda path, where: f"{path}: {_where(where)}: force spectrum on other frequencies than its FRF",
+    "import_plan_range": lambda path, detail: f"{path}: outside what a run directory holds: {detail}",
+    "import_out_not_new": lambda path: f"{path}: exists and is not empty (bench import writes a new run directory)",
+    "import_analysis": lambda run, path: (f"{run}: imported from {path}: it holds fundamentals only, and the friction "
+                                          "fit to fundamentals is not there yet (bench modes and bench report read it)"),
+    "imported": lambda path, out, levels, points, kind, response: (
+        f"imported from {path}: {levels} levels ({_LEVEL_KIND.get(kind, kind)}), {points} frequencies, "
+        f"{_RESPONSE.get(response, response)}; written to {out} (bench modes / report / export read it)"),
+    "origin_line": lambda file, sha256: f"imported from {file} (SHA-256 {sha256[:12]}), not a bench measurement",
+}
+
+
 # the mappings :func:`said` and :func:`refused` look a code up in (by name: a reworded mapping is found)
-_MAPPINGS = ("SOURCE", "NOT_IN_PLANT", "TWIN_NOTE", "TWIN", "COMPARE", "EXPORT", "ANALYZE", "TOOLS", "RESULTS", "STUDIES")
+_MAPPINGS = ("SOURCE", "NOT_IN_PLANT", "TWIN_NOTE", "TWIN", "COMPARE", "EXPORT", "ANALYZE", "TOOLS", "RESULTS", "STUDIES", "IMPORT")
 
 
 def said(code: str, **fields) -> str:
