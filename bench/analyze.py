@@ -34,6 +34,7 @@ class AnalyzeSaid(StrEnum):
     ANALYSING = "analysing"                 # steps, path, rejected: counts
     ARTEFACT = "artefact"                   # sentence: the artefact cause's (sim.artefacts)
     VERDICT = "verdict"                     # verdict: the analysis' (sim.discrepancy)
+    IMPORTED = "imported_fundamentals"      # run, path: an imported run (bench import) holds fundamentals only
 
 
 def default_out_dir(source: Path) -> Path:
@@ -56,12 +57,25 @@ def _guess(source: Path, rig: Path | None) -> tuple[dict | None, float | None]:
     return r.guess(), float(v_ref) if v_ref else None
 
 
+def refuse_imported(source: Path) -> None:
+    """Refuse an imported run (``bench import``): it holds the fundamentals only, and the
+    friction fit to fundamentals (issue 42 item 3) is not there yet."""
+    if not (Path(source) / "run.json").is_file():
+        return
+    from .frf_run import origin_of
+    from .storage import RunStore
+    origin = origin_of(RunStore.open(Path(source)).metadata)
+    if origin is not None:
+        raise words.refused(ConfigurationError, AnalyzeSaid.IMPORTED, run=source, path=origin.get("file", "?"))
+
+
 def analyze_source(source: Path, out_dir: Path | None = None, rig: Path | None = None, *, src=None) -> dict:
     """Analyse SOURCE, write ``analysis.json`` (and ``analysis.html``) to ``out_dir``; return the dict.
     ``src``: SOURCE already read by :func:`bench.sources.load_source` (not read again)."""
     source = Path(source)
     if not source.exists():
         raise words.refused(ConfigurationError, SourceProblem.NO_SUCH_SOURCE, path=source)
+    refuse_imported(source)
     src = src if src is not None else load_source(source)
     steps, rejected = list(src.steps), [dict(step=r.step, reason=r.reason) for r in src.rejected]
     if not steps:

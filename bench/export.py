@@ -35,6 +35,7 @@ import numpy as np
 
 from procedures.kind import FORCE, QUANTITIES, ProcedureKind, of_stored_plan
 
+from .frf_run import origin_of
 from .storage import RunStore
 from .words import terminal_data as words
 
@@ -164,7 +165,8 @@ def frf_datasets(meta: dict, results: list[dict]) -> list[dict]:
             out.append(_dset58(
                 func_type=FUNC_FRF, func_id=len(out) + 1, x=[s["freq_Hz"] for s in steps], data=data,
                 id1=words.said(ExportSaid.FRF_ID1, kind=kind, level=q.format(level), direction=d),
-                id2=words.said(ExportSaid.FRF_ID2, plan=plan.get("name", ""), rig=(meta.get("rig") or {}).get("name", "")),
+                id2=words.said(ExportSaid.FRF_ID2, plan=plan.get("name", ""), rig=(meta.get("rig") or {}).get("name", ""),
+                               origin=(origin_of(meta) or {}).get("name", "")),
                 id3=str(meta.get("started", "")),
                 id4=_tags(level=f"{level:g}", L=li, dir=d, n=len(steps), q=kind, **unit_tag),
                 id5=words.said(ExportSaid.FRF_ID5, kind=kind, quantity=q.name, labels=meta.get("labels") or {}),
@@ -218,7 +220,7 @@ def export_run(run_dir: Path, out_dir: Path | None = None, *, time_records: bool
             log.warning("%s", words.said(ExportSaid.NO_FRF, run=run_dir))
         from .export_modes import export_modes
         paths += export_modes(store.path, out, _write_uff)
-        if time_records:
+        if time_records and origin_of(meta) is None:     # an imported run holds no time records
             paths.append(_write_uff(out / "time.uff", time_datasets(store, meta, results)))
     else:
         log.warning("%s", words.said(ExportSaid.NO_STEPS, run=run_dir))

@@ -55,7 +55,6 @@ class ImportProblem(StrEnum):
     FORCE_GRID = "import_force_grid"                 # path, where: a force spectrum on other frequencies
     PLAN_RANGE = "import_plan_range"                 # path, detail: the stored plan's validator
     OUT_NOT_NEW = "import_out_not_new"               # path
-    ANALYSIS_OF_IMPORT = "import_analysis"           # run, path (the file it came from): fundamentals only
 
 
 RESPONSES = ("disp", "vel", "accel")

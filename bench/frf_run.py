@@ -14,9 +14,10 @@ record was imported).  run.json says where it came from::
     "origin": {"kind": "imported", "file": ..., "sha256": ..., "format": ..., "mapping": {...},
                "response": "disp" | "vel" | "accel", "level_kind": ..., "force": bool}
 
-and its rig is the default rig's layout, not simulated, with ``expected_mass_kg`` the
-mapping's ``mass_kg`` where the source holds the force beside the response (the energy
-balance's mass), NaN otherwise.  Nothing is written until every problem is known.
+and its rig is the default rig's layout, not simulated, no instruments (``bench analyze``
+and ``identify`` refuse an imported run before they read it), ``expected_mass_kg`` the
+mapping's ``mass_kg`` when given.  The energy balance's mass is ``origin.mass_kg``, used only
+where the source holds the force beside the response (``origin.force``).  Nothing is written until every problem is known.
 """
 
 from __future__ import annotations
@@ -30,7 +31,6 @@ from pathlib import Path
 import numpy as np
 
 from procedures.kind import ProcedureKind
-from sim.errors import ConfigurationError
 
 from .frf_import import Imported, ImportProblem, _Problems, read_frfs
 from .storage import RunStatus, RunStore
@@ -41,10 +41,16 @@ PERIOD_SAMPLES = 64       # the fundamental's period synthesized at 64 points (l
 
 
 class ImportLine(StrEnum):
-    """What ``bench import`` prints and the report's origin line (words: :data:`bench.words.terminal_data.IMPORT`)."""
+    """What ``bench import`` prints (words: :data:`bench.words.terminal_data.IMPORT`)."""
 
     IMPORTED = "imported"           # path, out, levels, points, kind, response
-    ORIGIN = "origin_line"          # file, sha256
+
+
+def energy_mass_kg(origin: dict) -> float:
+    """The energy balance's mass of an imported run: the mapping's ``mass_kg`` where the source
+    holds the force beside the response, else NaN (no energy balance)."""
+    m = origin.get("mass_kg")
+    return float(m) if origin.get("force") and isinstance(m, (int, float)) else math.nan
 
 
 def origin_of(meta: dict) -> dict | None:
@@ -131,9 +137,8 @@ def _plan(imp: Imported, freqs: list[float], skip: list[list[int]]) -> dict:
 def _rig(imp: Imported) -> dict:
     from .config import DEFAULTS, load_rig
     rig = load_rig(DEFAULTS / "sim_rig.toml")
-    has_force = all(lv.force_N is not None for lv in imp.levels)
     rig = replace(rig, name=imp.path.name, notes=IMPORTED, simulated=False, model=None,
-                  expected_mass_kg=imp.mass_kg if has_force else math.nan)
+                  expected_mass_kg=imp.mass_kg if math.isfinite(imp.mass_kg) else rig.expected_mass_kg)
     return rig.to_dict()
 
 
@@ -159,7 +164,8 @@ def import_frfs(source: Path, out: Path, mapping: Path | None = None) -> tuple[P
     origin = {"kind": IMPORTED, "file": str(source.resolve()), "name": source.name, "sha256": _sha256(source),
               "format": imp.format, "mapping": imp.mapping, "mapping_file": str(mapping) if mapping else "",
               "response": imp.response, "level_kind": imp.level_kind,
-              "force": all(lv.force_N is not None for lv in imp.levels)}
+              "force": all(lv.force_N is not None for lv in imp.levels),
+              "mass_kg": imp.mass_kg if math.isfinite(imp.mass_kg) else None}
     store = RunStore.create(out, {"plan": plan_dict, "procedure": plan.describe(), "rig": _rig(imp),
                                   "versions": _versions(), "sim_seed": None, "identifiability_warnings": [],
                                   "origin": origin})
@@ -174,13 +180,6 @@ def import_frfs(source: Path, out: Path, mapping: Path | None = None) -> tuple[P
 def _versions() -> dict:
     from .session import versions
     return versions()
-
-
-def refuse_imported(meta: dict, run: Path) -> None:
-    """Refuse an analysis of an imported run (fundamentals only; issue 42 item 3 is not there yet)."""
-    o = origin_of(meta)
-    if o is not None:
-        raise words.refused(ConfigurationError, ImportProblem.ANALYSIS_OF_IMPORT, run=run, path=o.get("file", "?"))
 
 
 def imported_line(out: Path, imp: Imported) -> str:

@@ -54,6 +54,8 @@ def cmd_identify(args) -> int:
     source = Path(args.source)
     if not source.exists():
         raise FileNotFoundError(2, say_result(ResultLine.NO_SOURCE), str(source))
+    from ..analyze import refuse_imported
+    refuse_imported(source)               # fundamentals only: nothing to identify the friction from yet
     src = load_source(source)
     if src.kind == "run":
         rig = parse_rig({"rig": rig_toml(src.metadata["rig"])}, f"{source}/run.json")

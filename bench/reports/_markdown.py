@@ -204,6 +204,9 @@ def write_report(run_dir: Path, with_runs=()) -> Path:
 def _header_md(run: RunData) -> list[str]:
     meta, plan, rig, levels_N = run.meta, run.plan, run.rig, run.levels_N
 
+    from ._imported import header_md, imported
+    if (origin := imported(run)) is not None:
+        return header_md(run, origin, _table)
     kind = run.kind
     md = [f"# {kind.label[:1].upper() + kind.label[1:]} report: {plan.get('name', '?')}", ""]
     md += accounting_md(run)
@@ -327,19 +330,24 @@ def _write_figures(run: RunData, out: Path, others=()) -> list[tuple[str, str]]:
     save(figures.plot_compliance(series, colours, title, run.legacy, level=q), out / "compliance.png")
     lines = ("each level's locked point, one marker per level (no sweep)" if run.kind is ProcedureKind.PHASE_RESONANCE
              else "solid = up sweep, dashed = down sweep")
+    from ._imported import imported
     files.append(("compliance.png", f"compliance vs frequency, log-log, one colour per {q.name} level ({q.unit}), "
-                  f"{lines}. Top: |X1/F1| from the fundamentals of the harmonic "
-                  "fits; middle: compliance_pp = (x_max - x_min)/(2 F1), the seed's Eq. 9 in SI, from "
-                  f"{pp_source(results)}; bottom: phase of X1/F1 in degrees (0 = spring-like, -180 = mass-like)."))
+                  + (f"{lines}. Top: |X1/F1| from the fundamentals of the harmonic "
+                     "fits; middle: compliance_pp = (x_max - x_min)/(2 F1), the seed's Eq. 9 in SI, from "
+                     f"{pp_source(results)}" if imported(run) is None else
+                     "one line per level. Top: |X1/F1| imported; middle: compliance_pp, here |X1/F1| (the source "
+                     "holds fundamentals only)")
+                  + "; bottom: phase of X1/F1 in degrees (0 = spring-like, -180 = mass-like)."))
     save(figures.plot_accelerance(series, colours, title, run.rig.get("expected_mass_kg"), level=q),
          out / "accelerance.png")
     files.append(("accelerance.png", "|A1/F1| vs frequency per level; it tends to 1/m above the friction "
                   "resonance (dotted line: the rig file's expected mass)."))
-    save(figures.plot_quality(series, colours, title, run.plan.get("force_tolerance"), level=q), out / "quality.png")
-    files.append(("quality.png", f"THD of the displacement (friction nonlinearity), {q.name}-control error "
-                  "of the fundamental with the tolerance, and the displacement residual after the harmonic fit "
-                  "relative to the fundamental (noise and non-periodic motion such as an unsettled free vibration; "
-                  f"steps above {100 * UNSETTLED_RESIDUAL:g} % are flagged)."))
+    if imported(run) is None:           # an import has no control error, THD or residual to draw
+        save(figures.plot_quality(series, colours, title, run.plan.get("force_tolerance"), level=q), out / "quality.png")
+        files.append(("quality.png", f"THD of the displacement (friction nonlinearity), {q.name}-control error "
+                      "of the fundamental with the tolerance, and the displacement residual after the harmonic fit "
+                      "relative to the fundamental (noise and non-periodic motion such as an unsettled free "
+                      f"vibration; steps above {100 * UNSETTLED_RESIDUAL:g} % are flagged)."))
 
     if run.modes is not None:
         save(mode_figures.plot_fig17([run.modes], f"Modes per {q.name} level: {title}"), out / "modes.png")
@@ -488,6 +496,9 @@ def _results_md(run: RunData, out: Path, files: list[tuple[str, str]]) -> list[s
     md += analysis_md(run)
     md += identification_md(run.ident, plotted=bool(run.ident.history))
 
+    from ._imported import imported, steps_md
+    if imported(run) is not None:
+        return md + steps_md()
     md += ["## Steps needing attention", ""]
     failed = [r for r in results if not r.get("force_converged", True)]
     q = run.level_quantity

@@ -80,7 +80,11 @@ class RunModes:
 def run_label(meta: dict, path: Path) -> str:
     """The run's label for legends: its ``labels`` (bench run --label k=v) or its directory's name."""
     labels = meta.get("labels") or {}
-    return ", ".join(f"{k}={v}" for k, v in labels.items()) if labels else Path(path).name
+    label = ", ".join(f"{k}={v}" for k, v in labels.items()) if labels else Path(path).name
+    origin = meta.get("origin")
+    if isinstance(origin, dict) and origin.get("kind") == "imported":     # never passed off as a bench measurement
+        label += f" (imported from {origin.get('name', '?')})"
+    return label
 
 
 def model_peaks(cmp: ModelComparison | None) -> tuple[dict, dict]:

@@ -247,7 +247,7 @@ EXPORT: Words = {
     "no_steps_to_export": lambda run: f"{run}: no completed steps; only the CSV header was written",
     "id_too_long": lambda line: f"UFF ID line longer than 80 characters: {line!r}",
     "frf_id1": lambda kind, level, direction: f"{_FRF[kind][0]}, {level}, {direction} sweep",
-    "frf_id2": lambda plan, rig: f"{plan} on {rig}",
+    "frf_id2": lambda plan, rig, origin="": f"imported from {origin}" if origin else f"{plan} on {rig}",
     "frf_id5": lambda kind, quantity, labels: f"{_FRF[kind][1]}, {quantity} amplitude held at the level; {_labels(labels)}",
     "time_id1": lambda channel, unit, key: f"{channel} ({unit}), step {key}",
     "mode_id1": lambda mode, level_N, status, resonance_Hz, curve: (
@@ -267,6 +267,9 @@ ANALYZE: Words = {
     "analysing": lambda steps, path, rejected: f"analysing {steps} steps of {path} ({rejected} rejected)",
     "artefact": lambda sentence: f"artefact: {sentence}",
     "verdict": lambda verdict: f"verdict: {verdict}",
+    "imported_fundamentals": lambda run, path: (f"{run}: imported from {path}: the run holds fundamentals only, and "
+                                                "the friction fit to fundamentals is not there yet (bench modes and "
+                                                "bench report read it)"),
 }
 
 # ---------------------------------------------------------------------------- bench.commands.tools
@@ -397,12 +400,9 @@ IMPORT: Words = {
     "import_force_grid": lambda path, where: f"{path}: {_where(where)}: force spectrum on other frequencies than its FRF",
     "import_plan_range": lambda path, detail: f"{path}: outside what a run directory holds: {detail}",
     "import_out_not_new": lambda path: f"{path}: exists and is not empty (bench import writes a new run directory)",
-    "import_analysis": lambda run, path: (f"{run}: imported from {path}: it holds fundamentals only, and the friction "
-                                          "fit to fundamentals is not there yet (bench modes and bench report read it)"),
     "imported": lambda path, out, levels, points, kind, response: (
         f"imported from {path}: {levels} levels ({_LEVEL_KIND.get(kind, kind)}), {points} frequencies, "
         f"{_RESPONSE.get(response, response)}; written to {out} (bench modes / report / export read it)"),
-    "origin_line": lambda file, sha256: f"imported from {file} (SHA-256 {sha256[:12]}), not a bench measurement",
 }
 
 
