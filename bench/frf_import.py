@@ -438,7 +438,7 @@ def _uff_level(rec, mapping: dict) -> tuple[float | None, str | None]:
 
 
 def _from_uff(path: Path, mapping: dict, problems: _Problems) -> Imported | None:
-    from .sources import FUNC_FRF, FUNC_SPECTRUM, read_frf_records
+    from .sources import FUNC_AUTO, FUNC_FRF, FUNC_SPECTRUM, read_frf_records
     try:
         records = read_frf_records(path)
     except ConfigurationError as e:
@@ -458,7 +458,7 @@ def _from_uff(path: Path, mapping: dict, problems: _Problems) -> Imported | None
             continue
         if lunit:
             units_seen.add(lunit)
-        if rec.func_type == FUNC_SPECTRUM and rec.sdt == SDT_FORCE:
+        if rec.func_type in (FUNC_SPECTRUM, FUNC_AUTO) and rec.sdt == SDT_FORCE:
             forces[level] = rec
         elif rec.func_type == FUNC_FRF and rec.sdt in SDT_RESPONSE:
             frfs.setdefault((level, rec.rsp), []).append(rec)
@@ -507,7 +507,8 @@ def _from_uff(path: Path, mapping: dict, problems: _Problems) -> Imported | None
             if fr.f_Hz.shape != rec.f_Hz.shape or not np.allclose(fr.f_Hz, rec.f_Hz, rtol=1e-6):
                 problems.add(ImportProblem.FORCE_GRID, path=path, where=("record", fr.record))
             else:
-                force = np.abs(fr.data)
+                # a linear spectrum holds the amplitude, an auto spectrum its square (both peak values)
+                force = np.abs(fr.data) if fr.func_type == FUNC_SPECTRUM else np.sqrt(np.abs(fr.data))
         levels.append(ImportedLevel(level * lscale, ("record", rec.record), rec.f_Hz,
                                     to_compliance(rec.data * scale, rec.f_Hz, response), force))
     return Imported(path, "uff58", sorted(responses)[0] if responses else "disp", kind, levels)

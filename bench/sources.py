@@ -447,13 +447,13 @@ def _log_rejections(src: Source) -> None:
 
 # ---------------------------------------------------------------------------- UFF58 FRF records
 
-FUNC_FRF, FUNC_SPECTRUM = 4, 12       # record 6: frequency response function, (linear) spectrum
+FUNC_FRF, FUNC_SPECTRUM, FUNC_AUTO = 4, 12, 2   # record 6: frequency response function, (linear) spectrum, auto spectrum
 
 
 @dataclass(frozen=True)
 class FrfRecord:
     """One dataset-58 record of a frequency-domain function as the file holds it (function
-    type 4, an FRF, or 12, a spectrum): read here, judged by :mod:`bench.frf_import`."""
+    type 4, an FRF, 12, a spectrum, or 2, an auto spectrum): read here, judged by :mod:`bench.frf_import`."""
 
     record: int                 # 1-based, in the file's order of datasets 58
     func_type: int
@@ -471,7 +471,7 @@ class FrfRecord:
 
 
 def read_frf_records(path: Path) -> list[FrfRecord]:
-    """Every dataset-58 record of function type 4 (FRF) or 12 (spectrum) in ``path``
+    """Every dataset-58 record of function type 4 (FRF), 12 (spectrum) or 2 (auto spectrum) in ``path``
     (:class:`ConfigurationError` naming the file when it is not a universal file or holds
     no dataset 58); the judging of what they hold is the importer's."""
     out = []
@@ -481,7 +481,7 @@ def read_frf_records(path: Path) -> list[FrfRecord]:
             out.append(FrfRecord(ds["_record"], ft, -1, -1, np.zeros(0), np.zeros(0, complex), (), 0, (0, 0), (0, 0),
                                  "", {}, ds["_error"]))
             continue
-        if ft not in (FUNC_FRF, FUNC_SPECTRUM):
+        if ft not in (FUNC_FRF, FUNC_SPECTRUM, FUNC_AUTO):
             continue
         unit = str(ds.get("ordinate_axis_units_lab", "") or "").strip()
         out.append(FrfRecord(
