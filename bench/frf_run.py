@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import hashlib
 import math
+import os
+import shutil
 from dataclasses import replace
 from enum import StrEnum
 from pathlib import Path
@@ -32,6 +34,7 @@ import numpy as np
 
 from procedures.kind import ProcedureKind
 
+from .durable import _fsync_dir, deferred_sync
 from .frf_import import Imported, ImportProblem, _Problems, read_frfs
 from .storage import RunStatus, RunStore
 from .words import terminal_data as words
@@ -166,14 +169,25 @@ def import_frfs(source: Path, out: Path, mapping: Path | None = None) -> tuple[P
               "response": imp.response, "level_kind": imp.level_kind,
               "force": all(lv.force_N is not None for lv in imp.levels),
               "mass_kg": imp.mass_kg if math.isfinite(imp.mass_kg) else None}
-    store = RunStore.create(out, {"plan": plan_dict, "procedure": plan.describe(), "rig": _rig(imp),
-                                  "versions": _versions(), "sim_seed": None, "identifiability_warnings": [],
-                                  "origin": origin})
-    empty = {"force_N": np.zeros(0), "accel_m_s2": np.zeros(0), "disp_m": np.zeros(0), "fs_Hz": np.array(math.nan),
-             "t0_s": np.array(0.0)}
-    for r in results:
-        store.write_step(r["key"], r, empty)      # type: ignore[arg-type]
-    store.finish(RunStatus.COMPLETED, steps_done=len(results), steps_total=len(results))
+    # written whole into a hidden directory beside OUT, synced once, then renamed into place:
+    # an import cut short leaves no half run directory (and 2 x 500 fsyncs cost seconds)
+    staging = out.parent / f".{out.name}.importing-{os.getpid()}"
+    shutil.rmtree(staging, ignore_errors=True)
+    try:
+        with deferred_sync():
+            store = RunStore.create(staging, {"plan": plan_dict, "procedure": plan.describe(), "rig": _rig(imp),
+                                              "versions": _versions(), "sim_seed": None,
+                                              "identifiability_warnings": [], "origin": origin})
+            empty = {"force_N": np.zeros(0), "accel_m_s2": np.zeros(0), "disp_m": np.zeros(0),
+                     "fs_Hz": np.array(math.nan), "t0_s": np.array(0.0)}
+            for r in results:
+                store.write_step(r["key"], r, empty)      # type: ignore[arg-type]
+            store.finish(RunStatus.COMPLETED, steps_done=len(results), steps_total=len(results))
+        os.sync()
+        os.replace(staging, out)                          # OUT absent or empty (checked above)
+        _fsync_dir(out.parent)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
     return out, imp
 
 

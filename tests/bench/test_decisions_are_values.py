@@ -43,6 +43,8 @@ from bench.durable import WriteRefusal
 from bench.export import ExportSaid
 from bench.export_modes import ModeId
 from bench.files import FileKind, FileRefusal
+from bench.frf_import import ImportProblem
+from bench.frf_run import ImportLine
 from bench.numbers import Shown
 from bench.plan_time import Online, planned_step_list, rig_time_bound_s
 from bench.reports._markdown import accounting_md, flagged_reasons
@@ -214,7 +216,8 @@ def test_every_code_has_words_in_its_renderers():
         assert set(words) == {str(c) for c in codes}, codes
     data = {"SOURCE": SourceProblem, "NOT_IN_PLANT": NotInPlant, "TWIN_NOTE": TwinNote, "TWIN": TwinSaid,
             "COMPARE": CompareSaid, "EXPORT": (*ExportSaid, *ModeId), "ANALYZE": AnalyzeSaid, "TOOLS": ToolLine,
-            "RESULTS": ResultLine, "STUDIES": (*StudiesSaid, *StudySaid, *MapRefusal, *McRefusal, *BatchSaid)}
+            "RESULTS": ResultLine, "STUDIES": (*StudiesSaid, *StudySaid, *MapRefusal, *McRefusal, *BatchSaid),
+            "IMPORT": (*ImportProblem, *ImportLine)}
     for name, codes in data.items():
         assert set(getattr(data_words, name)) == {str(c) for c in codes}, name
     assert set(data) == set(data_words._MAPPINGS)       # said() finds each code in one mapping only

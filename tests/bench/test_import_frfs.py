@@ -16,9 +16,9 @@ import time
 import numpy as np
 import pytest
 
+from bench.reports._modes import run_modes
 from benchtools.masing_peaks import golden_max, steady_state
 from benchtools.procs import bench_main
-from bench.reports._modes import run_modes
 
 MODEL = dict(F_s_N=10.0, x_s_m=1e-5, n=1.5, mass_kg=10.0)
 LEVELS_N = (1.0, 2.0, 3.5)
