@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from bench.reports._modes import run_modes
+from benchtools.frf_files import CSV_MAPPING, MAT_MAPPING, UFF_MAPPING, sdof, write_csv, write_mat, write_uff
 from benchtools.masing_peaks import golden_max, steady_state
 from benchtools.procs import bench_main
 
@@ -78,36 +79,14 @@ def _check_against_simulator(run, masing, energy: bool):
 
 
 def _pyuff_file(path, masing, with_force=True):
-    """Another layout than bench export's: accelerance (g/N ordinate label g), the level in
-    id1's words, two response points per level (the drive point 1 and node 7), the force's
-    auto spectrum (|F1|^2, function type 2: pyuff writes no type 12) after each level, no bench tags."""
-    import pyuff
-    sets = []
-    for P, (f, X, _, _) in masing.items():
-        w2 = (2 * np.pi * f) ** 2
-        A = -w2 * X / 9.80665                 # in g per newton
-        for node, scale in ((7, 0.4), (1, 1.0)):
-            sets.append(dict(type=58, func_type=4, id1=f"Accelerance at {P} N", id2="lab shaker", id3="NONE", id4="NONE",
-                             id5="NONE", rsp_node=node, rsp_dir=1, ref_node=1, ref_dir=1, load_case_id=3,
-                             abscissa_spacing=0, abscissa_spec_data_type=18, abscissa_axis_units_lab="Hz",
-                             ordinate_spec_data_type=12, ordinate_axis_units_lab="g",
-                             orddenom_spec_data_type=13, orddenom_axis_units_lab="N", x=f, data=A * scale))
-        if with_force:
-            sets.append(dict(type=58, func_type=2, id1=f"Force at {P} N", id2="NONE", id3="NONE", id4="NONE", id5="NONE",
-                             rsp_node=1, rsp_dir=1, ref_node=1, ref_dir=1, load_case_id=3, abscissa_spacing=0,
-                             abscissa_spec_data_type=18, abscissa_axis_units_lab="Hz", ordinate_spec_data_type=13,
-                             ordinate_axis_units_lab="N^2", orddenom_spec_data_type=13,
-                             orddenom_axis_units_lab="N", x=f, data=np.full(f.size, P * P, complex)))
-    pyuff.UFF(str(path)).write_sets(sets, mode="add")
-    return path
+    return write_uff(path, {P: (f, X) for P, (f, X, _, _) in masing.items()}, force=with_force)
 
 
-UFF_MAP = 'level_from = "id1"\nlevel_pattern = "at ([0-9.]+) N"\nmass_kg = 10.0\n'
 
 
 def test_pyuff_accelerance_per_level_and_point_gives_the_simulators_resonance(tmp_path, masing, capsys):
     src = _pyuff_file(tmp_path / "lab.unv", masing)
-    (tmp_path / "map.toml").write_text("[import]\n" + UFF_MAP)
+    (tmp_path / "map.toml").write_text(UFF_MAPPING)
     assert bench_main("import", src, "--out", tmp_path / "run", "--mapping", tmp_path / "map.toml") == 0
     assert "imported from" in capsys.readouterr().out
     _check_against_simulator(tmp_path / "run", masing, energy=True)
@@ -115,45 +94,26 @@ def test_pyuff_accelerance_per_level_and_point_gives_the_simulators_resonance(tm
 
 def test_without_force_spectra_there_is_no_energy_balance(tmp_path, masing):
     src = _pyuff_file(tmp_path / "lab.uff", masing, with_force=False)
-    (tmp_path / "map.toml").write_text("[import]\n" + UFF_MAP)
+    (tmp_path / "map.toml").write_text(UFF_MAPPING)
     assert bench_main("import", src, "--out", tmp_path / "run", "--mapping", tmp_path / "map.toml") == 0
     _check_against_simulator(tmp_path / "run", masing, energy=False)
 
 
 def test_a_pandas_csv_of_mobility_in_degrees(tmp_path, masing):
-    import pandas as pd
-    rows = []
-    for P, (f, X, _, _) in masing.items():
-        V = 1j * 2 * np.pi * f * X * 1e3           # mm/s per newton
-        rows += [{"Level [N]": P, "f [Hz]": x, "|V/F| [mm/s/N]": abs(v), "arg [deg]": np.degrees(np.angle(v)),
-                  "Force [N]": P} for x, v in zip(f, V, strict=True)]
-    pd.DataFrame(rows).to_csv(tmp_path / "frf.csv", index=False)
-    (tmp_path / "map.toml").write_text('[import]\nresponse = "vel"\nmass_kg = 10.0\n[import.fields]\n'
-                                       'frequency = "f"\namplitude = "|V/F|"\nphase = "arg"\n')
+    write_csv(tmp_path / "frf.csv", {P: (f, X) for P, (f, X, _, _) in masing.items()})
+    (tmp_path / "map.toml").write_text(CSV_MAPPING)
     assert bench_main("import", tmp_path / "frf.csv", "--out", tmp_path / "run",
                       "--mapping", tmp_path / "map.toml") == 0
     _check_against_simulator(tmp_path / "run", masing, energy=True)
 
 
-def _sdof(f, f_n=60.0, zeta=0.03, m=10.0):
-    w, wn = 2 * np.pi * f, 2 * np.pi * f_n
-    return 1 / (m * (wn * wn - w * w + 2j * zeta * wn * w))
-
-
 def test_a_savemat_struct_array_response_controlled(tmp_path):
     """A lab's MATLAB tests at held displacement: a linear mode (its FRF is the same at every
     level), whose peak of |X/F| is f_n sqrt(1 - 2 zeta^2) exactly."""
-    import scipy.io
     f_n, zeta = 60.0, 0.03
     f = np.linspace(45.0, 75.0, 31)
-    H = _sdof(f, f_n, zeta)
-    tests = np.zeros(2, dtype=[("held_um", "O"), ("freq", "O"), ("mag", "O"), ("ph", "O")])
-    for i, level in enumerate((1.0, 3.0)):
-        tests[i] = (level, f, np.abs(H) * 1e6, np.angle(H))         # um/N, rad
-    scipy.io.savemat(tmp_path / "tests.mat", {"tests": tests})
-    (tmp_path / "map.toml").write_text(
-        '[import]\nvariable = "tests"\nlevel_kind = "disp"\n[import.fields]\nlevel = "held_um"\nfrequency = "freq"\n'
-        'amplitude = "mag"\nphase = "ph"\n[import.units]\nlevel = "um"\nresponse = "um/N"\nphase = "rad"\n')
+    write_mat(tmp_path / "tests.mat", {1e-6: (f, sdof(f, f_n, zeta)), 3e-6: (f, sdof(f, f_n, zeta))})
+    (tmp_path / "map.toml").write_text(MAT_MAPPING)
     assert bench_main("import", tmp_path / "tests.mat", "--out", tmp_path / "run",
                       "--mapping", tmp_path / "map.toml") == 0
     run = run_modes(tmp_path / "run", model=False)
@@ -172,7 +132,7 @@ def test_a_savemat_struct_array_response_controlled(tmp_path):
 def test_the_benchs_own_frf_uff_imports_to_the_same_modes(tmp_path, masing, capsys):
     from bench.api import open_run
     src = _pyuff_file(tmp_path / "lab.unv", masing)
-    (tmp_path / "map.toml").write_text("[import]\n" + UFF_MAP)
+    (tmp_path / "map.toml").write_text(UFF_MAPPING)
     assert bench_main("import", src, "--out", tmp_path / "a", "--mapping", tmp_path / "map.toml") == 0
     files = open_run(tmp_path / "a").export(tmp_path / "exp")
     assert not any(p.name == "time.uff" for p in files)          # no time records were imported
@@ -193,7 +153,7 @@ def test_the_benchs_own_frf_uff_imports_to_the_same_modes(tmp_path, masing, caps
 def test_the_report_says_imported_and_analyze_refuses(tmp_path, masing, capsys):
     from bench.api import open_run
     src = _pyuff_file(tmp_path / "lab.unv", masing)
-    (tmp_path / "map.toml").write_text("[import]\n" + UFF_MAP)
+    (tmp_path / "map.toml").write_text(UFF_MAPPING)
     assert bench_main("import", src, "--out", tmp_path / "run", "--mapping", tmp_path / "map.toml") == 0
     text = open_run(tmp_path / "run").report().read_text()
     assert "Imported from" in text and "not a bench measurement" in text and str(src.resolve()) in text
@@ -262,7 +222,7 @@ def test_twelve_levels_of_41_frequencies_and_their_modes_in_a_few_seconds(tmp_pa
     f = np.linspace(40.0, 80.0, 41)
     rows = []
     for k in range(12):
-        H = _sdof(f, 65.0 - k, 0.02 + 0.002 * k)
+        H = sdof(f, 65.0 - k, 0.02 + 0.002 * k)
         rows += [{"level [N]": 1.0 + k, "frequency [Hz]": x, "re [m/N]": h.real, "im [m/N]": h.imag}
                  for x, h in zip(f, H, strict=True)]
     pd.DataFrame(rows).to_csv(tmp_path / "big.csv", index=False)
@@ -276,3 +236,22 @@ def test_twelve_levels_of_41_frequencies_and_their_modes_in_a_few_seconds(tmp_pa
     for k, e in enumerate(feed):
         assert abs(e.resonance_Hz / ((65.0 - k) * math.sqrt(1 - 2 * (0.02 + 0.002 * k) ** 2)) - 1) < 1e-4
     assert seconds < 5.0
+
+
+def test_the_howtos_example_files_are_the_generators_and_import(tmp_path, capsys):
+    """docs/howto/frf-examples/ is what docs/gen_frf_examples.py writes (with benchtools'
+    writers, as the tests' files): each imports, and the mapping files are the writers' own."""
+    import runpy
+    from benchtools import REPO
+    docs = REPO / "docs" / "howto" / "frf-examples"
+    gen = runpy.run_path(str(REPO / "docs" / "gen_frf_examples.py"))
+    written = gen["write_examples"](tmp_path / "ex")
+    assert sorted(p.name for p in written) == sorted(p.name for p in docs.iterdir())
+    for p in written:
+        if p.suffix in (".toml", ".csv"):
+            assert p.read_text() == (docs / p.name).read_text(), p.name
+    for name, mapping in gen["EXAMPLES"]:
+        for where in (tmp_path / "ex", docs):
+            out = tmp_path / f"run-{where.name}-{name}"
+            assert bench_main("import", where / name, "--out", out, "--mapping", where / mapping) == 0
+            assert all(e.ok for e in run_modes(out, model=False).modes if e.mode == "feed"), name
