@@ -62,7 +62,7 @@ def refuse_imported(source: Path) -> None:
     friction fit to fundamentals (issue 42 item 3) is not there yet."""
     if not (Path(source) / "run.json").is_file():
         return
-    from .frf_run import origin_of
+    from .frf_import import origin_of
     from .storage import RunStore
     origin = origin_of(RunStore.open(Path(source)).metadata)
     if origin is not None:

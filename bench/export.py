@@ -35,7 +35,7 @@ import numpy as np
 
 from procedures.kind import FORCE, QUANTITIES, ProcedureKind, of_stored_plan
 
-from .frf_run import origin_of
+from .frf_import import origin_of
 from .storage import RunStore
 from .words import terminal_data as words
 

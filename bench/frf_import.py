@@ -57,6 +57,22 @@ class ImportProblem(StrEnum):
     OUT_NOT_NEW = "import_out_not_new"               # path
 
 
+IMPORTED = "imported"       # run.json's origin.kind of an imported run
+
+
+def energy_mass_kg(origin: dict) -> float:
+    """The energy balance's mass of an imported run: the mapping's ``mass_kg`` where the source
+    holds the force beside the response, else NaN (no energy balance)."""
+    m = origin.get("mass_kg")
+    return float(m) if origin.get("force") and isinstance(m, (int, float)) else math.nan
+
+
+def origin_of(meta: dict) -> dict | None:
+    """run.json's ``origin`` when the run was imported, else None (a bench measurement)."""
+    o = meta.get("origin")
+    return o if isinstance(o, dict) and o.get("kind") == IMPORTED else None
+
+
 RESPONSES = ("disp", "vel", "accel")
 LEVEL_KINDS = ("force", "disp", "accel")
 G = 9.80665

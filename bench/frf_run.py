@@ -35,11 +35,10 @@ import numpy as np
 from procedures.kind import ProcedureKind
 
 from .durable import _fsync_dir, deferred_sync
-from .frf_import import Imported, ImportProblem, _Problems, read_frfs
+from .frf_import import IMPORTED, Imported, ImportProblem, _Problems, read_frfs
 from .storage import RunStatus, RunStore
 from .words import terminal_data as words
 
-IMPORTED = "imported"
 PERIOD_SAMPLES = 64       # the fundamental's period synthesized at 64 points (loop plots, bench compare)
 
 
@@ -47,19 +46,6 @@ class ImportLine(StrEnum):
     """What ``bench import`` prints (words: :data:`bench.words.terminal_data.IMPORT`)."""
 
     IMPORTED = "imported"           # path, out, levels, points, kind, response
-
-
-def energy_mass_kg(origin: dict) -> float:
-    """The energy balance's mass of an imported run: the mapping's ``mass_kg`` where the source
-    holds the force beside the response, else NaN (no energy balance)."""
-    m = origin.get("mass_kg")
-    return float(m) if origin.get("force") and isinstance(m, (int, float)) else math.nan
-
-
-def origin_of(meta: dict) -> dict | None:
-    """run.json's ``origin`` when the run was imported, else None (a bench measurement)."""
-    o = meta.get("origin")
-    return o if isinstance(o, dict) and o.get("kind") == IMPORTED else None
 
 
 def _sha256(path: Path) -> str:

@@ -61,8 +61,9 @@ def sdof(f, f_n: float = 60.0, zeta: float = 0.03, m: float = 10.0):
 
 
 def write_uff(path, levels: dict, *, force: bool = True):
-    import pyuff
     from pathlib import Path
+
+    import pyuff
     Path(path).unlink(missing_ok=True)          # pyuff adds to a file that exists
     sets = []
     common = dict(type=58, id2="lab shaker", id3="NONE", id4="NONE", id5="NONE", rsp_dir=1, ref_node=1, ref_dir=1,

@@ -68,7 +68,7 @@ def mode_masses(meta: dict):
         model = stored_model(rig)
     except Exception as e:  # noqa: BLE001 - the ratios come out without the model's masses
         log.warning("rig model unreadable for the energy balance's masses: %s", e)
-    from ..frf_run import energy_mass_kg, origin_of
+    from ..frf_import import energy_mass_kg, origin_of
     if (origin := origin_of(meta)) is not None:     # imported: the mapping's mass, and only beside a measured force
         feed = (energy_mass_kg(origin), "mass_kg of the import's mapping")
     elif model is not None:

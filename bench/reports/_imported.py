@@ -3,7 +3,7 @@ where it came from and what it holds, never a bench measurement."""
 
 from __future__ import annotations
 
-from ..frf_run import origin_of
+from ..frf_import import origin_of
 
 _RESPONSE = {"disp": "compliance X/F", "vel": "mobility V/F", "accel": "accelerance A/F"}
 _LEVEL = {"force": "force-controlled: the force amplitude held at each level (N)",

@@ -242,6 +242,7 @@ def test_the_howtos_example_files_are_the_generators_and_import(tmp_path, capsys
     """docs/howto/frf-examples/ is what docs/gen_frf_examples.py writes (with benchtools'
     writers, as the tests' files): each imports, and the mapping files are the writers' own."""
     import runpy
+
     from benchtools import REPO
     docs = REPO / "docs" / "howto" / "frf-examples"
     gen = runpy.run_path(str(REPO / "docs" / "gen_frf_examples.py"))
