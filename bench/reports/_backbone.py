@@ -74,7 +74,8 @@ def stepped_points(others, mode: str = "feed") -> list[dict]:
     """The modes of stepped-sine runs (``bench.reports._modes.RunModes``) as points of a
     backbone: each level's resonance with its 95 % interval and its damping ratio, at the
     amplitude of the fitted peak, |X1| = peak compliance x level for the feed mode (the
-    compliance_pp of seed Eq. 9) and peak accelerance x level / w^2 for the pitching mode."""
+    compliance_pp of seed Eq. 9) and peak accelerance x level / w^2 for the pitching mode;
+    a response-controlled run's, the displacement it held (an acceleration held / w^2)."""
     out = []
     for run in others:
         if run.kind != "stepped_sine":
@@ -82,7 +83,14 @@ def stepped_points(others, mode: str = "feed") -> list[dict]:
         for e in run.modes:
             if e.mode != mode or e.status != "ok" or not np.isfinite(e.peak):
                 continue
-            amp = e.peak * e.level_N if mode == "feed" else e.peak * e.level_N / (2 * np.pi * e.resonance_Hz) ** 2
+            w2 = (2 * np.pi * e.resonance_Hz) ** 2
+            held = getattr(getattr(run, "level_quantity", None), "key", "force")
+            if held == "disp":          # a response-controlled level is the amplitude it held
+                amp = e.level_N
+            elif held == "accel":
+                amp = e.level_N / w2
+            else:
+                amp = e.peak * e.level_N if mode == "feed" else e.peak * e.level_N / w2
             out.append(dict(label=run.label, level_N=e.level_N, amplitude_m=amp, frequency_Hz=e.resonance_Hz,
                             frequency_low_Hz=e.resonance_low_Hz, frequency_high_Hz=e.resonance_high_Hz,
                             damping_ratio=e.damping_ratio, damping_ratio_low=e.damping_ratio_low,
@@ -97,7 +105,7 @@ def plot_backbone(results: list[dict], rig: dict, title: str, others=()) -> Figu
     X = np.array([r["amplitude_m"] for r in rows])
     f = np.array([r["frequency_Hz"] for r in rows])
     z = np.array([r["damping_ratio"] for r in rows])
-    ok = np.array([bool(r["locked"]) for r in rows])
+    ok = np.array([bool(r["locked"]) for r in rows], dtype=bool)
     fig = Figure(figsize=(10, 4.5), layout="constrained")
     ax1, ax2 = fig.subplots(1, 2)
     grid = np.geomspace(X[X > 0].min() / 3, X.max() * 3, 80) if np.any(X > 0) else np.array([])
@@ -115,7 +123,7 @@ def plot_backbone(results: list[dict], rig: dict, title: str, others=()) -> Figu
         label = "model: Masing loop, single-harmonic balance" + ("" if rig.get("simulated") else " (expected values)")
         ax1.plot(grid, [p.frequency_Hz for p in model], "-", color="0.5", label=label)
         ax2.plot(grid, [100 * p.damping_ratio for p in model], "-", color="0.5", label=label)
-    for ax, y in ((ax1, f), (ax2, 100 * z)):
+    for ax, y in ((ax1, f), (ax2, 100 * z)) if rows else ():
         ax.plot(X[ok], y[ok], "o", color="C0", label="locked")
         if np.any(~ok):
             ax.plot(X[~ok], y[~ok], "x", color="C3", ms=9, label="not locked")
@@ -132,11 +140,17 @@ def plot_backbone(results: list[dict], rig: dict, title: str, others=()) -> Figu
             hi = np.array([p[f"{key}_high_Hz" if key == "frequency" else f"{key}_high"] for p in mine]) * k
             err = np.nan_to_num(np.vstack([v - lo, hi - v]), nan=0.0)
             ax.errorbar(a, v, yerr=err, fmt="s", color=f"C{i + 1}", ms=5, capsize=3,
-                        label=f"stepped sine, {label} (peak per level, 95 %)")
+                        label=f"{'stepped sine, ' if rows else ''}{label} (peak per level, 95 %)")
     for ax in (ax1, ax2):
         ax.set_xscale("log")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
+    if not rows:             # the modes per level alone (an imported run): no phase resonance drawn
+        ax1.set(xlabel="displacement amplitude |X1| (m)", ylabel="resonance (Hz)", title="backbone: resonance per level")
+        ax2.set(xlabel="displacement amplitude |X1| (m)", ylabel="damping ratio (%)",
+                title="damping ratio (single-mode fit)")
+        fig.suptitle(f"Backbone: {title}")
+        return fig
     ax1.set(xlabel="displacement amplitude |X1| (m)", ylabel="natural frequency (Hz)",
             title="backbone: frequency at phase resonance")
     ax2.set(xlabel="displacement amplitude |X1| (m)", ylabel="damping ratio (%)",

@@ -48,7 +48,11 @@ def header_md(run, origin: dict, table) -> list[str]:
 
 
 def steps_md() -> list[str]:
-    """In place of the steps needing attention: an import has no control and no time records."""
-    return ["## Steps needing attention", "",
+    """In place of the analysis, the identification and the steps needing attention: an import
+    has fundamentals only, no control and no time records."""
+    return ["## Analysis and identification", "",
+            "Not made: the run holds fundamentals only, and the friction fit to fundamentals is not there yet "
+            "(`bench analyze` and `bench identify` refuse an imported run).", "",
+            "## Steps needing attention", "",
             "None judged: imported fundamentals carry neither a control record nor time records to check "
             "(the source's own checks are the measuring software's).", ""]

@@ -360,6 +360,12 @@ def _write_figures(run: RunData, out: Path, others=()) -> list[tuple[str, str]]:
                           "(bars: 95 % intervals; squares: half-power cross-check; triangles: no peak inside the "
                           "grid, the mode lies at or beyond that edge; lines: the rig model's prediction, simulated "
                           "rigs)."))
+    if imported(run) is not None and run.modes is not None:     # the backbone of the imported levels
+        from ._backbone import plot_backbone
+        save(plot_backbone([], {}, title, [run.modes]), out / "backbone.png")
+        files.append(("backbone.png", "the imported levels' backbone: each level's resonance and damping ratio "
+                      "(single-mode fit, 95 % intervals) against the response amplitude at the fitted peak "
+                      "(|X1| = peak compliance x force level; a held displacement as held)."))
     if any("backbone" in r for r in results):
         from ._backbone import plot_backbone
         save(plot_backbone(results, run.rig, title, others), out / "backbone.png")
@@ -493,12 +499,12 @@ def _results_md(run: RunData, out: Path, files: list[tuple[str, str]]) -> list[s
                        _pct(c.max), _pct(c.max_unflagged), "; ".join(c.notes) or "ok"] for c in cmp.levels])
         md.append("")
 
+    from ._imported import imported, steps_md
+    if imported(run) is not None:       # no analysis nor identification of fundamentals yet
+        return md + steps_md()
     md += analysis_md(run)
     md += identification_md(run.ident, plotted=bool(run.ident.history))
 
-    from ._imported import imported, steps_md
-    if imported(run) is not None:
-        return md + steps_md()
     md += ["## Steps needing attention", ""]
     failed = [r for r in results if not r.get("force_converged", True)]
     q = run.level_quantity

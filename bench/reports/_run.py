@@ -110,6 +110,9 @@ class RunData:
 
     @property
     def title(self) -> str:
+        origin = self.meta.get("origin")
+        if isinstance(origin, dict) and origin.get("kind") == "imported":
+            return f"{origin.get('name', '?')} (imported)"
         return f"{self.plan.get('name', '?')} on {self.rig.get('name', '?')}"
 
     @property

@@ -16,6 +16,7 @@ import time
 import numpy as np
 import pytest
 
+from bench.reports._backbone import stepped_points
 from bench.reports._modes import run_modes
 from benchtools.frf_files import CSV_MAPPING, MAT_MAPPING, UFF_MAPPING, sdof, write_csv, write_mat, write_uff
 from benchtools.masing_peaks import golden_max, steady_state
@@ -70,9 +71,13 @@ def _check_against_simulator(run, masing, energy: bool):
             assert eb is not None and abs(eb.value / zeta - 1) < 0.03, (P, eb, zeta)
         else:
             assert eb is None
-    # the backbone: the resonance falls as the force rises (a softening friction contact)
+    # the backbone: the resonance falls as the force rises (a softening friction contact), each
+    # at the simulator's response amplitude there (|X1/F1| at its peak x the force)
     f_r = [modes[("feed", P)].resonance_Hz for P in LEVELS_N]
     assert f_r == sorted(f_r, reverse=True)
+    points = {p["level_N"]: p for p in stepped_points([run_modes(run, model=False)])}
+    for P, (_, _, f_peak, _) in masing.items():
+        assert abs(points[P]["amplitude_m"] / (abs(_H(P, f_peak)) * P) - 1) < 0.01, (P, points[P])
 
 
 # ---------------------------------------------------------------------------- files written another way
@@ -124,6 +129,8 @@ def test_a_savemat_struct_array_response_controlled(tmp_path):
         assert e.ok and abs(e.resonance_Hz / peak - 1) < 1e-4, (e.resonance_Hz, peak)
         assert abs(e.damping_ratio / zeta - 1) < 1e-3, e.damping_ratio
         assert e.extra.get("energy_balance") is None          # no force in the file
+    # the backbone's amplitude of a held displacement is the displacement held
+    assert sorted(p["amplitude_m"] for p in stepped_points([run])) == [1e-6, 3e-6]
 
 
 # ---------------------------------------------------------------------------- round trip, report, analyze
@@ -157,7 +164,7 @@ def test_the_report_says_imported_and_analyze_refuses(tmp_path, masing, capsys):
     assert bench_main("import", src, "--out", tmp_path / "run", "--mapping", tmp_path / "map.toml") == 0
     text = open_run(tmp_path / "run").report().read_text()
     assert "Imported from" in text and "not a bench measurement" in text and str(src.resolve()) in text
-    assert "Stepped sine report" not in text
+    assert "Stepped sine report" not in text and "(backbone.png)" in text
     modes = open_run(tmp_path / "run").modes(model=False)
     assert modes["label"].str.contains("imported from lab.unv").all()
     capsys.readouterr()
