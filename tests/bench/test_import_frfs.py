@@ -215,6 +215,16 @@ def test_a_field_missing_from_the_mapping_is_named(tmp_path, capsys):
     assert not (tmp_path / "run").exists()
 
 
+def test_a_column_the_mapping_names_and_the_file_lacks_is_named(tmp_path, capsys):
+    (tmp_path / "t.csv").write_text("level [N],f [Hz],re [m/N],im [m/N]\n" +
+                                    "".join(f"1,{x},1e-6,0\n" for x in (40, 45, 50, 55)))
+    (tmp_path / "map.toml").write_text('[import]\n[import.fields]\nfrequency = "freq"\n')
+    assert bench_main("import", tmp_path / "t.csv", "--out", tmp_path / "run", "--mapping", tmp_path / "map.toml") == 2
+    err = capsys.readouterr().err
+    assert "t.csv: frequency: the mapping names 'freq', which the file lacks" in err, err
+    assert not (tmp_path / "run").exists()
+
+
 def test_a_v73_mat_file_is_refused_by_name(tmp_path, capsys):
     head = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Mon Dec  7 2026 HDF5 schema 1.00 ."
     (tmp_path / "t.mat").write_bytes(head.ljust(512, b" ") + b"\x89HDF\r\n\x1a\n" + bytes(64))
