@@ -157,6 +157,35 @@ def test_the_benchs_own_frf_uff_imports_to_the_same_modes(tmp_path, masing, caps
         assert x.extra.get("energy_balance") is not None and y.extra.get("energy_balance") is None
 
 
+def test_a_held_response_survives_the_round_trip_and_load_cases_give_levels(tmp_path):
+    """frf.uff's tags carry a response-controlled level's unit (unit=m): the re-import is
+    response-controlled at the same levels with the same modes; a file whose levels are its
+    load cases, named by [import.levels], reads as well."""
+    import pyuff
+    from bench.api import open_run
+    f = np.linspace(45.0, 75.0, 31)
+    write_mat(tmp_path / "tests.mat", {1e-6: (f, sdof(f, 60.0, 0.03)), 3e-6: (f, sdof(f, 58.0, 0.04))})
+    (tmp_path / "map.toml").write_text(MAT_MAPPING)
+    assert bench_main("import", tmp_path / "tests.mat", "--out", tmp_path / "a", "--mapping", tmp_path / "map.toml") == 0
+    open_run(tmp_path / "a").export(tmp_path / "exp")
+    assert bench_main("import", tmp_path / "exp" / "frf.uff", "--out", tmp_path / "b") == 0
+    a, b = (run_modes(tmp_path / r, model=False) for r in ("a", "b"))
+    assert a.level_quantity.unit == b.level_quantity.unit == "m"
+    assert [(e.level_N, f"{e.resonance_Hz:.5g}", f"{e.damping_ratio:.3g}") for e in a.modes] == \
+        [(e.level_N, f"{e.resonance_Hz:.5g}", f"{e.damping_ratio:.3g}") for e in b.modes]
+    sets = [dict(type=58, func_type=4, id1="run", id2="NONE", id3="NONE", id4="NONE", id5="NONE", rsp_node=1,
+                 rsp_dir=1, ref_node=1, ref_dir=1, load_case_id=case, abscissa_spacing=0, abscissa_spec_data_type=18,
+                 abscissa_axis_units_lab="Hz", ordinate_spec_data_type=8, ordinate_axis_units_lab="m",
+                 orddenom_spec_data_type=13, orddenom_axis_units_lab="N", x=f, data=sdof(f, f_n, 0.03))
+            for case, f_n in ((11, 61.0), (12, 57.0))]
+    pyuff.UFF(str(tmp_path / "cases.uff")).write_sets(sets, mode="add")
+    (tmp_path / "cases.toml").write_text('[import]\nlevel_from = "load_case"\n[import.levels]\n"11" = 2.0\n"12" = 5.0\n')
+    assert bench_main("import", tmp_path / "cases.uff", "--out", tmp_path / "c", "--mapping", tmp_path / "cases.toml") == 0
+    got = {e.level_N: e.resonance_Hz for e in run_modes(tmp_path / "c", model=False).modes}
+    assert abs(got[2.0] / (61.0 * math.sqrt(1 - 2 * 0.03 ** 2)) - 1) < 1e-4
+    assert abs(got[5.0] / (57.0 * math.sqrt(1 - 2 * 0.03 ** 2)) - 1) < 1e-4
+
+
 def test_the_report_says_imported_and_analyze_refuses(tmp_path, masing, capsys):
     from bench.api import open_run
     src = _pyuff_file(tmp_path / "lab.unv", masing)
