@@ -162,6 +162,7 @@ def test_a_held_response_survives_the_round_trip_and_load_cases_give_levels(tmp_
     response-controlled at the same levels with the same modes; a file whose levels are its
     load cases, named by [import.levels], reads as well."""
     import pyuff
+
     from bench.api import open_run
     f = np.linspace(45.0, 75.0, 31)
     write_mat(tmp_path / "tests.mat", {1e-6: (f, sdof(f, 60.0, 0.03)), 3e-6: (f, sdof(f, 58.0, 0.04))})
