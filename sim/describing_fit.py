@@ -47,6 +47,7 @@ Z95 = 1.959963984540054
 SIDE = 1e-6                        # distance kept from a value the model excludes (Sakai's n = 1)
 DIFF_STEP = 1e-6                   # relative step of the forward-difference Jacobian
 MAX_NFEV = 200
+SATURATION_SEEN = 0.9              # loop_reach at which the data have seen the loop saturate
 
 
 class ParameterStatus(StrEnum):
@@ -89,7 +90,10 @@ class FundamentalFit:
     """The fit (module doc).  ``friction_values``: the model's parameters as its
     ``periodic_force`` takes them; ``bic_by_structure``: every structure tried;
     ``force_reach``: the largest force amplitude of the data over the fitted friction level
-    (the model's ``friction_level``: F_s, F_c)."""
+    (the model's ``friction_level``: F_s, F_c); ``loop_reach``: the friction's fundamental at
+    the largest fitted amplitude over that level (below :data:`SATURATION_SEEN` the data never
+    saw the loop saturate: the friction level, if identified, is the model's extrapolation of
+    the pre-rolling loops, and ``separations`` names a level at saturation)."""
 
     model: str
     structure: Structure
@@ -105,6 +109,7 @@ class FundamentalFit:
     bic_by_structure: dict[str, float]
     separations: tuple[Separation, ...]
     force_reach: float
+    loop_reach: float
     n_points: int
     nfev: int
     seconds: float
@@ -201,11 +206,19 @@ def _flat_value(values: Mapping[str, Any], name: str) -> float:
     return float(np.atleast_1d(values[base])[int(rest[:-1])])
 
 
-def initial_guess(model: FrictionModel | str, levels: Sequence[Level], *, points: int = POINTS) -> dict[str, Any]:
-    """A start for the fit from the data alone: the mass and a stiffness from a straight line
-    of Re(1/H) against w^2 at the level of smallest response, the friction level 1.5 times the
-    largest force amplitude, and the model's typical parameters scaled to both (newtons by
-    the force's factor, metres by the length's, N/m and N s/m by their ratio)."""
+FORCE_FACTORS = (1.5, 4.0, 12.0, 40.0)   # friction levels tried, times the largest force amplitude
+
+
+def initial_guesses(model: FrictionModel | str, levels: Sequence[Level], *,
+                    points: int = POINTS) -> list[dict[str, Any]]:
+    """Starts for the fit from the data alone (the fit takes the one of least chi-square):
+    the mass and a stiffness K from a straight line of Re(1/H) against w^2 at the level of
+    smallest response; the friction level :data:`FORCE_FACTORS` times the largest force
+    amplitude (the fundamentals may not say where it is: a level well below it reaches the
+    pre-rolling amplitudes only); the model's typical parameters, and for a parameter with an
+    excluded value (Sakai's n = 1) also a value on its other side, scaled to both (newtons
+    by the force's factor, metres by a length's factor that makes K_eq at the smallest
+    amplitude K, N/m and N s/m by their ratio)."""
     m = friction_model(model) if isinstance(model, str) else model
     amp = [float(np.median(np.abs(lv.receptance_m_per_N) * _force(lv))) for lv in levels]
     low = levels[int(np.argmin(amp))]
@@ -215,26 +228,35 @@ def initial_guess(model: FrictionModel | str, levels: Sequence[Level], *, points
     mass = -slope if slope < 0 else float(np.median(np.abs(D) / w2))
     K = K if K > 0 else float(np.median(np.abs(D)))
     F_top = max(float(np.max(_force(lv))) for lv in levels)
-    typ = m.typical()
-    sF = 1.5 * F_top / m.friction_level(typ)
-    a_low = amp[int(np.argmin(amp))]
+    a_low = min(amp)
+    typicals = [m.typical()]
+    for p in m.parameters:
+        for x in p.exclude:
+            if p.lo < x < p.hi and not p.elements:
+                typicals += [{**t, p.name: x - 0.8 * (t[p.name] - x)} for t in list(typicals)]
+    out = []
+    for typ in typicals:
+        L_typ = m.friction_level(typ) / float(describing_function(m, typ, 1e-9, points=points).real)
+        for factor_F in FORCE_FACTORS:
+            sF = factor_F * F_top / m.friction_level(typ)
 
-    def scaled(sL: float) -> dict[str, Any]:
-        factor = {"N": sF, "m": sL, "N/m": sF / sL, "N s/m": sF / sL}
-        return {k: (np.asarray(v) * factor.get(_unit(m, k), 1.0)).tolist() if isinstance(v, list)
-                else v * factor.get(_unit(m, k), 1.0) for k, v in typ.items()}
+            def scaled(sL: float) -> dict[str, Any]:
+                factor = {"N": sF, "m": sL, "N/m": sF / sL, "N s/m": sF / sL}
+                return {k: (np.asarray(v) * factor.get(_unit(m, k), 1.0)).tolist() if isinstance(v, list)
+                        else v * factor.get(_unit(m, k), 1.0) for k, v in typ.items()}
 
-    # bisection on ln sL for K_eq(smallest amplitude) = K, from where that amplitude is below
-    # the scaled model's length F / K_eq (K_eq falls with sL there; below, the loop saturates)
-    L_typ = m.friction_level(typ) / float(describing_function(m, typ, 1e-9, points=points).real)
-    lo = math.log(a_low / (L_typ * sF))
-    hi = lo + 30.0
-    for _ in range(50):
-        mid = 0.5 * (lo + hi)
-        Kmid = describing_function(m, scaled(math.exp(mid)), a_low, points=points).real
-        lo, hi = (lo, mid) if Kmid < K else (mid, hi)
-    out = scaled(math.exp(0.5 * (lo + hi)))
-    out["mass_kg"] = float(mass)
+            # bisection on ln sL for K_eq(smallest amplitude) = K, from where that amplitude is
+            # below the scaled model's length F / K_eq (K_eq falls with sL there; below it the
+            # loop saturates)
+            lo = math.log(a_low / (L_typ * sF))
+            hi = lo + 30.0
+            for _ in range(50):
+                mid = 0.5 * (lo + hi)
+                Kmid = describing_function(m, scaled(math.exp(mid)), a_low, points=points).real
+                lo, hi = (lo, mid) if Kmid < K else (mid, hi)
+            start = scaled(math.exp(0.5 * (lo + hi)))
+            start["mass_kg"] = float(mass)
+            out.append(start)
     return out
 
 
@@ -259,6 +281,13 @@ def _structure_start(structure: Structure, prob: _Problem, theta: np.ndarray, ma
     return {"spring_N_per_m": 0.1 * k, "dashpot_N_s_per_m": 0.02 * math.sqrt(k * mass)}
 
 
+def _chi2_at(m: FrictionModel, levels: Sequence[Level], start: dict[str, Any], held: dict[str, float],
+             points: int) -> float:
+    prob = _Problem(m, Structure.NONE, levels, start, held, points)
+    r = prob.residuals(prob.theta0())
+    return float(r @ r) if np.all(np.isfinite(r)) else math.inf
+
+
 def fit_fundamentals(levels: Sequence[Level], model: FrictionModel | str = "masing", *,
                      structures: Sequence[Structure | str] = (Structure.NONE, Structure.MODE),
                      guess: Mapping[str, Any] | None = None, fixed: Mapping[str, float] | None = None,
@@ -266,16 +295,17 @@ def fit_fundamentals(levels: Sequence[Level], model: FrictionModel | str = "masi
     """Fit ``model`` (a name of :data:`sim.friction.MODELS` or the model) and the carriage's
     mass to ``levels`` with each of ``structures`` and return the fit of least BIC
     (module doc).  ``guess``: start values by name (the model's parameters, ``mass_kg``, a
-    structure's; :func:`initial_guess` fills the rest); ``fixed``: values held."""
+    structure's; the best of :func:`initial_guesses` fills the rest); ``fixed``: values held."""
     t0 = time.perf_counter()
     m = friction_model(model) if isinstance(model, str) else model
     levels = list(levels)
     if not levels:
         raise ValueError("fit_fundamentals: no levels")
-    start: dict[str, Any] = initial_guess(m, levels, points=points)
-    start.update(guess or {})
     held = dict(fixed or {})
-    start.update(held)
+    starts = [{**g, **(guess or {}), **held} for g in initial_guesses(m, levels, points=points)]
+    if guess and all(p.name in guess for p in m.parameters) and "mass_kg" in guess:
+        starts = starts[:1]
+    start = min(starts, key=lambda st: _chi2_at(m, levels, st, held, points))
     wanted = [Structure(s) for s in structures]
     order = [Structure.NONE] + [s for s in wanted if s is not Structure.NONE]
     fits: dict[Structure, tuple[_Problem, Any]] = {}
@@ -344,12 +374,15 @@ def _summarise(m: FrictionModel, prob: _Problem, res: Any, bic: dict[Structure, 
     fv, mass, sv = prob.split(flat)
     level_N = m.friction_level(fv)
     reach = max(float(np.max(_force(lv))) for lv in prob.levels) / level_N
+    a_max = max(float(np.max(receptance(m, fv, mass, lv, prob.structure, sv, points=prob.points)[1]))
+                for lv in prob.levels)
+    loop_reach = float(np.abs(describing_function(m, fv, a_max, points=prob.points))) * a_max / level_N
     friction_names = {p.name for p in m.flat_parameters(prob.n_elements)}
     open_ = {e.name for e in estimates if e.status is ParameterStatus.DEGENERATE}
     seps = []
     if open_ & friction_names:
         seps.append(Separation.HARMONICS)
-    if any(e.unit == "N" for e in prob.free if e.name in open_ & friction_names) and reach < 1.0:
+    if loop_reach < SATURATION_SEEN or any(e.unit == "N" for e in prob.free if e.name in open_ & friction_names):
         seps.append(Separation.LEVEL_AT_SATURATION)
     if "mass_kg" in open_:
         seps.append(Separation.FREQUENCIES_ACROSS_RESONANCE)
@@ -357,5 +390,5 @@ def _summarise(m: FrictionModel, prob: _Problem, res: Any, bic: dict[Structure, 
         seps.append(Separation.FREQUENCIES_AT_MODE)
     return FundamentalFit(m.name, prob.structure, fv, mass, sv, tuple(estimates), tuple(directions),
                           tuple(float(x) for x in S), chi2, dof, bic[prob.structure],
-                          {str(s): b for s, b in bic.items()}, tuple(seps), reach, N // 2, nfev, seconds,
+                          {str(s): b for s, b in bic.items()}, tuple(seps), reach, loop_reach, N // 2, nfev, seconds,
                           np.asarray(res.fun))
