@@ -52,6 +52,7 @@ GRID = 192             # log-spaced amplitudes that bracket a force-controlled p
 GRID_SPAN = 8.0        # the grid reaches this factor beyond the measured amplitudes either way
 ROOT_TOL = 1e-13       # relative width of a refined bracket in a
 ROOT_ITER = 60
+THIRD_ITER = 3         # corrections of the displacement's third harmonic (0: single-harmonic balance)
 
 
 class Control(StrEnum):
@@ -174,22 +175,51 @@ class Level:
 
 def receptance(model: FrictionModel | str, values: Mapping[str, Any], mass_kg: float, level: Level,
                structure: Structure = Structure.NONE, structure_values: Mapping[str, float] | None = None,
-               *, points: int = POINTS) -> tuple[np.ndarray, np.ndarray]:
+               *, points: int = POINTS, third: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """The model's receptance H (m/N, complex) at ``level``'s points and the friction
-    element's amplitude a (m) there, by the harmonic balance of the module doc."""
+    element's amplitude a (m) there, by the harmonic balance of the module doc; ``third``:
+    with the displacement's third harmonic (:data:`THIRD_ITER` corrections), else the
+    single-harmonic balance."""
     m = _model(model)
     sv = structure_values or {}
     w = 2 * math.pi * level.frequency_Hz
     base = -w ** 2 * mass_kg + structure_stiffness(structure, sv, w)
-    if level.control is Control.RESPONSE:
-        a = level.drive
-        D = base + describing_function(m, values, a, w, points=points)
-        return 1.0 / D, a
-    return _force_controlled(m, values, base, w, level, points)
+    base3 = -9 * w ** 2 * mass_kg + structure_stiffness(structure, sv, 3 * w)
+    solve = (lambda dK: level.drive) if level.control is Control.RESPONSE else _amplitudes(m, values, base, w, level,
+                                                                                            points)
+    dK = np.zeros(w.size, complex)
+    a = solve(dK)
+    X3 = np.zeros(w.size, complex)
+    for it in range(THIRD_ITER + 1 if third else 1):
+        S1p, S3p, S1, S3 = _two_paths(m, values, a, X3, w, points)
+        K0 = S1p / a
+        dK = (S1 - S1p) / a
+        if it == (THIRD_ITER if third else 0):
+            break
+        # the third harmonic's balance, base3 X3 + S3(X3) = 0, by a Newton step with the
+        # friction's stiffness for it taken as the secant one, Re K_eq
+        X3 = X3 - (base3 * X3 + S3) / (base3 + K0.real)
+        a = solve(dK)
+    return 1.0 / (base + K0 + dK), a
 
 
-def _force_controlled(m: FrictionModel, values: Mapping[str, Any], base: np.ndarray, w: np.ndarray, level: Level,
-                      points: int) -> tuple[np.ndarray, np.ndarray]:
+def _two_paths(m: FrictionModel, values: Mapping[str, Any], a: np.ndarray, X3: np.ndarray, w: np.ndarray,
+               points: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Harmonics 1 and 3 (complex, N) of the friction along a cos(theta) and along
+    a cos(theta) + Re(X3 exp(3 i theta)), every point in one call."""
+    theta = 2 * math.pi * np.arange(points) / points
+    pure = a[:, None] * np.cos(theta)[None, :]
+    paths = np.vstack([pure, pure + (X3[:, None] * np.exp(3j * theta)[None, :]).real])
+    F = _model(m).periodic_force(values, paths, np.concatenate([w, w]))
+    S = np.fft.rfft(F, axis=1) * (2.0 / points)
+    n = a.size
+    return S[:n, 1], S[:n, 3], S[n:, 1], S[n:, 3]
+
+
+def _amplitudes(m: FrictionModel, values: Mapping[str, Any], base: np.ndarray, w: np.ndarray, level: Level,
+                points: int) -> Any:
+    """The force-controlled level's solver: dK (N/m per point, the third harmonic's change of
+    the friction's fundamental, held) -> the amplitudes a that balance |F| = a |D + dK|."""
     F = level.drive
     X_meas = np.abs(level.receptance_m_per_N) * F
     grid = np.geomspace(float(X_meas.min()) / GRID_SPAN, float(X_meas.max()) * GRID_SPAN, GRID)
@@ -200,7 +230,8 @@ def _force_controlled(m: FrictionModel, values: Mapping[str, Any], base: np.ndar
             return describing_function(m, values, a, w[rows], points=points)
     else:
         # a rate-independent K_eq: one cubic spline in ln a through the grid serves every
-        # frequency; the roots are found on it and K_eq is evaluated exactly at them
+        # frequency; the roots are found on it (the spline's error, about 1e-9 relative, is
+        # far below any noise; K_eq is evaluated exactly at the roots)
         K_grid = describing_function(m, values, grid, points=points)
         spline = CubicSpline(np.log(grid), np.column_stack([K_grid.real, K_grid.imag]))
         K = np.broadcast_to(K_grid[None, :], (w.size, GRID))
@@ -208,22 +239,25 @@ def _force_controlled(m: FrictionModel, values: Mapping[str, Any], base: np.ndar
         def K_at(a, rows):
             v = spline(np.log(a))
             return v[..., 0] + 1j * v[..., 1]
-    h = grid[None, :] * np.abs(base[:, None] + K) - F[:, None]
-    j, g = np.nonzero(np.signbit(h[:, :-1]) != np.signbit(h[:, 1:]))
-    roots = _illinois(lambda x: np.exp(x) * np.abs(base[j] + K_at(np.exp(x), j)) - F[j],
-                      np.log(grid[g]), np.log(grid[g + 1]), h[j, g], h[j, g + 1])
-    a = np.empty(w.size)
-    have = np.zeros(w.size, bool)
-    best = np.full(w.size, np.inf)
-    for r, i in zip(roots, j):
-        # the branch the measurement was on: the root whose amplitude is nearest the measured one
-        dist = abs(math.log(r / X_meas[i]))
-        if dist < best[i]:
-            best[i], a[i], have[i] = dist, r, True
-    for i in np.nonzero(~have)[0]:
-        a[i] = grid[int(np.argmin(np.abs(h[i])))]        # no root on the grid: its nearest point
-    D = base + describing_function(m, values, a, w, points=points)
-    return 1.0 / D, a
+
+    def solve(dK: np.ndarray) -> np.ndarray:
+        lin = base + dK
+        h = grid[None, :] * np.abs(lin[:, None] + K) - F[:, None]
+        j, g = np.nonzero(np.signbit(h[:, :-1]) != np.signbit(h[:, 1:]))
+        roots = _illinois(lambda x: np.exp(x) * np.abs(lin[j] + K_at(np.exp(x), j)) - F[j],
+                          np.log(grid[g]), np.log(grid[g + 1]), h[j, g], h[j, g + 1])
+        a = np.empty(w.size)
+        have = np.zeros(w.size, bool)
+        best = np.full(w.size, np.inf)
+        for r, i in zip(roots, j):
+            # the branch the measurement was on: the root whose amplitude is nearest the measured one
+            dist = abs(math.log(r / X_meas[i]))
+            if dist < best[i]:
+                best[i], a[i], have[i] = dist, r, True
+        for i in np.nonzero(~have)[0]:
+            a[i] = grid[int(np.argmin(np.abs(h[i])))]        # no root on the grid: its nearest point
+        return a
+    return solve
 
 
 def _illinois(fn: Any, x0: np.ndarray, x1: np.ndarray, h0: np.ndarray, h1: np.ndarray) -> np.ndarray:

@@ -288,6 +288,23 @@ def _chi2_at(m: FrictionModel, levels: Sequence[Level], start: dict[str, Any], h
     return float(r @ r) if np.all(np.isfinite(r)) else math.inf
 
 
+def _admissible(structure: Structure, prob: _Problem, res: Any, N: int) -> bool:
+    """A structure may be chosen when its parameters are what the data show: a mode inside
+    the measured band with every parameter identified (a mode outside it, or one the data
+    leave open, is the misfit of something else absorbed: a transient, the harmonics the
+    single-harmonic balance leaves out)."""
+    if structure is Structure.NONE:
+        return True
+    names = [n for n, _ in STRUCTURE_PARAMETERS[structure]]
+    fit = _summarise(prob.model, prob, res, {structure: 0.0}, N, 0, 0.0)
+    if any(fit.estimate(n).status is ParameterStatus.DEGENERATE for n in names):
+        return False
+    if structure is Structure.MODE:
+        f = np.concatenate([lv.frequency_Hz for lv in prob.levels])
+        return bool(f.min() <= fit.structure_values["mode_frequency_Hz"] <= f.max())
+    return True
+
+
 def fit_fundamentals(levels: Sequence[Level], model: FrictionModel | str = "masing", *,
                      structures: Sequence[Structure | str] = (Structure.NONE, Structure.MODE),
                      guess: Mapping[str, Any] | None = None, fixed: Mapping[str, float] | None = None,
@@ -332,7 +349,10 @@ def fit_fundamentals(levels: Sequence[Level], model: FrictionModel | str = "masi
             fits[s] = (prob, res)
     N = int(sum(2 * lv.frequency_Hz.size for lv in levels))
     bic = {s: float(2 * r.cost + len(p.free) * math.log(N)) for s, (p, r) in fits.items()}
-    best = min(bic, key=lambda s: bic[s])
+    best = min((s for s in bic if _admissible(s, *fits[s], N)), key=lambda s: bic[s], default=Structure.NONE)
+    if best not in fits:
+        fits[best] = base                                 # type: ignore[assignment]
+        bic[best] = float(2 * base[1].cost + len(base[0].free) * math.log(N))  # type: ignore[index]
     prob, res = fits[best]
     return _summarise(m, prob, res, bic, N, nfev, time.perf_counter() - t0)
 
