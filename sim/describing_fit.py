@@ -206,16 +206,16 @@ def _flat_value(values: Mapping[str, Any], name: str) -> float:
     return float(np.atleast_1d(values[base])[int(rest[:-1])])
 
 
-FORCE_FACTORS = (1.5, 4.0, 12.0, 40.0)   # friction levels tried, times the largest force amplitude
+FORCE_FACTORS = (1.2, 3.0, 8.0, 25.0)    # friction levels tried, times the largest friction fundamental
 
 
 def initial_guesses(model: FrictionModel | str, levels: Sequence[Level], *,
                     points: int = POINTS) -> list[dict[str, Any]]:
     """Starts for the fit from the data alone (the fit takes the one of least chi-square):
     the mass and a stiffness K from a straight line of Re(1/H) against w^2 at the level of
-    smallest response; the friction level :data:`FORCE_FACTORS` times the largest force
-    amplitude (the fundamentals may not say where it is: a level well below it reaches the
-    pre-rolling amplitudes only); the model's typical parameters, and for a parameter with an
+    smallest response; the friction level :data:`FORCE_FACTORS` times the largest friction
+    fundamental that mass implies, |X (1/H + w^2 m)| (the fundamentals may not say where it
+    is: a level well below it reaches the pre-rolling amplitudes only); the model's typical parameters, and for a parameter with an
     excluded value (Sakai's n = 1) also a value on its other side, scaled to both (newtons
     by the force's factor, metres by a length's factor that makes K_eq at the smallest
     amplitude K, N/m and N s/m by their ratio)."""
@@ -227,7 +227,10 @@ def initial_guesses(model: FrictionModel | str, levels: Sequence[Level], *,
     slope, K = np.polyfit(w2, D, 1) if low.frequency_Hz.size >= 2 else (0.0, D[0])
     mass = -slope if slope < 0 else float(np.median(np.abs(D) / w2))
     K = K if K > 0 else float(np.median(np.abs(D)))
-    F_top = max(float(np.max(_force(lv))) for lv in levels)
+    # the friction's fundamental per point, |X (1/H + w^2 m)|, at its largest
+    F_top = max(float(np.max(np.abs(lv.receptance_m_per_N) * _force(lv)
+                             * np.abs(1.0 / lv.receptance_m_per_N + (2 * math.pi * lv.frequency_Hz) ** 2 * mass)))
+                for lv in levels)
     a_low = min(amp)
     typicals = [m.typical()]
     for p in m.parameters:
