@@ -50,7 +50,7 @@ from .friction import FrictionModel, friction_model
 POINTS = 256           # samples of one period of the loop (the reversals are samples: theta = 0, pi)
 GRID = 192             # log-spaced amplitudes that bracket a force-controlled point's roots
 GRID_SPAN = 8.0        # the grid reaches this factor beyond the measured amplitudes either way
-ROOT_TOL = 1e-13       # relative width of a refined bracket in a
+ROOT_TOL = 1e-12       # a refined bracket's width in ln a, or its residual relative to the bracket's
 ROOT_ITER = 60
 THIRD_ITER = 3         # corrections of the displacement's third harmonic (0: single-harmonic balance)
 
@@ -266,8 +266,9 @@ def _illinois(fn: Any, x0: np.ndarray, x1: np.ndarray, h0: np.ndarray, h1: np.nd
     if x0.size == 0:
         return np.empty(0)
     side = np.zeros(x0.size, dtype=np.int8)
+    scale = np.maximum(np.abs(h0), np.abs(h1))
     for _ in range(ROOT_ITER):
-        if np.max(x1 - x0) <= ROOT_TOL:
+        if np.max(x1 - x0) <= ROOT_TOL or np.all(np.minimum(np.abs(h0), np.abs(h1)) <= ROOT_TOL * scale):
             break
         xn = x1 - h1 * (x1 - x0) / (h1 - h0)
         xn = np.where(np.isfinite(xn) & (xn > x0) & (xn < x1), xn, 0.5 * (x0 + x1))
@@ -281,4 +282,5 @@ def _illinois(fn: Any, x0: np.ndarray, x1: np.ndarray, h0: np.ndarray, h1: np.nd
         done = hn == 0
         x0, x1 = np.where(done, xn, x0), np.where(done, xn, x1)
     r = x1 - h1 * (x1 - x0) / np.where(h1 != h0, h1 - h0, 1.0)
+    r = np.where(np.abs(h0) <= ROOT_TOL * scale, x0, np.where(np.abs(h1) <= ROOT_TOL * scale, x1, r))
     return np.exp(np.where(np.isfinite(r) & (r >= x0) & (r <= x1), r, 0.5 * (x0 + x1)))

@@ -384,7 +384,7 @@ def _summarise(m: FrictionModel, prob: _Problem, res: Any, bic: dict[Structure, 
             continue
         h = float(hw[prob.free.index(e)])
         status = ParameterStatus.IDENTIFIED if h <= IDENTIFIED_WIDTH else ParameterStatus.DEGENERATE
-        lo, hi = (v * math.exp(-h), v * math.exp(h)) if math.isfinite(h) else (0.0, math.inf)
+        lo, hi = (v * math.exp(-h), v * math.exp(h)) if h < 700.0 else (0.0, math.inf)
         if not e.log:
             lo, hi = v - h * abs(v), v + h * abs(v)
         estimates.append(Estimate(e.name, e.unit, v, lo, hi, status))
