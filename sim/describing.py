@@ -185,13 +185,15 @@ def receptance(model: FrictionModel | str, values: Mapping[str, Any], mass_kg: f
     w = 2 * math.pi * level.frequency_Hz
     base = -w ** 2 * mass_kg + structure_stiffness(structure, sv, w)
     base3 = -9 * w ** 2 * mass_kg + structure_stiffness(structure, sv, 3 * w)
-    solve = (lambda dK: level.drive) if level.control is Control.RESPONSE else _amplitudes(m, values, base, w, level,
-                                                                                            points)
+    if level.control is Control.RESPONSE:
+        solve, pure = (lambda dK: level.drive), None
+    else:
+        solve, pure = _amplitudes(m, values, base, w, level, points)
     dK = np.zeros(w.size, complex)
     a = solve(dK)
     X3 = np.zeros(w.size, complex)
     for it in range(THIRD_ITER + 1 if third else 1):
-        S1p, S3p, S1, S3 = _two_paths(m, values, a, X3, w, points)
+        S1p, S3p, S1, S3 = _two_paths(m, values, a, X3, w, points, pure)
         K0 = S1p / a
         dK = (S1 - S1p) / a
         if it == (THIRD_ITER if third else 0):
@@ -204,22 +206,28 @@ def receptance(model: FrictionModel | str, values: Mapping[str, Any], mass_kg: f
 
 
 def _two_paths(m: FrictionModel, values: Mapping[str, Any], a: np.ndarray, X3: np.ndarray, w: np.ndarray,
-               points: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+               points: int, pure: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Harmonics 1 and 3 (complex, N) of the friction along a cos(theta) and along
-    a cos(theta) + Re(X3 exp(3 i theta)), every point in one call."""
+    a cos(theta) + Re(X3 exp(3 i theta)), every point in one call (``pure``: the first two
+    from a function of a, the splines of a rate-independent model, where there is one)."""
     theta = 2 * math.pi * np.arange(points) / points
-    pure = a[:, None] * np.cos(theta)[None, :]
-    paths = np.vstack([pure, pure + (X3[:, None] * np.exp(3j * theta)[None, :]).real])
-    F = _model(m).periodic_force(values, paths, np.concatenate([w, w]))
-    S = np.fft.rfft(F, axis=1) * (2.0 / points)
+    cos = a[:, None] * np.cos(theta)[None, :]
+    third = cos + (X3[:, None] * np.exp(3j * theta)[None, :]).real
     n = a.size
+    if pure is not None:
+        S = np.fft.rfft(m.periodic_force(values, third, w), axis=1) * (2.0 / points)
+        S1p, S3p = pure(a)
+        return S1p, S3p, S[:, 1], S[:, 3]
+    S = np.fft.rfft(m.periodic_force(values, np.vstack([cos, third]), np.concatenate([w, w])), axis=1) * (2.0 / points)
     return S[:n, 1], S[:n, 3], S[n:, 1], S[n:, 3]
 
 
 def _amplitudes(m: FrictionModel, values: Mapping[str, Any], base: np.ndarray, w: np.ndarray, level: Level,
                 points: int) -> Any:
-    """The force-controlled level's solver: dK (N/m per point, the third harmonic's change of
-    the friction's fundamental, held) -> the amplitudes a that balance |F| = a |D + dK|."""
+    """The force-controlled level's solver, dK (N/m per point, the third harmonic's change of
+    the friction's fundamental, held) -> the amplitudes a that balance |F| = a |D + dK|, and
+    for a rate-independent model a -> the harmonics 1 and 3 along a cos(theta) from splines
+    (None for a rate-dependent one)."""
     F = level.drive
     X_meas = np.abs(level.receptance_m_per_N) * F
     grid = np.geomspace(float(X_meas.min()) / GRID_SPAN, float(X_meas.max()) * GRID_SPAN, GRID)
@@ -228,17 +236,25 @@ def _amplitudes(m: FrictionModel, values: Mapping[str, Any], base: np.ndarray, w
 
         def K_at(a, rows):
             return describing_function(m, values, a, w[rows], points=points)
+        pure = None
     else:
-        # a rate-independent K_eq: one cubic spline in ln a through the grid serves every
-        # frequency; the roots are found on it (the spline's error, about 1e-9 relative, is
-        # far below any noise; K_eq is evaluated exactly at the roots)
-        K_grid = describing_function(m, values, grid, points=points)
-        spline = CubicSpline(np.log(grid), np.column_stack([K_grid.real, K_grid.imag]))
+        # a rate-independent model: one cubic spline in ln a of harmonics 1 and 3 over a,
+        # through the grid, serves every frequency (its error, about 1e-9 relative, is far
+        # below any noise); the roots are found on it
+        theta = 2 * math.pi * np.arange(points) / points
+        S = np.fft.rfft(m.periodic_force(values, grid[:, None] * np.cos(theta)[None, :], np.ones(GRID)),
+                        axis=1)[:, [1, 3]] * (2.0 / points) / grid[:, None]
+        K_grid = S[:, 0]
+        spline = CubicSpline(np.log(grid), np.column_stack([S.real, S.imag]))
         K = np.broadcast_to(K_grid[None, :], (w.size, GRID))
 
         def K_at(a, rows):
             v = spline(np.log(a))
-            return v[..., 0] + 1j * v[..., 1]
+            return v[..., 0] + 1j * v[..., 2]
+
+        def pure(a):
+            v = spline(np.log(a)) * a[:, None]
+            return v[:, 0] + 1j * v[:, 2], v[:, 1] + 1j * v[:, 3]
 
     def solve(dK: np.ndarray) -> np.ndarray:
         lin = base + dK
@@ -257,7 +273,7 @@ def _amplitudes(m: FrictionModel, values: Mapping[str, Any], base: np.ndarray, w
         for i in np.nonzero(~have)[0]:
             a[i] = grid[int(np.argmin(np.abs(h[i])))]        # no root on the grid: its nearest point
         return a
-    return solve
+    return solve, pure
 
 
 def _illinois(fn: Any, x0: np.ndarray, x1: np.ndarray, h0: np.ndarray, h1: np.ndarray) -> np.ndarray:

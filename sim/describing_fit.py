@@ -206,7 +206,7 @@ def _flat_value(values: Mapping[str, Any], name: str) -> float:
     return float(np.atleast_1d(values[base])[int(rest[:-1])])
 
 
-FORCE_FACTORS = (1.2, 3.0, 8.0, 25.0)    # friction levels tried, times the largest friction fundamental
+FORCE_FACTORS = (0.5, 1.0, 2.0, 5.0, 15.0, 40.0)   # friction levels tried, times the largest friction fundamental
 
 
 def initial_guesses(model: FrictionModel | str, levels: Sequence[Level], *,
@@ -278,7 +278,7 @@ def _structure_start(structure: Structure, prob: _Problem, theta: np.ndarray, ma
     f = np.concatenate([lv.frequency_Hz for lv in prob.levels])
     H = np.concatenate([lv.receptance_m_per_N for lv in prob.levels])
     if structure is Structure.MODE:
-        return {"mode_mass_kg": 0.2 * mass, "mode_frequency_Hz": float(f[int(np.argmax(d))]),
+        return {"mode_mass_kg": 0.05 * mass, "mode_frequency_Hz": float(f[int(np.argmax(d))]),
                 "mode_damping_ratio": 0.02}
     k = float(np.median(np.abs(1.0 / H)))
     return {"spring_N_per_m": 0.1 * k, "dashpot_N_s_per_m": 0.02 * math.sqrt(k * mass)}
