@@ -209,3 +209,19 @@ def test_one_held_amplitude_leaves_one_combination_open(held):
     assert set(fit.directions[-1].exponents) <= {"F_s_N", "x_s_m", "n"}
     assert fit.singular_values[-1] < 1e-3 * fit.singular_values[-2]
     assert fit.degenerate and Separation.HARMONICS in fit.separations
+
+
+def test_velocity_and_acceleration_fundamentals_give_the_displacement_s_receptance(saturating):
+    """A response given as velocity (i w X) or acceleration (-w^2 X) with its noise is the
+    same level: Level.from_fundamentals divides by (i w)^k.  Flip: dividing by (-i w)^k
+    (red: the velocity's receptance comes out -H)."""
+    lv = saturating[0]
+    f = lv.frequency_Hz
+    w = 2 * math.pi * f
+    F = 3.0 * np.exp(0.3j) * np.ones(f.size)
+    X = lv.receptance_m_per_N * F
+    for k, R in ((1, 1j * w * X), (2, -w ** 2 * X)):
+        got = Level.from_fundamentals(f, R, F, Control.FORCE, derivative=k, sigma_response=1e-9 * w ** k)
+        assert np.allclose(got.receptance_m_per_N, lv.receptance_m_per_N, rtol=1e-12, atol=0)
+        assert np.allclose(got.sigma_m_per_N, 1e-9 / 3.0, rtol=1e-12)
+        assert np.allclose(got.drive, 3.0)
