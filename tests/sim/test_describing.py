@@ -225,3 +225,15 @@ def test_velocity_and_acceleration_fundamentals_give_the_displacement_s_receptan
         assert np.allclose(got.receptance_m_per_N, lv.receptance_m_per_N, rtol=1e-12, atol=0)
         assert np.allclose(got.sigma_m_per_N, 1e-9 / 3.0, rtol=1e-12)
         assert np.allclose(got.drive, 3.0)
+
+
+def test_a_held_parameter_is_fixed_and_the_rest_still_fitted(low):
+    """``fixed`` holds a value: its status is FIXED at that value, its interval a point, it
+    is in no direction, and the others are fitted around it (here n at the simulator's own
+    1.5: F_s, x_s and m covered).  Flip: ``fixed`` not passed on to the problem (red: n
+    fitted, status identified)."""
+    fit = fit_fundamentals(low, "masing", structures=("none",), fixed={"n": N})
+    e = fit.estimate("n")
+    assert e.status is ParameterStatus.FIXED and e.value == e.low == e.high == N
+    assert all("n" not in d.exponents for d in fit.directions) and len(fit.directions) == 3
+    assert all(_covers(fit, ("F_s_N", "x_s_m", "mass_kg")).values())
