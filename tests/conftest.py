@@ -20,12 +20,14 @@ def pytest_configure(config):
 # was dealt out alone (test_identification's module fixture was made on both workers).
 SPLIT = {"tests/sim/test_discrepancy.py"}
 
-# Started first, longest first (figures of a full run), so that no long module is left for
-# the end while the other worker idles.
-FIRST = ("tests/procedures/test_identification.py", "tests/sim/test_discrepancy.py",
-         "tests/bench/test_twin_causes.py", "tests/bench/test_analyze.py", "tests/bench/test_twin.py",
-         "tests/sim/test_discover.py", "tests/bench/test_report.py", "tests/sim/test_identify_clean.py",
-         "tests/sim/test_independent_cases.py")
+# Started first, longest first (figures of a full run, decision 0083), so that no long module
+# is left for the end while the other worker idles.
+FIRST = ("tests/bench/test_model_lines.py", "tests/sim/test_discrepancy.py", "tests/sim/test_paper.py",
+         "tests/bench/test_studies.py", "tests/procedures/test_identification.py", "tests/bench/test_report.py",
+         "tests/bench/test_procedure_words.py", "tests/bench/test_api.py", "tests/bench/test_analyze.py",
+         "tests/bench/test_truth_id.py", "tests/bench/test_twin_causes.py", "tests/sim/test_discover.py",
+         "tests/sim/test_identify_clean.py", "tests/sim/test_discrepancy_noise.py",
+         "tests/sim/test_independent_cases.py", "tests/bench/test_twin.py")
 
 
 def module_of(nodeid: str) -> str:

@@ -19,6 +19,12 @@ SEEDS = {"viscous_damping": 5, "linear_spring": 6, "sensor_delay": 7, "sensor_ga
 # case (clean 3.7-3.8, two causes 4.0, the cubic 7.9, n < 1 19.7) against 24-53 s on the
 # issue's 5 x 18 grid (decision 0062)
 GRID = dict(levels=3, freqs=10)
+# `make test` keeps four causes (viscous damping, linear spring, gain error, speed-dependent
+# friction; the two-cause case names two of them again); the sensor delay and the second mode
+# are named alone here by `make bench` (marker campaign), in `make test` on the independent
+# simulator's data (tests/sim/test_independent_cases.py, tests/sim/test_second_mode_alone.py;
+# decision 0083)
+CAMPAIGN = {"second_mode", "sensor_delay"}
 
 
 def analyse(case, seed):
@@ -29,7 +35,8 @@ def analyse(case, seed):
 
 @pytest.mark.slow
 @pytest.mark.timeout(300)
-@pytest.mark.parametrize("effect", CATALOG)
+@pytest.mark.parametrize("effect", [pytest.param(e, marks=pytest.mark.campaign) if e in CAMPAIGN else e
+                                    for e in CATALOG])
 def test_each_hidden_cause_is_named_with_its_size(effect):
     case = make_case(SEEDS[effect], (effect,), **GRID)
     a = analyse(case, SEEDS[effect])
@@ -55,7 +62,8 @@ def test_each_hidden_cause_is_named_with_its_size(effect):
 
 
 @pytest.mark.timeout(300)
-@pytest.mark.parametrize("seed", [2, 4])       # n = 2.5 and 2.8
+# n = 2.5 and 2.8; the second in `make bench` (decision 0083)
+@pytest.mark.parametrize("seed", [2, pytest.param(4, marks=pytest.mark.campaign)])
 def test_clean_data_gets_no_cause(seed):
     case = make_case(seed, (), **GRID)
     a = analyse(case, seed)
@@ -90,6 +98,7 @@ def test_two_hidden_effects_are_both_named():
 
 
 @pytest.mark.slow
+@pytest.mark.campaign    # in `make test` the cubic of tests/sim/test_discover.py (plant seed 7, decision 0083)
 @pytest.mark.timeout(300)
 def test_an_effect_outside_the_catalog_is_named_by_its_form_not_by_catalog_effects():
     # issue 16: this case used to come out as "linear spring + viscous damping", F_s -12 %
@@ -139,11 +148,12 @@ def test_a_spring_in_pre_rolling_is_exactly_a_masing_curve_with_other_parameters
 @pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_a_spring_the_data_cannot_separate_is_not_named_and_the_verdict_says_why():
-    # n = 0.38, every step below x_s; 3 levels x 4 frequencies: the inseparability does not
+    # n = 0.38, every step below x_s; 3 levels x 3 frequencies: the inseparability does not
     # depend on the grid, and n < 0.5 needs the plant's raised resolution (the cost is there:
-    # 27 s of plant for 0.6 s of analysis; 3 x 10 took 59 s, with the same verdict and F_s,
-    # x_s within 3e-5 and 2e-4 of the stiffer curve's, decision 0062)
-    case = make_case(1044, ("linear_spring",), levels=3, freqs=4)
+    # 17.6 s of plant for 0.2 s of analysis; 3 x 4 took 27 s, 3 x 10 59 s, with the same
+    # verdict; here F_s, x_s 3.8e-4 and 1.3e-3 from the stiffer curve's, largest amplitude
+    # 0.55 x_s; 2 x 4 leaves "unexplained", decisions 0062, 0083)
+    case = make_case(1044, ("linear_spring",), levels=3, freqs=3)
     assert case.rig["n"] < 1
     a = analyse(case, 44)
     d = a.to_dict()

@@ -36,11 +36,16 @@ def plus(steps, noise, sign):
         for s, dz in zip(steps, noise)]
 
 
+@pytest.fixture(scope="module")
+def clean():
+    """The sensor-delay case of seed 1047 without noise, made once for both tests (decision 0083)."""
+    return make_case(1047, ("sensor_delay",), noise=(0.0, 0.0, 0.0))
+
+
 @pytest.mark.timeout(300)
-def test_the_noise_induced_mean_of_the_residuals_is_predicted_and_removed():
+def test_the_noise_induced_mean_of_the_residuals_is_predicted_and_removed(clean):
     # a sensor-delay case (n = 1.82) where the benchmark's m sat 0.7 standard errors low
     noisy = make_case(1047, ("sensor_delay",))
-    clean = make_case(1047, ("sensor_delay",), noise=(0.0, 0.0, 0.0))
     sigmas = [(s.harmonics.sigma_force, s.harmonics.sigma_accel, s.harmonics.sigma_disp) for s in noisy.steps]
     steps0 = [dataclasses.replace(s, harmonics=dataclasses.replace(
         s.harmonics, sigma_force=sg[0], sigma_accel=sg[1], sigma_disp=sg[2])) for s, sg in zip(clean.steps, sigmas)]
@@ -82,12 +87,11 @@ def test_the_noise_induced_mean_of_the_residuals_is_predicted_and_removed():
 
 
 
-def test_no_measured_noise_adds_no_mean_whatever_the_floors():
+def test_no_measured_noise_adds_no_mean_whatever_the_floors(clean):
     """Decision 0064: the noise-induced mean is the measured noise's.  With every channel's
     measured noise zero the residuals' noise-induced mean is zero (an independent fact: no
     noise, no mean), though the variances keep their floors (1e-5 of each fundamental); with
     the floors' noise in the mean it was as large as the floors' own mean."""
-    clean = make_case(1047, ("sensor_delay",), noise=(0.0, 0.0, 0.0))
     steps0 = [dataclasses.replace(s, harmonics=dataclasses.replace(
         s.harmonics, sigma_force=0.0, sigma_accel=0.0, sigma_disp=0.0)) for s in clean.steps]
     d0 = data_from_steps(steps0, 9)

@@ -10,9 +10,12 @@ Two sources the identification did not make:
   bench.sources.load_source (3 levels 0.25-0.85 F_s x 8 frequencies 0.5-2.5 x, 12 settle /
   8 measured periods: its integrator is slow).
 Bar: every parameter within 1 %, reduced chi-square in [0.5, 2], the truth inside the 95 %
-interval for at least 90 % of the parameters; a seeded sample of 6 rigs, 3 with n < 1 (10
-until the suite reached its 12-minute budget).  The campaign over 40 rigs is
-benchmarks/bench_identification.py.
+interval for at least 90 % of the parameters; a seeded sample of 5 rigs in `make test` (both
+UFF rigs, n 0.43 and 2.54, and plant rigs with n 0.51, 0.58 and 2.42), the 6 rigs this module
+held before (3 with n < 1) in `make bench` (marker campaign; 10 until the suite reached its
+12-minute budget, 6 until decision 0083).  Not 4: the UFF rig with n 2.54 leaves F_s and m
+(+0.021 %, +0.034 %) outside their intervals, 14 of 16 inside is below the bar; 18 of 20 is
+not (22 of 24 on the six).  The campaign over 40 rigs is benchmarks/bench_identification.py.
 """
 import multiprocessing
 import os
@@ -25,6 +28,7 @@ from benchtools.clean_cases import KEYS, plant_case, uff_case
 
 PLANT = [(11, (0.45, 0.95)), (12, (0.45, 0.95)), (15, (1.1, 3.0)), (16, (1.1, 3.0))]
 UFF = [(21, (0.35, 0.45)), (23, (1.5, 3.0))]
+SAMPLE = {11, 12, 15, 21, 23}       # `make test`; all six in `make bench`
 
 
 def run_case(args):
@@ -32,10 +36,11 @@ def run_case(args):
     return plant_case(seed, n_range) if kind == "plant" else uff_case(seed, n_range, out)
 
 
-@pytest.fixture(scope="module")
-def outcomes(tmp_path_factory):
+@pytest.fixture(scope="module", params=["sample", pytest.param("six_rigs", marks=pytest.mark.campaign)])
+def outcomes(request, tmp_path_factory):
     out = tmp_path_factory.mktemp("clean")
     jobs = [("uff", s, r, out) for s, r in UFF] + [("plant", s, r, out) for s, r in PLANT]
+    jobs = [j for j in jobs if request.param != "sample" or j[1] in SAMPLE]
     with ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1),
                              mp_context=multiprocessing.get_context("spawn")) as ex:
         return list(ex.map(run_case, jobs))
@@ -44,7 +49,7 @@ def outcomes(tmp_path_factory):
 @pytest.mark.slow
 @pytest.mark.timeout(900)
 def test_clean_data_parameters_within_one_percent(outcomes):
-    assert len(outcomes) >= 6 and sum(t["n"] < 1 for _, t, _, _ in outcomes) >= len(outcomes) / 2
+    assert len(outcomes) >= 5 and sum(t["n"] < 1 for _, t, _, _ in outcomes) >= len(outcomes) / 2
     misses = [f"{kind} n={t['n']:.2f}: {k} {100 * (e.values[k] / t[k] - 1):+.2f} %"
               for kind, t, e, _ in outcomes for k in KEYS if abs(e.values[k] / t[k] - 1) > 0.01]
     assert not misses, "\n".join(misses)

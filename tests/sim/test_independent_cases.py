@@ -66,7 +66,12 @@ CATALOG_CASES = [
 
 @pytest.mark.slow
 @pytest.mark.timeout(300)
-@pytest.mark.parametrize("seed,effect,cid,name,truth", CATALOG_CASES, ids=[c[2] for c in CATALOG_CASES])
+# `make test` keeps the sensor delay (n = 2.2); the viscous damping (n = 0.7) and the
+# speed-dependent friction, named in the plant's data by tests/sim/test_discrepancy.py, are
+# here in `make bench` (marker campaign, decision 0083)
+@pytest.mark.parametrize("seed,effect,cid,name,truth",
+                         [c if c[2] == "sensor_delay" else pytest.param(*c, marks=pytest.mark.campaign)
+                          for c in CATALOG_CASES], ids=[c[2] for c in CATALOG_CASES])
 def test_a_catalog_effect_in_independent_data_is_named_by_its_id_with_its_size(tmp_path, seed, effect, cid, name,
                                                                               truth):
     rig = RIGS[seed]
