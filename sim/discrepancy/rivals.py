@@ -321,3 +321,89 @@ def _end(x: float) -> float | None:
 
 def _exp(x: float) -> float:
     return math.exp(x) if x < 709.0 else math.inf
+
+
+# ---------------------------------------------------------------- the choice
+@dataclass
+class FrictionChoice:
+    """The model the data prefer (``name``), every model's fit (``fits``, by name), the
+    rivals that passed the gates against bare Masing (``passed_bare``) and against Masing
+    with its named causes (``passed_final``), the models the data cannot separate from the
+    preferred one with the measurement that would (``not_separable``: [(name, what)]),
+    and the held-out gain over bare Masing (before, after)."""
+
+    name: str
+    fits: dict[str, ModelFit]
+    passed_bare: list[str] = field(default_factory=list)
+    passed_final: list[str] = field(default_factory=list)
+    not_separable: list[tuple[str, str]] = field(default_factory=list)
+    gain: tuple[float, float] = (math.nan, math.nan)
+    masing_final: tuple[float, int, int, float] = (math.nan, 0, 0, math.nan)   # chi2, params, dof, held-out
+
+    @property
+    def preferred(self) -> ModelFit:
+        return self.fits[self.name]
+
+
+def choose(fits: dict[str, ModelFit], final_chi2: float, final_params: int, final_dof: int,
+           final_heldout: float) -> FrictionChoice:
+    """The rule of decision 0078: a rival is preferred only if it passes the gates against
+    the bare Masing fit and against Masing with the causes named on it (``final_*``: that
+    model's chi-square in the base weights, parameters, degrees of freedom, held-out
+    error); among those the lowest BIC wins; else ``masing``."""
+    m = fits["masing"]
+    bare = [n for n, f in fits.items() if n != "masing" and passes(f, m.chi2, m.n_params, m.dof, m.heldout)]
+    final = [n for n in bare if passes(fits[n], final_chi2, final_params, final_dof, final_heldout)]
+    name = min(final, key=lambda n: fits[n].bic) if final else "masing"
+    best = fits[name]
+    if name == "masing":
+        best = ModelFit("masing", chi2=final_chi2, n_data=m.n_data, n_params=final_params, heldout=final_heldout)
+    pairs = [(n, SEPARATING.get(frozenset((name, n)), DEFAULT_SEPARATING))
+             for n, f in fits.items() if n != name and f.fitted and not separable(best, f)]
+    return FrictionChoice(name, fits, bare, final, pairs, (m.heldout, fits[name].heldout if name != "masing"
+                                                                       else final_heldout),
+                          (final_chi2, final_params, final_dof, final_heldout))
+
+
+# ---------------------------------------------------------------- words and schema
+WHY = {   # what sets the preferred model apart, in the verdict
+    "dahl": "the branch after a reversal depends on the reversal force, as in Dahl's model",
+    "masing_iwan": "the Masing rules hold but the virgin curve is not Sakai's: a Maxwell-slip (Iwan) distribution "
+                   "of elasto-plastic elements fits it",
+}
+
+
+def choice_sentences(c: FrictionChoice) -> list[str]:
+    """The verdict's sentences on the friction model: the preferred rival with its gain, or
+    that Masing is kept; then the models the data cannot separate from it."""
+    out = []
+    best = c.preferred
+    m = c.fits["masing"]
+    if c.name != "masing":
+        dbic = delta_bic(best, m.chi2, m.n_params, m.reduced_chi2)
+        out.append(f"The hysteresis is not Masing: {WHY.get(c.name, MODELS[c.name].label)}; held-out error "
+                   f"{100 * c.gain[0]:.1f} % -> {100 * c.gain[1]:.2f} % (reduced chi-square {m.reduced_chi2:.3g} -> "
+                   f"{best.reduced_chi2:.3g}, BIC by {-dbic:.0f}).")
+    elif c.passed_bare:
+        out.append(f"{', '.join(MODELS[n].label for n in c.passed_bare)} fits better than the Masing model alone but "
+                   f"not better than the Masing model with the causes named here: the friction model is kept as Masing.")
+    for n, what in c.not_separable:
+        out.append(f"{MODELS[n].label} fits these data as well within the noise (held-out error "
+                   f"{100 * c.fits[n].heldout:.2f} %, reduced chi-square {c.fits[n].reduced_chi2:.3g}): the data cannot "
+                   f"separate it from {MODELS[c.name].label}; {what} would.")
+    return out
+
+
+def choice_dict(c: FrictionChoice) -> dict:
+    """analysis.json's ``friction_models`` (the table) and the reasons (docs/analysis.md)."""
+    m = c.fits["masing"]
+    rows = []
+    for n, f in c.fits.items():
+        row = f.to_dict()
+        if f.fitted:
+            row["delta_bic_vs_masing"] = delta_bic(f, m.chi2, m.n_params, m.reduced_chi2) if n != "masing" else 0.0
+        rows.append(row)
+    return dict(table=rows, preferred=c.name, passed_against_masing=list(c.passed_bare),
+                passed_against_masing_with_causes=list(c.passed_final),
+                not_separable=[dict(model=n, measurement=w) for n, w in c.not_separable],
+                heldout_error_before=c.gain[0], heldout_error_after=c.gain[1])
