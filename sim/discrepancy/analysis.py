@@ -565,7 +565,8 @@ def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, sourc
         # the catalog's effects on top of the preferred model (the library's forms are Masing's)
         rival = choice.preferred
         assert rival.fit is not None
-        sel_r = select(rival.fit, d, W, library=())
+        sel_r = select(rival.fit, d, W, library=(), nfev=rivals.ON_RIVAL_NFEV,
+                       heldout=(rival.heldout, rival.heldout_thetas))
         sel = settle_final(sel_r, d)
         sel.base, sel.heldout_base = base, choice.gain[0]
     else:

@@ -47,7 +47,8 @@ FRICTION_MODELS = tuple(MODELS)            # masing, masing_iwan, dahl, lugre, g
 FITTED = ("masing", "masing_iwan", "dahl")
 IWAN_ELEMENTS = 160                     # a fine grid: NNLS keeps few (the issue-41 Iwan case: 12 -> rchi2 882, 64 -> 5.2, 160 -> 1.26)
 DAHL_NFEV = 60
-DAHL_STARTS = (1.0, 2.0)                   # exponents to start from (the best by chi-square is kept)
+DAHL_STARTS = (1.0, 2.0)                   # exponents to start from: the second only if the first leaves misfit
+ON_RIVAL_NFEV = 20                         # a catalog candidate's evaluations on top of a converged rival
 
 # what would separate two models the data cannot (issue 41 item 4), by unordered pair
 SEPARATING = {
@@ -201,6 +202,8 @@ def dahl_fit(masing: Fit, d: Data, W: Weights) -> ModelFit:
             continue
         if best is None or f.chi2 < best.chi2:
             best = f
+        if best.reduced_chi2 <= CHI2_UNEXPLAINED:
+            break
     if best is None:
         return ModelFit("dahl", fitted=False)
     return head_fit("dahl", best, d, W, seconds=time.process_time() - t0)
