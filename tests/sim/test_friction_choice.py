@@ -71,3 +71,36 @@ def test_the_table_has_every_model_with_intervals_heldout_errors_chi2_and_bic(an
     for r in table:
         if r["fitted"]:
             assert {"heldout_error_compliance", "heldout_error_accelerance", "reduced_chi2", "bic"} <= set(r)
+
+
+def _fit(name, chi2, p, held, n_data=3000):
+    from sim.discrepancy.rivals import ModelFit
+    return ModelFit(name, chi2=chi2, n_data=n_data, n_params=p, heldout=held)
+
+
+def test_a_rival_that_beats_bare_masing_but_not_masing_with_its_causes_is_not_preferred():
+    # the lost first attempt's failure (decision 0078): on Masing + damping + a gain error
+    # bare Dahl beat bare Masing; Masing with the two causes fits to the noise
+    from sim.discrepancy.rivals import ModelFit, choose
+
+    fits = {"masing": _fit("masing", 9e5, 4, 0.30), "masing_iwan": ModelFit("masing_iwan", fitted=False),
+            "dahl": _fit("dahl", 3e5, 4, 0.10), "lugre": ModelFit("lugre", fitted=False),
+            "gms": ModelFit("gms", fitted=False)}
+    c = choose(fits, final_chi2=3000.0, final_params=6, final_dof=2994, final_heldout=0.003)
+    assert c.passed_bare == ["dahl"] and c.passed_final == [] and c.name == "masing"
+    # the same rival against a Masing whose causes leave the misfit: preferred
+    c = choose(fits, final_chi2=8e5, final_params=6, final_dof=2994, final_heldout=0.25)
+    assert c.name == "dahl" and c.gain == (0.30, 0.10)
+
+
+def test_models_within_the_gates_of_the_preferred_one_are_said_not_separable_with_the_measurement():
+    from sim.discrepancy.rivals import SEPARATING, ModelFit, choose
+
+    fits = {"masing": _fit("masing", 9e5, 4, 0.30), "masing_iwan": _fit("masing_iwan", 2999.0, 5, 0.0031),
+            "dahl": _fit("dahl", 3000.0, 4, 0.003), "lugre": ModelFit("lugre", fitted=False),
+            "gms": ModelFit("gms", fitted=False)}
+    c = choose(fits, final_chi2=8e5, final_params=6, final_dof=2994, final_heldout=0.25)
+    assert c.name == "dahl"
+    assert c.not_separable == [("masing_iwan", SEPARATING[frozenset(("dahl", "masing_iwan"))])]
+    fits["masing_iwan"] = _fit("masing_iwan", 3500.0, 5, 0.0031)       # BIC worse by about 500: separable
+    assert choose(fits, 8e5, 6, 2994, 0.25).not_separable == []
