@@ -25,12 +25,12 @@ import numpy as np
 
 from ..errors import ConfigurationError
 from ..identify import Estimate, Identifier, displacement_harmonics, synthesize
+from . import rivals
 from .fit import Fit, Weights, fit, whitened
 from .gain import frf
 from .models import BASE_PARAMS, CENTRE, CENTRED, EFFECTS, LIBRARY, Data, Model
-from .rounding import interval_text
-from . import rivals
 from .rivals import FrictionChoice
+from .rounding import interval_text
 from .select import BIC_GATE, CHI2_UNEXPLAINED, Selection, select, settle_final
 from .terms import accelerance_pair, second_mode_phrase, speed_friction, speed_friction_phrase
 
