@@ -27,7 +27,7 @@ from ..errors import ConfigurationError
 from ..identify import Estimate, Identifier, displacement_harmonics, synthesize
 from . import rivals
 from .fit import Fit, Weights, fit, whitened
-from .gain import frf
+from .gain import frf, heldout_error
 from .models import BASE_PARAMS, CENTRE, CENTRED, EFFECTS, LIBRARY, Data, Model
 from .rivals import FrictionChoice
 from .rounding import interval_text
@@ -559,8 +559,23 @@ def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, sourc
     log.info("base fit: reduced chi2 %.2f", base.reduced_chi2)
     g = guess or guess_from_data(d)
     restart = np.array([math.log(g["F_s_N"]), math.log(g["x_s_m"]), g["n"], math.log(g["mass_kg"])])
-    sel = select(base, d, W, library=LIBRARY if library is None else tuple(library), restart=restart)
-    choice = prefer_model(sel, d, W, friction_models)
+    lib = LIBRARY if library is None else tuple(library)
+    base_thetas: list = []
+    held = (heldout_error(base.model, base.theta, d, W, thetas=base_thetas), base_thetas)
+    masing = rivals.head_fit("masing", base, d, W, heldout=held[0], thetas=base_thetas)
+    fits = rivals.fit_all(masing, d, W) if friction_models else {
+        n: (masing if n == "masing" else rivals.ModelFit(n, fitted=False)) for n in rivals.FRICTION_MODELS}
+    if rivals.passed_bare(fits) and lib:
+        # a rival beats bare Masing: Masing's own shape corrections (the library) compete with
+        # it only if Masing with the catalog's causes does not already keep Masing (decision 0078)
+        sel = select(base, d, W, library=(), restart=restart, heldout=held, nfev=rivals.ON_RIVAL_NFEV)
+        choice = _choice(fits, sel)
+        if choice.name == "masing":
+            sel = select(base, d, W, library=lib, restart=restart, heldout=held)
+            choice = _choice(fits, sel)
+    else:
+        sel = select(base, d, W, library=lib, restart=restart, heldout=held)
+        choice = _choice(fits, sel)
     if choice.name == "dahl":
         # the catalog's effects on top of the preferred model (the library's forms are Masing's)
         rival = choice.preferred
@@ -569,6 +584,10 @@ def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, sourc
                        heldout=(rival.heldout, rival.heldout_thetas))
         sel = settle_final(sel_r, d)
         sel.base, sel.heldout_base = base, choice.gain[0]
+    elif choice.name == "masing_iwan":
+        # the elements replace Masing's shape: no cause named on Sakai's curve stands (decision 0078)
+        sel = settle_final(Selection(base=base, final=base, named=[], tried=sel.tried, heldout_base=held[0],
+                                     screened=sel.screened, base_heldout_thetas=base_thetas), d)
     else:
         sel = settle_final(sel, d)
     return Analysis(steps=steps, data=d, weights=W, selection=sel, source=source,
@@ -576,12 +595,8 @@ def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, sourc
                     artefacts=list(artefacts or []), friction=choice)
 
 
-def prefer_model(sel: Selection, d: Data, W: Weights, friction_models: bool = True) -> FrictionChoice:
-    """Every friction model on the data, and the one they prefer (:func:`rivals.choose`)
-    against bare Masing and Masing with the causes ``sel`` named (its fits are in the base
-    weights ``W``); ``friction_models=False``: Masing alone, the rivals not fitted."""
-    masing = rivals.head_fit("masing", sel.base, d, W, heldout=sel.heldout_base, thetas=sel.base_heldout_thetas)
-    fits = rivals.fit_all(masing, d, W) if friction_models else {
-        n: (masing if n == "masing" else rivals.ModelFit(n, fitted=False)) for n in rivals.FRICTION_MODELS}
+def _choice(fits: dict, sel: Selection) -> FrictionChoice:
+    """The preferred friction model against bare Masing and Masing with the causes ``sel``
+    named (its fits are in the base weights): :func:`rivals.choose`."""
     held = sel.named[-1].heldout_error if sel.named else sel.heldout_base
     return rivals.choose(fits, sel.final.chi2, sel.final.model.size, sel.final.dof, held)

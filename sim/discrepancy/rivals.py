@@ -348,6 +348,12 @@ class FrictionChoice:
         return self.fits[self.name]
 
 
+def passed_bare(fits: dict[str, ModelFit]) -> list[str]:
+    """The rivals that pass the gates against the bare Masing fit."""
+    m = fits["masing"]
+    return [n for n, f in fits.items() if n != "masing" and passes(f, m.chi2, m.n_params, m.dof, m.heldout)]
+
+
 def choose(fits: dict[str, ModelFit], final_chi2: float, final_params: int, final_dof: int,
            final_heldout: float) -> FrictionChoice:
     """The rule of decision 0078: a rival is preferred only if it passes the gates against
@@ -355,7 +361,7 @@ def choose(fits: dict[str, ModelFit], final_chi2: float, final_params: int, fina
     model's chi-square in the base weights, parameters, degrees of freedom, held-out
     error); among those the lowest BIC wins; else ``masing``."""
     m = fits["masing"]
-    bare = [n for n, f in fits.items() if n != "masing" and passes(f, m.chi2, m.n_params, m.dof, m.heldout)]
+    bare = passed_bare(fits)
     final = [n for n in bare if passes(fits[n], final_chi2, final_params, final_dof, final_heldout)]
     name = min(final, key=lambda n: fits[n].bic) if final else "masing"
     best = fits[name]
