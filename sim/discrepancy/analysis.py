@@ -569,13 +569,13 @@ def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, sourc
         # a rival beats bare Masing: Masing's own shape corrections (the library) compete with
         # it only if Masing with the catalog's causes does not already keep Masing (decision 0078)
         sel = select(base, d, W, library=(), restart=restart, heldout=held, nfev=rivals.ON_RIVAL_NFEV)
-        choice = _choice(fits, sel)
+        choice = rivals.choose_after(fits, sel)
         if choice.name == "masing":
             sel = select(base, d, W, library=lib, restart=restart, heldout=held)
-            choice = _choice(fits, sel)
+            choice = rivals.choose_after(fits, sel)
     else:
         sel = select(base, d, W, library=lib, restart=restart, heldout=held)
-        choice = _choice(fits, sel)
+        choice = rivals.choose_after(fits, sel)
     if choice.name == "dahl":
         # the catalog's effects on top of the preferred model (the library's forms are Masing's)
         rival = choice.preferred
@@ -593,10 +593,3 @@ def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, sourc
     return Analysis(steps=steps, data=d, weights=W, selection=sel, source=source,
                     software_version=software_version, rejected=list(rejected or []), v_ref_m_per_s=v_ref_m_per_s,
                     artefacts=list(artefacts or []), friction=choice)
-
-
-def _choice(fits: dict, sel: Selection) -> FrictionChoice:
-    """The preferred friction model against bare Masing and Masing with the causes ``sel``
-    named (its fits are in the base weights): :func:`rivals.choose`."""
-    held = sel.named[-1].heldout_error if sel.named else sel.heldout_base
-    return rivals.choose(fits, sel.final.chi2, sel.final.model.size, sel.final.dof, held)

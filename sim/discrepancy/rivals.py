@@ -41,7 +41,7 @@ from ..identify import path_harmonics, period_paths
 from .fit import Z95, Fit, Weights, fit
 from .gain import frf, heldout_error
 from .models import Data, Model
-from .select import BIC_GATE, CHI2_UNEXPLAINED, HELDOUT_GATE, MISFIT_SHARE_GATE
+from .select import BIC_GATE, CHI2_UNEXPLAINED, HELDOUT_GATE, MISFIT_SHARE_GATE, Selection
 
 FRICTION_MODELS = tuple(MODELS)            # masing, masing_iwan, dahl, lugre, gms
 FITTED = ("masing", "masing_iwan", "dahl")
@@ -372,6 +372,13 @@ def choose(fits: dict[str, ModelFit], final_chi2: float, final_params: int, fina
     return FrictionChoice(name, fits, bare, final, pairs, (m.heldout, fits[name].heldout if name != "masing"
                                                                        else final_heldout),
                           (final_chi2, final_params, final_dof, final_heldout))
+
+
+def choose_after(fits: dict[str, ModelFit], sel: Selection) -> FrictionChoice:
+    """:func:`choose` against bare Masing and Masing with the causes the selection ``sel``
+    named (its fits are in the base weights)."""
+    held = sel.named[-1].heldout_error if sel.named else sel.heldout_base
+    return choose(fits, sel.final.chi2, sel.final.model.size, sel.final.dof, held)
 
 
 # ---------------------------------------------------------------- words and schema
