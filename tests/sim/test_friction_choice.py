@@ -104,3 +104,14 @@ def test_models_within_the_gates_of_the_preferred_one_are_said_not_separable_wit
     assert c.not_separable == [("masing_iwan", SEPARATING[frozenset(("dahl", "masing_iwan"))])]
     fits["masing_iwan"] = _fit("masing_iwan", 3500.0, 5, 0.0031)       # BIC worse by about 500: separable
     assert choose(fits, 8e5, 6, 2994, 0.25).not_separable == []
+
+
+def test_the_report_and_the_page_show_the_table_with_the_preferred_model_marked(analysed):
+    from bench.reports._analysis import analysis_data, friction_rows
+    from bench.reports._html import _friction
+
+    a = analysis_data(analysed["dahl_i2"])
+    rows = friction_rows(a)
+    assert [r[0].endswith("- preferred") for r in rows] == [False, False, True, False, False]
+    assert rows[2][1].startswith("F_c_N = ") and rows[3][1] == "not fitted"
+    assert "Friction models" in _friction(a) and "<code>dahl</code>" in _friction(a)
