@@ -103,6 +103,7 @@ bench: setup
 	$(PY) benchmarks/bench_modes_coverage.py --seeds 3
 	$(PY) benchmarks/bench_friction_models.py
 	$(PY) benchmarks/bench_describing_fit.py
+	$(PY) benchmarks/bench_model_choice.py
 
 # Soak test (by hand, not in `make test`): 2000 steps, ~3 h of rig time, twins hammered by
 # other clients; prints memory, open files, latencies. SOAK_PROFILE=short for a quick one.

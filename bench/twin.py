@@ -422,6 +422,13 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source
         raise words.refused(ConfigurationError, TwinSaid.NO_STEPS, path=source)
     params = analysis["base"]["parameters"] if plain else analysis["parameters"]
     causes = [] if plain else list(analysis.get("causes", []))
+    friction = "masing" if plain else str(analysis.get("friction_model", "masing"))
+    rival: dict = {}
+    reported = params
+    if friction == "dahl":       # the preferred model's own parameters (decision 0078); Masing's slots for the rig's scale
+        rival = dict(friction="dahl", **{k: params[k]["value"] for k in ("F_c_N", "sigma_N_per_m", "exponent")})
+        params = dict(params, F_s_N=params["F_c_N"], x_s_m=dict(value=rival["F_c_N"] / rival["sigma_N_per_m"]),
+                      n=dict(value=1.5))
     notes: list[str] = []
     meta_rig = src.metadata.get("rig") if src.kind == "run" else None
     src_model = (meta_rig or {}).get("model") or {}
@@ -442,8 +449,8 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source
     rig["simulated"] = True
     cal = rig["calibration"]
 
-    model = dict(F_s_N=params["F_s_N"]["value"], x_s_m=params["x_s_m"]["value"], n=params["n"]["value"],
-                 mass_kg=params["mass_kg"]["value"], force_sens_V_per_N=cal["force_V_per_N"],
+    head = rival or dict(F_s_N=params["F_s_N"]["value"], x_s_m=params["x_s_m"]["value"], n=params["n"]["value"])
+    model = dict(**head, mass_kg=params["mass_kg"]["value"], force_sens_V_per_N=cal["force_V_per_N"],
                  accel_sens_V_per_m_s2=cal["accel_V_per_m_s2"], disp_sens_V_per_m=cal["disp_V_per_m"], **noise)
     f_r, ratio, Zs = drive_ratio(src)
     shaker = shaker_model(f_r, ratio, Zs, shaker_defaults())
@@ -485,7 +492,7 @@ def build_twin(source: Path, analysis: dict, *, plain: bool = False, src: Source
                 analysis_software_version=analysis.get("software_version", ""), software_version=__version__,
                 steps_used=len(src.steps), steps_rejected=len(src.rejected), plain=plain)
     twin = Twin(rig={"rig": rig}, plan={"plan": plan}, provenance=prov,
-                parameters={k: dict(v) for k, v in params.items()}, causes=[c["id"] for c in causes],
+                parameters={k: dict(v) for k, v in reported.items()}, causes=[c["id"] for c in causes],
                 applied=applied, not_in_plant=not_in_plant, notes=notes,
                 drive_ratio=[dict(freq_Hz=float(f), N_per_V=float(r), Z_s_N_s_per_m=[float(z.real), float(z.imag)])
                              for f, r, z in zip(f_r, ratio, Zs)],

@@ -118,6 +118,8 @@ class AnalysisData:
     loops: list[Loop] = field(default_factory=list)
     restoring_force: RestoringForce | None = None
     problems: list[str] = field(default_factory=list)   # parts that could not be read
+    friction_model: str = "masing"                      # the friction model the data prefer (decision 0078)
+    friction_table: list[dict] = field(default_factory=list)   # analysis.json friction_models.table
 
 
 def _float(v) -> float:
@@ -237,6 +239,9 @@ def analysis_data(d: dict) -> AnalysisData:
     a.base_heldout_error = _float(base.get("heldout_error"))
     a.final_reduced_chi2 = _float((d.get("final") if isinstance(d.get("final"), dict) else {}).get("reduced_chi2"))
     a.causes = _items(a, d, "causes", _cause)
+    a.friction_model = str(d.get("friction_model") or "masing")
+    fm = d.get("friction_models")
+    a.friction_table = [r for r in (fm.get("table") or [] if isinstance(fm, dict) else []) if isinstance(r, dict)]
     a.candidates = _items(a, d, "candidates", _candidate)
     a.steps_used = [str(k) for k in d.get("steps_used") or []]
     a.steps_rejected = _items(a, d, "steps_rejected", lambda r: (str(r["step"]), str(r.get("reason", "?"))))
@@ -271,3 +276,37 @@ def relative_error(model: complex, measured: complex) -> float:
     if not (np.isfinite(model) and np.isfinite(measured)) or measured == 0:
         return math.nan
     return abs(model - measured) / abs(measured)
+
+
+FRICTION_HEAD = ["friction model", "parameters (95 %)", "held-out error, compliance", "held-out error, accelerance",
+                 "reduced chi-square", "BIC"]
+
+
+def friction_rows(a: AnalysisData) -> list[list[str]]:
+    """The friction-model table's rows as plain text (the preferred model marked), for both
+    renderers; a model not fitted says so."""
+    rows = []
+    for r in a.friction_table:
+        name = f"{r.get('label', r.get('model'))} ({r.get('model')})" + (" - preferred" if r.get("model") == a.friction_model else "")
+        if not r.get("fitted"):
+            rows.append([name, "not fitted", "-", "-", "-", "-"])
+            continue
+        parts = []
+        for k, p in (r.get("parameters") or {}).items():
+            if isinstance(p, dict):
+                parts.append(f"{k} = {_fmt(p.get('value'))} [{_fmt(p.get('low'))}, {_fmt(p.get('high'))}]")
+            elif isinstance(p, list) and p and isinstance(p[0], dict):
+                parts.append(f"{k}: {len(p)} elements")
+        rows.append([name, "; ".join(parts) or "-", _pct_text(r.get("heldout_error_compliance")),
+                     _pct_text(r.get("heldout_error_accelerance")), _fmt(r.get("reduced_chi2")), _fmt(r.get("bic"))])
+    return rows
+
+
+def _fmt(v) -> str:
+    x = _float(v)
+    return "-" if not math.isfinite(x) else f"{x:.4g}"
+
+
+def _pct_text(v) -> str:
+    x = _float(v)
+    return "-" if not math.isfinite(x) else f"{100 * x:.3g} %"

@@ -23,7 +23,7 @@ from sim.discrepancy.rounding import round_to_interval
 
 from . import _figures as figures
 from . import _figures_analysis as analysis_figures
-from ._analysis import AnalysisData, Interval, analysis_data
+from ._analysis import FRICTION_HEAD, AnalysisData, Interval, analysis_data, friction_rows
 
 log = logging.getLogger(__name__)
 
@@ -105,6 +105,16 @@ def _verdict(a: AnalysisData) -> str:
 
 KIND_TEXT = {"catalog": "catalog effect", "discovered": "discovered (not in the catalog)",
              "artefact": "measurement artefact"}
+
+
+def _friction(a: AnalysisData) -> str:
+    """Every friction model fitted to the same data (decision 0078)."""
+    if not a.friction_table:
+        return ""
+    rows = [[escape(c) for c in r] for r in friction_rows(a)]
+    return ('<section aria-labelledby="friction-h"><h2 id="friction-h">Friction models</h2>'
+            f"<p>The data prefer <code>{escape(a.friction_model)}</code>.</p>"
+            + table(FRICTION_HEAD, rows) + "</section>")
 
 
 def _causes(a: AnalysisData) -> str:
@@ -324,7 +334,7 @@ def render_analysis_html(analysis: dict) -> str:
         problems = (f'<section class="problems" aria-labelledby="prob-h"><h2 id="prob-h">Parts of the analysis that '
                     f"could not be shown</h2><ul>{items}</ul></section>")
     body = (f"<header><h1>{escape(title)}</h1>" + (f'<p class="meta">{escape(meta)}</p>' if meta else "")
-            + "</header><main>" + _verdict(a) + problems + _overview(a) + _causes(a) + _restoring(a)
+            + "</header><main>" + _verdict(a) + problems + _overview(a) + _causes(a) + _friction(a) + _restoring(a)
             + '<details id="details"><summary>Details: parameters, figures per level, candidates, diagnostics, '
               "steps</summary>" + _parameters(a) + _figures(a) + _candidates(a) + _steps(a) + "</details></main>")
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'

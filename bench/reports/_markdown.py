@@ -28,7 +28,7 @@ from ..words import report as words
 from ..words.numbers import number, percent
 from . import _figures as figures
 from . import _figures_modes as mode_figures
-from ._analysis import analysis_data
+from ._analysis import FRICTION_HEAD, analysis_data, friction_rows
 from ._damping import DAMPING_HEADS, DAMPING_KINDS, damping_notes, damping_row
 from ._identification import ID_PARAMS, IdentificationData, determined_from, finite, steps_of
 from ._overall import overall
@@ -133,6 +133,9 @@ def analysis_md(run: RunData) -> list[str]:
                       for c in a.causes])
     else:
         md.append("No cause named.")
+    if a.friction_table:
+        md += ["", f"Friction model the data prefer: `{a.friction_model}`.", ""]
+        md += _table(FRICTION_HEAD, friction_rows(a))
     md += ["", f"- steps used: {len(a.steps_used)}, rejected: {len(a.steps_rejected)}; candidates tried: "
            f"{len(a.candidates)}"]
     md.append(f"- figures, candidate scores and rejected steps: {link}" if page.is_file() else

@@ -122,7 +122,7 @@ def _header(what: str, p: dict) -> str:
 def _rig_comments(parameters: dict, applied: dict, shaker: dict, not_in_plant: list, notes: list) -> str:
     v = parameters
     lines = ["# identified (95 %): " + ", ".join(
-        f"{k} {v[k]['value']:.5g} [{v[k]['low']:.5g}, {v[k]['high']:.5g}]" for k in ("F_s_N", "x_s_m", "n", "mass_kg"))]
+        f"{k} {v[k]['value']:.5g} [{v[k]['low']:.5g}, {v[k]['high']:.5g}]" for k in v)]     # the model's own names
     for cid, keys in applied.items():
         lines.append(f"# cause {cid} -> " + ", ".join(f"{k} = {val:.5g}" if isinstance(val, float) else f"{k} = {val}"
                                                        for k, val in keys.items()))
@@ -292,7 +292,7 @@ TOOLS: Words = {
     "not_simulated": lambda rig: f"{rig}: not a simulated rig (simulated = true is needed)",
     "stopping_twins": lambda: "stopping twins",
     "twin_parameters": lambda parameters: "twin: " + ", ".join(f"{k} {parameters[k]['value']:.4g}"
-                                                              for k in ("F_s_N", "x_s_m", "n", "mass_kg")),
+                                                              for k in parameters),
     "twin_applied": _twin_applied,
     "twin_not_in_plant": lambda cause, reason: f"not in the plant: {cause}: {reason}",
     "twin_wrote": lambda rig, plan, twin: f"wrote {rig}, {plan} and {twin}",

@@ -25,11 +25,13 @@ import numpy as np
 
 from ..errors import ConfigurationError
 from ..identify import Estimate, Identifier, displacement_harmonics, synthesize
+from . import rivals
 from .fit import Fit, Weights, fit, whitened
-from .gain import frf
+from .gain import frf, heldout_error
 from .models import BASE_PARAMS, CENTRE, CENTRED, EFFECTS, LIBRARY, Data, Model
+from .rivals import FrictionChoice
 from .rounding import interval_text
-from .select import BIC_GATE, Selection, select, settle_final
+from .select import BIC_GATE, CHI2_UNEXPLAINED, Selection, select, settle_final
 from .terms import accelerance_pair, second_mode_phrase, speed_friction, speed_friction_phrase
 
 log = logging.getLogger(__name__)
@@ -138,6 +140,7 @@ class Analysis:
     rejected: list = field(default_factory=list)
     v_ref_m_per_s: float | None = None     # the rig file's friction_v_ref_m_per_s: alpha is stated there
     artefacts: list = field(default_factory=list)   # causes of kind "artefact" (sim.artefacts.artefact_causes)
+    friction: FrictionChoice | None = None          # every friction model's fit and the preferred one (decision 0078)
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -154,7 +157,13 @@ class Analysis:
 
     @property
     def unexplained(self) -> bool:
+        if self.friction is not None and self.friction.name == "masing_iwan":
+            return self.friction.preferred.reduced_chi2 > CHI2_UNEXPLAINED
         return self.selection.unexplained
+
+    @property
+    def friction_model(self) -> str:
+        return "masing" if self.friction is None else self.friction.name
 
     def f_res_Hz(self, f: Fit) -> float:
         v = f.model.values(f.theta)
@@ -163,7 +172,9 @@ class Analysis:
     @staticmethod
     def _params(f: Fit) -> dict:
         """F_s, x_s, n, m with 95 % intervals; an end the data do not bound is null, with
-        ``bounded: false`` (:meth:`Fit.unbounded`)."""
+        ``bounded: false`` (:meth:`Fit.unbounded`).  A Dahl head: F_c, sigma, exponent, m."""
+        if f.model.friction == "dahl":
+            return {k: {a: b for a, b in v.items() if a != "unit"} for k, v in rivals.head_parameters("dahl", f).items()}
         iv = f.named_intervals()
         loose = set(f.unbounded())
         return {k: dict(value=iv[k][0], low=_end(iv[k][1]), high=_end(iv[k][2]),
@@ -241,7 +252,18 @@ class Analysis:
         sel = self.selection
         base_err = 100 * sel.heldout_base
         parts = []
-        if sel.named:
+        ch = self.friction
+        if ch is not None and ch.name != "masing":
+            parts.append(f"The Masing model alone mis-predicts compliance and accelerance by {base_err:.1f} % "
+                         f"(rms over held-out force levels; reduced chi-square {self.base.reduced_chi2:.1f}).")
+            parts += rivals.choice_sentences(ch)
+            parts += [self.sentence(c) for c in sel.named]
+            if sel.named:
+                parts.append(f"Out-of-sample error falls from {base_err:.1f} % to {100 * sel.named[-1].heldout_error:.2f} %.")
+            if ch.name == "masing_iwan":
+                parts.append("The catalog's effects are not looked for on top of the elements' model (its fit is "
+                             "linear; the parameters above are the Masing model's, for reference).")
+        elif sel.named:
             first = sel.named[0]
             parts.append(f"The Masing model alone mis-predicts compliance and accelerance by {base_err:.1f} % "
                          f"(rms over held-out force levels; reduced chi-square {self.base.reduced_chi2:.1f})"
@@ -252,12 +274,15 @@ class Analysis:
             parts.append(f"Out-of-sample error falls from {100 * first.heldout_before:.1f} % to "
                          f"{100 * last.heldout_error:.1f} %.")
             parts += self._not_separable_phrases()
-        elif not sel.unexplained:
+        elif not self.unexplained:
             parts.append(f"The Masing model explains the data within the noise (reduced chi-square "
                          f"{self.base.reduced_chi2:.2f}, held-out error {base_err:.2f} %); no effect in the "
                          f"catalog and no term of the library improves both the BIC and the held-out prediction.")
-        if sel.unexplained:
-            what = "the extended model" if sel.named else "the Masing model"
+        if ch is not None and ch.name == "masing" and ch.passed_bare or ch is not None and ch.name == "masing" and ch.not_separable:
+            parts += rivals.choice_sentences(ch)
+        if self.unexplained:
+            what = ("the extended model" if sel.named else "the Masing model") if ch is None or ch.name != "dahl" \
+                else ("Dahl's model with the causes above" if sel.named else "Dahl's model")
             said = sel.explanations or sel.reasons
             parts.append(f"Structure remains that {what} does not explain: {'; '.join(said[:4])}. "
                          f"Neither the catalog nor the library of force terms accounts for it"
@@ -433,7 +458,9 @@ class Analysis:
                                        largest_amplitude_over_x_s=self.largest_amplitude_over_x_s(),
                                        spring_separable=self.spring_separable())),
             final=dict(effects=list(self.final.model.effects), reduced_chi2=self.final.reduced_chi2),
-            causes=causes + list(self.artefacts), unexplained=sel.unexplained, verdict=self.verdict(),
+            causes=causes + list(self.artefacts), unexplained=self.unexplained, verdict=self.verdict(),
+            friction_model=self.friction_model,
+            **({} if self.friction is None else dict(friction_models=rivals.choice_dict(self.friction))),
             candidates=candidates, steps_used=[s.key for s in self.steps], steps_rejected=list(self.rejected),
             steps_flagged=steps_flagged(self.steps),
             steps=steps, loops=self.loops(), restoring_force=self.restoring_force())
@@ -512,7 +539,7 @@ def steps_flagged(steps) -> list[dict]:
 def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, source: str = "",
                   software_version: str = "", rejected: list | None = None,
                   v_ref_m_per_s: float | None = None, artefacts: list | None = None,
-                  library: tuple[str, ...] | None = None) -> Analysis:
+                  library: tuple[str, ...] | None = None, friction_models: bool = True) -> Analysis:
     """Fit the base model, try the catalog, name what survives both gates (see module doc).
 
     ``guess``: rough F_s_N, x_s_m, n, mass_kg (e.g. a rig file's expected values); None
@@ -521,7 +548,9 @@ def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, sourc
     ``artefacts``: causes of kind "artefact" found in the time records
     (:func:`sim.artefacts.artefact_causes`), reported beside the physics.
     ``library``: the library terms to search (default all of
-    :data:`~sim.discrepancy.effects.LIBRARY`; ``()`` for the catalog alone)."""
+    :data:`~sim.discrepancy.effects.LIBRARY`; ``()`` for the catalog alone).
+    ``friction_models``: fit the rival friction models and prefer one where the data do
+    (:mod:`sim.discrepancy.rivals`, decision 0078); False: Masing alone."""
     steps = list(steps)
     d = data_from_steps(steps, harmonics)
     if np.unique(d.level).size < 2:
@@ -530,7 +559,37 @@ def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, sourc
     log.info("base fit: reduced chi2 %.2f", base.reduced_chi2)
     g = guess or guess_from_data(d)
     restart = np.array([math.log(g["F_s_N"]), math.log(g["x_s_m"]), g["n"], math.log(g["mass_kg"])])
-    sel = settle_final(select(base, d, W, library=LIBRARY if library is None else tuple(library), restart=restart), d)
+    lib = LIBRARY if library is None else tuple(library)
+    base_thetas: list = []
+    held = (heldout_error(base.model, base.theta, d, W, thetas=base_thetas), base_thetas)
+    masing = rivals.head_fit("masing", base, d, W, heldout=held[0], thetas=base_thetas)
+    fits = rivals.fit_all(masing, d, W) if friction_models else {
+        n: (masing if n == "masing" else rivals.ModelFit(n, fitted=False)) for n in rivals.FRICTION_MODELS}
+    if rivals.passed_bare(fits) and lib:
+        # a rival beats bare Masing: Masing's own shape corrections (the library) compete with
+        # it only if Masing with the catalog's causes does not already keep Masing (decision 0078)
+        sel = select(base, d, W, library=(), restart=restart, heldout=held, nfev=rivals.ON_RIVAL_NFEV)
+        choice = rivals.choose_after(fits, sel)
+        if choice.name == "masing":
+            sel = select(base, d, W, library=lib, restart=restart, heldout=held)
+            choice = rivals.choose_after(fits, sel)
+    else:
+        sel = select(base, d, W, library=lib, restart=restart, heldout=held)
+        choice = rivals.choose_after(fits, sel)
+    if choice.name == "dahl":
+        # the catalog's effects on top of the preferred model (the library's forms are Masing's)
+        rival = choice.preferred
+        assert rival.fit is not None
+        sel_r = select(rival.fit, d, W, library=(), nfev=rivals.ON_RIVAL_NFEV,
+                       heldout=(rival.heldout, rival.heldout_thetas))
+        sel = settle_final(sel_r, d)
+        sel.base, sel.heldout_base = base, choice.gain[0]
+    elif choice.name == "masing_iwan":
+        # the elements replace Masing's shape: no cause named on Sakai's curve stands (decision 0078)
+        sel = settle_final(Selection(base=base, final=base, named=[], tried=sel.tried, heldout_base=held[0],
+                                     screened=sel.screened, base_heldout_thetas=base_thetas), d)
+    else:
+        sel = settle_final(sel, d)
     return Analysis(steps=steps, data=d, weights=W, selection=sel, source=source,
                     software_version=software_version, rejected=list(rejected or []), v_ref_m_per_s=v_ref_m_per_s,
-                    artefacts=list(artefacts or []))
+                    artefacts=list(artefacts or []), friction=choice)

@@ -49,10 +49,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ConfigurationError
+from ..friction import MODELS
 from ..identify import POINTS_PER_PERIOD, path_friction, period_paths
 from .effects import CATALOG, CENTRE, CENTRED, EFFECTS, LIBRARY, Effect, Path  # noqa: F401  (re-exported)
 
 BASE_PARAMS = ("F_s_N", "x_s_m", "n", "mass_kg")
+# the friction laws a Model's head (friction level, length, shape, log m) can be: Sakai-Masing,
+# or Dahl's with F_c in the F_s slot, the pre-rolling length F_c / sigma in x_s's and its
+# exponent in n's (decision 0078)
+HEAD_FRICTIONS = ("masing", "dahl")
 MOTION_EFFECTS = ("sensor_delay", "sensor_gain_error", "second_mode")   # they change the rebuilt x
 MEMO_ENTRIES = 24
 
@@ -95,6 +100,13 @@ class Data:
                       for f in self.FIELDS))
 
 
+def dahl_dimless(paths: np.ndarray, length_m: float, exponent: float, omega: np.ndarray) -> np.ndarray:
+    """Dahl's steady friction over F_c along rows of ``paths`` (sim.friction.Dahl with F_c = 1
+    and sigma = 1 / length): a function of x / length and the exponent alone."""
+    return MODELS["dahl"].periodic_force(dict(F_c_N=1.0, sigma_N_per_m=1.0 / length_m, exponent=exponent),
+                                          paths, omega)
+
+
 class Model:
     """Base Masing model plus a set of effects; parameters as one flat vector.
 
@@ -102,7 +114,10 @@ class Model:
     units of :data:`EFFECTS` (f_p in log Hz)."""
 
     def __init__(self, effects: tuple[str, ...] = (), harmonics: int = 9, points_per_period: int = POINTS_PER_PERIOD,
-                 scales: dict | None = None):
+                 scales: dict | None = None, friction: str = "masing"):
+        if friction not in HEAD_FRICTIONS:
+            raise ConfigurationError(f"friction {friction!r}: the fitted head is one of {HEAD_FRICTIONS}")
+        self.friction = friction
         unknown = [e for e in effects if e not in EFFECTS]
         if unknown:
             raise ConfigurationError(f"unknown effects {unknown}; catalog: {CATALOG}; library: {LIBRARY}")
@@ -148,10 +163,10 @@ class Model:
         median step's mean displacement, 0)."""
         if effect in CENTRED and CENTRE not in self.effects:
             m = Model(self.effects + (effect, CENTRE), self.K, self.M,
-                      dict(self.scales, **{effect: scale, CENTRE: math.exp(theta[1])}))
+                      dict(self.scales, **{effect: scale, CENTRE: math.exp(theta[1])}), self.friction)
             init = np.asarray(init, float)
             return m, np.concatenate([theta, init[:1], init[1:2] if init.size > 1 else np.zeros(1)])
-        m = Model(self.effects + (effect,), self.K, self.M, dict(self.scales, **{effect: scale}))
+        m = Model(self.effects + (effect,), self.K, self.M, dict(self.scales, **{effect: scale}), self.friction)
         return m, np.concatenate([theta, init])
 
     # ------------------------------------------------------------------ physics
@@ -223,8 +238,12 @@ class Model:
             paths, starts = period_paths(x, self.M)
             return x, paths, starts
         x, paths, starts = self._cached(d, mkey, motion)
-        n = v["n"] if abs(v["n"] - 1.0) >= 1e-6 else 1.0 + 1e-6
-        M = self._cached(d, mkey + (float(theta[1]), n), lambda: path_friction(paths, v["x_s_m"], n))
+        if self.friction == "dahl":
+            n = v["n"]
+            M = self._cached(d, mkey + (float(theta[1]), n), lambda: dahl_dimless(paths, v["x_s_m"], n, d.omega))
+        else:
+            n = v["n"] if abs(v["n"] - 1.0) >= 1e-6 else 1.0 + 1e-6
+            M = self._cached(d, mkey + (float(theta[1]), n), lambda: path_friction(paths, v["x_s_m"], n))
         K = d.X.shape[1]
         ctx = Path(X=x[:, :K], Om=d.Omega, x=paths, starts=starts, x0=d.x0, centre=v.get(f"{CENTRE}.x_c", 0.0),
                    F_s=v["F_s_N"], x_s=v["x_s_m"], n=n, M_dimless=M, xf=x, omega=d.omega, cache=lambda key, make: self._cached(d, key, make), mkey=mkey)

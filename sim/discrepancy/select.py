@@ -296,14 +296,17 @@ def term_scale(current: Fit, d: Data, term: str) -> float:
 
 def select(base: Fit, d: Data, W: Weights, catalog: tuple[str, ...] = CATALOG, max_causes: int = 3,
            library: tuple[str, ...] = LIBRARY, library_fits: int = LIBRARY_FITS,
-           restart: np.ndarray | None = None) -> Selection:
+           restart: np.ndarray | None = None, nfev: int = SELECT_NFEV,
+           heldout: tuple[float, list] | None = None) -> Selection:
     """``restart``: log F_s, log x_s, n, log m to start the candidates from while the
     current model's F_s or x_s is unbounded (gross sliding beside a spring: the Masing
     model alone runs off to F_s, x_s ~ 1e30 and a candidate warm-started there stays
-    stuck, chi-square 1.6e5 where the truth gives 1)."""
+    stuck, chi-square 1.6e5 where the truth gives 1).  ``nfev``: a candidate's evaluations;
+    ``heldout``: the base fit's held-out error and refits when already measured."""
     current = base
-    base_thetas: list = []
-    held_cur = heldout_error(base.model, base.theta, d, W, thetas=base_thetas)
+    base_thetas: list = [] if heldout is None else list(heldout[1])
+    held_cur = (heldout_error(base.model, base.theta, d, W, thetas=base_thetas) if heldout is None
+                else heldout[0])
     held_base = held_cur
     named: list[Candidate] = []
     tried: list[Candidate] = []
@@ -331,7 +334,7 @@ def select(base: Fit, d: Data, W: Weights, catalog: tuple[str, ...] = CATALOG, m
                 start = np.concatenate([restart, current.theta[4:]])
             model, th0 = current.model.extend(start, e, init, scale_of.get(e, 1.0))
             try:
-                f = fit(model, th0, d, W, max_nfev=SELECT_NFEV)
+                f = fit(model, th0, d, W, max_nfev=nfev)
             except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
                 log.warning("candidate %s did not fit: %s", e, exc)
                 continue

@@ -95,6 +95,8 @@ def test_two_hidden_effects_are_both_named():
     a = analyse(case, 31)
     assert sorted(a.causes) == ["sensor_gain_error", "viscous_damping"], a.verdict()
     assert not a.unexplained
+    # a rival must beat Masing with its causes, not the bare Masing fit (decision 0078)
+    assert a.friction_model == "masing", a.verdict()
 
 
 @pytest.mark.slow

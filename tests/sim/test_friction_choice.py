@@ -1,0 +1,117 @@
+"""Issue 41 items 3 and 4: which friction model the data prefer (decision 0078), on data
+this project did not make (benchtools/friction_cases.py: the independent simulators of
+benchtools/independent_friction.py and independent_masing.py, the rig's noise, levels up
+to 1.5 times the friction level, gross sliding included).
+
+A small seeded grid per case (3 levels x 5 frequencies, the Iwan case 5 x 3; the top level always in); the
+campaign over the full 90-step grids is benchmarks/bench_model_choice.py.
+
+- a rival model's data: its family is named (``friction_model``), and its held-out error
+  is within twice the noise's, measured as the Masing control's held-out error on its own
+  data of the same grid and noise;
+- Masing data of both virgin-curve exponents the project knows (n = 1.5 and n = 0.5)
+  keep ``masing``;
+- every model of sim.friction is in the table, the fitted ones with their parameters'
+  95 % intervals, held-out errors, reduced chi-square and BIC.
+"""
+
+import pytest
+
+from benchtools import friction_cases as fc
+
+GRID = fc.small_grid(seed=3, n_levels=3, n_freqs=5)
+# the elements' model is non-parametric: a held-out level is predicted from the elements
+# whose slip lies between the levels kept, so it needs the levels closer together
+GRID_IWAN = fc.small_grid(seed=3, n_levels=5, n_freqs=3)
+
+
+@pytest.fixture(scope="module")
+def analysed(tmp_path_factory):
+    from bench.sources import load_source
+    from sim.discrepancy import analyze_steps
+
+    out = {}
+    tmp = tmp_path_factory.mktemp("cases")
+    for name in ("masing_n15", "masing_n05", "dahl_i05", "dahl_i2", "masing_iwan"):
+        levels, freqs = GRID_IWAN if name == "masing_iwan" else GRID
+        path, truth = fc.write_case(name, tmp, levels=levels, freqs=freqs, settle=15, measure=6, seed=5)
+        out[name] = analyze_steps(load_source(path).steps).to_dict()
+    return out
+
+
+def noise_heldout(analysed):
+    return analysed["masing_n15"]["friction_models"]["table"][0]["heldout_error"]
+
+
+@pytest.mark.parametrize("case,family", [("dahl_i05", "dahl"), ("dahl_i2", "dahl"), ("masing_iwan", "masing_iwan")])
+def test_a_rival_models_data_name_its_family_with_a_heldout_error_within_twice_the_noise(analysed, case, family):
+    d = analysed[case]
+    assert d["friction_model"] == family, d["verdict"]
+    row = next(r for r in d["friction_models"]["table"] if r["model"] == family)
+    assert row["heldout_error"] <= 2 * noise_heldout(analysed), (row["heldout_error"], noise_heldout(analysed))
+    assert "The hysteresis is not Masing" in d["verdict"]
+
+
+@pytest.mark.parametrize("case", ["masing_n15", "masing_n05"])
+def test_masing_data_keep_masing(analysed, case):
+    d = analysed[case]
+    assert d["friction_model"] == "masing", d["verdict"]
+    assert not d["friction_models"]["passed_against_masing_with_causes"]
+
+
+def test_the_table_has_every_model_with_intervals_heldout_errors_chi2_and_bic(analysed):
+    from sim.friction import MODELS
+
+    table = analysed["dahl_i2"]["friction_models"]["table"]
+    assert [r["model"] for r in table] == list(MODELS)
+    dahl = next(r for r in table if r["model"] == "dahl")
+    for name, truth in fc.CASES["dahl_i2"].params.items():
+        p = dahl["parameters"][name]
+        assert p["low"] <= truth <= p["high"], (name, p, truth)
+    for r in table:
+        if r["fitted"]:
+            assert {"heldout_error_compliance", "heldout_error_accelerance", "reduced_chi2", "bic"} <= set(r)
+
+
+def _fit(name, chi2, p, held, n_data=3000):
+    from sim.discrepancy.rivals import ModelFit
+    return ModelFit(name, chi2=chi2, n_data=n_data, n_params=p, heldout=held)
+
+
+def test_a_rival_that_beats_bare_masing_but_not_masing_with_its_causes_is_not_preferred():
+    # the lost first attempt's failure (decision 0078): on Masing + damping + a gain error
+    # bare Dahl beat bare Masing; Masing with the two causes fits to the noise
+    from sim.discrepancy.rivals import ModelFit, choose
+
+    fits = {"masing": _fit("masing", 9e5, 4, 0.30), "masing_iwan": ModelFit("masing_iwan", fitted=False),
+            "dahl": _fit("dahl", 3e5, 4, 0.10), "lugre": ModelFit("lugre", fitted=False),
+            "gms": ModelFit("gms", fitted=False)}
+    c = choose(fits, final_chi2=3000.0, final_params=6, final_dof=2994, final_heldout=0.003)
+    assert c.passed_bare == ["dahl"] and c.passed_final == [] and c.name == "masing"
+    # the same rival against a Masing whose causes leave the misfit: preferred
+    c = choose(fits, final_chi2=8e5, final_params=6, final_dof=2994, final_heldout=0.25)
+    assert c.name == "dahl" and c.gain == (0.30, 0.10)
+
+
+def test_models_within_the_gates_of_the_preferred_one_are_said_not_separable_with_the_measurement():
+    from sim.discrepancy.rivals import SEPARATING, ModelFit, choose
+
+    fits = {"masing": _fit("masing", 9e5, 4, 0.30), "masing_iwan": _fit("masing_iwan", 2999.0, 5, 0.0031),
+            "dahl": _fit("dahl", 3000.0, 4, 0.003), "lugre": ModelFit("lugre", fitted=False),
+            "gms": ModelFit("gms", fitted=False)}
+    c = choose(fits, final_chi2=8e5, final_params=6, final_dof=2994, final_heldout=0.25)
+    assert c.name == "dahl"
+    assert c.not_separable == [("masing_iwan", SEPARATING[frozenset(("dahl", "masing_iwan"))])]
+    fits["masing_iwan"] = _fit("masing_iwan", 3500.0, 5, 0.0031)       # BIC worse by about 500: separable
+    assert choose(fits, 8e5, 6, 2994, 0.25).not_separable == []
+
+
+def test_the_report_and_the_page_show_the_table_with_the_preferred_model_marked(analysed):
+    from bench.reports._analysis import analysis_data, friction_rows
+    from bench.reports._html import _friction
+
+    a = analysis_data(analysed["dahl_i2"])
+    rows = friction_rows(a)
+    assert [r[0].endswith("- preferred") for r in rows] == [False, False, True, False, False]
+    assert rows[2][1].startswith("F_c_N = ") and rows[3][1] == "not fitted"
+    assert "Friction models" in _friction(a) and "<code>dahl</code>" in _friction(a)
