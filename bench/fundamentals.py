@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +36,15 @@ from sim.describing_fit import FundamentalFit, fit_fundamentals
 
 from .frf_import import origin_of
 from .storage import RunStore
+
+class FundamentalLine(StrEnum):
+    """The lines of the fit's verdict (words: :data:`bench.words.terminal_data.FUNDAMENTALS`)."""
+
+    MODEL = "fundamentals_model"            # model, structure, reduced_chi2, bic, parameters: the section's
+    PREFERRED = "fundamentals_preferred"    # model, gap: the next model's BIC above it (None: one model)
+    OPEN = "fundamentals_open"              # degenerate: names, separations: Separation codes
+    NOISE = "fundamentals_noise"            # rule: mapping | residuals, sigma: relative
+
 
 MODELS = ("masing", "dahl")          # the friction models fitted (the others of sim.friction: slow or untested)
 NOMINAL_NOISE = 1e-3                 # the first fit's relative sigma, rescaled by its residuals (module doc)
