@@ -41,6 +41,7 @@ class FundamentalLine(StrEnum):
     """The lines of the fit's verdict (words: :data:`bench.words.terminal_data.FUNDAMENTALS`)."""
 
     MODEL = "fundamentals_model"            # model, structure, reduced_chi2, bic, parameters: the section's
+    FAILED = "fundamentals_failed"          # model, error: a rival's fit that failed (its error's text)
     PREFERRED = "fundamentals_preferred"    # model, gap: the next model's BIC above it (None: one model)
     OPEN = "fundamentals_open"              # degenerate: names, separations: Separation codes
     NOISE = "fundamentals_noise"            # rule: mapping | residuals, sigma: relative
@@ -108,7 +109,7 @@ def _rival_guess(model: str, masing: FundamentalFit) -> dict[str, Any]:
     return start
 
 
-def fit_run(path: Path, models: tuple[str, ...] = MODELS) -> tuple[RunLevels, dict[str, FundamentalFit]]:
+def fit_run(path: Path, models: tuple[str, ...] = MODELS) -> tuple[RunLevels, dict[str, FundamentalFit | str]]:
     """Every model of ``models`` (the first ``masing``) fitted to the run's fundamentals
     (module doc): Masing with the structures none and mode, BIC choosing; each rival with
     the structure Masing's fit chose, from a start made of Masing's fit."""
@@ -124,10 +125,15 @@ def fit_run(path: Path, models: tuple[str, ...] = MODELS) -> tuple[RunLevels, di
         noise, rule = NOMINAL_NOISE * math.sqrt(max(first.reduced_chi2, 1e-12)), "residuals"
     levels = _levels(fs, Hs, ds, control, noise)
     main = fit_fundamentals(levels, models[0], guess=_values(first) if first is not None else None)
-    fits = {models[0]: main}
+    fits: dict[str, FundamentalFit | str] = {models[0]: main}
     for m in models[1:]:
-        fits[m] = fit_fundamentals(levels, m, structures=tuple({Structure.NONE, main.structure}),
-                                   guess=_rival_guess(m, main))
+        try:
+            fits[m] = fit_fundamentals(levels, m, structures=tuple({Structure.NONE, main.structure}),
+                                       guess=_rival_guess(m, main))
+        except (ArithmeticError, ValueError) as e:
+            # a rival's fit run into a parameter's end (Dahl's F_c -> 0 on one held level divides by
+            # zero in its kernel): the rival is reported failed, Masing's fit stands
+            fits[m] = f"{type(e).__name__}: {e}"
     return RunLevels(levels, vals, kind, noise, rule), fits
 
 
@@ -147,8 +153,11 @@ def _curve(fit: FundamentalFit, lv: Level) -> tuple[np.ndarray, np.ndarray]:
     return f, H
 
 
-def fundamentals_section(rl: RunLevels, fits: dict[str, FundamentalFit]) -> dict[str, Any]:
-    """analysis.json's ``fundamentals`` section (schema in docs/analysis.md)."""
+def fundamentals_section(rl: RunLevels, every: dict[str, FundamentalFit | str]) -> dict[str, Any]:
+    """analysis.json's ``fundamentals`` section (schema in docs/analysis.md); a model whose
+    fit failed (the error's text in ``every``) is listed in ``failed``."""
+    fits = {m: f for m, f in every.items() if isinstance(f, FundamentalFit)}
+    failed = {m: f for m, f in every.items() if isinstance(f, str)}
     models = {}
     for name, fit in fits.items():
         models[name] = {
@@ -170,7 +179,7 @@ def fundamentals_section(rl: RunLevels, fits: dict[str, FundamentalFit]) -> dict
             f, H = _curve(fit, lv)
             entry["fitted"][name] = {"freq_Hz": f.tolist(), "receptance": [[h.real, h.imag] for h in H]}
         levels.append(entry)
-    return {"models": models, "preferred": preferred, "separations": [str(s) for s in best.separations],
+    return {"models": models, "failed": failed, "preferred": preferred, "separations": [str(s) for s in best.separations],
             "level_kind": rl.level_kind, "noise": {"relative_sigma": rl.noise, "rule": rl.noise_rule},
             "n_levels": len(rl.levels), "n_points": int(sum(lv.frequency_Hz.size for lv in rl.levels)),
             "levels": levels}

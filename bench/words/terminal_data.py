@@ -306,6 +306,7 @@ FUNDAMENTALS: Words = {
     "fundamentals_model": lambda model, structure, reduced_chi2, bic, parameters: (
         f"{model} (structure: {structure}): " + ", ".join(_estimate_words(k, p) for k, p in parameters.items())
         + f"; reduced chi^2 {reduced_chi2:.3g}, BIC {bic:.4g}"),
+    "fundamentals_failed": lambda model, error: f"{model}: the fit failed ({error}); not compared",
     "fundamentals_preferred": lambda model, gap: (f"preferred by BIC: {model}" +
                                                   (f" (the next model's BIC {gap:.4g} higher)" if gap is not None
                                                    else "")),
@@ -327,6 +328,7 @@ def fundamentals_verdict(section: dict) -> str:
     best = section["preferred"]
     lines = [said("fundamentals_model", model=m, structure=d["structure"], reduced_chi2=d["reduced_chi2"],
                   bic=d["bic"], parameters=d["parameters"]) for m, d in models.items()]
+    lines += [said("fundamentals_failed", model=m, error=e) for m, e in (section.get("failed") or {}).items()]
     others = [d["bic"] for m, d in models.items() if m != best]
     lines.append(said("fundamentals_preferred", model=best, gap=min(others) - models[best]["bic"] if others else None))
     lines.append(said("fundamentals_open", degenerate=models[best]["degenerate"], separations=section["separations"]))
