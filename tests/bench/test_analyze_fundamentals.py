@@ -97,8 +97,8 @@ def test_force_controlled_levels_cover_the_simulator_and_prefer_masing(forced, c
     95 % intervals of F_s, x_s, n, m cover the simulator's values, each identified; Masing is
     preferred by BIC (Dahl's reduced chi-square far above); the terminal says it in a few
     lines; the page holds the figure.  Flips: the noise rule's rescaling dropped (the nominal
-    1e-3 kept: red, F_s [9.989, 9.998] and x_s missed), the preferred model taken by the
-    largest BIC (red: dahl)."""
+    1e-3 kept: red on the noise's range only; the intervals, scaled by the reduced
+    chi-square, still cover), the preferred model taken by the largest BIC (red: dahl)."""
     tmp, levels = forced
     a, out, run = _analyse(tmp, "frf.csv", write_csv, levels, CSV_MAPPING, capsys)
     f = a["fundamentals"]
@@ -125,7 +125,7 @@ def held():
 def test_response_controlled_levels_cover_the_simulator(tmp_path, held, capsys):
     """Three held displacements (0.15, 0.5, 1.2 x_s) x 6 frequencies in a savemat struct
     array: the intervals cover.  Flip: the held run's levels fitted as force-controlled (the
-    held amplitude taken for a force; red: chi2/dof 3.1e3)."""
+    held metres taken for newtons; red: bench analyze exits 1, the fit fails)."""
     a, out, _ = _analyse(tmp_path, "tests.mat", write_mat, held, MAT_MAPPING, capsys)
     masing = a["fundamentals"]["models"]["masing"]
     print("\n" + out, {m: round(d["seconds"], 1) for m, d in a["fundamentals"]["models"].items()})
@@ -137,7 +137,8 @@ def test_response_controlled_levels_cover_the_simulator(tmp_path, held, capsys):
 def test_one_held_level_leaves_F_s_and_x_s_open_and_names_the_harmonics(tmp_path, held, capsys):
     """One held amplitude is one complex K_eq for three friction parameters: F_s and x_s
     degenerate, the harmonics of time records named as what would separate them (the code
-    in analysis.json, not the sentence).  Flip: the section's separations emptied (red)."""
+    in analysis.json, not the sentence).  Flip: the section's separations emptied (red:
+    'harmonics' not in [])."""
     one = {k: v for k, v in held.items() if math.isclose(k, 0.5 * X_S)}
     a, out, _ = _analyse(tmp_path, "one.mat", write_mat, one, MAT_MAPPING, capsys)
     f = a["fundamentals"]
