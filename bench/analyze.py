@@ -5,7 +5,9 @@ SOURCE (a run directory or a UFF58 file of time records) is read into steps by
 the measurement artefacts found in the time records (:mod:`sim.artefacts`, through the
 source) are added to the causes with ``kind: "artefact"``; this module only picks the starting values (``--rig`` file, else the run's own rig, else
 estimated from the data) and writes ``analysis.json`` (schema in docs/analysis.md) and
-``analysis.html``.  Nothing in SOURCE is modified.
+``analysis.html``.  An imported run (``bench import``: fundamentals only) is not analysed so:
+:func:`analyze_imported` fits the friction models to its fundamentals instead
+(:mod:`bench.fundamentals`, decision 0083).  Nothing in SOURCE is modified.
 """
 
 from __future__ import annotations

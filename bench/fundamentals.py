@@ -37,6 +37,7 @@ from sim.describing_fit import FundamentalFit, fit_fundamentals
 from .frf_import import origin_of
 from .storage import RunStore
 
+
 class FundamentalLine(StrEnum):
     """The lines of the fit's verdict (words: :data:`bench.words.terminal_data.FUNDAMENTALS`)."""
 
