@@ -51,8 +51,9 @@ def steps_md() -> list[str]:
     """In place of the analysis, the identification and the steps needing attention: an import
     has fundamentals only, no control and no time records."""
     return ["## Analysis and identification", "",
-            "Not made: the run holds fundamentals only, and the friction fit to fundamentals is not there yet "
-            "(`bench analyze` and `bench identify` refuse an imported run).", "",
+            "Not in this report: the run holds fundamentals only. `bench analyze RUN` fits the friction models to "
+            "them (RUN/analysis/analysis.html, decision 0083); `bench identify` refuses an imported run (no time "
+            "records).", "",
             "## Steps needing attention", "",
             "None judged: imported fundamentals carry neither a control record nor time records to check "
             "(the source's own checks are the measuring software's).", ""]
