@@ -152,12 +152,16 @@ def test_one_held_level_leaves_F_s_and_x_s_open_and_names_the_harmonics(tmp_path
 def test_the_mappings_noise_is_the_fits_and_a_bad_one_is_refused(tmp_path, held, capsys):
     """``noise`` under [import] is the fit's relative sigma (rule ``mapping``, not the
     residuals'); a noise outside (0, 1) is refused at import, one line naming import.noise,
-    exit 2, nothing written.  Flips: the mapping's noise ignored (red: rule residuals), the
-    check's bound dropped (red: exit 0)."""
+    exit 2, nothing written; the run's report carries the fit's verdict.  Flips: the mapping's
+    noise ignored (red: rule residuals), the check's bound dropped (red: exit 0), the report
+    given no analysis (red)."""
+    from bench.api import open_run
     one = {k: v for k, v in held.items() if math.isclose(k, 0.5 * X_S)}
-    a, _, _ = _analyse(tmp_path, "one.mat", write_mat, one, MAT_MAPPING.replace("[import]\n", "[import]\nnoise = 0.004\n"),
+    a, _, run = _analyse(tmp_path, "one.mat", write_mat, one, MAT_MAPPING.replace("[import]\n", "[import]\nnoise = 0.004\n"),
                        capsys)
     assert a["fundamentals"]["noise"] == {"relative_sigma": 0.004, "rule": "mapping"}
+    text = open_run(run).report().read_text()
+    assert "fitted to the fundamentals" in text and a["verdict"].splitlines()[0] in text
     (tmp_path / "bad.toml").write_text(MAT_MAPPING.replace("[import]\n", "[import]\nnoise = 2.0\n"))
     assert bench_main("import", tmp_path / "one.mat", "--out", tmp_path / "bad", "--mapping", tmp_path / "bad.toml") == 2
     err = capsys.readouterr().err.strip().splitlines()
