@@ -129,8 +129,10 @@ def fit_run(path: Path, models: tuple[str, ...] = MODELS) -> tuple[RunLevels, di
     fits: dict[str, FundamentalFit | str] = {models[0]: main}
     for m in models[1:]:
         try:
-            fits[m] = fit_fundamentals(levels, m, structures=tuple({Structure.NONE, main.structure}),
-                                       guess=_rival_guess(m, main))
+            # Masing's mode (when BIC took one) held in the rival's: a free mode in Dahl's fit
+            # cost 120 s on the how-to's 3 x 41 points (226 evaluations)
+            fits[m] = fit_fundamentals(levels, m, structures=tuple(dict.fromkeys((Structure.NONE, main.structure))),
+                                       guess=_rival_guess(m, main), fixed=dict(main.structure_values) or None)
         except (ArithmeticError, ValueError) as e:
             # a rival's fit run into a parameter's end (Dahl's F_c -> 0 on one held level divides by
             # zero in its kernel): the rival is reported failed, Masing's fit stands
