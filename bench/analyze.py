@@ -5,7 +5,9 @@ SOURCE (a run directory or a UFF58 file of time records) is read into steps by
 the measurement artefacts found in the time records (:mod:`sim.artefacts`, through the
 source) are added to the causes with ``kind: "artefact"``; this module only picks the starting values (``--rig`` file, else the run's own rig, else
 estimated from the data) and writes ``analysis.json`` (schema in docs/analysis.md) and
-``analysis.html``.  Nothing in SOURCE is modified.
+``analysis.html``.  An imported run (``bench import``: fundamentals only) is not analysed so:
+:func:`analyze_imported` fits the friction models to its fundamentals instead
+(:mod:`bench.fundamentals`, decision 0083).  Nothing in SOURCE is modified.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ class AnalyzeSaid(StrEnum):
     ARTEFACT = "artefact"                   # sentence: the artefact cause's (sim.artefacts)
     VERDICT = "verdict"                     # verdict: the analysis' (sim.discrepancy)
     IMPORTED = "imported_fundamentals"      # run, path: an imported run (bench import) holds fundamentals only
+    FUNDAMENTALS = "analysing_fundamentals"  # levels, points, path: an imported run, the fit to fundamentals
 
 
 def default_out_dir(source: Path) -> Path:
@@ -57,16 +60,43 @@ def _guess(source: Path, rig: Path | None) -> tuple[dict | None, float | None]:
     return r.guess(), float(v_ref) if v_ref else None
 
 
-def refuse_imported(source: Path) -> None:
-    """Refuse an imported run (``bench import``): it holds the fundamentals only, and the
-    friction fit to fundamentals (issue 42 item 3) is not there yet."""
+def imported_origin(source: Path) -> dict | None:
+    """run.json's ``origin`` of an imported run (``bench import``), else None."""
     if not (Path(source) / "run.json").is_file():
-        return
+        return None
     from .frf_import import origin_of
     from .storage import RunStore
-    origin = origin_of(RunStore.open(Path(source)).metadata)
+    return origin_of(RunStore.open(Path(source)).metadata)
+
+
+def refuse_imported(source: Path) -> None:
+    """Refuse an imported run where time records are needed (``bench identify``): it holds
+    the fundamentals only (``bench analyze`` fits them, :mod:`bench.fundamentals`)."""
+    origin = imported_origin(source)
     if origin is not None:
         raise words.refused(ConfigurationError, AnalyzeSaid.IMPORTED, run=source, path=origin.get("file", "?"))
+
+
+def analyze_imported(source: Path, out_dir: Path | None = None) -> dict:
+    """An imported run: the friction models fitted to its fundamentals (decision 0083);
+    ``analysis.json`` holds the ``fundamentals`` section, ``verdict`` its lines."""
+    from sim.discrepancy.analysis import SCHEMA
+
+    from .fundamentals import fit_run, fundamentals_section
+    from .reports import write_fundamentals_html
+    rl, fits = fit_run(Path(source))
+    log.info("%s", words.said(AnalyzeSaid.FUNDAMENTALS, levels=len(rl.levels),
+                              points=sum(lv.frequency_Hz.size for lv in rl.levels), path=source))
+    section = fundamentals_section(rl, fits)
+    result = {"schema": SCHEMA, "source": str(source), "software_version": __version__, "kind": "fundamentals",
+              "fundamentals": section, "verdict": words.fundamentals_verdict(section), "causes": [],
+              "unexplained": False}
+    out = Path(out_dir) if out_dir else default_out_dir(source)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "analysis.json", result)
+    write_fundamentals_html(result, out / "analysis.html")
+    log.info("%s", words.said(AnalyzeSaid.VERDICT, verdict=result["verdict"]))
+    return result
 
 
 def analyze_source(source: Path, out_dir: Path | None = None, rig: Path | None = None, *, src=None) -> dict:
@@ -75,7 +105,8 @@ def analyze_source(source: Path, out_dir: Path | None = None, rig: Path | None =
     source = Path(source)
     if not source.exists():
         raise words.refused(ConfigurationError, SourceProblem.NO_SUCH_SOURCE, path=source)
-    refuse_imported(source)
+    if imported_origin(source) is not None:
+        return analyze_imported(source, out_dir)
     src = src if src is not None else load_source(source)
     steps, rejected = list(src.steps), [dict(step=r.step, reason=r.reason) for r in src.rejected]
     if not steps:

@@ -97,7 +97,7 @@ UNIT_FIELDS = ("level", "frequency", "response", "phase", "force")
 NAMES = {"level": ("level",), "frequency": ("frequency", "freq", "f"), "amplitude": ("amplitude", "abs", "magnitude"),
          "phase": ("phase",), "re": ("re", "real"), "im": ("im", "imag"), "force": ("force",)}
 MAPPING_KEYS = ("response", "level_kind", "mass_kg", "variable", "fields", "units", "levels", "level_from",
-                "level_pattern", "point")
+                "level_pattern", "point", "noise")
 _HEAD = re.compile(r"^\s*(?P<name>[^\[(]*?)\s*(?:[\[(](?P<unit>.*)[\])])?\s*$")
 
 
@@ -167,6 +167,9 @@ def read_mapping(path: Path | None, problems: _Problems) -> dict:
     mass = m.get("mass_kg")
     if mass is not None and not (isinstance(mass, (int, float)) and math.isfinite(mass) and mass > 0):
         problems.add(ImportProblem.MAPPING_VALUE, path=path, key="import.mass_kg", got=mass, allowed="> 0")
+    noise = m.get("noise")      # the FRF's relative sigma per real or imaginary part (bench analyze, decision 0083)
+    if noise is not None and not (isinstance(noise, (int, float)) and math.isfinite(noise) and 0 < noise < 1):
+        problems.add(ImportProblem.MAPPING_VALUE, path=path, key="import.noise", got=noise, allowed="0 < noise < 1")
     m["_path"] = str(path)
     return m
 

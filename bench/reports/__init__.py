@@ -11,6 +11,7 @@ Decision record 0016.
 from ._compare import render_compare_html, write_compare_html
 from ._damping import damping_row
 from ._figures import plot_identification
+from ._fundamentals import render_fundamentals_html, write_fundamentals_html
 from ._html import render_analysis_html, write_analysis_html
 from ._identification import ID_PARAMS, IdentificationData, analysis_estimate, identification_data
 from ._markdown import write_report
@@ -22,5 +23,5 @@ from ._sequence import sequence_md
 from ._steps import UNSETTLED_RESIDUAL, residual_ratio
 
 __all__ = ["ID_PARAMS", "UNSETTLED_RESIDUAL", "IdentificationData", "MODES_COLUMNS", "RunData", "RunModes", "analysis_estimate", "damping_row", "identification_data", "load_run",
-           "plot_identification", "render_analysis_html", "render_compare_html", "residual_ratio", "run_modes", "sequence_md", "write_analysis_html",
-           "write_compare_html", "write_modes", "write_modes_csv", "write_report"]
+           "plot_identification", "render_analysis_html", "render_compare_html", "render_fundamentals_html", "residual_ratio", "run_modes", "sequence_md", "write_analysis_html",
+           "write_compare_html", "write_fundamentals_html", "write_modes", "write_modes_csv", "write_report"]

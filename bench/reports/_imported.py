@@ -47,12 +47,18 @@ def header_md(run, origin: dict, table) -> list[str]:
     return md
 
 
-def steps_md() -> list[str]:
+def steps_md(analysis: dict | None = None) -> list[str]:
     """In place of the analysis, the identification and the steps needing attention: an import
-    has fundamentals only, no control and no time records."""
-    return ["## Analysis and identification", "",
-            "Not made: the run holds fundamentals only, and the friction fit to fundamentals is not there yet "
-            "(`bench analyze` and `bench identify` refuse an imported run).", "",
+    has fundamentals only, no control and no time records; the fit to fundamentals' verdict
+    when ``bench analyze`` has written it (``analysis``: analysis.json's dict)."""
+    fitted = isinstance(analysis, dict) and analysis.get("kind") == "fundamentals"
+    said = (["The friction models fitted to the fundamentals (`bench analyze`, "
+             "[analysis.html](../analysis/analysis.html), decision 0083):", ""]
+            + [f"- {line}" for line in str(analysis.get("verdict", "")).splitlines()]  # type: ignore[union-attr]
+            if fitted else
+            ["Not made yet: `bench analyze RUN` fits the friction models to the fundamentals (decision 0083)."])
+    return ["## Analysis and identification", "", *said, "",
+            "`bench identify` refuses an imported run (no time records).", "",
             "## Steps needing attention", "",
             "None judged: imported fundamentals carry neither a control record nor time records to check "
             "(the source's own checks are the measuring software's).", ""]

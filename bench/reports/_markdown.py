@@ -503,8 +503,8 @@ def _results_md(run: RunData, out: Path, files: list[tuple[str, str]]) -> list[s
         md.append("")
 
     from ._imported import imported, steps_md
-    if imported(run) is not None:       # no analysis nor identification of fundamentals yet
-        return md + steps_md()
+    if imported(run) is not None:       # fundamentals: bench analyze's fit to them, no identification
+        return md + steps_md(run.analysis)
     md += analysis_md(run)
     md += identification_md(run.ident, plotted=bool(run.ident.history))
 

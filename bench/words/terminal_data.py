@@ -267,10 +267,74 @@ ANALYZE: Words = {
     "analysing": lambda steps, path, rejected: f"analysing {steps} steps of {path} ({rejected} rejected)",
     "artefact": lambda sentence: f"artefact: {sentence}",
     "verdict": lambda verdict: f"verdict: {verdict}",
-    "imported_fundamentals": lambda run, path: (f"{run}: imported from {path}: the run holds fundamentals only, and "
-                                                "the friction fit to fundamentals is not there yet (bench modes and "
-                                                "bench report read it)"),
+    "imported_fundamentals": lambda run, path: (f"{run}: imported from {path}: the run holds fundamentals only, no "
+                                                "time records to identify from (bench analyze fits the friction to "
+                                                "the fundamentals; bench modes and bench report read it)"),
+    "analysing_fundamentals": lambda levels, points, path: (f"fitting the friction models to the fundamentals of {path} "
+                                                            f"({levels} levels, {points} points)"),
 }
+
+# ---------------------------------------------------------------------------- bench.fundamentals
+
+# the parameters' names and display units (the terminal's and the analysis page's)
+FUNDAMENTAL_PARAMETERS = {"F_s_N": ("F_s", "N", 1.0), "x_s_m": ("x_s", "um", 1e6), "n": ("n", "", 1.0),
+                          "mass_kg": ("m", "kg", 1.0), "F_c_N": ("F_c", "N", 1.0),
+                          "sigma_N_per_m": ("sigma", "N/um", 1e-6), "exponent": ("exponent", "", 1.0),
+                          "mode_mass_kg": ("m_r", "kg", 1.0), "mode_frequency_Hz": ("f_r", "Hz", 1.0),
+                          "mode_damping_ratio": ("zeta_r", "", 1.0), "spring_N_per_m": ("k", "N/m", 1.0),
+                          "dashpot_N_s_per_m": ("c", "N s/m", 1.0)}
+
+
+def _estimate_words(name: str, p: dict) -> str:
+    label, unit, scale = FUNDAMENTAL_PARAMETERS.get(name, (name, p.get("unit", ""), 1.0))
+    lo, hi = p.get("low"), p.get("high")
+    span = (f" [{lo * scale:.4g}, {hi * scale:.4g}]" if lo is not None and hi is not None else " [unbounded]")
+    return f"{label} {p['value'] * scale:.4g}{' ' + unit if unit else ''}{span} {said(p['status'])}"
+
+
+# the codes of the fit to fundamentals (sim.describing_fit.ParameterStatus, Separation) and the lines of its
+# verdict (bench.fundamentals.FundamentalLine)
+FUNDAMENTALS: Words = {
+    "identified": lambda: "identified",
+    "degenerate": lambda: "degenerate",
+    "fixed": lambda: "fixed",
+    "harmonics": lambda: ("the upper harmonics of time records (the loop's shape, which the fundamental does not see: "
+                          "record time histories, bench run or UFF58 time records, and bench analyze them)"),
+    "level_at_saturation": lambda: "a level at or above the friction level (a loop that saturates)",
+    "frequencies_across_resonance": lambda: "frequencies across and above the friction resonance (the mass)",
+    "frequencies_at_mode": lambda: "frequencies around the structure's mode",
+    "fundamentals_model": lambda model, structure, reduced_chi2, bic, parameters: (
+        f"{model} (structure: {structure}): " + ", ".join(_estimate_words(k, p) for k, p in parameters.items())
+        + f"; reduced chi^2 {reduced_chi2:.3g}, BIC {bic:.4g}"),
+    "fundamentals_failed": lambda model, error: f"{model}: the fit failed ({error}); not compared",
+    "fundamentals_preferred": lambda model, gap: (f"preferred by BIC: {model}" +
+                                                  (f" (the next model's BIC {gap:.4g} higher)" if gap is not None
+                                                   else "")),
+    "fundamentals_open": lambda degenerate, separations: (
+        ("identified: every parameter (95 % intervals within a factor 2)" if not degenerate else
+         "not identified by the fundamentals: " + ", ".join(FUNDAMENTAL_PARAMETERS.get(d, (d,))[0] for d in degenerate))
+        + ("; what would separate what is open: " + "; ".join(said(c) for c in separations) if separations else "")),
+    "fundamentals_noise": lambda rule, sigma: (
+        f"noise: {100 * sigma:.3g} % of |X/F| per real and imaginary part, "
+        + ("the mapping's noise" if rule == "mapping" else
+           "from the residuals of the Masing fit without a structure (the FRF file gives none)")),
+}
+
+
+def fundamentals_verdict(section: dict) -> str:
+    """The verdict's lines of a fit to fundamentals (analysis.json's ``fundamentals``): one per
+    model, the preferred model, what is open and what would separate it, the noise used."""
+    models = section["models"]
+    best = section["preferred"]
+    lines = [said("fundamentals_model", model=m, structure=d["structure"], reduced_chi2=d["reduced_chi2"],
+                  bic=d["bic"], parameters=d["parameters"]) for m, d in models.items()]
+    lines += [said("fundamentals_failed", model=m, error=e) for m, e in (section.get("failed") or {}).items()]
+    others = [d["bic"] for m, d in models.items() if m != best]
+    lines.append(said("fundamentals_preferred", model=best, gap=min(others) - models[best]["bic"] if others else None))
+    lines.append(said("fundamentals_open", degenerate=models[best]["degenerate"], separations=section["separations"]))
+    lines.append(said("fundamentals_noise", rule=section["noise"]["rule"], sigma=section["noise"]["relative_sigma"]))
+    return "\n".join(lines)
+
 
 # ---------------------------------------------------------------------------- bench.commands.tools
 
@@ -316,6 +380,7 @@ RESULTS: Words = {
     "analyzed": lambda causes, unexplained, out: (f"causes: {', '.join(causes) or 'none'}; "
                                                   f"unexplained: {'yes' if unexplained else 'no'}; written to {out}"),
     "compared": lambda out: f"written to {out}/compare.json and compare.html",
+    "fundamentals_written": lambda out: f"the fit to fundamentals written to {out}/analysis.json and analysis.html",
 }
 
 # ---------------------------------------------------------------------------- bench.studies
@@ -407,7 +472,8 @@ IMPORT: Words = {
 
 
 # the mappings :func:`said` and :func:`refused` look a code up in (by name: a reworded mapping is found)
-_MAPPINGS = ("SOURCE", "NOT_IN_PLANT", "TWIN_NOTE", "TWIN", "COMPARE", "EXPORT", "ANALYZE", "TOOLS", "RESULTS", "STUDIES", "IMPORT")
+_MAPPINGS = ("SOURCE", "NOT_IN_PLANT", "TWIN_NOTE", "TWIN", "COMPARE", "EXPORT", "ANALYZE", "TOOLS", "RESULTS", "STUDIES", "IMPORT",
+             "FUNDAMENTALS")
 
 
 def said(code: str, **fields) -> str:

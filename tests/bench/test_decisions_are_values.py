@@ -45,6 +45,7 @@ from bench.export_modes import ModeId
 from bench.files import FileKind, FileRefusal
 from bench.frf_import import ImportProblem
 from bench.frf_run import ImportLine
+from bench.fundamentals import FundamentalLine
 from bench.numbers import Shown
 from bench.plan_time import Online, planned_step_list, rig_time_bound_s
 from bench.reports._markdown import accounting_md, flagged_reasons
@@ -75,6 +76,7 @@ from bench.watch.snapshot import PageMessage, PageWarning, RunReader, SnapshotLi
 from bench.watch.stop import StopLine
 from procedures.stepped_sine import unsettled_in
 from sim.artefacts import artefact_causes, assess_step
+from sim.describing_fit import ParameterStatus, Separation
 from sim.rig_friction import FrictionKey
 
 F, FS = 37.0, 5120.0
@@ -217,7 +219,8 @@ def test_every_code_has_words_in_its_renderers():
     data = {"SOURCE": SourceProblem, "NOT_IN_PLANT": NotInPlant, "TWIN_NOTE": TwinNote, "TWIN": TwinSaid,
             "COMPARE": CompareSaid, "EXPORT": (*ExportSaid, *ModeId), "ANALYZE": AnalyzeSaid, "TOOLS": ToolLine,
             "RESULTS": ResultLine, "STUDIES": (*StudiesSaid, *StudySaid, *MapRefusal, *McRefusal, *BatchSaid),
-            "IMPORT": (*ImportProblem, *ImportLine)}
+            "IMPORT": (*ImportProblem, *ImportLine),
+            "FUNDAMENTALS": (*ParameterStatus, *Separation, *FundamentalLine)}
     for name, codes in data.items():
         assert set(getattr(data_words, name)) == {str(c) for c in codes}, name
     assert set(data) == set(data_words._MAPPINGS)       # said() finds each code in one mapping only
