@@ -7,7 +7,7 @@ source) are added to the causes with ``kind: "artefact"``; this module only pick
 estimated from the data) and writes ``analysis.json`` (schema in docs/analysis.md) and
 ``analysis.html``.  An imported run (``bench import``: fundamentals only) is not analysed so:
 :func:`analyze_imported` fits the friction models to its fundamentals instead
-(:mod:`bench.fundamentals`, decision 0083).  Nothing in SOURCE is modified.
+(:mod:`bench.fundamentals`, decision 0084).  Nothing in SOURCE is modified.
 """
 
 from __future__ import annotations
@@ -78,7 +78,7 @@ def refuse_imported(source: Path) -> None:
 
 
 def analyze_imported(source: Path, out_dir: Path | None = None) -> dict:
-    """An imported run: the friction models fitted to its fundamentals (decision 0083);
+    """An imported run: the friction models fitted to its fundamentals (decision 0084);
     ``analysis.json`` holds the ``fundamentals`` section, ``verdict`` its lines."""
     from sim.discrepancy.analysis import SCHEMA
 

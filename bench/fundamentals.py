@@ -1,4 +1,4 @@
-"""``bench analyze RUN`` on an imported run (issue 42 item 3, decision 0083): the friction
+"""``bench analyze RUN`` on an imported run (issue 42 item 3, decision 0084): the friction
 models' describing functions fitted to the measured fundamentals across levels
 (:func:`sim.describing_fit.fit_fundamentals`), a structural mode where BIC takes it.
 

@@ -1,4 +1,4 @@
-"""The analysis page of an imported run (``bench analyze RUN`` on fundamentals, decision 0083):
+"""The analysis page of an imported run (``bench analyze RUN`` on fundamentals, decision 0084):
 the verdict's lines, each model's parameters with 95 % intervals and status, the structures'
 BIC, what would separate what is open, and per level the measured receptance against each
 model's fitted one (magnitude and phase)."""

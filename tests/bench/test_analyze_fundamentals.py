@@ -1,4 +1,4 @@
-"""``bench analyze RUN`` on an imported run (issue 42 item 3, decision 0083): FRFs computed from
+"""``bench analyze RUN`` on an imported run (issue 42 item 3, decision 0084): FRFs computed from
 benchtools' independent Masing simulator (solve_ivp on the documented equations; this
 module's own least-squares fundamental of its records), written as other software writes
 them (benchtools.frf_files: a pandas CSV of mobility, a savemat struct array of held
