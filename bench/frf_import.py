@@ -167,7 +167,7 @@ def read_mapping(path: Path | None, problems: _Problems) -> dict:
     mass = m.get("mass_kg")
     if mass is not None and not (isinstance(mass, (int, float)) and math.isfinite(mass) and mass > 0):
         problems.add(ImportProblem.MAPPING_VALUE, path=path, key="import.mass_kg", got=mass, allowed="> 0")
-    noise = m.get("noise")      # the FRF's relative sigma per real or imaginary part (bench analyze, decision 0083)
+    noise = m.get("noise")      # the FRF's relative sigma per real or imaginary part (bench analyze, decision 0084)
     if noise is not None and not (isinstance(noise, (int, float)) and math.isfinite(noise) and 0 < noise < 1):
         problems.add(ImportProblem.MAPPING_VALUE, path=path, key="import.noise", got=noise, allowed="0 < noise < 1")
     m["_path"] = str(path)

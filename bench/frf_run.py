@@ -15,7 +15,7 @@ record was imported).  run.json says where it came from::
                "response": "disp" | "vel" | "accel", "level_kind": ..., "force": bool}
 
 and its rig is the default rig's layout, not simulated, no instruments (``bench identify``
-refuses an imported run before it reads it; ``bench analyze`` fits its fundamentals, decision 0083), ``expected_mass_kg`` the
+refuses an imported run before it reads it; ``bench analyze`` fits its fundamentals, decision 0084), ``expected_mass_kg`` the
 mapping's ``mass_kg`` when given.  The energy balance's mass is ``origin.mass_kg``, used only
 where the source holds the force beside the response (``origin.force``).  Nothing is written until every problem is known.
 """

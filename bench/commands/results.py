@@ -103,7 +103,7 @@ def cmd_analyze(args) -> int:
     result = analyze_source(source, Path(args.out) if args.out else None, Path(args.rig) if args.rig else None)
     out = Path(args.out) if args.out else default_out_dir(source)
     print(result["verdict"])
-    if "fundamentals" in result:          # an imported run: the fit to fundamentals (decision 0083)
+    if "fundamentals" in result:          # an imported run: the fit to fundamentals (decision 0084)
         print(say_result(ResultLine.FUNDAMENTALS_WRITTEN, out=out))
         return 0
     print(say_result(ResultLine.ANALYZED, causes=[c["id"] for c in result["causes"]], unexplained=result["unexplained"],

@@ -53,10 +53,10 @@ def steps_md(analysis: dict | None = None) -> list[str]:
     when ``bench analyze`` has written it (``analysis``: analysis.json's dict)."""
     fitted = isinstance(analysis, dict) and analysis.get("kind") == "fundamentals"
     said = (["The friction models fitted to the fundamentals (`bench analyze`, "
-             "[analysis.html](../analysis/analysis.html), decision 0083):", ""]
+             "[analysis.html](../analysis/analysis.html), decision 0084):", ""]
             + [f"- {line}" for line in str(analysis.get("verdict", "")).splitlines()]  # type: ignore[union-attr]
             if fitted else
-            ["Not made yet: `bench analyze RUN` fits the friction models to the fundamentals (decision 0083)."])
+            ["Not made yet: `bench analyze RUN` fits the friction models to the fundamentals (decision 0084)."])
     return ["## Analysis and identification", "", *said, "",
             "`bench identify` refuses an imported run (no time records).", "",
             "## Steps needing attention", "",
