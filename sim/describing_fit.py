@@ -48,6 +48,7 @@ SIDE = 1e-6                        # distance kept from a value the model exclud
 DIFF_STEP = 1e-6                   # relative step of the forward-difference Jacobian
 MAX_NFEV = 200
 SATURATION_SEEN = 0.9              # loop_reach at which the data have seen the loop saturate
+REACH_MIN = 0.01                   # levels below this share of the fitted friction level: its N and m extrapolated
 
 
 class ParameterStatus(StrEnum):
@@ -376,6 +377,15 @@ def _summarise(m: FrictionModel, prob: _Problem, res: Any, bic: dict[Structure, 
         inv = np.where(S > 0, 1.0 / S, np.inf)
     cov = (Vt.T * inv ** 2) @ Vt if np.all(np.isfinite(inv)) else np.full((k, k), np.inf)
     hw = Z95 * inflate * np.sqrt(np.abs(np.diag(cov)))
+    fv, mass, sv = prob.split(flat)
+    level_N = m.friction_level(fv)
+    reach = max(float(np.max(_force(lv))) for lv in prob.levels) / level_N
+    friction_names = {p.name for p in m.flat_parameters(prob.n_elements)}
+    # levels a hundredth of the friction level see its initial stiffness and damping only: the
+    # level itself (and the slip where it is reached) is the curve's form extrapolated, not measured
+    extrapolated: set[str] = set()
+    if reach < REACH_MIN:
+        extrapolated = {e.name for e in prob.free if e.name in friction_names and e.unit in ("N", "m")}
     estimates = []
     for e in prob.all:
         v = flat[e.name]
@@ -383,7 +393,8 @@ def _summarise(m: FrictionModel, prob: _Problem, res: Any, bic: dict[Structure, 
             estimates.append(Estimate(e.name, e.unit, v, v, v, ParameterStatus.FIXED))
             continue
         h = float(hw[prob.free.index(e)])
-        status = ParameterStatus.IDENTIFIED if h <= IDENTIFIED_WIDTH else ParameterStatus.DEGENERATE
+        status = ParameterStatus.IDENTIFIED if h <= IDENTIFIED_WIDTH and e.name not in extrapolated \
+            else ParameterStatus.DEGENERATE
         lo, hi = (v * math.exp(-h), v * math.exp(h)) if h < 700.0 else (0.0, math.inf)
         if not e.log:
             lo, hi = v - h * abs(v), v + h * abs(v)
@@ -394,13 +405,9 @@ def _summarise(m: FrictionModel, prob: _Problem, res: Any, bic: dict[Structure, 
         c = c if vrow[int(np.argmax(np.abs(vrow)))] > 0 else -c
         ex = {e.name: round(float(x / c), 3) for e, x in zip(prob.free, vrow) if abs(x / c) >= 0.05}
         directions.append(Direction(ex, float(s_hw / abs(c)), bool(s_hw / abs(c) <= IDENTIFIED_WIDTH)))
-    fv, mass, sv = prob.split(flat)
-    level_N = m.friction_level(fv)
-    reach = max(float(np.max(_force(lv))) for lv in prob.levels) / level_N
     a_max = max(float(np.max(receptance(m, fv, mass, lv, prob.structure, sv, points=prob.points)[1]))
                 for lv in prob.levels)
     loop_reach = float(np.abs(describing_function(m, fv, a_max, points=prob.points))) * a_max / level_N
-    friction_names = {p.name for p in m.flat_parameters(prob.n_elements)}
     open_ = {e.name for e in estimates if e.status is ParameterStatus.DEGENERATE}
     seps = []
     if open_ & friction_names:

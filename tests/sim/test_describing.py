@@ -237,3 +237,25 @@ def test_a_held_parameter_is_fixed_and_the_rest_still_fitted(low):
     assert e.status is ParameterStatus.FIXED and e.value == e.low == e.high == N
     assert all("n" not in d.exponents for d in fit.directions) and len(fit.directions) == 3
     assert all(_covers(fit, ("F_s_N", "x_s_m", "mass_kg")).values())
+
+
+def test_a_linear_spring_leaves_the_friction_level_open():
+    """A linear mass-spring-damper (an analytic FRF, no friction loop: 1/(k - w^2 m + i w c))
+    fitted as a Masing carriage: Sakai's curve becomes a spring of F_s and x_s far beyond the
+    levels, each with an interval within a factor 2 (the curve's assumed form extrapolated).
+    Neither may be called identified.
+    Flip: REACH_MIN = 0 (levels at 1e-5 of the fitted F_s): both identified, red."""
+    k, m, c = 3.0e6, 10.0, 2 * 0.02 * math.sqrt(3.0e6 * 10.0)
+    f = np.linspace(60.0, 80.0, 20)
+    w = 2 * math.pi * f
+    H = 1.0 / (k - w ** 2 * m + 1j * w * c)
+    rng = np.random.default_rng(4)
+    levels = []
+    for F in (1.0, 2.0, 4.0):
+        Hn = H * (1 + 0.002 * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)))
+        levels.append(Level(f, Hn, Control.FORCE, np.full(f.size, F), 0.002 * np.abs(H)))
+    fit = fit_fundamentals(levels, "masing", structures=("none",))
+    assert fit.estimate("F_s_N").value > 100 * 4.0                   # the spring's F_s: far above every level
+    assert fit.estimate("F_s_N").status is ParameterStatus.DEGENERATE
+    assert fit.estimate("x_s_m").status is ParameterStatus.DEGENERATE
+    assert Separation.LEVEL_AT_SATURATION in fit.separations
