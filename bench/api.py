@@ -82,6 +82,7 @@ class ApiRefusal(StrEnum):
     NOT_A_PLAN = "api_not_a_plan"       # got (the type's name)
     NOT_A_RIG = "api_not_a_rig"         # got (the type's name)
     BAD_LABEL = "api_bad_label"         # key
+    IMPORTED_NO_RIG = "api_imported_no_rig"     # run, file: an imported run (bench import) has no rig
 
 
 class ApiLine(StrEnum):
@@ -216,6 +217,10 @@ class Run:
 
     @property
     def rig(self) -> Rig:
+        """The rig the run was measured on; an imported run (``bench import``) has none."""
+        from .frf_import import origin_of
+        if (origin := origin_of(self.metadata)) is not None:
+            raise refused(ConfigurationError, ApiRefusal.IMPORTED_NO_RIG, run=self.path, file=origin.get("file", "?"))
         return stored_configs(self.metadata, f"{self.path}/run.json")[1]
 
     @property

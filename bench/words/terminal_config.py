@@ -198,6 +198,8 @@ API: Words = {
     "api_not_a_plan": lambda got: f"plan: expected a bench Plan or the path of a plan file, got {got}",
     "api_not_a_rig": lambda got: f"rig: expected a bench Rig or the path of a rig file, got {got}",
     "api_bad_label": lambda key: f"labels: a key must be a non-empty string, got {key!r}",
+    "api_imported_no_rig": lambda run, file: f"{run}: imported from {file} (bench import): measured by other "
+                                             f"software, it has no bench rig; steps(), modes() and report() read it",
     "no_attribute": lambda module, name: f"module {module!r} has no attribute {name!r}",
     "plugin_bad_instrument": lambda call, allowed, got: (f"{call}: instrument must be one of {', '.join(allowed)}, "
                                                          f"got {got!r}"),

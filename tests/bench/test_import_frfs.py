@@ -21,6 +21,7 @@ from bench.reports._modes import run_modes
 from benchtools.frf_files import CSV_MAPPING, MAT_MAPPING, UFF_MAPPING, sdof, write_csv, write_mat, write_uff
 from benchtools.masing_peaks import golden_max, steady_state
 from benchtools.procs import bench_main
+from sim.errors import ConfigurationError
 
 MODEL = dict(F_s_N=10.0, x_s_m=1e-5, n=1.5, mass_kg=10.0)
 LEVELS_N = (1.0, 2.0, 3.5)
@@ -202,6 +203,9 @@ def test_the_report_says_imported_and_identify_refuses(tmp_path, masing, capsys)
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "fundamentals only" in err[0] and "no time records" in err[0]
     assert not (tmp_path / "run" / "analysis").exists()
+    with pytest.raises(ConfigurationError, match="no bench rig") as e:    # flip: the refusal dropped: red
+        _ = open_run(tmp_path / "run").rig                                # (the URL check's three lines)
+    assert len(str(e.value).splitlines()) == 1 and "lab.unv" in str(e.value)
 
 
 # ---------------------------------------------------------------------------- bad input
