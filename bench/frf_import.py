@@ -1,6 +1,6 @@
 """Measured frequency responses read from another program's files (issue 42 item 1):
 UFF58 FRF records (through :func:`bench.sources.read_frf_records`, the one UFF58 reader),
-CSV and MATLAB ``.mat`` (v5/v7 through :func:`scipy.io.loadmat`), with an optional mapping
+CSV and MATLAB ``.mat`` (v5/v7 through :func:`scipy.io.loadmat`, v7.3 through :mod:`bench.mat73`), with an optional mapping
 (TOML, ``[import]``: which field is what, units, the response kind, the level's kind).
 
     read_frfs(path, mapping=None) -> Imported (levels, each f_Hz, the compliance X/F, the force)
@@ -35,7 +35,7 @@ class ImportProblem(StrEnum):
     """What is wrong with an imported file or its mapping (words: :data:`bench.words.terminal_data.IMPORT`)."""
 
     UNKNOWN_FORMAT = "import_unknown_format"         # path, suffix
-    MAT_V73 = "import_mat_v73"                       # path
+    MAT_NOT_NUMBERS = "import_mat_not_numbers"       # path, where, cls: a v7.3 value bench import cannot read
     UNREADABLE = "import_unreadable"                 # path, error, detail
     MAPPING_KEY = "import_mapping_key"               # path, key (not a key of [import])
     MAPPING_VALUE = "import_mapping_value"           # path, key, got, allowed
@@ -370,13 +370,15 @@ def _from_mat(path: Path, mapping: dict, problems: _Problems) -> Imported | None
     except OSError as e:
         problems.add(ImportProblem.UNREADABLE, path=path, error=type(e).__name__, detail=str(e))
         return None
-    if b"MATLAB 7.3" in head or head.startswith(b"\x89HDF"):
-        problems.add(ImportProblem.MAT_V73, path=path)
-        return None
     import scipy.io
+
+    from .mat73 import NotNumbers, is_v73, load_mat73
     try:
-        doc = scipy.io.loadmat(str(path), simplify_cells=True)
-    except Exception as e:  # noqa: BLE001 - scipy raises many kinds for a file it cannot read
+        doc = load_mat73(path) if is_v73(head) else scipy.io.loadmat(str(path), simplify_cells=True)
+    except NotNumbers as e:
+        problems.add(ImportProblem.MAT_NOT_NUMBERS, path=path, where=e.args[0], cls=e.args[1])
+        return None
+    except Exception as e:  # noqa: BLE001 - scipy and h5py raise many kinds for a file they cannot read
         problems.add(ImportProblem.UNREADABLE, path=path, error=type(e).__name__, detail=str(e))
         return None
     names = [k for k in doc if not k.startswith("__")]

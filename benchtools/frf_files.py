@@ -94,11 +94,21 @@ def write_csv(path, levels: dict):
     return path
 
 
-def write_mat(path, levels_m: dict):
-    """``levels_m``: held displacement (m) -> (frequencies, X/F)."""
+def write_mat(path, levels_m: dict, *, version: str = "5"):
+    """``levels_m``: held displacement (m) -> (frequencies, X/F); ``version`` "5" through
+    scipy.io.savemat, "7.3" (HDF5, MATLAB's layout) through hdf5storage, neither the bench's."""
     import scipy.io
     tests = np.zeros(len(levels_m), dtype=[("held_um", "O"), ("freq", "O"), ("mag", "O"), ("ph", "O")])
     for i, (level, (f, X)) in enumerate(levels_m.items()):
         tests[i] = (level * 1e6, np.asarray(f, float), np.abs(X) * 1e6, np.angle(X))
+    if version == "7.3":
+        import hdf5storage
+        rows = tests.reshape(1, -1)             # MATLAB's 1 x n struct array, each vector a row
+        for name in tests.dtype.names:
+            for j in range(rows.shape[1]):
+                rows[name][0, j] = np.atleast_2d(np.asarray(rows[name][0, j], float))
+        hdf5storage.savemat(str(path), {"tests": rows}, format="7.3", matlab_compatible=True,
+                            store_python_metadata=False)
+        return path
     scipy.io.savemat(str(path), {"tests": tests})
     return path

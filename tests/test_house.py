@@ -66,7 +66,8 @@ WORDLESS = ("bench/step_files.py", "bench/runlock.py", "sim/artefacts/causes.py"
             "bench/plan_time.py", "bench/rig_model.py",
             "bench/api.py", "bench/testing.py", "bench/numbers.py", "bench/backbone.py", "bench/__init__.py",
             "bench/studies/cli.py", "bench/__main__.py", "bench/commands/__init__.py", "bench/terminal.py",
-            "bench/watch/__init__.py", "bench/frf_import.py", "bench/frf_run.py", "bench/fundamentals.py")
+            "bench/watch/__init__.py", "bench/frf_import.py", "bench/frf_run.py", "bench/fundamentals.py",
+            "bench/mat73.py")
 
 # the renderers (decision 0071): the modules that make the words of an output from values and
 # decide nothing that is stored or acted upon; every other module of bench/ is WORDLESS

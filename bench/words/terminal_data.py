@@ -435,8 +435,8 @@ _RESPONSE = {"disp": "compliance X/F", "vel": "mobility V/F", "accel": "accelera
 IMPORT: Words = {
     "import_unknown_format": lambda path, suffix: (f"{path}: not a format bench import reads ({suffix or 'no suffix'}; "
                                                    "it reads .uff/.unv (UFF58 FRF records), .csv and .mat)"),
-    "import_mat_v73": lambda path: (f"{path}: a MATLAB v7.3 file (HDF5), which bench import does not read (h5py is not "
-                                    "a dependency); save it as v7 in MATLAB: save('file.mat', 'tests', '-v7')"),
+    "import_mat_not_numbers": lambda path, where, cls: (f"{path}: {where} is a MATLAB {cls} value, where bench import "
+                                                        "reads numbers, strings, structs and cells"),
     "import_unreadable": lambda path, error, detail: f"{path}: cannot be read ({error}: {detail})",
     "import_mapping_key": lambda path, key: f"{path}: [{key}] is not a key of the mapping (docs/howto/measured-frfs.md)",
     "import_mapping_value": lambda path, key, got, allowed: f"{path}: {key} = {got!r}; allowed: {allowed}",

@@ -259,13 +259,35 @@ def test_a_column_the_mapping_names_and_the_file_lacks_is_named(tmp_path, capsys
     assert not (tmp_path / "run").exists()
 
 
-def test_a_v73_mat_file_is_refused_by_name(tmp_path, capsys):
+def test_a_v73_mat_file_written_by_hdf5storage_imports_to_the_v5_files_modes(tmp_path, capsys):
+    """MATLAB's v7.3 (HDF5) layout as hdf5storage writes it: the same tests as the v5 file give
+    the same modes; a file with the v7.3 header and no HDF5 behind it is one line, exit 2.
+    Flip: a v7.3 file read by scipy.io.loadmat (is_v73 -> False): exit 2, red."""
+    f = np.linspace(45.0, 75.0, 31)
+    levels = {1e-6: (f, sdof(f, 60.0, 0.03)), 3e-6: (f, sdof(f, 58.0, 0.04))}
+    write_mat(tmp_path / "v5.mat", levels)
+    write_mat(tmp_path / "v73.mat", levels, version="7.3")
+    assert (tmp_path / "v73.mat").read_bytes().startswith(b"MATLAB 7.3")
+    (tmp_path / "map.toml").write_text(MAT_MAPPING)
+    got = {}
+    for v in ("v5", "v73"):
+        assert bench_main("import", tmp_path / f"{v}.mat", "--out", tmp_path / v, "--mapping", tmp_path / "map.toml") == 0
+        got[v] = sorted((e.level_N, round(e.resonance_Hz, 6), round(e.damping_ratio, 6))
+                        for e in run_modes(tmp_path / v, model=False).modes if e.mode == "feed")
+    assert got["v73"] == got["v5"] and len(got["v5"]) == 2, got
+    capsys.readouterr()
     head = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Mon Dec  7 2026 HDF5 schema 1.00 ."
     (tmp_path / "t.mat").write_bytes(head.ljust(512, b" ") + b"\x89HDF\r\n\x1a\n" + bytes(64))
     assert bench_main("import", tmp_path / "t.mat", "--out", tmp_path / "run") == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "v7.3" in err[0] and "-v7" in err[0]
+    assert len(err) == 1 and "t.mat: cannot be read" in err[0], err
     assert not (tmp_path / "run").exists()
+    import h5py                                       # a value that is not numbers: named, exit 2
+    with h5py.File(tmp_path / "odd.mat", "w") as h:   # (flip: NotNumbers not caught: exit 1, red)
+        h["tests"] = np.zeros(3, dtype=[("a", "f8"), ("b", "f8")])
+    assert bench_main("import", tmp_path / "odd.mat", "--out", tmp_path / "run") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "odd.mat: tests is a MATLAB" in err[0], err
 
 
 def test_twelve_levels_of_41_frequencies_and_their_modes_in_a_few_seconds(tmp_path, capsys):
