@@ -282,8 +282,9 @@ def test_a_v73_mat_file_written_by_hdf5storage_imports_to_the_v5_files_modes(tmp
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "t.mat: cannot be read" in err[0], err
     assert not (tmp_path / "run").exists()
-    import h5py                                       # a value that is not numbers: named, exit 2
-    with h5py.File(tmp_path / "odd.mat", "w") as h:   # (flip: NotNumbers not caught: exit 1, red)
+    # a value that is not numbers: named, exit 2 (flip: NotNumbers not caught: exit 1, red)
+    import h5py
+    with h5py.File(tmp_path / "odd.mat", "w") as h:
         h["tests"] = np.zeros(3, dtype=[("a", "f8"), ("b", "f8")])
     assert bench_main("import", tmp_path / "odd.mat", "--out", tmp_path / "run") == 2
     err = capsys.readouterr().err.strip().splitlines()
