@@ -82,6 +82,7 @@ class ModelFit:
     fit: Fit | None = None                 # head models (masing, dahl)
     heldout_thetas: list = field(default_factory=list)
     virgin_curve: dict | None = None       # masing_iwan: the identified virgin curve with its interval
+    values: dict = field(default_factory=dict)   # the model's own parameters (sim.friction names), for its force
 
     @property
     def dof(self) -> int:
@@ -165,7 +166,15 @@ def head_fit(name: str, f: Fit, d: Data, W: Weights, heldout: float | None = Non
     hc, ha = _parts(f.model, thetas, d)
     return ModelFit(name, parameters=head_parameters(name, f), chi2=f.chi2, n_data=f.n_data, n_params=f.model.size,
                     heldout=heldout, heldout_compliance=hc, heldout_accelerance=ha,
-                    seconds=seconds + time.process_time() - t0, fit=f, heldout_thetas=list(thetas))
+                    seconds=seconds + time.process_time() - t0, fit=f, heldout_thetas=list(thetas),
+                    values=head_values(name, f.theta))
+
+
+def head_values(name: str, theta: np.ndarray) -> dict:
+    """A head model's parameters by :mod:`sim.friction`'s names (what its periodic force takes)."""
+    if name == "dahl":
+        return dict(F_c_N=math.exp(theta[0]), sigma_N_per_m=math.exp(theta[0] - theta[1]), exponent=float(theta[2]))
+    return dict(F_s_N=math.exp(theta[0]), x_s_m=math.exp(theta[1]), n=float(theta[2]))
 
 
 def head_parameters(name: str, f: Fit) -> dict:
@@ -306,7 +315,7 @@ def iwan_fit(masing: Fit, d: Data, W: Weights, elements: int = IWAN_ELEMENTS) ->
     return ModelFit("masing_iwan", parameters=params, chi2=chi2, n_data=n_data, n_params=int(active.size),
                     heldout=held, heldout_compliance=float(np.sqrt(np.mean(cc ** 2))),
                     heldout_accelerance=float(np.sqrt(np.mean(aa ** 2))), seconds=time.process_time() - t0,
-                    virgin_curve=virgin)
+                    virgin_curve=virgin, values=dict(k_N_per_m=[q["value"] for q in ks], f_N=[q["value"] for q in params["f_N"]]))
 
 
 def fit_all(masing: ModelFit, d: Data, W: Weights) -> dict[str, ModelFit]:
