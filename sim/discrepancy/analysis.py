@@ -28,6 +28,7 @@ from ..identify import Estimate, Identifier, displacement_harmonics, synthesize
 from . import rivals
 from .fit import Fit, Weights, fit, whitened
 from .gain import frf, heldout_error
+from .loops import friction_model_loops, loop_steps, measured_period
 from .models import BASE_PARAMS, CENTRE, CENTRED, EFFECTS, LIBRARY, Data, Model
 from .rivals import FrictionChoice
 from .rounding import interval_text
@@ -460,7 +461,7 @@ class Analysis:
             final=dict(effects=list(self.final.model.effects), reduced_chi2=self.final.reduced_chi2),
             causes=causes + list(self.artefacts), unexplained=self.unexplained, verdict=self.verdict(),
             friction_model=self.friction_model,
-            **({} if self.friction is None else dict(friction_models=rivals.choice_dict(self.friction))),
+            **({} if self.friction is None else dict(friction_models=self.friction_models())),
             candidates=candidates, steps_used=[s.key for s in self.steps], steps_rejected=list(self.rejected),
             steps_flagged=steps_flagged(self.steps),
             steps=steps, loops=self.loops(), restoring_force=self.restoring_force())
@@ -481,35 +482,36 @@ class Analysis:
                     force_N=[float(a) for a in r.ravel()], level_index=[int(a) for a in lv])
 
     def loops(self, count: int = LOOPS) -> list[dict]:
-        """Measured and model friction loops at the most compliant step of a few levels."""
+        """Measured and Masing (base and final) friction loops at the most compliant step of a
+        few levels (:mod:`sim.discrepancy.loops`)."""
         d = self.data
-        C = np.abs(d.X[:, 0] / d.P[:, 0])
-        levels = np.unique(d.level)
-        pick = [levels[int(round(i))] for i in np.linspace(0, levels.size - 1, min(count, levels.size))]
         out = []
         m_fin = self.final.model.values(self.final.theta)["mass_kg"]
-        for lv in dict.fromkeys(pick):
-            idx = np.flatnonzero(d.level == lv)
-            i = int(idx[np.argmax(C[idx])])
+        for i in loop_steps(d, count):
             s = self.steps[i]
-            disp = getattr(s, "disp_m", None)
-            if disp is None or np.size(disp) < 8:
-                N = 256
-                disp = synthesize(d.X[i:i + 1], N)[0]
-                meas = synthesize(d.P[i:i + 1] - m_fin * d.A[i:i + 1], N)[0]
-            else:
-                disp = np.asarray(disp, float)
-                meas = np.asarray(s.force_N, float) - m_fin * np.asarray(s.accel_m_s2, float)
-                N = disp.size
+            disp, force, accel = measured_period(s, d, i)
+            meas = force - m_fin * accel
             sub = d.subset(np.arange(d.X.shape[0]) == i)
 
             def model_loop(f: Fit):
                 G, _ = f.model.terms(f.theta, sub, sub.P)
-                return synthesize(G, N)[0] + float(np.mean(meas))
+                return synthesize(G, disp.size)[0] + float(np.mean(meas))
             out.append(dict(key=s.key, level_N=float(s.level_N), freq_Hz=float(s.freq_Hz),
                             disp_m=[float(x) for x in disp], friction_meas_N=[float(x) for x in meas],
                             friction_base_N=[float(x) for x in model_loop(self.base)],
                             friction_final_N=[float(x) for x in model_loop(self.final)]))
+        return out
+
+    def friction_models(self) -> dict:
+        """analysis.json's ``friction_models``: the table of :func:`rivals.choice_dict`, each
+        fitted model's row with its loops at every level (:func:`friction_model_loops`)."""
+        assert self.friction is not None
+        out = rivals.choice_dict(self.friction)
+        loops = friction_model_loops(self.steps, self.data, self.friction.fits,
+                                     self.final.model.values(self.final.theta)["mass_kg"])
+        for row in out["table"]:
+            if row.get("model") in loops:
+                row["loops"] = loops[row["model"]]
         return out
 
 
