@@ -97,6 +97,19 @@ class Loop:
         return f"{self.key} ({where})" if where else self.key
 
 
+@dataclass(frozen=True)
+class ModelLoop:
+    """One friction model's loop at one level: measured (P - m a with the model's mass) and
+    modelled friction against displacement, and their rms difference."""
+
+    key: str
+    level_N: float
+    disp_m: np.ndarray
+    measured_N: np.ndarray
+    model_N: np.ndarray
+    rms_difference_N: float
+
+
 @dataclass
 class AnalysisData:
     source: str = ""
@@ -120,6 +133,7 @@ class AnalysisData:
     problems: list[str] = field(default_factory=list)   # parts that could not be read
     friction_model: str = "masing"                      # the friction model the data prefer (decision 0078)
     friction_table: list[dict] = field(default_factory=list)   # analysis.json friction_models.table
+    friction_loops: dict[str, list[ModelLoop]] = field(default_factory=dict)   # model -> its loops, level by level
 
 
 def _float(v) -> float:
@@ -200,6 +214,13 @@ def _loop(d: dict) -> Loop:
     return Loop(str(d.get("key", "?")), x, forces, _float(d.get("level_N")), _float(d.get("freq_Hz")))
 
 
+def _model_loop(d: dict) -> ModelLoop:
+    x, meas, model = (np.asarray(d[k], dtype=float) for k in ("disp_m", "friction_meas_N", "friction_model_N"))
+    if not x.ndim == 1 or meas.shape != x.shape or model.shape != x.shape:
+        raise ValueError("disp_m, friction_meas_N and friction_model_N must be lists of one length")
+    return ModelLoop(str(d.get("key", "?")), _float(d.get("level_N")), x, meas, model, _float(d.get("rms_difference_N")))
+
+
 def _items(a: AnalysisData, d: dict, key: str, parse) -> list:
     """Parse each entry of the list ``d[key]``; a bad entry is left out and named in problems."""
     raw = d.get(key)
@@ -242,6 +263,10 @@ def analysis_data(d: dict) -> AnalysisData:
     a.friction_model = str(d.get("friction_model") or "masing")
     fm = d.get("friction_models")
     a.friction_table = [r for r in (fm.get("table") or [] if isinstance(fm, dict) else []) if isinstance(r, dict)]
+    for r in a.friction_table:
+        if r.get("fitted") and r.get("loops") is not None:
+            where = f"friction_models.table[{r.get('model')}].loops"
+            a.friction_loops[str(r.get("model"))] = _items(a, {where: r["loops"]}, where, _model_loop)
     a.candidates = _items(a, d, "candidates", _candidate)
     a.steps_used = [str(k) for k in d.get("steps_used") or []]
     a.steps_rejected = _items(a, d, "steps_rejected", lambda r: (str(r["step"]), str(r.get("reason", "?"))))

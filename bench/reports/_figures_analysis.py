@@ -241,3 +241,39 @@ def plot_restoring_force(rf) -> Figure:
     return fig
 
 
+
+
+def plot_friction_model_loops(loops: dict, preferred: str, labels: dict[str, str] | None = None) -> Figure:
+    """Every fitted friction model's loop at every level against the measured one, one panel
+    per level (``loops``: model -> its :class:`~._analysis.ModelLoop` s, level by level).  The
+    measured loop is drawn with the preferred model's mass; each model's curve is its
+    prediction of that P - m a (its friction, plus the inertia its own mass differs by), so
+    every curve meets the measured one where that model fits.  The preferred model is the
+    thick line."""
+    labels = labels or {}
+    ref = loops.get(preferred) or next(iter(loops.values()), [])
+    cols = min(3, max(1, len(ref)))
+    rows = math.ceil(len(ref) / cols) if ref else 1
+    fig = Figure(figsize=(10, 3.6 * rows + 0.8), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False).ravel())
+    handles = [Line2D([], [], color="k", lw=2.4, label="measured (P - m a)")]
+    for ax, r in zip(axes, ref):
+        x_um = 1e6 * np.append(r.disp_m, r.disp_m[:1])
+        ax.plot(x_um, np.append(r.measured_N, r.measured_N[:1]), color="k", lw=2.4)
+        ax.set(xlabel="displacement (um)", ylabel="friction force (N)", title=f"{r.key} ({r.level_N:.3g} N)")
+        ax.grid(True, alpha=0.3)
+    for j, (name, ls) in enumerate(loops.items()):
+        best = name == preferred
+        style = dict(color=f"C{j}", lw=1.8 if best else 1.1, ls="-" if best else "--")
+        for ax, r in zip(axes, ref):
+            own = next((q for q in ls if q.key == r.key and q.disp_m.shape == r.disp_m.shape), None)
+            if own is None:
+                continue
+            y = own.model_N + (r.measured_N - own.measured_N)      # into the preferred model's mass
+            ax.plot(1e6 * np.append(r.disp_m, r.disp_m[:1]), np.append(y, y[:1]), **style)
+        handles.append(Line2D([], [], label=f"{labels.get(name, name)}{' (preferred)' if best else ''}", **style))
+    for ax in axes[len(ref):]:
+        ax.set_axis_off()
+    fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 3), fontsize=8, frameon=False)
+    fig.suptitle("Hysteresis loops of every fitted friction model against the measured loop")
+    return fig

@@ -114,7 +114,32 @@ def _friction(a: AnalysisData) -> str:
     rows = [[escape(c) for c in r] for r in friction_rows(a)]
     return ('<section aria-labelledby="friction-h"><h2 id="friction-h">Friction models</h2>'
             f"<p>The data prefer <code>{escape(a.friction_model)}</code>.</p>"
-            + table(FRICTION_HEAD, rows) + "</section>")
+            + table(FRICTION_HEAD, rows) + _friction_loops(a) + "</section>")
+
+
+def _friction_loops(a: AnalysisData) -> str:
+    """Every fitted model's loop at every level against the measured one, and the rms gap."""
+    loops = {n: ls for n, ls in a.friction_loops.items() if ls}
+    if not loops:
+        return ""
+    labels = {str(r.get("model")): str(r.get("label") or r.get("model")) for r in a.friction_table}
+    ref = loops.get(a.friction_model) or next(iter(loops.values()))
+    head = ["friction model"] + [f"{lp.key} ({lp.level_N:.3g} N)" for lp in ref]
+    rows = []
+    for name, ls in loops.items():
+        by_key = {lp.key: lp for lp in ls}
+        rows.append([escape(f"{labels.get(name, name)} ({name})" + (" - preferred" if name == a.friction_model else ""))]
+                    + [num(by_key[lp.key].rms_difference_N, ".3g") if lp.key in by_key else "-" for lp in ref])
+    return ("<h3>Hysteresis loops of each friction model</h3>"
+            + figure(analysis_figures.plot_friction_model_loops(loops, a.friction_model, labels),
+                     f"Friction force against displacement over one period at {len(ref)} force levels: measured and "
+                     f"each fitted friction model ({', '.join(loops)}); the preferred model "
+                     f"({a.friction_model}) thick.",
+                     "Measured friction P - m a (black, with the preferred model's mass m) and each fitted model's "
+                     "prediction of it (its steady periodic friction along the measured displacement, plus the "
+                     "inertia by which its own mass differs), at the most compliant step of every force level.")
+            + table(head, rows, caption="RMS difference between the measured loop (P - m a with the model's own "
+                                        "mass) and the model's friction over one period (N), per force level."))
 
 
 def _causes(a: AnalysisData) -> str:
