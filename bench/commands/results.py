@@ -68,15 +68,25 @@ def cmd_identify(args) -> int:
     guess = rig.guess()
     analysis_json = default_out_dir(source) / "analysis.json"
     extra: tuple[str, ...] = ()
+    analysis = None
     if analysis_json.is_file():
         try:
-            extra = analysis_effects(json.loads(analysis_json.read_text()))
+            analysis = json.loads(analysis_json.read_text())
+            extra = analysis_effects(analysis)
         except (OSError, ValueError) as e:
+            analysis = None
             print(say_result(ResultLine.ANALYSIS_UNREADABLE, path=analysis_json, detail=str(e)))
     est = identify_steps(src.steps, guess, rig.model, extra, MAX_HARMONICS)
     check_finite(est)
+    friction = preferred_friction(analysis, analysis_json)
+    if friction is not None:
+        est["friction_model"] = friction
     if src.kind == "run":
         RunStore.open(source).update(identification=est)
+    if friction is None:
+        print(say_result(ResultLine.FRICTION_NOT_COMPARED, source=source))
+    else:
+        print(say_result(ResultLine.FRICTION_PREFERRED, **friction))
     effects = est.get("model", {}).get("effects") or []
     print(say_result(ResultLine.MODEL, effects=effects, source=est.get("source"), named="source" in est))
     print(say_result(ResultLine.TABLE_HEAD))
@@ -93,6 +103,20 @@ def cmd_identify(args) -> int:
     return 0
 
 
+def preferred_friction(analysis, path: Path) -> dict | None:
+    """The friction model an analysis of the source prefers (issue 41 item 5): ``model``,
+    ``label``, its ``parameters`` ({name: {value, low, high, unit}}, 95 %) and the file
+    (``analysis``); None without an analysis that compared the models (decision 0087)."""
+    from sim.friction import MODELS
+    if not isinstance(analysis, dict) or not isinstance(analysis.get("friction_models"), dict):
+        return None
+    name = str(analysis.get("friction_model") or "masing")
+    rows = [r for r in analysis["friction_models"].get("table") or [] if isinstance(r, dict) and r.get("model") == name]
+    params = rows[0].get("parameters") if rows and isinstance(rows[0].get("parameters"), dict) else {}
+    return dict(model=name, label=MODELS[name].label if name in MODELS else name, analysis=str(path),
+                parameters={k: v for k, v in params.items() if isinstance(v, dict)})
+
+
 def cmd_analyze(args) -> int:
     """Where the Masing model is wrong in SOURCE, the cause, the extended model and its gain."""
     from ..analyze import analyze_source, default_out_dir
@@ -107,6 +131,7 @@ def cmd_analyze(args) -> int:
         print(say_result(ResultLine.FUNDAMENTALS_WRITTEN, out=out))
         return 0
     print(say_result(ResultLine.ANALYZED, causes=[c["id"] for c in result["causes"]], unexplained=result["unexplained"],
+                     friction_model=str(result.get("friction_model") or "masing"),
                      out=out))
     return 0
 
@@ -189,7 +214,9 @@ class ResultLine(StrEnum):
     TABLE_HEAD = "table_head"
     FIT = "fit"                             # steps, rejected, chi2: formatted
     WARNING = "warning"                     # text: the identification's warning
-    ANALYZED = "analyzed"                   # causes: ids, unexplained, out
+    ANALYZED = "analyzed"                   # causes: ids, unexplained, friction_model (the preferred id), out
+    FRICTION_PREFERRED = "friction_preferred"   # model, label, parameters, analysis: preferred_friction()
+    FRICTION_NOT_COMPARED = "friction_not_compared"     # source: no analysis compared the friction models
     COMPARED = "compared"                   # out
     FUNDAMENTALS_WRITTEN = "fundamentals_written"   # out: an imported run's fit to fundamentals
 

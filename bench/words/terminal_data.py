@@ -292,6 +292,15 @@ def _estimate_words(name: str, p: dict) -> str:
     return f"{label} {p['value'] * scale:.4g}{' ' + unit if unit else ''}{span} {said(p['status'])}"
 
 
+def _interval(name: str, p: dict) -> str:
+    """'F_c 10 N [9.99, 10.01]': a parameter of analysis.json with its 95 % interval."""
+    label, unit, scale = FUNDAMENTAL_PARAMETERS.get(name, (name, p.get("unit", ""), 1.0))
+    unit = "" if unit in ("", "1") else " " + unit
+    lo, hi = p.get("low"), p.get("high")
+    span = f" [{lo * scale:.4g}, {hi * scale:.4g}]" if lo is not None and hi is not None else " [unbounded]"
+    return f"{label} {p['value'] * scale:.4g}{unit}{span}"
+
+
 # the codes of the fit to fundamentals (sim.describing_fit.ParameterStatus, Separation) and the lines of its
 # verdict (bench.fundamentals.FundamentalLine)
 FUNDAMENTALS: Words = {
@@ -377,8 +386,16 @@ RESULTS: Words = {
     "table_head": lambda: f"{'parameter':>10} {'estimate':>12} {'95 % interval':>28}",
     "fit": lambda steps, rejected, chi2: f"{steps} steps ({rejected} rejected), reduced chi^2 {chi2}",
     "warning": lambda text: f"warning: {text}",
-    "analyzed": lambda causes, unexplained, out: (f"causes: {', '.join(causes) or 'none'}; "
-                                                  f"unexplained: {'yes' if unexplained else 'no'}; written to {out}"),
+    "analyzed": lambda causes, unexplained, friction_model, out: (
+        f"friction model: {friction_model}; causes: {', '.join(causes) or 'none'}; "
+        f"unexplained: {'yes' if unexplained else 'no'}; written to {out}"),
+    "friction_preferred": lambda model, label, parameters, analysis: (
+        f"friction model the data prefer: {label} ({model}), by `bench analyze` ({analysis})"
+        + (": " + "; ".join(_interval(k, p) for k, p in parameters.items()) if model != "masing" and parameters
+           else "")
+        + ("; the estimate below is the Masing model's" if model != "masing" else "")),
+    "friction_not_compared": lambda source: (f"friction model: Masing, not compared with the rival models "
+                                             f"(`bench analyze {source}` fits them and names the one the data prefer)"),
     "compared": lambda out: f"written to {out}/compare.json and compare.html",
     "fundamentals_written": lambda out: f"the fit to fundamentals written to {out}/analysis.json and analysis.html",
 }

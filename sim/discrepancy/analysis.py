@@ -75,7 +75,8 @@ def level_groups(levels_N: np.ndarray) -> np.ndarray:
 def data_from_steps(steps, harmonics: int = 9) -> Data:
     """Arrays of the first ``harmonics`` harmonics (the residuals), and every harmonic of
     both motion channels with their inverse-variance weights (the friction along x,
-    :func:`sim.identify.displacement_harmonics`)."""
+    :func:`sim.identify.displacement_harmonics`).  Levels: the response levels held when
+    every step held one (response control), else the force amplitudes."""
     if not steps:
         raise ConfigurationError("no steps to analyse")
     H = [s.harmonics for s in steps]
@@ -89,6 +90,7 @@ def data_from_steps(steps, harmonics: int = 9) -> Data:
         j = min(X.size, h.force.size)
         Xf[i, :j], wDf[i, :j], Pf[i, :j] = h.disp[:j], wD[:j], h.force[:j]
         XAf[i, :j] = -h.accel[:j] / (k[:j] * 2 * math.pi * h.freq_Hz) ** 2
+    held = [float(getattr(s, "held", None)[0]) if getattr(s, "held", None) else 0.0 for s in steps]   # response control
     means = np.array([float(np.mean(s.disp_m)) if np.size(getattr(s, "disp_m", ())) > 1 else math.nan
                       for s in steps])
     x0 = np.nan_to_num(means - np.nanmedian(means)) if np.isfinite(means).any() else np.zeros(len(steps))
@@ -96,7 +98,7 @@ def data_from_steps(steps, harmonics: int = 9) -> Data:
                 P=np.array([h.force[:K] for h in H]), A=np.array([h.accel[:K] for h in H]),
                 X=np.array([h.disp[:K] for h in H]), sP=np.array([h.sigma_force for h in H]),
                 sA=np.array([h.sigma_accel for h in H]), sX=np.array([h.sigma_disp for h in H]),
-                level=level_groups(np.array([float(s.level_N) for s in steps])),
+                level=level_groups(np.array(held if all(held) else [float(s.level_N) for s in steps])),
                 Xf=Xf, XAf=XAf, wDf=wDf, Pf=Pf)
 
 
