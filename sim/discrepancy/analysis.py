@@ -90,7 +90,7 @@ def data_from_steps(steps, harmonics: int = 9) -> Data:
         j = min(X.size, h.force.size)
         Xf[i, :j], wDf[i, :j], Pf[i, :j] = h.disp[:j], wD[:j], h.force[:j]
         XAf[i, :j] = -h.accel[:j] / (k[:j] * 2 * math.pi * h.freq_Hz) ** 2
-    held = [float(getattr(s, "held", None)[0]) if getattr(s, "held", None) else 0.0 for s in steps]   # response control
+    held = [float((getattr(s, "held", None) or (0.0,))[0]) for s in steps]     # response control: the level held
     means = np.array([float(np.mean(s.disp_m)) if np.size(getattr(s, "disp_m", ())) > 1 else math.nan
                       for s in steps])
     x0 = np.nan_to_num(means - np.nanmedian(means)) if np.isfinite(means).any() else np.zeros(len(steps))
