@@ -342,17 +342,22 @@ def iwan_fit(masing: Fit, d: Data, W: Weights, elements: int = IWAN_ELEMENTS) ->
                     virgin_curve=virgin, values=dict(k_N_per_m=[q["value"] for q in ks], f_N=[q["value"] for q in params["f_N"]]))
 
 
-def rate_fits(masing: Fit, dahl: ModelFit, d: Data, W: Weights) -> dict[str, ModelFit]:
+def rate_fits(masing: Fit, dahl: ModelFit, d: Data, W: Weights, others: tuple = ()) -> dict[str, ModelFit]:
     """LuGre (from Dahl's F_c and sigma, or the Masing fit's F_s and F_s / x_s) and GMS (on
-    the Iwan grid) by :mod:`sim.discrepancy.rate_rivals`; a fit that fails is not fitted."""
+    the Iwan grid; ``others``: the fits so far, whose best chi-square decides GMS's fine
+    grid) by :mod:`sim.discrepancy.rate_rivals`; a fit that fails is not fitted."""
     out: dict[str, ModelFit] = {}
     t0 = time.process_time()
     s = rr.setup(d, W)
     share = time.process_time() - t0
     F_s, x_s = math.exp(masing.theta[0]), math.exp(masing.theta[1])
     F_c, sigma = (dahl.values["F_c_N"], dahl.values["sigma_N_per_m"]) if dahl.fitted else (F_s, F_s / x_s)
-    makers = dict(lugre=lambda: rr.lugre_fit(s, F_c, sigma), gms=lambda: rr.gms_fit(s, iwan_grid(masing, d, rr.GMS_ELEMENTS)))
+    best = lambda: min((f.chi2 for f in (*others, *out.values()) if f.fitted), default=math.inf)  # noqa: E731
+    makers = dict(lugre=lambda: rr.lugre_fit(s, F_c, sigma),
+                  gms=lambda: rr.gms_fit(s, iwan_grid(masing, d, rr.GMS_ELEMENTS), best()))
     for name, make in makers.items():
+        if name not in FITTED:
+            continue
         t1 = time.process_time()
         try:
             res, values, params = make()
@@ -370,7 +375,7 @@ def fit_all(masing: ModelFit, d: Data, W: Weights) -> dict[str, ModelFit]:
     """Every model of :data:`FRICTION_MODELS`: the fitted ones, the others as not fitted."""
     assert masing.fit is not None
     out = {"masing": masing, "masing_iwan": iwan_fit(masing.fit, d, W), "dahl": dahl_fit(masing.fit, d, W)}
-    out.update(rate_fits(masing.fit, out["dahl"], d, W))
+    out.update(rate_fits(masing.fit, out["dahl"], d, W, tuple(out.values())))
     for name in FRICTION_MODELS:
         out.setdefault(name, ModelFit(name, fitted=False))
     return {name: out[name] for name in FRICTION_MODELS}
