@@ -566,10 +566,11 @@ def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, sourc
         n: (masing if n == "masing" else rivals.ModelFit(n, fitted=False)) for n in rivals.FRICTION_MODELS}
     if rivals.passed_bare(fits) and lib:
         # a rival beats bare Masing: Masing's own shape corrections (the library) compete with
-        # it only if Masing with the catalog's causes does not already keep Masing (decision 0078)
+        # it only if Masing with the catalog's causes does not already keep Masing (decision 0078),
+        # or if the rival is one the catalog is not searched on and leaves structure (decision 0086)
         sel = select(base, d, W, library=(), restart=restart, heldout=held, nfev=rivals.ON_RIVAL_NFEV)
         choice = rivals.choose_after(fits, sel)
-        if choice.name == "masing":
+        if choice.name == "masing" or rivals.leaves_structure(choice):
             sel = select(base, d, W, library=lib, restart=restart, heldout=held)
             choice = rivals.choose_after(fits, sel)
     else:

@@ -411,6 +411,14 @@ class FrictionChoice:
         return self.fits[self.name]
 
 
+def leaves_structure(c: FrictionChoice) -> bool:
+    """A preferred rival the catalog is not searched on top of (:data:`NO_CATALOG`) whose
+    own fit leaves structure (reduced chi-square above :data:`CHI2_UNEXPLAINED`): Masing's
+    library forms must then compete with it (a cubic spring on Masing: GMS passed the
+    catalog-only Masing at reduced chi-square 8840, decision 0086)."""
+    return c.name in NO_CATALOG and c.preferred.reduced_chi2 > CHI2_UNEXPLAINED
+
+
 def passed_bare(fits: dict[str, ModelFit]) -> list[str]:
     """The rivals that pass the gates against the bare Masing fit."""
     m = fits["masing"]
