@@ -5,6 +5,10 @@ the model named, the preferred model's held-out error against the Masing control
 noise's held-out error, same grid and noise, the same run), and the analysis's CPU seconds
 (``bench analyze``'s analyze_steps on one core, the clean Masing case's time beside it).
 
+Every fitted model of sim.discrepancy.rivals.FITTED has its cases here (LuGre and GMS since
+decision 0086); each row also gives the named model's reduced chi-square and each rival
+fit's CPU seconds.
+
 Bars: the right family named; held-out error within twice the noise's; median CPU per
 90-step case at most 15 s, maximum 30 s.
 
@@ -60,11 +64,14 @@ def main(argv=None) -> int:
                 rows.append(dict(case=name, seed=seed, truth=truth["friction_model"], named=d["friction_model"],
                                  heldout=row.get("heldout_error"), masing_heldout=fm["table"][0]["heldout_error"],
                                  causes=[c["id"] for c in d["causes"] if c["kind"] != "artefact"],
-                                 unexplained=d["unexplained"], steps=len(steps), cpu_s=cpu))
+                                 unexplained=d["unexplained"], steps=len(steps), cpu_s=cpu,
+                                 reduced_chi2=row.get("reduced_chi2"),
+                                 model_s={r["model"]: r.get("seconds") for r in fm["table"] if r["fitted"]}))
                 r = rows[-1]
                 print(f"{name:12s} seed {seed}  {r['steps']:3d} steps  named {r['named']:12s} (truth {r['truth']:12s})"
                       f"  held-out {100 * r['heldout']:.3f} % (Masing {100 * r['masing_heldout']:.2f} %)"
-                      f"  causes {r['causes']}  {cpu:5.1f} s", flush=True)
+                      f"  rchi2 {r['reduced_chi2']:.3g}  causes {r['causes']}  {cpu:5.1f} s  (fits: "
+                      + ", ".join(f"{k} {v:.1f}" for k, v in r["model_s"].items() if k != "masing") + " s)", flush=True)
     noise = {r["seed"]: r["heldout"] for r in rows if r["case"] == REFERENCE}
     right = sum(r["named"] == r["truth"] for r in rows)
     within = sum(r["heldout"] <= 2 * noise[r["seed"]] for r in rows)

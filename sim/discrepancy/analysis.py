@@ -160,7 +160,7 @@ class Analysis:
 
     @property
     def unexplained(self) -> bool:
-        if self.friction is not None and self.friction.name == "masing_iwan":
+        if self.friction is not None and self.friction.name in rivals.NO_CATALOG:
             return self.friction.preferred.reduced_chi2 > CHI2_UNEXPLAINED
         return self.selection.unexplained
 
@@ -263,9 +263,8 @@ class Analysis:
             parts += [self.sentence(c) for c in sel.named]
             if sel.named:
                 parts.append(f"Out-of-sample error falls from {base_err:.1f} % to {100 * sel.named[-1].heldout_error:.2f} %.")
-            if ch.name == "masing_iwan":
-                parts.append("The catalog's effects are not looked for on top of the elements' model (its fit is "
-                             "linear; the parameters above are the Masing model's, for reference).")
+            if ch.name in rivals.NO_CATALOG:
+                parts.append(rivals.no_catalog_sentence(ch.name))
         elif sel.named:
             first = sel.named[0]
             parts.append(f"The Masing model alone mis-predicts compliance and accelerance by {base_err:.1f} % "
@@ -571,10 +570,11 @@ def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, sourc
         n: (masing if n == "masing" else rivals.ModelFit(n, fitted=False)) for n in rivals.FRICTION_MODELS}
     if rivals.passed_bare(fits) and lib:
         # a rival beats bare Masing: Masing's own shape corrections (the library) compete with
-        # it only if Masing with the catalog's causes does not already keep Masing (decision 0078)
+        # it only if Masing with the catalog's causes does not already keep Masing (decision 0078),
+        # or if the rival is one the catalog is not searched on and leaves structure (decision 0086)
         sel = select(base, d, W, library=(), restart=restart, heldout=held, nfev=rivals.ON_RIVAL_NFEV)
         choice = rivals.choose_after(fits, sel)
-        if choice.name == "masing":
+        if choice.name == "masing" or rivals.leaves_structure(choice):
             sel = select(base, d, W, library=lib, restart=restart, heldout=held)
             choice = rivals.choose_after(fits, sel)
     else:
@@ -588,8 +588,8 @@ def analyze_steps(steps, guess: dict | None = None, *, harmonics: int = 9, sourc
                        heldout=(rival.heldout, rival.heldout_thetas))
         sel = settle_final(sel_r, d)
         sel.base, sel.heldout_base = base, choice.gain[0]
-    elif choice.name == "masing_iwan":
-        # the elements replace Masing's shape: no cause named on Sakai's curve stands (decision 0078)
+    elif choice.name in rivals.NO_CATALOG:
+        # the elements (or a rate-dependent law) replace Masing's shape: no cause named on Sakai's curve stands (decision 0078)
         sel = settle_final(Selection(base=base, final=base, named=[], tried=sel.tried, heldout_base=held[0],
                                      screened=sel.screened, base_heldout_thetas=base_thetas), d)
     else:

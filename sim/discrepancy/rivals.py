@@ -14,8 +14,10 @@ Fitted here:
   the stiffnesses and the mass, so the fit is one non-negative least squares
   (scipy.optimize.nnls) on the whitened harmonics, and so is each held-out refit.
 
-``lugre`` and ``gms`` (rate-dependent, 6 and 4 + 2N parameters) are listed, not fitted:
-their rows say so (``fitted: false``).
+- ``lugre`` and ``gms`` (rate dependent): by variable projection on a rigid carriage
+  (:mod:`sim.discrepancy.rate_rivals`, decision 0086): the parameters the force is linear
+  in by non-negative least squares inside, four outside; LuGre started from the Dahl fit,
+  GMS's elements on the Iwan fit's grid of slip displacements.
 
 A rival is preferred only if it passes, against the bare Masing fit *and* against Masing
 with the causes the selection named on it, the selection's own gates
@@ -38,19 +40,23 @@ from scipy.optimize import nnls
 from ..friction import MODELS
 from ..friction.iwan import design_matrix, virgin_interval
 from ..identify import path_harmonics, period_paths
+from . import rate_rivals as rr
 from .fit import Z95, Fit, Weights, fit
 from .gain import frf, heldout_error
 from .models import Data, Model
 from .select import BIC_GATE, CHI2_UNEXPLAINED, HELDOUT_GATE, MISFIT_SHARE_GATE, Selection
 
 FRICTION_MODELS = tuple(MODELS)            # masing, masing_iwan, dahl, lugre, gms
-FITTED = ("masing", "masing_iwan", "dahl")
+FITTED = ("masing", "masing_iwan", "dahl", "lugre", "gms")
+NO_CATALOG = ("masing_iwan", "lugre", "gms")   # not heads of the Model: the catalog is not searched on top
 IWAN_ELEMENTS = 160                     # a fine grid: NNLS keeps few (the issue-41 Iwan case: 12 -> rchi2 882, 64 -> 5.2, 160 -> 1.26)
 DAHL_NFEV = 60
 DAHL_STARTS = (1.0, 2.0)                   # exponents to start from: the second only if the first leaves misfit
 ON_RIVAL_NFEV = 20                         # a catalog candidate's evaluations on top of a converged rival
 
 # what would separate two models the data cannot (issue 41 item 4), by unordered pair
+RATE = ("two drive frequencies at the same force level, or a level in gross sliding at two speeds (the rate "
+        "dependence of the rate-dependent one)")
 SEPARATING = {
     frozenset(("masing", "masing_iwan")): "force levels between and below the measured ones (the virgin curve's "
                                           "shape between the measured amplitudes: Sakai's curve is smooth, the "
@@ -59,6 +65,18 @@ SEPARATING = {
                                    "Dahl's branch depends on the reversal force, Masing's does not",
     frozenset(("masing_iwan", "dahl")): "a reversal at a smaller amplitude inside a loop (a minor loop): after it "
                                         "Dahl's branch depends on the reversal force, the elements' does not",
+    frozenset(("lugre", "dahl")): "two drive frequencies at the same force level, or a level in gross sliding at "
+                                  "two speeds (the rate dependence: LuGre's loop changes with the speed through its "
+                                  "Stribeck curve and damping, Dahl's does not)",
+    frozenset(("lugre", "masing")): RATE,
+    frozenset(("lugre", "masing_iwan")): RATE,
+    frozenset(("gms", "masing_iwan")): "two drive frequencies at the same force level, or a level in gross sliding "
+                                       "at two speeds (GMS with F_s = F_c is the Iwan model; its Stribeck curve and "
+                                       "frictional lag make the loops depend on the rate)",
+    frozenset(("gms", "masing")): RATE,
+    frozenset(("gms", "dahl")): RATE,
+    frozenset(("gms", "lugre")): "a reversal at a smaller amplitude inside a loop (a minor loop): after it LuGre's "
+                                 "branch depends on the reversal force, the GMS elements' does not",
 }
 DEFAULT_SEPARATING = "a level above the friction level (gross sliding) at two speeds"
 
@@ -270,16 +288,22 @@ def _iwan_errors(sys_: _Linear, z: np.ndarray, d: Data, rows: np.ndarray) -> tup
     return np.abs(C_pred / C_meas - 1.0), np.abs(Acc_pred / Acc_meas - 1.0), eH2
 
 
+def iwan_grid(masing: Fit, d: Data, elements: int) -> np.ndarray:
+    """Slip displacements on a geometric grid from a quarter of the smallest step's
+    amplitude to three Masing x_s (the Iwan fit's, GMS's coarse one)."""
+    amp = np.abs(d.X[:, 0])
+    x_s = math.exp(masing.theta[1])
+    lo = max(float(amp.min()) / 4, 1e-3 * x_s)
+    hi = max(3 * min(x_s, float(amp.max())), 2 * lo)
+    return np.geomspace(lo, hi, elements)
+
+
 def iwan_fit(masing: Fit, d: Data, W: Weights, elements: int = IWAN_ELEMENTS) -> ModelFit:
     """The Maxwell-slip / Iwan model by non-negative least squares: slip displacements on a
     geometric grid from a quarter of the smallest step's amplitude to three Masing x_s (an
     element that never slips is a spring), stiffnesses and mass linear (module doc)."""
     t0 = time.process_time()
-    amp = np.abs(d.X[:, 0])
-    x_s = math.exp(masing.theta[1])
-    lo = max(float(amp.min()) / 4, 1e-3 * x_s)
-    hi = max(3 * min(x_s, float(amp.max())), 2 * lo)
-    slip = np.geomspace(lo, hi, elements)
+    slip = iwan_grid(masing, d, elements)
     sys_ = _iwan_system(d, W, slip)
     every = np.ones(d.X.shape[0], bool)
     z, chi2 = sys_.solve(every)
@@ -318,10 +342,40 @@ def iwan_fit(masing: Fit, d: Data, W: Weights, elements: int = IWAN_ELEMENTS) ->
                     virgin_curve=virgin, values=dict(k_N_per_m=[q["value"] for q in ks], f_N=[q["value"] for q in params["f_N"]]))
 
 
+def rate_fits(masing: Fit, dahl: ModelFit, d: Data, W: Weights, others: tuple = ()) -> dict[str, ModelFit]:
+    """LuGre (from Dahl's F_c and sigma, or the Masing fit's F_s and F_s / x_s) and GMS (on
+    the Iwan grid; ``others``: the fits so far, whose best chi-square decides GMS's fine
+    grid) by :mod:`sim.discrepancy.rate_rivals`; a fit that fails is not fitted."""
+    out: dict[str, ModelFit] = {}
+    t0 = time.process_time()
+    s = rr.setup(d, W)
+    share = time.process_time() - t0
+    F_s, x_s = math.exp(masing.theta[0]), math.exp(masing.theta[1])
+    F_c, sigma = (dahl.values["F_c_N"], dahl.values["sigma_N_per_m"]) if dahl.fitted else (F_s, F_s / x_s)
+    best = lambda: min((f.chi2 for f in (*others, *out.values()) if f.fitted), default=math.inf)  # noqa: E731
+    makers = dict(lugre=lambda: rr.lugre_fit(s, F_c, sigma),
+                  gms=lambda: rr.gms_fit(s, iwan_grid(masing, d, rr.GMS_ELEMENTS), best()))
+    for name, make in makers.items():
+        if name not in FITTED:
+            continue
+        t1 = time.process_time()
+        try:
+            res, values, params = make()
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+            out[name] = ModelFit(name, fitted=False)
+            continue
+        out[name] = ModelFit(name, parameters=params, chi2=res.chi2, n_data=res.n_data, n_params=res.n_params,
+                             heldout=res.heldout, heldout_compliance=res.heldout_compliance,
+                             heldout_accelerance=res.heldout_accelerance,
+                             seconds=share / 2 + time.process_time() - t1, values=values)
+    return out
+
+
 def fit_all(masing: ModelFit, d: Data, W: Weights) -> dict[str, ModelFit]:
     """Every model of :data:`FRICTION_MODELS`: the fitted ones, the others as not fitted."""
     assert masing.fit is not None
     out = {"masing": masing, "masing_iwan": iwan_fit(masing.fit, d, W), "dahl": dahl_fit(masing.fit, d, W)}
+    out.update(rate_fits(masing.fit, out["dahl"], d, W, tuple(out.values())))
     for name in FRICTION_MODELS:
         out.setdefault(name, ModelFit(name, fitted=False))
     return {name: out[name] for name in FRICTION_MODELS}
@@ -355,6 +409,14 @@ class FrictionChoice:
     @property
     def preferred(self) -> ModelFit:
         return self.fits[self.name]
+
+
+def leaves_structure(c: FrictionChoice) -> bool:
+    """A preferred rival the catalog is not searched on top of (:data:`NO_CATALOG`) whose
+    own fit leaves structure (reduced chi-square above :data:`CHI2_UNEXPLAINED`): Masing's
+    library forms must then compete with it (a cubic spring on Masing: GMS passed the
+    catalog-only Masing at reduced chi-square 8840, decision 0086)."""
+    return c.name in NO_CATALOG and c.preferred.reduced_chi2 > CHI2_UNEXPLAINED
 
 
 def passed_bare(fits: dict[str, ModelFit]) -> list[str]:
@@ -395,7 +457,22 @@ WHY = {   # what sets the preferred model apart, in the verdict
     "dahl": "the branch after a reversal depends on the reversal force, as in Dahl's model",
     "masing_iwan": "the Masing rules hold but the virgin curve is not Sakai's: a Maxwell-slip (Iwan) distribution "
                    "of elasto-plastic elements fits it",
+    "lugre": "the loops depend on the rate and the branch after a reversal on the reversal force: the LuGre "
+             "bristles' Stribeck curve and damping fit them",
+    "gms": "the loops follow the Masing rules at rest but depend on the rate: Maxwell-slip elements with a Stribeck "
+           "curve and a frictional lag (the generalized Maxwell-slip model) fit them",
 }
+ON_TOP = {   # the model whose parameters stand in analysis.json's parameters when the catalog is not searched
+    "masing_iwan": "the elements' model (its fit is linear",
+    "lugre": "the LuGre model (its fit is a variable projection, not the Model's",
+    "gms": "the generalized Maxwell-slip model (its fit is a variable projection, not the Model's",
+}
+
+
+def no_catalog_sentence(name: str) -> str:
+    """What the verdict says when the preferred model is not a head of the Model."""
+    return (f"The catalog's effects are not looked for on top of {ON_TOP[name]}; the parameters above are the "
+            f"Masing model's, for reference).")
 
 
 def choice_sentences(c: FrictionChoice) -> list[str]:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from ..errors import ConfigurationError
 from ._base import FrictionModel, Parameter, ParameterProblem, Problem
+from ._periodic import path_velocity, sample_spacing
 from .dahl import Dahl
 from .gms import GMS
 from .iwan import MasingIwan
@@ -30,7 +31,8 @@ from .masing import Masing
 
 MODELS: dict[str, FrictionModel] = {m.name: m for m in (Masing(), MasingIwan(), Dahl(), LuGre(), GMS())}
 
-__all__ = ["MODELS", "FrictionModel", "Parameter", "ParameterProblem", "Problem", "friction_model"]
+__all__ = ["MODELS", "FrictionModel", "Parameter", "ParameterProblem", "Problem", "friction_model", "path_velocity",
+           "sample_spacing"]
 
 
 def friction_model(name: str) -> FrictionModel:
