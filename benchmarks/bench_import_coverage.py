@@ -36,6 +36,7 @@ from benchtools.frf_coverage import (  # noqa: E402
     Simulator,
     binomial_range,
     run_trial,
+    stored_truth,
     truth,
 )
 
@@ -44,12 +45,15 @@ def main_(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=40)
     ap.add_argument("--out", help="keep the files, runs and rows.json here (default: a temporary directory)")
+    ap.add_argument("--recompute", action="store_true",
+                    help="the truths from the simulator (about 4 min) instead of benchtools.frf_coverage.TRUTHS")
     args = ap.parse_args(argv)
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="bench_import_coverage_"))
     sim = Simulator()
     t0 = time.process_time()
-    truths = [truth(sim, "force", P) for P in FORCE_LEVELS_N] + [truth(sim, "disp", X) for X in HELD_M]
-    print(f"truths ({time.process_time() - t0:.0f} s CPU, {len(sim.cache)} steady states):")
+    levels = [("force", P) for P in FORCE_LEVELS_N] + [("disp", X) for X in HELD_M]
+    truths = [truth(sim, *k) if args.recompute else stored_truth(*k) for k in levels]
+    print(f"truths ({'computed' if args.recompute else 'stored'}, {time.process_time() - t0:.0f} s CPU):")
     for t in truths:
         unit = "N" if t.kind == "force" else "m"
         print(f"  {t.kind:5s} {t.level:g} {unit}: resonance {t.resonance_Hz:.4f} Hz, damping energy balance "
@@ -59,7 +63,7 @@ def main_(argv=None) -> int:
         t0 = time.process_time()
         rows += run_trial(sim, truths, seed, out / f"seed{seed}")
         print(f"seed {seed}: {time.process_time() - t0:.1f} s CPU", flush=True)
-    (out / "rows.json").write_text(json.dumps(rows, indent=0))
+        (out / "rows.json").write_text(json.dumps(rows, indent=0))
     held: dict = collections.Counter()
     claimed: dict = collections.Counter()
     missing: dict = collections.Counter()
