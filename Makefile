@@ -83,6 +83,8 @@ check: $(VENV)/.installed
 # free vibration (25 settle cycles): the time bench analyze spends, no line where none was put (0045).
 # bench_signals: 20 runs, a random ending signal in stepped sine, response control, phase
 # resonance, a dwell and the report (0040, 0051; about 5 min).
+# bench_import_coverage: imported FRFs of the independent simulator, 5 levels x 40 seeds, each
+# interval against the simulator's truth (0085; about 25 min of one core).
 bench: setup
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q -n 2 --dist loadscope -m campaign
 	$(PY) benchmarks/bench_sim.py
@@ -101,6 +103,7 @@ bench: setup
 	$(PY) benchmarks/bench_twin.py
 	$(PY) benchmarks/bench_modes.py --seeds 6
 	$(PY) benchmarks/bench_modes_coverage.py --seeds 3
+	$(PY) benchmarks/bench_import_coverage.py --seeds 40
 	$(PY) benchmarks/bench_friction_models.py
 	$(PY) benchmarks/bench_describing_fit.py
 	$(PY) benchmarks/bench_model_choice.py

@@ -74,8 +74,9 @@ class EnergyBalance:
 def energy_balance(steps: Sequence[StepFRF], resonance_Hz: float, low_Hz: float, high_Hz: float,
                    mass_kg: float, mass_note: str) -> EnergyBalance | None:
     """The energy balance at the resonance from the dwell step nearest it, else the
-    refined step, else the sweep step nearest it (None without a step, a resonance or a
-    mass)."""
+    refined step, else across the sweep steps nearest it (:func:`_across_steps`; the
+    nearest sweep step alone when fewer than ACROSS_MIN); None without a step, a resonance
+    or a mass."""
     if not steps or not (math.isfinite(resonance_Hz) and math.isfinite(mass_kg) and mass_kg > 0):
         return None
     rank = {"dwell": 0, "refined": 1, "sweep": 2}
@@ -85,9 +86,53 @@ def energy_balance(steps: Sequence[StepFRF], resonance_Hz: float, low_Hz: float,
     z = energy_balance_zeta(s.f_Hz, s.receptance, mass_kg)
     lo_f = low_Hz if math.isfinite(low_Hz) and low_Hz > 0 else resonance_Hz
     hi_f = high_Hz if math.isfinite(high_Hz) and high_Hz > 0 else resonance_Hz
+    if best_kind == rank["sweep"] and (across := _across_steps(steps, resonance_Hz, lo_f, hi_f, mass_kg)):
+        return EnergyBalance(*across, s.key, "across sweep steps", s.f_Hz, mass_kg, mass_note)
     moved = [z, z * s.f_Hz / hi_f, z * s.f_Hz / lo_f, z * s.f_Hz / resonance_Hz]
     sd = abs(z) * s.rel_sd
     return EnergyBalance(z, min(moved) - Z95 * sd, max(moved) + Z95 * sd, s.key, s.kind, s.f_Hz, mass_kg, mass_note)
+
+
+ACROSS_POINTS = 7        # the sweep steps nearest the resonance the energy balance's curve is fitted to
+ACROSS_MIN = 5           # fewer: the nearest step alone (its offset from the resonance moved as a linear mode's)
+
+
+def _across_steps(steps: Sequence[StepFRF], resonance_Hz: float, lo_f: float, hi_f: float,
+                  mass_kg: float) -> tuple[float, float, float] | None:
+    """(value, low, high) of the energy balance at the resonance from the sweep steps' ratios
+    zeta(f_i) (decision record 0085): a quadratic in f fitted to the ACROSS_POINTS steps
+    nearest the resonance, its value there; the interval the curve's over the resonance's
+    interval +- t(0.975, dof) of its standard error (the steps' noise: their stated sd where
+    every step states one, the residuals' scale where larger or where none is stated).  A
+    non-viscous mode's ratio is no zeta f_r / f across the band (a hysteretic one's goes as
+    1 / f^2; a friction peak's with the amplitude), so no step's value is moved by a model;
+    None with fewer than ACROSS_MIN sweep steps."""
+    near = sorted((s for s in steps if s.kind == "sweep"), key=lambda s: abs(math.log(s.f_Hz / resonance_Hz)))
+    near = near[:ACROSS_POINTS]
+    if len({s.f_Hz for s in near}) < ACROSS_MIN:
+        return None
+    f = np.array([s.f_Hz for s in near]) / resonance_Hz - 1.0
+    zs = np.array([energy_balance_zeta(s.f_Hz, s.receptance, mass_kg) for s in near])
+    sd = np.abs(zs) * np.array([s.rel_sd for s in near])
+    stated = bool(np.all(np.isfinite(sd) & (sd > 0)))
+    w = 1.0 / sd if stated else np.ones_like(zs)
+    X = np.column_stack([np.ones_like(f), f, f * f])
+    coef, *_ = np.linalg.lstsq(X * w[:, None], zs * w, rcond=None)
+    dof = f.size - 3
+    chi2 = float(np.sum(((X @ coef - zs) * w) ** 2)) / dof
+    scale = max(chi2, 1.0) if stated else chi2
+    try:
+        cov = scale * np.linalg.inv((X * w[:, None]).T @ (X * w[:, None]))
+    except np.linalg.LinAlgError:
+        return None
+    from scipy import stats
+    t = float(stats.t.ppf(0.975, dof)) if (not stated or chi2 > 1.0) else Z95
+    ends = []
+    for x in {lo_f, resonance_Hz, hi_f}:
+        b = np.array([1.0, x / resonance_Hz - 1.0, (x / resonance_Hz - 1.0) ** 2])
+        q, se = float(b @ coef), math.sqrt(max(float(b @ cov @ b), 0.0))
+        ends += [q - t * se, q + t * se]
+    return float(coef[0]), min(ends), max(ends)
 
 
 def ratio_rel_sd(num: complex, num_sigma: float, den: complex, den_sigma: float) -> float:

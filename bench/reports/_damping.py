@@ -144,8 +144,9 @@ def damping_notes(modes: Sequence[ModeEstimate]) -> list[str]:
                      if (eb := e.extra.get("energy_balance")) is not None})
     out = ["Damping ratios (per cent; modes.csv holds fractions): **single-mode fit**: the local rational-fraction "
            "fit's zeta; **energy balance at resonance**: |F1| sin(-phase) / (2 m w^2 |X1|) on the dwell step (else "
-           "the refined step, else the sweep step) nearest the resonance, the definition phase resonance uses; its "
-           "interval holds the step's noise and its offset from the resonance; **half-power**: (f2 - f1) / (2 f_r) "
+           "the refined step) nearest the resonance, else a quadratic through the ratios of the 7 sweep steps nearest "
+           "it, the definition phase resonance uses; its interval holds the step's noise and its offset from the "
+           "resonance (across sweep steps: the curve's standard error and the resonance's interval); **half-power**: (f2 - f1) / (2 f_r) "
            "from the measured points, its interval the bracket of the measured crossings."]
     out += [f"- {mode}: m = {kg:.4g} kg, {note}" for mode, note, kg in masses if math.isfinite(kg)]
     out += [f"- {mode}: no energy balance ({note})" for mode, note, kg in masses if not math.isfinite(kg)]
