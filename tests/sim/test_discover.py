@@ -151,5 +151,6 @@ def test_the_page_opens_with_verdict_overview_causes_and_the_missing_force(combi
     if shutil.which("chromium"):
         mark = _render_check(page, tmp_path)
         n_img = text.count("<img ")
-        assert int(mark["data-images"]) == n_img == 6 and int(mark["data-loaded"]) == n_img
+        # six figures and the friction models' loops at every level (decision 0087)
+        assert int(mark["data-images"]) == n_img == 7 and int(mark["data-loaded"]) == n_img
         assert d["verdict"][:60] in mark["data-verdict"]
