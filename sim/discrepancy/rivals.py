@@ -475,6 +475,15 @@ def no_catalog_sentence(name: str) -> str:
             f"Masing model's, for reference).")
 
 
+def leaves_structure_sentence(c: FrictionChoice) -> str:
+    """What the verdict says when a preferred model the catalog is not searched on top of
+    (:data:`NO_CATALOG`) leaves structure: its own misfit, not the Masing base's residuals."""
+    best = c.preferred
+    return (f"Structure remains that the {MODELS[c.name].label} model does not explain: its reduced chi-square is "
+            f"{best.reduced_chi2:.3g} (the noise alone gives about 1, the bar is {CHI2_UNEXPLAINED:g}) and its held-out "
+            f"error {100 * best.heldout:.2f} %.")
+
+
 def choice_sentences(c: FrictionChoice) -> list[str]:
     """The verdict's sentences on the friction model: the preferred rival with its gain, or
     that Masing is kept; then the models the data cannot separate from it."""
