@@ -30,7 +30,6 @@ from .fit import Fit, Weights, fit, whitened
 from .gain import frf, heldout_error
 from .loops import friction_model_loops, loop_steps, measured_period
 from .models import BASE_PARAMS, CENTRE, CENTRED, EFFECTS, LIBRARY, Data, Model
-from .rivals import FrictionChoice
 from .rounding import interval_text
 from .select import BIC_GATE, CHI2_UNEXPLAINED, Selection, select, settle_final
 from .terms import accelerance_pair, second_mode_phrase, speed_friction, speed_friction_phrase
@@ -143,7 +142,7 @@ class Analysis:
     rejected: list = field(default_factory=list)
     v_ref_m_per_s: float | None = None     # the rig file's friction_v_ref_m_per_s: alpha is stated there
     artefacts: list = field(default_factory=list)   # causes of kind "artefact" (sim.artefacts.artefact_causes)
-    friction: FrictionChoice | None = None          # every friction model's fit and the preferred one (decision 0078)
+    friction: rivals.FrictionChoice | None = None          # every friction model's fit and the preferred one (decision 0078)
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -280,7 +279,7 @@ class Analysis:
             parts.append(f"The Masing model explains the data within the noise (reduced chi-square "
                          f"{self.base.reduced_chi2:.2f}, held-out error {base_err:.2f} %); no effect in the "
                          f"catalog and no term of the library improves both the BIC and the held-out prediction.")
-        if ch is not None and ch.name == "masing" and ch.passed_bare or ch is not None and ch.name == "masing" and ch.not_separable:
+        if ch is not None and ch.name == "masing" and (ch.passed_bare or ch.not_separable):
             parts += rivals.choice_sentences(ch)
         if self.unexplained and ch is not None and ch.name in rivals.NO_CATALOG:
             parts.append(rivals.leaves_structure_sentence(ch))
