@@ -282,7 +282,7 @@ class Analysis:
         if ch is not None and ch.name == "masing" and (ch.passed_bare or ch.not_separable):
             parts += rivals.choice_sentences(ch)
         if self.unexplained and ch is not None and ch.name in rivals.NO_CATALOG:
-            parts.append(rivals.leaves_structure_sentence(ch))
+            parts.append(rivals.leaves_structure_sentence(ch, sel.explanations or sel.reasons))
         elif self.unexplained:
             what = ("the extended model" if sel.named else "the Masing model") if ch is None or ch.name != "dahl" \
                 else ("Dahl's model with the causes above" if sel.named else "Dahl's model")

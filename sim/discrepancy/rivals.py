@@ -475,13 +475,15 @@ def no_catalog_sentence(name: str) -> str:
             f"Masing model's, for reference).")
 
 
-def leaves_structure_sentence(c: FrictionChoice) -> str:
+def leaves_structure_sentence(c: FrictionChoice, masing_said: list[str]) -> str:
     """What the verdict says when a preferred model the catalog is not searched on top of
-    (:data:`NO_CATALOG`) leaves structure: its own misfit, not the Masing base's residuals."""
+    (:data:`NO_CATALOG`) leaves structure: its own misfit first, then where the Masing model
+    alone misses (``masing_said``: its residuals' structure in words, for reference)."""
     best = c.preferred
+    where = f" Where the Masing model alone misses, for reference: {'; '.join(masing_said[:2])}." if masing_said else ""
     return (f"Structure remains that the {MODELS[c.name].label} model does not explain: its reduced chi-square is "
             f"{best.reduced_chi2:.3g} (the noise alone gives about 1, the bar is {CHI2_UNEXPLAINED:g}) and its held-out "
-            f"error {100 * best.heldout:.2f} %.")
+            f"error {100 * best.heldout:.2f} %.{where}")
 
 
 def choice_sentences(c: FrictionChoice) -> list[str]:
