@@ -151,6 +151,7 @@ class RunStore:
         self.steps_dir = self.path / "steps"
         self.problems: list[StepProblem] = []     # damaged steps met by the last results()
         self._npz_ok: dict[str, tuple] = {}        # key -> stamp of a block already verified
+        self._json_ok: dict[str, bytes] = {}       # key -> SHA-256 of a JSON file already verified
 
     # ------------------------------------------------------------------ life cycle
     @staticmethod
@@ -334,7 +335,7 @@ class RunStore:
         """The step's result after checking both its files (JSON content, the .npz's size
         and checksum); raises :class:`DamagedStep` naming the file and why."""
         jp, zp = self.steps_dir / f"{key}.json", self.steps_dir / f"{key}.npz"
-        result, integrity = _read_step_json(jp, key)
+        result, integrity = _read_step_json(jp, key, self._json_ok)
         try:
             st = os.lstat(zp)          # a link put in its place later is not the block verified
             stamp = (st.st_mtime_ns, st.st_size, (integrity or {}).get("npz_sha256"))
@@ -554,6 +555,7 @@ class RunStore:
                 if p.exists():
                     os.replace(p, dest / p.name)
             self._npz_ok.pop(pr.key, None)
+            self._json_ok.pop(pr.key, None)
             log.warning(_said(StoreLine.DAMAGED_MOVED, key=pr.key, problem=pr, dest=dest))
             self.event("damaged_step", step=pr.key, problem=pr.kind, reason=str(pr), moved_to=str(dest))
         _fsync_dir(self.steps_dir)

@@ -214,6 +214,11 @@ def step_fields_problem(result: dict) -> str | None:
     return f"not a step result: {problem}" if problem else None
 
 
+# the exact types a JSON reader gives each scalar hint (a bool is not a number; the slow path
+# below says why a value of another type, e.g. a subclass, is or is not one)
+_SCALAR_TYPES = {float: (float, int), int: (int,), str: (str,), bool: (bool,)}
+
+
 @functools.cache
 def _hints(typed_dict) -> dict:
     return typing.get_type_hints(typed_dict)
@@ -242,6 +247,10 @@ def _typed_problem(value, hint, where: str) -> str | None:
         if not isinstance(value, list):
             return f"{where}: a list was expected, found {type(value).__name__}"
         item = typing.get_args(hint)[0]
+        if item in _SCALAR_TYPES:       # a waveform: thousands of numbers, checked by their exact types at once
+            allowed = _SCALAR_TYPES[item]
+            i = next((i for i, v in enumerate(value) if type(v) not in allowed), None)
+            return None if i is None else _typed_problem(value[i], item, f"{where}[{i}]")
         return next((p for i, v in enumerate(value) if (p := _typed_problem(v, item, f"{where}[{i}]"))), None)
     ok = {float: lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
           int: lambda v: isinstance(v, int) and not isinstance(v, bool),

@@ -78,6 +78,23 @@ def test_an_intact_run_has_no_problems_and_every_step_carries_checksums(small_ru
     assert "20 intact / 20 planned; missing: none; damaged: none; orphan: none" in capsys.readouterr().out
 
 
+def test_a_store_that_read_a_step_sees_it_damaged_later(small_run, tmp_path):
+    """A store parses a step it already verified without checking it again only while the
+    file's bytes are the same (decision 0083: a refined run reads every step after each
+    refinement step); a digit flipped after the first read is a checksum problem on the next."""
+    run = tmp_path / "run"
+    shutil.copytree(small_run.path, run)
+    store = RunStore.open(run)
+    first = store.results(warn=False)
+    assert not store.problems and len(first) == len(list((run / "steps").glob("*.json")))
+    assert store.results(warn=False) == first                 # the same bytes: the same results
+    key = first[3]["key"]
+    _flip_digit(run / "steps" / f"{key}.json")
+    again = store.results(warn=False)
+    assert [p.key for p in store.problems] == [key] and store.problems[0].kind == "checksum", store.problems
+    assert len(again) == len(first) - 1
+
+
 def test_check_lists_every_problem_and_fails(damaged, capsys):
     run, keys, expected = damaged
     found = {p.path.name: p.kind for p in RunStore(run).check()}
