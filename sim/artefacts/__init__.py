@@ -25,7 +25,8 @@ Nyquist, :mod:`sim.records`):
   than ``HARMONIC_GUARD`` record resolutions (fs/N) from every drive harmonic (and from
   where harmonics above Nyquist fold back, when the record has content up there), above the
   noise floor by a factor that gives a false alarm probability of 1e-4 per record and
-  channel; its frequency, amplitude and phase are fitted by least squares (with a decay
+  channel (near a folded harmonic only above what a fold can be, 10 x the largest of the
+  top tenth fitted: decision record 0088); its frequency, amplitude and phase are fitted by least squares (with a decay
   rate, to tell a line from a transient), and a steady line is **removed** from the record:
   the step stays usable (flagged).  Up to ``MAX_LINES`` per channel.  A "line" the probe
   and the accelerometer see as one motion (both components above ``MOTION_Z`` standard

@@ -19,6 +19,7 @@ from .detectors import (
     _quantum,
     _robust_noise,
     _trend,
+    alias_bound,
     quantisation_line_bound,
 )
 from .quality import Artefact
@@ -49,14 +50,15 @@ def _clean_channel(ch: str, x: np.ndarray, fs: float, f: float):
         noise = max(seen, floor)
         below = quantisation_line_bound(q, math.sqrt(max(seen * seen - floor * floor, 0.0)))
         aliases = _aliases(C, noise * math.sqrt(2.0 / n), f, fs)
-        lines, transients = _find_lines(r, fs, f, aliases)
+        folded = alias_bound(C, aliases)
+        lines, transients = _find_lines(r, fs, f, aliases, folded)
         lines = [ln for ln in lines if ln.amp > below]
         removed_part = sum((ln.model for ln in lines + transients), zero)
         trend, change, z = _trend(r - removed_part, noise)
         if not z > TREND_Z:
             trend, change, z = zero, 0.0, 0.0
         elif lines or transients:     # what the trend's low-frequency leakage made look like a line goes
-            lines, transients = _find_lines(r - trend, fs, f, aliases)
+            lines, transients = _find_lines(r - trend, fs, f, aliases, folded)
             lines = [ln for ln in lines if ln.amp > below]
             removed_part = sum((ln.model for ln in lines + transients), zero)
             trend, change, z = _trend(r - removed_part, noise)

@@ -19,6 +19,7 @@ from .sentences import UNIT
 LINE_FALSE_ALARM = 1e-4       # per record and channel
 HARMONIC_GUARD = 1.5          # record resolutions (fs / N) around each drive harmonic not searched for lines
 MAX_LINES = 6
+ALIAS_MARGIN = 10.0           # a peak near a folded harmonic is a line when above this x the largest top-tenth harmonic
 _BLOCK = 128                 # samples: exp((-sigma + i w) t) as the outer product of block starts and offsets
 TREND_Z = 6.0                 # offset drift: sqrt(chi-square, 2 dof) of the trend coefficients
 DECAY_Z = 6.0                 # a line's decay rate, in standard errors, above which it is a transient
@@ -269,6 +270,18 @@ def _aliases(C: np.ndarray, se: float, f: float, fs: float) -> np.ndarray:
     return np.sort(np.abs(kk - np.round(kk / fs) * fs))
 
 
+def alias_bound(C: np.ndarray, aliases: np.ndarray) -> float:
+    """The largest amplitude a folded harmonic can have, times :data:`ALIAS_MARGIN`: the
+    harmonics above Nyquist continue the decay of the top tenth fitted (:func:`_aliases`),
+    so none exceeds the largest of those.  A component far above it at a folded
+    frequency is not the fold (a free vibration of 1.4 um beside top harmonics of nm:
+    decision 0088).  inf when nothing folds."""
+    if not aliases.size:
+        return math.inf
+    m = max(3, C.size // 10)
+    return ALIAS_MARGIN * float(np.max(np.abs(C)[-m:]))
+
+
 def _trend(r: np.ndarray, noise: float) -> tuple[np.ndarray, float, float]:
     """Linear + quadratic trend of the residual: (trend, change over the record, z score)."""
     n = r.size
@@ -409,9 +422,10 @@ NO_FREQUENCIES = np.zeros(0)     # no aliased harmonics (read only)
 
 
 def _line_search(q: np.ndarray, fs: float, f: float, skip: list[float],
-                 aliases: np.ndarray = NO_FREQUENCIES) -> list[tuple[float, float]]:
+                 aliases: np.ndarray = NO_FREQUENCIES, alias_amp: float = math.inf) -> list[tuple[float, float]]:
     """Candidate (frequency, peak power / noise floor) of the residual, strongest first,
-    away from the drive harmonics, their ``aliases`` and the frequencies in ``skip``."""
+    away from the drive harmonics, their ``aliases`` (unless above what a folded harmonic
+    can be, ``alias_amp``: :func:`alias_bound`) and the frequencies in ``skip``."""
     n = q.size
     nfft = 1 << int(math.ceil(math.log2(2 * n)))
     S = np.abs(np.fft.rfft((q - q.mean()) * np.hanning(n), nfft)) ** 2
@@ -421,30 +435,37 @@ def _line_search(q: np.ndarray, fs: float, f: float, skip: list[float],
     ok = (np.abs(freqs - k * f) > guard) & (freqs > guard) & (freqs < fs / 2 - guard)
     for fk in skip:
         ok &= np.abs(freqs - fk) > guard
+    strong = np.zeros(S.size, bool)
+    searched = ok.copy()
     if aliases.size:
         i = np.clip(np.searchsorted(aliases, freqs), 0, aliases.size - 1)
         near = np.minimum(np.abs(freqs - aliases[i]), np.abs(freqs - aliases[np.maximum(i - 1, 0)]))
+        # a sinusoid of amplitude a peaks at (a sum(hann) / 2)^2 = (a n / 4)^2 in S
+        strong = ok & (near <= guard) & (S > (alias_amp * n / 4) ** 2)
         ok &= near > guard
-    if ok.sum() < 16:
+    if ok.sum() < 16 and not strong.any():
         return []
-    floor = float(np.median(S[ok])) / math.log(2.0)
+    # the floor where nothing folds; where the folds cover the band (a short record, many
+    # folded harmonics), the median over it all: they are weak, a few standard errors
+    floor = float(np.median(S[ok] if ok.sum() >= 16 else S[searched])) / math.log(2.0)
     thr = floor * (math.log(n / 2) - math.log(LINE_FALSE_ALARM))
-    peak = ok & (S > thr)
+    peak = (ok | strong) & (S > thr)
     peak[1:-1] &= (S[1:-1] >= S[:-2]) & (S[1:-1] >= S[2:])
     idx = np.flatnonzero(peak)
     return [(float(freqs[i]), float(S[i] / floor)) for i in idx[np.argsort(S[idx])[::-1]]]
 
 
-def _find_lines(q: np.ndarray, fs: float, f: float,
-                aliases: np.ndarray = NO_FREQUENCIES) -> tuple[list[_Line], list[_Line]]:
-    """Steady lines and decaying components of the residual ``q``, strongest first."""
+def _find_lines(q: np.ndarray, fs: float, f: float, aliases: np.ndarray = NO_FREQUENCIES,
+                alias_amp: float = math.inf) -> tuple[list[_Line], list[_Line]]:
+    """Steady lines and decaying components of the residual ``q``, strongest first (near a
+    folded harmonic only those above ``alias_amp``, :func:`alias_bound`)."""
     n = q.size
     guard = HARMONIC_GUARD * fs / n
     lines: list[_Line] = []
     transients: list[_Line] = []
     found = np.zeros(n)
     while len(lines) < MAX_LINES and len(transients) < 2:
-        cands = _line_search(q - found, fs, f, [ln.freq_Hz for ln in lines + transients], aliases)
+        cands = _line_search(q - found, fs, f, [ln.freq_Hz for ln in lines + transients], aliases, alias_amp)
         if not cands:
             break
         steady = _fit_sinusoid(q - found, fs, cands[0][0], with_decay=False)
@@ -459,8 +480,8 @@ def _find_lines(q: np.ndarray, fs: float, f: float,
         k = round(ln.freq_Hz / f)
         if k >= 1 and abs(ln.freq_Hz - k * f) <= guard:       # moved onto a drive harmonic: not separable
             break
-        if aliases.size and np.min(np.abs(aliases - ln.freq_Hz)) <= guard:    # onto an aliased harmonic
-            break
+        if aliases.size and np.min(np.abs(aliases - ln.freq_Hz)) <= guard and not ln.amp > alias_amp:
+            break                                               # onto an aliased harmonic
         (transients if is_transient else lines).append(ln)
         found = found + ln.model
     if len(lines) + len(transients) > 1:
