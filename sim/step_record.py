@@ -20,6 +20,7 @@ of its cleaned records.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -47,13 +48,20 @@ class BlockRecord:
         return float(self.records.channels["disp"].noise_rms)
 
 
+@functools.lru_cache(maxsize=16)
+def _period_basis(harmonics: int) -> np.ndarray:
+    """exp(i k w t) at 1024 points of a period for k = 1..harmonics (read only: shared)."""
+    B = np.exp(2j * np.pi * np.outer(np.arange(1024) / 1024, np.arange(1, harmonics + 1)))
+    B.flags.writeable = False
+    return B
+
+
 def _summary(ch: ChannelHarmonics, harmonics: int, raw: np.ndarray) -> FitSummary:
     """The channel's first ``harmonics`` harmonics as the step result keeps them (seed
     Eq. 9's peak-to-peak from the periodic part they describe, 1024 points a period)."""
     C = ch.harmonics[:harmonics]
     A = np.abs(C)
-    k = np.arange(1, C.size + 1)
-    periodic = (np.exp(2j * np.pi * np.outer(np.arange(1024) / 1024, k)) @ C).imag
+    periodic = (_period_basis(C.size) @ C).imag
     return FitSummary(amplitude=A.tolist(), phase_rad=np.angle(C).tolist(), offset=float(ch.offset),
                       thd=float(np.sqrt(np.sum(A[1:] ** 2)) / A[0]) if A.size and A[0] > 0 else math.inf,
                       noise_rms=float(ch.noise_rms), peak_to_peak=float(periodic.max() - periodic.min()),
