@@ -40,7 +40,9 @@ turn, every parameter moved from the full fit by one Gauss-Newton step on the ke
 inner ones then solved exactly at the new outer ones; errors of compliance, accelerance
 and the waveform as the Iwan fit computes them.  Intervals (95 %): the full Jacobian
 (outer by finite differences, the active linear parameters' columns exact) at the
-optimum, scaled by the reduced chi-square when it exceeds 1.
+optimum, scaled by the reduced chi-square when it exceeds 1, each variance then raised to at
+least the empirical per-step sandwich's (:func:`sim.discrepancy.fit.at_least_empirical`,
+decision 0036) when there are at least twice as many steps as parameters (decision 0089).
 """
 
 from __future__ import annotations
@@ -56,7 +58,7 @@ from scipy.optimize import least_squares, nnls
 
 from ..friction import MODELS, path_velocity, sample_spacing
 from ..identify import path_harmonics, period_paths
-from .fit import Z95, Weights
+from .fit import Z95, Weights, at_least_empirical, step_scores
 from .gain import frf
 from .models import Data, Model
 
@@ -70,6 +72,7 @@ NO_POLISH = 100.0            # no fine grid when the coarse chi-square is this m
 HELD_NFEV = 0                # a held-out refit: 0, one Gauss-Newton step from the full fit (projected_fit)
 UNIT_TOL = 1e-7              # a unit element's steady state: change per period below this
 PERIODS_MAX = 60
+EMPIRICAL_FLOOR = True       # intervals at least the empirical per-step sandwich (decisions 0036, 0089)
 
 
 # ---------------------------------------------------------------- the common problem
@@ -223,7 +226,15 @@ def projected_fit(p: _Projected, theta0: np.ndarray, lo: np.ndarray, hi: np.ndar
     J[:, nt:] = C[:, active]
     n_params = nt + active.size
     phi = max(1.0, chi2 / max(1, r.size - n_params))
-    cov_a = np.linalg.pinv(J.T @ J) * phi
+    H_inv = np.linalg.pinv(J.T @ J)
+    cov_a = H_inv * phi
+    if EMPIRICAL_FLOOR and every.size >= 2 * n_params:
+        # decision 0036's floor, with at least as many steps to spare as parameters (0089);
+        # fit.step_scores takes the rows as (part, step, harmonic), these are (step, part, harmonic)
+        S, K4 = every.size, r.size // every.size
+        Jl = J.reshape(S, 4, K4 // 4, n_params).transpose(1, 0, 2, 3).reshape(r.size, n_params)
+        rl = r.reshape(S, 4, K4 // 4).transpose(1, 0, 2).ravel()
+        cov_a = at_least_empirical(cov_a, H_inv, step_scores(Jl, rl, S))
     idx = np.concatenate([np.arange(nt), nt + active])
     cov = np.zeros((nt + z.size, nt + z.size))
     cov[np.ix_(idx, idx)] = cov_a

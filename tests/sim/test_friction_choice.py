@@ -94,8 +94,9 @@ def test_a_rate_dependent_rivals_row_has_its_own_parameters_with_intervals(analy
             assert q["low"] <= q["value"] <= q["high"] and q["high"] > q["low"], (name, q)
         if not isinstance(p, list):      # the scalars against the independent simulator's truth (10 %)
             assert p["value"] == pytest.approx(truth[name], rel=0.1, abs=1.0 if "sigma" in name else 0.0), (name, p)
-    # (the 95 % intervals do not all cover the truth: on this 15-step grid LuGre's F_c
-    # 9.989-9.998 N and sigma_2 20.11-20.55 N s/m miss 10 and 20; decision 0086)
+    # (not asserted here: the truth inside each 95 % interval.  At this seed LuGre's F_c and
+    # sigma_2 are -2.8 and +3.0 standard errors off, one of the 5 and 7 seeds in 100 on this
+    # grid whose F_c and sigma_2 miss (decision 0089); coverage is a campaign's, below)
 
 
 def test_the_gms_unit_elements_sum_to_the_models_own_periodic_force():
@@ -185,3 +186,68 @@ def test_a_preferred_model_that_leaves_structure_is_named_as_what_does_not_expla
     verdict = a.verdict()
     assert f"Structure remains that the {MODELS[case].label} model does not explain: its reduced chi-square is 4" in verdict, verdict
     assert "Masing model does not explain" not in verdict, verdict
+
+
+# ---------------------------------------------------------------- LuGre's 95 % intervals (decision 0089)
+LUGRE_SCALARS = ("sigma0_N_per_m", "sigma1_N_s_per_m", "sigma2_N_s_per_m", "F_c_N", "F_s_N", "v_s_m_per_s")
+
+
+def _lugre_inputs(tmp, seed):
+    """The LuGre case on the test grid as the analysis gives it to the rivals: (Data, the base
+    fit's weights, Dahl's F_c and sigma, the truth with the mass)."""
+    from bench.sources import load_source
+    from sim.discrepancy import rivals
+    from sim.discrepancy.analysis import base_fit, data_from_steps
+
+    path, truth = fc.write_case("lugre", tmp, levels=GRID[0], freqs=GRID[1], settle=15, measure=6, seed=seed)
+    steps = load_source(path).steps
+    d = data_from_steps(steps, 9)
+    base, W = base_fit(steps, d, None, 9)
+    dahl = rivals.dahl_fit(base, d, W)
+    return d, W, (dahl.values["F_c_N"], dahl.values["sigma_N_per_m"]), dict(truth["params"], mass_kg=truth["mass_kg"])
+
+
+def _covered(d, W, start, truth, names):
+    from sim.discrepancy import rate_rivals as rr
+
+    _, _, params = rr.lugre_fit(rr.setup(d, W), *start)
+    return {n: params[n]["low"] <= truth[n] <= params[n]["high"] for n in names}
+
+
+def test_lugre_intervals_hold_a_misfit_the_noise_model_does_not(tmp_path):
+    # the records' noise is not all a step carries (decision 0036): here the top level's five
+    # steps (gross sliding, where F_c, sigma_2 and m are measured) get force harmonics with 3x
+    # the noise their records state, the weights unchanged, 20 seeded draws.  The Jacobian's
+    # covariance alone (main before 0089) covered F_c, sigma_2, m 14, 13, 14 of 20 (41/60);
+    # with the empirical per-step floor 17, 16, 19 (52/60); ~14 s
+    from dataclasses import replace
+
+    import numpy as np
+
+    d0, W, start, truth = _lugre_inputs(tmp_path, seed=0)
+    top = (d0.level == d0.level.max())[:, None]
+    rng = np.random.default_rng(1)
+    K = d0.X.shape[1]
+    hits = 0
+    for _ in range(20):
+        e = 3.0 * d0.sP[:, None] * top * (rng.standard_normal(d0.Pf.shape) + 1j * rng.standard_normal(d0.Pf.shape))
+        d = replace(d0, P=d0.P + e[:, :K], Pf=d0.Pf + e)
+        hits += sum(_covered(d, W, start, truth, ("F_c_N", "sigma2_N_s_per_m", "mass_kg")).values())
+    assert hits >= 50, hits
+
+
+@pytest.mark.campaign
+def test_lugre_intervals_cover_the_truth_as_often_as_they_claim(tmp_path):
+    # 60 noise seeds of the test grid (15 steps), the independent simulator's data: each scalar
+    # and the mass covered in at least 53 of 60 (a 95 % interval misses 8 or more in 1.2 %), all
+    # 420 in 93-98.5 % (neither too narrow nor too wide: the leverage-corrected floor, CR3,
+    # covered 99.4 % of 700 with intervals 1.6-3x as wide).  Measured: 59 55 56 57 59 59 59,
+    # 404/420 (96.2 %); ~4 min
+    names = (*LUGRE_SCALARS, "mass_kg")
+    counts = dict.fromkeys(names, 0)
+    for seed in range(60):
+        d, W, start, truth = _lugre_inputs(tmp_path, seed)
+        for n, ok in _covered(d, W, start, truth, names).items():
+            counts[n] += ok
+    assert all(c >= 53 for c in counts.values()), counts
+    assert 391 <= sum(counts.values()) <= 414, counts
