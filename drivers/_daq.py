@@ -296,6 +296,12 @@ class CanFdDaq:
             self.configure(rate_Hz, n)
         return self.acquire()
 
+    def acquire_samples(self, sample_rate_Hz: float, n_samples: int) -> DaqBlock:
+        """One block of ``n_samples`` at ``sample_rate_Hz`` (configured only when it changes)."""
+        if (int(round(sample_rate_Hz * 1000)), n_samples) != (self._rate_mHz, self._n_samples):
+            self.configure(sample_rate_Hz, n_samples)
+        return self.acquire()
+
     def close(self) -> None:
         try:
             self._command(codec.Command.ABORT)

@@ -133,8 +133,7 @@ class SupervisedDaq:
         return block
 
     def acquire_samples(self, rate_Hz: float, n_samples: int) -> Block:
-        self._daq.configure(rate_Hz, n_samples)
-        block = self._daq.acquire()
+        block = self._daq.acquire_samples(rate_Hz, n_samples)
         self._sup.check_block(block)
         return block
 

@@ -199,11 +199,12 @@ class SteppedSine:
         self._track_phase(block, freq_Hz)
         return block
 
-    def _track_phase(self, block: Block, freq_Hz: float) -> None:
-        """Drive phase at the end of ``block``, from a fit of its force signal."""
+    def _track_phase(self, block: Block, freq_Hz: float, fit_samples: int | None = None) -> None:
+        """Drive phase at the end of ``block``, from a fit of its force signal (of its first
+        ``fit_samples``, whole periods, when the block is longer)."""
         if not self.drive.on or block.n_samples < 8:
             return
-        phi0 = fit_harmonics(block.force_N, block.fs_Hz, freq_Hz, 1).phase_rad[0]
+        phi0 = fit_harmonics(block.force_N[:fit_samples], block.fs_Hz, freq_Hz, 1).phase_rad[0]
         self.drive.phase_rad = (phi0 + 2 * math.pi * freq_Hz * block.n_samples / block.fs_Hz) % (2 * math.pi)
 
     def _align(self) -> None:
@@ -216,14 +217,32 @@ class SteppedSine:
         phi, f = self.drive.phase_rad, self.drive.freq_Hz
         if phi is None or not self.drive.on:
             return
-        target = self.drive.next_quarter * math.pi / 2
-        self.drive.next_quarter = 4 - self.drive.next_quarter
-        wait = ((target - phi) % (2 * math.pi)) / (2 * math.pi * f)
-        rate, _ = plan_block(f, 1, self.plan.min_sample_rate_Hz)
-        n = int(round(wait * rate))
+        rate, n = self._to_quarter(phi, f, 0)
         if n >= 1:
             self.daq.acquire_samples(rate, n)
         self.drive.phase_rad = (phi + 2 * math.pi * f * n / rate) % (2 * math.pi)
+
+    def _to_quarter(self, phi: float, f: float, periods: int) -> tuple[float, int]:
+        """(rate, samples) from drive phase ``phi`` through ``periods`` whole periods to the
+        next quarter (see _align), which is then the one after."""
+        target = self.drive.next_quarter * math.pi / 2
+        self.drive.next_quarter = 4 - self.drive.next_quarter
+        rate, per_period = plan_block(f, 1, self.plan.min_sample_rate_Hz)
+        phi_end = phi + 2 * math.pi * f * periods * per_period / rate
+        return rate, periods * per_period + int(round(((target - phi_end) % (2 * math.pi)) / (2 * math.pi * f) * rate))
+
+    def _period_to_quarter(self, freq_Hz: float) -> bool:
+        """A ramp's period and the wait to the next quarter after it in one block (as one
+        period, then :meth:`_align`, would acquire them: the same samples, one request);
+        False, nothing acquired, while the drive phase is not known."""
+        phi = self.drive.phase_rad
+        if phi is None or not self.drive.on:
+            return False
+        rate, n = self._to_quarter(phi, freq_Hz, 1)
+        block = self.last_block = self.daq.acquire_samples(rate, n)
+        self.periods += 1
+        self._track_phase(block, freq_Hz, fit_samples=plan_block(freq_Hz, 1, self.plan.min_sample_rate_Hz)[1])
+        return True
 
     def _change(self, *, vpp: float | None = None, freq_Hz: float | None = None) -> None:
         """Change frequency and/or amplitude at a quarter phase (see _align)."""
@@ -261,9 +280,14 @@ class SteppedSine:
         else:
             self._change(freq_Hz=freq_Hz)
         steps = max(40, math.ceil(self.plan.ramp_s * freq_Hz))
+        aligned = False
         for k in range(1, steps + 1):
-            self._change(vpp=start + (target_Vpp - start) * k / steps)
-            self._acquire(freq_Hz, 1)
+            if not aligned:
+                self._align()
+            self.drive.amplitude_Vpp = self.gen.set_amplitude(max(start + (target_Vpp - start) * k / steps, MIN_VPP))
+            aligned = k < steps and self._period_to_quarter(freq_Hz)
+            if not aligned:
+                self._acquire(freq_Hz, 1)
 
     def stop(self) -> None:
         """Soft stop: ramp to the minimum amplitude, then output off."""

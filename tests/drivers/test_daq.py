@@ -80,6 +80,18 @@ def test_consecutive_blocks_advance_the_plant_clock(rig, daq):
     assert second.block_id == first.block_id + 1
 
 
+def test_a_block_of_samples_is_the_one_asked_for_and_configured_only_when_it_changes(rig, daq, mocker):
+    """The ramp's blocks (a period and the wait to a quarter phase) are all of one length:
+    the DAQ is configured for the first only (decision 0083, third addendum)."""
+    drive(rig)
+    configure = mocker.spy(daq, "configure")
+    a, b, c = (daq.acquire_samples(25_600.0, n) for n in (384, 384, 100))
+    assert (a.n_samples, b.n_samples, c.n_samples) == (384, 384, 100)
+    assert a.fs_Hz == b.fs_Hz == c.fs_Hz == 25_600.0
+    assert b.t0_s == pytest.approx(a.t0_s + 384 / 25_600.0, abs=1e-6)
+    assert [call.args for call in configure.call_args_list] == [(25_600.0, 384), (25_600.0, 100)]
+
+
 class HeldPlant:
     """The real plant, but each block waits for ``release``: a plant slower than real
     time, as the first run of a process is (it compiles the kernel)."""
