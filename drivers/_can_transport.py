@@ -1,6 +1,6 @@
 """CAN buses chosen by URL, and a loopback TCP bridge to an in-process virtual bus.
 
-URLs: ``virtual:<channel>`` (python-can's in-process virtual bus) and
+URLs: ``virtual:<channel>`` (python-can's in-process virtual bus, as :class:`InProcessBus`) and
 ``tcp://127.0.0.1:<port>`` (a :class:`CanTcpBridge` in another process). Anything else is
 handed to ``can.Bus`` as ``<interface>:<channel>`` (e.g. ``socketcan:can0`` on a real
 rig). Why a TCP bridge and not udp_multicast: docs/decisions/0006.
@@ -12,6 +12,7 @@ Bridge wire format, per frame, little-endian: ``uint32 arbitration_id, uint8 fla
 from __future__ import annotations
 
 import logging
+import queue
 import select
 import socket
 import struct
@@ -21,6 +22,7 @@ import urllib.parse
 from typing import Any
 
 import can
+from can.interfaces.virtual import VirtualBus
 
 from ._errors import ConnectionLost
 from ._urls import check_daq_url
@@ -36,6 +38,32 @@ def _encode(msg: can.Message) -> bytes:
              | (_EXT if msg.is_extended_id else 0) | (_ERR if msg.is_error_frame else 0))
     data = bytes(msg.data)
     return _HEAD.pack(msg.arbitration_id, flags, len(data)) + data
+
+
+class InProcessBus(VirtualBus):
+    """python-can's virtual bus (the same channels, so its own buses share them), each
+    receiver's copy of a frame made by the Message constructor instead of ``deepcopy``:
+    4.6 of a send's 7.1 us, in a refined run's 300 000 frames (decision 0091)."""
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self._check_if_open()
+        timestamp = msg.timestamp if self.preserve_timestamps else time.time()
+        all_sent = True
+        for bus_queue in self.channel:
+            if bus_queue is self.queue and not self.receive_own_messages:
+                continue
+            frame = can.Message(timestamp=timestamp, arbitration_id=msg.arbitration_id,
+                                is_extended_id=msg.is_extended_id, is_remote_frame=msg.is_remote_frame,
+                                is_error_frame=msg.is_error_frame, channel=self.channel_id, dlc=msg.dlc,
+                                data=bytearray(msg.data), is_fd=msg.is_fd, is_rx=bus_queue is not self.queue,
+                                bitrate_switch=msg.bitrate_switch,
+                                error_state_indicator=msg.error_state_indicator, check=False)
+            try:
+                bus_queue.put(frame, block=True, timeout=timeout)
+            except queue.Full:
+                all_sent = False
+        if not all_sent:
+            raise can.CanOperationError("Could not send message to one or more recipients")
 
 
 class _FrameReader:
@@ -137,7 +165,7 @@ class CanTcpBridge:
                 continue
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             conn.settimeout(SEND_TIMEOUT_S)
-            bus = can.Bus(interface="virtual", channel=self.channel)
+            bus = InProcessBus(channel=self.channel)
             with self._lock:
                 self._links.append((conn, bus))
             threading.Thread(target=self._socket_to_bus, args=(conn, bus), daemon=True).start()
@@ -207,7 +235,7 @@ def open_can_bus(url: str) -> can.BusABC:
     ``<interface>:<channel>`` for a python-can interface allowed by ``drivers/_urls.py``."""
     check_daq_url(url)
     if url.startswith("virtual:"):
-        return can.Bus(interface="virtual", channel=url[len("virtual:"):])
+        return InProcessBus(channel=url[len("virtual:"):])
     if url.startswith("tcp://"):
         parts = urllib.parse.urlsplit(url)
         assert parts.hostname is not None and parts.port is not None     # check_daq_url made sure

@@ -74,3 +74,32 @@ def test_run_standalone_prints_urls_and_stops_on_request(rig):
     thread.join(timeout=5)
     assert not thread.is_alive()
     assert any(line.startswith("generator ") for line in lines)
+
+
+def test_the_in_process_bus_delivers_each_receiver_its_own_copy_of_a_frame():
+    """drivers.InProcessBus (decision 0091) is python-can's virtual bus without deepcopy: a
+    plain python-can virtual bus on the channel gets every field of the frame, as a copy of
+    its own (the sender's message changed after the send does not change it), and the
+    sender does not hear itself."""
+    import can
+
+    from drivers._can_transport import InProcessBus, open_can_bus
+    sender = open_can_bus("virtual:test-inprocess-copy")
+    receivers = [can.Bus(interface="virtual", channel="test-inprocess-copy"), InProcessBus(channel="test-inprocess-copy")]
+    try:
+        assert isinstance(sender, InProcessBus)
+        msg = can.Message(arbitration_id=0x123, data=bytes(range(64)), is_fd=True, bitrate_switch=True,
+                          is_extended_id=False)
+        sender.send(msg)
+        msg.data[0] = 99
+        got = [bus.recv(timeout=1.0) for bus in receivers]
+        for g in got:
+            assert g is not None and g is not msg
+            assert (g.arbitration_id, bytes(g.data), g.dlc, g.is_fd, g.bitrate_switch, g.is_extended_id, g.is_rx) == \
+                (0x123, bytes(range(64)), 64, True, True, False, True)
+            assert g.channel == "test-inprocess-copy"
+        assert got[0] is not got[1] and got[0].data is not got[1].data
+        assert sender.recv(timeout=0.05) is None
+    finally:
+        for bus in (sender, *receivers):
+            bus.shutdown()
