@@ -58,6 +58,29 @@ def test_dahls_steady_loop_reverses_at_the_closed_form_force(i, a):
     assert F.min() / values["F_c_N"] == pytest.approx(-r, rel=1e-6, abs=1e-9)
 
 
+@pytest.mark.parametrize("i", [0.5, 1.0, 2.0])
+def test_dahls_steady_force_with_inner_loops_is_where_sample_by_sample_stepping_settles(i):
+    """The steady force (:func:`sim.friction.dahl.dahl_rows`, its period map taken a
+    monotone run at a time, decision 0091) along paths whose third and seventh harmonics
+    make inner loops, against the time-domain update stepped sample by sample from a
+    virgin state for 300 periods (Dahl forgets its start: the force is then steady)."""
+    values = dict(DAHL, exponent=i)
+    length = values["F_c_N"] / values["sigma_N_per_m"]
+    t = TAU
+    paths = np.array([a * length * (np.sin(t + 0.3) + 0.45 * np.sin(3 * t + 1.1) + 0.25 * np.sin(7 * t))
+                      for a in (0.05, 0.4, 1.5, 4.0)])
+    steady = MODELS["dahl"].periodic_force(values, paths, np.full(4, 2 * math.pi * 40))
+    model = MODELS["dahl"]
+    advance, p = type(model).advance, model.kernel_params(values)
+    for x, F in zip(paths, steady):
+        state = np.zeros(1)
+        advance(p, state, x[0], math.inf, 0.0)
+        for _ in range(300):
+            stepped = np.array([advance(p, state, x[(j + 1) % x.size] - x[j], math.inf, 0.0) for j in range(x.size)])
+        assert np.max(np.abs(np.roll(stepped, 1) - F)) <= 1e-9 * values["F_c_N"]
+        assert np.ptp(F) > 0.01 * values["F_c_N"]
+
+
 def test_dahl_is_rate_independent_and_its_branch_depends_on_the_reversal_force():
     d = MODELS["dahl"]
     paths = 1e-5 * np.cos(TAU)[None, :] * np.array([[1.0], [3.0]])
