@@ -20,7 +20,6 @@ from sim.artefacts import HARMONIC_GUARD, Rejection, StepQuality, assess_step, s
 from sim.step_record import BlockRecord, measure_block
 from sim.step_result import ControlIteration, StepMeasurement, StepResult
 
-from .analysis import fit_harmonics
 from .capacity import measure_periods
 from .control import FIRST_DRIVE_MARGIN, Controller, ForceControl, Outcome, Reason, next_drive
 from .instruments import Block, BlockSource, SineSource, StepMarker
@@ -200,11 +199,15 @@ class SteppedSine:
         return block
 
     def _track_phase(self, block: Block, freq_Hz: float, fit_samples: int | None = None) -> None:
-        """Drive phase at the end of ``block``, from a fit of its force signal (of its first
-        ``fit_samples``, whole periods, when the block is longer)."""
+        """Drive phase at the end of ``block``, from its force signal's fundamental over
+        whole periods (all of a block of whole periods, or its first ``fit_samples``): there
+        the fundamental's sine and cosine are orthogonal to each other, to the offset and to
+        the other harmonics, so the projection is the least-squares fit's phase."""
         if not self.drive.on or block.n_samples < 8:
             return
-        phi0 = fit_harmonics(block.force_N[:fit_samples], block.fs_Hz, freq_Hz, 1).phase_rad[0]
+        x = block.force_N[:fit_samples]
+        wt = 2 * math.pi * freq_Hz / block.fs_Hz * np.arange(x.size)
+        phi0 = math.atan2(float(x @ np.cos(wt)), float(x @ np.sin(wt)))
         self.drive.phase_rad = (phi0 + 2 * math.pi * freq_Hz * block.n_samples / block.fs_Hz) % (2 * math.pi)
 
     def _align(self) -> None:
