@@ -57,7 +57,7 @@ from numba import njit
 from scipy.optimize import least_squares, nnls
 
 from ..friction import MODELS, path_velocity, sample_spacing
-from ..identify import path_harmonics, period_paths
+from ..identify import _rotate_lift_centre, path_harmonics, period_paths
 from .fit import Z95, Weights, at_least_empirical, step_scores
 from .gain import frf
 from .models import Data, Model
@@ -68,10 +68,13 @@ GMS_REFINE = 4               # the fine grid: each active coarse element's inter
 GMS_FINE_MAX = 96            # at most this many elements on the fine grid (fewer cuts where many are active)
 OUTER_NFEV = 20              # the outer least squares' evaluations (each with a Jacobian of 4 more)
 POLISH_NFEV = 4              # on the fine grid, from the coarse fit
+GMS_FREE_MAX = 8             # at most this many elements at free slips (more clusters: the fine grid's result)
+FREE_NFEV = 20               # the free slips' fit, from the fine grid's
 NO_POLISH = 100.0            # no fine grid when the coarse chi-square is this many times another model's
 HELD_NFEV = 0                # a held-out refit: 0, one Gauss-Newton step from the full fit (projected_fit)
 UNIT_TOL = 1e-7              # a unit element's steady state: change per period below this
 PERIODS_MAX = 60
+TIMED_PATHS = True           # each period started at its largest value in time (timed_paths)
 EMPIRICAL_FLOOR = True       # intervals at least the empirical per-step sandwich (decisions 0036, 0089)
 
 
@@ -111,10 +114,34 @@ def _vec(wF, wK):
     return np.concatenate([wF.real, wF.imag, wK.real, wK.imag], axis=1)
 
 
+def timed_paths(X: np.ndarray, M: int, newton: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`sim.identify.period_paths` with each period started at its largest value in
+    time, not at the largest sample (Newton on the harmonic series from that sample): a
+    reversal half a sample late moves the whole hysteresis loop, the force's error first
+    order in 1 / M (decision 0090).  Returns (paths, rotations in samples, not integers)."""
+    X = np.atleast_2d(X)
+    _, starts = period_paths(X, M)
+    k = np.arange(1, X.shape[1] + 1)
+    tau = 2 * np.pi * starts / M
+    for _ in range(newton):
+        e = X * np.exp(1j * np.outer(tau, k))
+        d1 = (e * k).real.sum(axis=1)                        # x'(tau), x = sum Im(X_k e^(i k tau))
+        d2 = -(e * k ** 2).imag.sum(axis=1)
+        step = np.where(d2 < 0, -d1 / np.where(d2 < 0, d2, -1.0), 0.0)
+        tau = tau + np.clip(step, -2 * np.pi / M, 2 * np.pi / M)
+    spec = np.zeros((X.shape[0], M // 2 + 1), complex)
+    K = min(X.shape[1], M // 2 - 1)
+    spec[:, 1:K + 1] = -1j * (X * np.exp(1j * np.outer(tau, k)))[:, :K] * (M / 2)
+    x = np.fft.irfft(spec, M, axis=1)
+    out = np.empty_like(x)
+    _rotate_lift_centre(x, np.zeros(X.shape[0], dtype=np.int64), out)
+    return out, tau * M / (2 * np.pi)
+
+
 def setup(d: Data, W: Weights, M: int = M_RATE) -> _Setup:
     K = d.X.shape[1]
     x = Model((), K)._displacement({}, d)
-    paths, starts = period_paths(x, M)
+    paths, starts = (timed_paths if TIMED_PATHS else period_paths)(x, M)
     vel = path_velocity(paths, d.omega)
     every = np.arange(d.X.shape[0])
     s = _Setup(d, W, paths, starts, vel, _vec(*W.whiten(d.P, d.A + d.Omega ** 2 * d.X)),
@@ -439,11 +466,52 @@ def refine(slips: np.ndarray, active: np.ndarray, parts: int = GMS_REFINE) -> np
     return slips
 
 
+def clusters(active: np.ndarray) -> list[np.ndarray]:
+    """Runs of neighbouring grid indices in the sorted ``active`` (each run one cluster)."""
+    if active.size == 0:
+        return []
+    cut = np.flatnonzero(np.diff(active) > 1) + 1
+    return np.split(active, cut)
+
+
+def gms_free_problem(s: _Setup, fixed: np.ndarray) -> _Projected:
+    """GMS with the first elements' log-slips free (theta[4:]) and ``fixed`` slips after them."""
+    def basis(theta, rows):
+        slips = np.concatenate([np.exp(theta[4:]), fixed])
+        return None, gms_units(s, slips, math.exp(theta[0]), math.exp(theta[1]), float(theta[2]), math.exp(theta[3]),
+                               rows)
+    return _Projected(s, basis, lin_viscous=True)
+
+
+def gms_free(s: _Setup, slips: np.ndarray, z: np.ndarray, ratio: float) -> tuple | None:
+    """The free-slip problem from a grid fit (module doc): each cluster of active grid
+    elements that slides at some step becomes one element at a free log-slip (start: the
+    cluster's force-weighted mean log-slip, bounds one coarse interval ``ratio`` beyond it),
+    the springs' elements (slip above every amplitude) stay on the grid.  (problem, start
+    of the slips, their bounds, the fixed slips), or None for more than :data:`GMS_FREE_MAX`."""
+    f = z[1:1 + slips.size]
+    free, fixed = [], []
+    for c in clusters(np.flatnonzero(f > 0)):
+        if slips[c].min() < s.amp.max():
+            free.append(c)
+        else:
+            fixed.extend(c.tolist())
+    if not free or len(free) > GMS_FREE_MAX:
+        return None
+    ls = np.log(slips)
+    start = np.array([float(np.average(ls[c], weights=f[c])) for c in free])
+    lo = np.array([ls[c].min() for c in free]) - math.log(ratio)
+    hi = np.array([ls[c].max() for c in free]) + math.log(ratio)
+    fixed_s = slips[np.array(fixed, dtype=int)]
+    return gms_free_problem(s, fixed_s), start, lo, hi, fixed_s
+
+
 def gms_fit(s: _Setup, slips: np.ndarray, other_chi2: float = math.inf) -> tuple[Result, dict, dict]:
     """GMS on the slip grid ``slips`` (module doc): (result, values, parameters).  The fine
     grid only where it can matter: with the coarse fit's chi-square above :data:`NO_POLISH`
     times ``other_chi2`` (the best other model's) the coarse fit is the result (the fine
-    grid lowered it 15-fold on the issue's GMS case, decision 0086)."""
+    grid lowered it 15-fold on the issue's GMS case, decision 0086); else the fine grid's
+    clusters become elements at free slips (:func:`gms_free`, decision 0090)."""
     speed = float(np.median(np.abs(s.vel).max(axis=1)))
     w = float(np.median(s.d.omega))
     lo = np.array([0.0, math.log(speed) - 7, 0.5, math.log(w) - 3])
@@ -453,18 +521,39 @@ def gms_fit(s: _Setup, slips: np.ndarray, other_chi2: float = math.inf) -> tuple
     every = np.arange(s.d.X.shape[0])
     th1 = coarse.fit(th0, lo, hi, every, OUTER_NFEV)
     z1, r1, _ = coarse.solve(th1, every)
+    n_free, grid = 0, slips
     if float(r1 @ r1) > NO_POLISH * other_chi2:
         res = projected_fit(coarse, th1, lo, hi, nfev=0)
     else:
-        slips = refine(slips, np.flatnonzero(z1[1:1 + slips.size] > 0))
-        res = projected_fit(gms_problem(s, slips), th1, lo, hi, nfev=POLISH_NFEV)
+        ratio = float(slips[1] / slips[0]) if slips.size > 1 else 2.0
+        slips = grid = refine(slips, np.flatnonzero(z1[1:1 + slips.size] > 0))
+        fine = gms_problem(s, slips)
+        th2 = fine.fit(th1, lo, hi, every, POLISH_NFEV)
+        z2, _, _ = fine.solve(th2, every)
+        made = gms_free(s, slips, z2, ratio) if GMS_FREE_MAX > 0 else None
+        if made is None:
+            res = projected_fit(fine, th2, lo, hi, nfev=0)
+        else:
+            problem, ls0, ls_lo, ls_hi, fixed = made
+            n_free = ls0.size
+            res = projected_fit(problem, np.concatenate([th2, ls0]), np.concatenate([lo, ls_lo]),
+                                np.concatenate([hi, ls_hi]), nfev=FREE_NFEV)
+            slips = np.concatenate([np.exp(res.theta[4:]), fixed])
+    return res, *_gms_report(res, slips, n_free, grid)
+
+
+def _gms_report(res: Result, slips: np.ndarray, n_free: int, grid: np.ndarray) -> tuple[dict, dict]:
+    """GMS's values and parameters with 95 % intervals from a fit whose first ``n_free``
+    elements' log-slips are outer parameters 4.. (the others on the slip ``grid``: their
+    slip's interval is its grid cell, between the geometric midpoints to its neighbours)."""
     th, z, cov = res.theta, res.z, res.cov
+    nt = th.size
     N = slips.size
     f, m, s2 = z[1:1 + N], float(z[0]), float(z[-1])
     F_c = float(f.sum())
     r, v_s, delta, c = math.exp(th[0]), math.exp(th[1]), float(th[2]), math.exp(th[3])
-    act = np.flatnonzero(f > 0)
-    fi = 5 + np.arange(N)                    # f's entries in (theta, z)
+    act = [int(i) for i in np.argsort(slips) if f[i] > 0]
+    fi = nt + 1 + np.arange(N)               # f's entries in (theta, z)
     g_Fc = np.zeros(cov.shape[0])
     g_Fc[fi] = 1.0
     var_Fc = _grad_var(cov, g_Fc)
@@ -475,15 +564,29 @@ def gms_fit(s: _Setup, slips: np.ndarray, other_chi2: float = math.inf) -> tuple
     gC[3] += 1.0
     values = dict(F_c_N=F_c, F_s_N=r * F_c, v_s_m_per_s=v_s, delta=delta, C_N_per_s=c * F_c, sigma2_N_s_per_m=s2,
                   k_N_per_m=[float(f[i] / slips[i]) for i in act], alpha=[float(f[i] / F_c) for i in act])
-    ks, alphas = [], []
+    ks, alphas, slip_q = [], [], []
     for i in act:
-        ks.append(_lin_q(float(f[i] / slips[i]), cov[fi[i], fi[i]] / slips[i] ** 2, "N/m"))
-        alphas.append(_lin_q(float(f[i] / F_c), cov[fi[i], fi[i]] / F_c ** 2, "1"))
+        k = float(f[i] / slips[i])
+        gk = np.zeros(cov.shape[0])
+        gk[fi[i]] = 1.0 / slips[i]
+        ga = -g_Fc * f[i] / F_c ** 2
+        ga[fi[i]] += 1.0 / F_c
+        if i < n_free:
+            gk[4 + i] = -k
+            slip_q.append(_log_q(float(slips[i]), cov[4 + i, 4 + i], "m"))
+        else:
+            j = int(np.argmin(np.abs(grid - slips[i])))
+            ratio = float(grid[1] / grid[0]) if grid.size > 1 else 2.0
+            below = grid[j - 1] if j > 0 else slips[i] / ratio
+            above = grid[j + 1] if j + 1 < grid.size else slips[i] * ratio
+            slip_q.append(dict(value=float(slips[i]), low=float(math.sqrt(below * slips[i])),
+                               high=float(math.sqrt(above * slips[i])), unit="m"))
+        ks.append(_lin_q(k, _grad_var(cov, gk), "N/m"))
+        alphas.append(_lin_q(float(f[i] / F_c), _grad_var(cov, ga), "1"))
     params = dict(F_c_N=_log_q(F_c, rel_Fc, "N"), F_s_N=_log_q(r * F_c, _grad_var(cov, gs), "N"),
                   v_s_m_per_s=_log_q(v_s, cov[1, 1], "m/s"),
                   delta=_lin_q(delta, cov[2, 2], "1", floor=None),
                   C_N_per_s=_log_q(c * F_c, _grad_var(cov, gC), "N/s"),
-                  sigma2_N_s_per_m=_lin_q(s2, cov[-1, -1], "N s/m"), mass_kg=_lin_q(m, cov[4, 4], "kg"),
-                  k_N_per_m=ks, alpha=alphas)
-    params["slip_m"] = [float(slips[i]) for i in act]
-    return res, values, params
+                  sigma2_N_s_per_m=_lin_q(s2, cov[-1, -1], "N s/m"), mass_kg=_lin_q(m, cov[nt, nt], "kg"),
+                  k_N_per_m=ks, alpha=alphas, slip_m=slip_q)
+    return values, params
