@@ -2,15 +2,15 @@
 
 The GMS case of :mod:`benchtools.friction_cases` (the independent simulator's data, four
 elements at 3, 6.5, 14 and 30 um) on tests/sim/test_friction_choice.py's 5 x 3 grid, settle 15,
-one noise seed per run, fitted as the analysis fits it (:func:`sim.discrepancy.rate_rivals.gms_fit`
-on the Iwan grid, the fine grid always).  ``python -m benchtools.gms_coverage [seeds] [noise x]``
-prints per seed the values, the reduced chi-square and which scalars are covered, then the
-counts.
+one noise seed per run, fitted as the analysis fits it (:func:`sim.discrepancy.gms_rival.gms_fit`
+on the Iwan grid, the fine grid always).  ``python -m benchtools.gms_coverage [--seeds 30]
+[--noise 1] [--grid-only] [--sample-start]`` prints per seed the reduced chi-square, the fit's
+CPU seconds, the values (a star: the truth outside the 95 % interval) and the slips, then the
+counts; ``--grid-only --sample-start`` is main's fit before decision 0090.
 """
 
 from __future__ import annotations
 
-import sys
 import tempfile
 import time
 
@@ -23,8 +23,8 @@ SCALARS = ("F_c_N", "F_s_N", "v_s_m_per_s", "delta", "C_N_per_s", "sigma2_N_s_pe
 def gms_inputs(tmp, seed: int, noise_scale: float = 1.0):
     """(the rate rivals' setup, the Iwan grid, the truth with the mass) of one noise seed."""
     from bench.sources import load_source
+    from sim.discrepancy import gms_rival, rivals
     from sim.discrepancy import rate_rivals as rr
-    from sim.discrepancy import rivals
     from sim.discrepancy.analysis import base_fit, data_from_steps
 
     noise = tuple(noise_scale * n for n in fc.NOISE)
@@ -33,14 +33,14 @@ def gms_inputs(tmp, seed: int, noise_scale: float = 1.0):
     steps = load_source(path).steps
     d = data_from_steps(steps, 9)
     base, W = base_fit(steps, d, None, 9)
-    return rr.setup(d, W), rivals.iwan_grid(base, d, rr.GMS_ELEMENTS), dict(truth["params"], mass_kg=truth["mass_kg"])
+    return rr.setup(d, W), rivals.iwan_grid(base, d, gms_rival.GMS_ELEMENTS), dict(truth["params"], mass_kg=truth["mass_kg"])
 
 
 def covered(s, grid, truth, names=SCALARS):
     """({name: covered}, the fit's result, its parameters)."""
-    from sim.discrepancy import rate_rivals as rr
+    from sim.discrepancy import gms_rival
 
-    res, _, params = rr.gms_fit(s, grid)
+    res, _, params = gms_rival.gms_fit(s, grid)
     return {n: params[n]["low"] <= truth[n] <= params[n]["high"] for n in names}, res, params
 
 
@@ -63,4 +63,17 @@ def main(seeds: int = 30, noise_scale: float = 1.0) -> dict:
 
 
 if __name__ == "__main__":
-    main(*(int(sys.argv[1]),) if len(sys.argv) > 1 else (), *(float(sys.argv[2]),) if len(sys.argv) > 2 else ())
+    import argparse
+
+    from sim.discrepancy import gms_rival
+    from sim.discrepancy import rate_rivals as rr
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=30)
+    ap.add_argument("--noise", type=float, default=1.0, help="x the rig's noise")
+    ap.add_argument("--grid-only", action="store_true", help="no free slips (GMS_FREE_MAX 0)")
+    ap.add_argument("--sample-start", action="store_true", help="periods from their largest sample (main before 0090)")
+    a = ap.parse_args()
+    gms_rival.GMS_FREE_MAX = 0 if a.grid_only else gms_rival.GMS_FREE_MAX
+    rr.TIMED_PATHS = not a.sample_start
+    main(a.seeds, a.noise)
