@@ -1,9 +1,11 @@
-"""The rate-dependent rivals, LuGre and GMS, fitted to the same data with the same weights and
+"""The rate-dependent rivals, LuGre and GMS (its code in :mod:`sim.discrepancy.gms_rival`), fitted to the same data with the same weights and
 held-out levels as the others (:mod:`sim.discrepancy.rivals`; decision 0086).
 
 Both are fitted like the Iwan elements, on a rigid carriage: the measured displacement
 harmonics (rebuilt from both motion channels, :meth:`Model._displacement`) give periodic
-paths (:func:`sim.identify.period_paths`, :data:`M_RATE` samples a period), the model's
+paths (:func:`timed_paths`: :func:`sim.identify.period_paths` started at the period's
+largest value in time, not at its largest sample, decision 0090; :data:`M_RATE` samples a
+period), the model's
 force along them gives harmonics G (:func:`sim.identify.path_harmonics`), and the residual
 is the force balance P - m A - G with the kinematics A + Omega^2 X, whitened by the base
 fit's :class:`~sim.discrepancy.fit.Weights`.
@@ -17,14 +19,14 @@ nonlinear, fitted outside by scipy.optimize.least_squares (log scales, bounds):
   outer four: log sigma_0, log F_c, log F_s / F_c >= 0, log v_s.  z is the model's own
   steady periodic force (:meth:`sim.friction.lugre.LuGre.periodic_force` with
   sigma_1 = sigma_2 = 0) over sigma_0; dz/dt follows from it as the kernel takes it.
-- GMS: slip displacements at F_c on a fixed geometric grid (:data:`GMS_ELEMENTS`, as the
+- GMS: slip displacements at F_c on a fixed geometric grid (:data:`~sim.discrepancy.gms_rival.GMS_ELEMENTS`, as the
   Iwan grid), k_i = f_i / slip_i with f_i = alpha_i F_c.  Written as F_i = f_i u_i, the
   unit element u_i depends on slip_i, F_s / F_c, v_s, delta and C / F_c alone (stick:
   du/dx = 1 / slip; slide: du/dt = (C / F_c)(sgn v - u F_c / s(v)); slip when
   u sgn v reaches s(v) / F_c), so F = sum f_i u_i + sigma_2 v is linear in the f_i,
   sigma_2 (and m); F_c = sum f_i, alpha_i = f_i / F_c.  The outer four: log F_s / F_c >= 0,
   log v_s, delta, log C / F_c.  The unit elements' steady responses come from
-  :func:`_gms_units` (compiled, every element of a row at once, the Stribeck curve shared;
+  :func:`~sim.discrepancy.gms_rival._gms_units` (compiled, every element of a row at once, the Stribeck curve shared;
   an element whose slip exceeds the row's amplitude never slides and is x / slip): the
   update of :func:`sim.friction.gms.gms_advance`, written per unit element because the
   projection needs each element's force, not their sum; tests/sim/test_friction_choice.py
@@ -33,8 +35,14 @@ nonlinear, fitted outside by scipy.optimize.least_squares (log scales, bounds):
 The starts: LuGre from Dahl's fit (F_s ~ Dahl's F_c, F_c 0.85 of it, sigma_0 ~ sigma, v_s
 half the median speed amplitude); GMS from F_s / F_c = 1.2, delta 2, v_s the median speed
 amplitude, C / F_c twenty times the median drive frequency, on the Iwan fit's grid of
-:data:`GMS_ELEMENTS` (coarse), then on that grid refined around its active elements
-(:func:`refine`) in :data:`POLISH_NFEV` more.  Held-out errors: each level left out in
+:data:`~sim.discrepancy.gms_rival.GMS_ELEMENTS` (coarse), then on that grid refined around its active elements
+(:func:`~sim.discrepancy.gms_rival.refine`) in :data:`~sim.discrepancy.gms_rival.POLISH_NFEV` more; then each cluster of the fine grid's active
+elements (neighbours at most one coarse interval apart) that slides at some step becomes
+one element whose log-slip is an outer parameter too (start: the cluster's force-weighted
+mean log-slip; bounds one coarse interval beyond the cluster), at most
+:data:`~sim.discrepancy.gms_rival.GMS_FREE_MAX` of them (more: the fine grid's fit is the result), fitted in
+:data:`~sim.discrepancy.gms_rival.FREE_NFEV` evaluations (:func:`~sim.discrepancy.gms_rival.gms_free`, decision 0090); an element whose slip
+exceeds every amplitude is a spring whose slip the data cannot fix and stays on the grid.  Held-out errors: each level left out in
 turn, every parameter moved from the full fit by one Gauss-Newton step on the kept levels
 (the full Jacobian's rows; :data:`HELD_NFEV` > 0: the outer least squares instead), the
 inner ones then solved exactly at the new outer ones; errors of compliance, accelerance
@@ -53,25 +61,18 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 from scipy.optimize import least_squares, nnls
 
-from ..friction import MODELS, path_velocity, sample_spacing
-from ..identify import path_harmonics, period_paths
+from ..friction import MODELS, path_velocity
+from ..identify import _rotate_lift_centre, path_harmonics, period_paths
 from .fit import Z95, Weights, at_least_empirical, step_scores
 from .gain import frf
 from .models import Data, Model
 
 M_RATE = 256                 # samples a period: harmonics 1..9 of a kinked force to 1e-5 of it
-GMS_ELEMENTS = 40            # slip displacements on the coarse grid (the Iwan fit's range)
-GMS_REFINE = 4               # the fine grid: each active coarse element's interval cut in this many
-GMS_FINE_MAX = 96            # at most this many elements on the fine grid (fewer cuts where many are active)
 OUTER_NFEV = 20              # the outer least squares' evaluations (each with a Jacobian of 4 more)
-POLISH_NFEV = 4              # on the fine grid, from the coarse fit
-NO_POLISH = 100.0            # no fine grid when the coarse chi-square is this many times another model's
 HELD_NFEV = 0                # a held-out refit: 0, one Gauss-Newton step from the full fit (projected_fit)
-UNIT_TOL = 1e-7              # a unit element's steady state: change per period below this
-PERIODS_MAX = 60
+TIMED_PATHS = True           # each period started at its largest value in time (timed_paths)
 EMPIRICAL_FLOOR = True       # intervals at least the empirical per-step sandwich (decisions 0036, 0089)
 
 
@@ -111,10 +112,34 @@ def _vec(wF, wK):
     return np.concatenate([wF.real, wF.imag, wK.real, wK.imag], axis=1)
 
 
+def timed_paths(X: np.ndarray, M: int, newton: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`sim.identify.period_paths` with each period started at its largest value in
+    time, not at the largest sample (Newton on the harmonic series from that sample): a
+    reversal half a sample late moves the whole hysteresis loop, the force's error first
+    order in 1 / M (decision 0090).  Returns (paths, rotations in samples, not integers)."""
+    X = np.atleast_2d(X)
+    _, starts = period_paths(X, M)
+    k = np.arange(1, X.shape[1] + 1)
+    tau = 2 * np.pi * starts / M
+    for _ in range(newton):
+        e = X * np.exp(1j * np.outer(tau, k))
+        d1 = (e * k).real.sum(axis=1)                        # x'(tau), x = sum Im(X_k e^(i k tau))
+        d2 = -(e * k ** 2).imag.sum(axis=1)
+        step = np.where(d2 < 0, -d1 / np.where(d2 < 0, d2, -1.0), 0.0)
+        tau = tau + np.clip(step, -2 * np.pi / M, 2 * np.pi / M)
+    spec = np.zeros((X.shape[0], M // 2 + 1), complex)
+    K = min(X.shape[1], M // 2 - 1)
+    spec[:, 1:K + 1] = -1j * (X * np.exp(1j * np.outer(tau, k)))[:, :K] * (M / 2)
+    x = np.fft.irfft(spec, M, axis=1)
+    out = np.empty_like(x)
+    _rotate_lift_centre(x, np.zeros(X.shape[0], dtype=np.int64), out)
+    return out, tau * M / (2 * np.pi)
+
+
 def setup(d: Data, W: Weights, M: int = M_RATE) -> _Setup:
     K = d.X.shape[1]
     x = Model((), K)._displacement({}, d)
-    paths, starts = period_paths(x, M)
+    paths, starts = (timed_paths if TIMED_PATHS else period_paths)(x, M)
     vel = path_velocity(paths, d.omega)
     every = np.arange(d.X.shape[0])
     s = _Setup(d, W, paths, starts, vel, _vec(*W.whiten(d.P, d.A + d.Omega ** 2 * d.X)),
@@ -306,184 +331,4 @@ def lugre_fit(s: _Setup, F_c: float, sigma: float) -> tuple[Result, dict, dict]:
                   sigma1_N_s_per_m=_lin_q(s1, cov[5, 5], "N s/m"), sigma2_N_s_per_m=_lin_q(s2, cov[6, 6], "N s/m"),
                   F_c_N=_log_q(F_c, cov[1, 1], "N"), F_s_N=_log_q(F_s, cov[1, 1] + cov[2, 2] + 2 * cov[1, 2], "N"),
                   v_s_m_per_s=_log_q(v_s, cov[3, 3], "m/s"), mass_kg=_lin_q(m, cov[4, 4], "kg"))
-    return res, values, params
-
-
-# ---------------------------------------------------------------- GMS
-@njit(cache=True, nogil=True, inline="always")
-def _s_n(r, v_s, delta, v):
-    return 1.0 + (r - 1.0) * math.exp(-abs(v / v_s) ** delta)
-
-
-@njit(cache=True, nogil=True)
-def _gms_units(paths, vel, dts, slips, amp, r, v_s, delta, c, tol, out):
-    """Steady unit-element forces u (rows x elements x samples) of the GMS with F_c = 1,
-    F_s = r, C = c, alpha = 1 per element, k = 1 / slip: gms_advance's update, every element
-    of a row at once (module doc).  Returns the most periods a row needed."""
-    R, M = paths.shape
-    N = slips.shape[0]
-    s_mean = np.empty(M)
-    s_end = np.empty(M)
-    s_start = np.empty(M)
-    decay = np.empty(M)
-    u = np.empty(N)
-    mode = np.empty(N)
-    prev = np.empty(N)
-    worst = 0
-    for i in range(R):
-        x = paths[i]
-        n_act = 0
-        for e in range(N):
-            if slips[e] < amp[i]:
-                n_act = e + 1
-            else:
-                for j in range(M):
-                    out[i, e, j] = x[j] / slips[e]     # never slides: a spring
-        if n_act == 0:
-            continue
-        dt = dts[i]
-        for j in range(M):
-            jn = j + 1 if j + 1 < M else 0
-            dx = x[jn] - x[j]
-            v_end = vel[i, jn]
-            v_m = dx / dt
-            s_mean[j] = _s_n(r, v_s, delta, v_m)
-            s_end[j] = _s_n(r, v_s, delta, v_end)
-            s_start[j] = _s_n(r, v_s, delta, 2.0 * v_m - v_end)
-            decay[j] = math.exp(-c * dt / s_mean[j])
-        # virgin, quasi-static to the first sample (the path starts at its largest value)
-        sg0 = 1.0 if x[0] > 0.0 else -1.0
-        for e in range(n_act):
-            u[e] = x[0] / slips[e]
-            mode[e] = 0.0
-            if sg0 * u[e] > r:
-                u[e] = sg0 * r
-                mode[e] = 1.0
-        direction = sg0 if x[0] != 0.0 else 0.0
-        used = 0
-        write = False
-        while True:
-            for e in range(n_act):
-                prev[e] = u[e]
-            for j in range(M):
-                jn = j + 1 if j + 1 < M else 0
-                dx = x[jn] - x[j]
-                if dx != 0.0:
-                    sg = 1.0 if dx > 0.0 else -1.0
-                    if direction != sg:
-                        for e in range(n_act):
-                            mode[e] = 0.0
-                        direction = sg
-                    for e in range(n_act):
-                        if mode[e] == 0.0:
-                            un = u[e] + dx / slips[e]
-                            after = sg * un - s_end[j]
-                            if after <= 0.0:
-                                u[e] = un
-                                continue
-                            before = sg * u[e] - s_start[j]
-                            frac = before / (before - after) if before < 0.0 else 0.0
-                            ui = u[e] + frac * dx / slips[e]
-                            v0 = 2.0 * dx / dt - vel[i, jn]
-                            ss = _s_n(r, v_s, delta, v0 + (vel[i, jn] - v0) * 0.5 * (1.0 + frac))
-                            a = sg * ss
-                            u[e] = a + (ui - a) * math.exp(-c * (1.0 - frac) * dt / ss)
-                            mode[e] = 1.0
-                        else:
-                            a = sg * s_mean[j]
-                            u[e] = a + (u[e] - a) * decay[j]
-                if write:
-                    for e in range(n_act):
-                        out[i, e, jn] = u[e]
-            if write:
-                break
-            used += 1
-            change = 0.0
-            for e in range(n_act):
-                change = max(change, abs(u[e] - prev[e]))
-            if (used >= 2 and change <= tol) or used >= PERIODS_MAX:
-                write = True
-        worst = max(worst, used)
-    return worst
-
-
-def gms_units(s: _Setup, slips: np.ndarray, r: float, v_s: float, delta: float, c: float,
-              rows: np.ndarray) -> np.ndarray:
-    """Harmonics (rows x K x elements) of the unit elements' steady force."""
-    paths = np.ascontiguousarray(s.paths[rows])
-    out = np.empty((paths.shape[0], slips.size, paths.shape[1]))
-    _gms_units(paths, np.ascontiguousarray(s.vel[rows]), sample_spacing(s.d.omega[rows], paths.shape[1]), slips,
-               s.amp[rows], r, v_s, delta, c, UNIT_TOL, out)
-    H = path_harmonics(out.reshape(-1, out.shape[2]), np.repeat(s.starts[rows], slips.size), s.K)
-    return H.reshape(paths.shape[0], slips.size, s.K).transpose(0, 2, 1)
-
-
-def gms_problem(s: _Setup, slips: np.ndarray) -> _Projected:
-    def basis(theta, rows):
-        return None, gms_units(s, slips, math.exp(theta[0]), math.exp(theta[1]), float(theta[2]), math.exp(theta[3]),
-                               rows)
-    return _Projected(s, basis, lin_viscous=True)
-
-
-def refine(slips: np.ndarray, active: np.ndarray, parts: int = GMS_REFINE) -> np.ndarray:
-    """The geometric grid ``slips`` with each active element's neighbourhood (to the next
-    element either side) cut into ``parts`` per interval, fewer where that would make more
-    than :data:`GMS_FINE_MAX` (a smooth virgin curve, many elements active, needs none)."""
-    ratio = float(slips[1] / slips[0]) if slips.size > 1 else 2.0
-    while parts > 1:
-        sub = [slips[i] * ratio ** (k / parts) for i in active for k in range(1 - parts, parts)]
-        fine = np.unique(np.concatenate([slips, np.array(sub, dtype=float)]))
-        if fine.size <= GMS_FINE_MAX:
-            return fine
-        parts -= 1
-    return slips
-
-
-def gms_fit(s: _Setup, slips: np.ndarray, other_chi2: float = math.inf) -> tuple[Result, dict, dict]:
-    """GMS on the slip grid ``slips`` (module doc): (result, values, parameters).  The fine
-    grid only where it can matter: with the coarse fit's chi-square above :data:`NO_POLISH`
-    times ``other_chi2`` (the best other model's) the coarse fit is the result (the fine
-    grid lowered it 15-fold on the issue's GMS case, decision 0086)."""
-    speed = float(np.median(np.abs(s.vel).max(axis=1)))
-    w = float(np.median(s.d.omega))
-    lo = np.array([0.0, math.log(speed) - 7, 0.5, math.log(w) - 3])
-    hi = np.array([math.log(5.0), math.log(speed) + 5, 5.0, math.log(w) + 9])
-    th0 = np.array([math.log(1.2), math.log(speed), 2.0, math.log(20 * w)])
-    coarse = gms_problem(s, slips)
-    every = np.arange(s.d.X.shape[0])
-    th1 = coarse.fit(th0, lo, hi, every, OUTER_NFEV)
-    z1, r1, _ = coarse.solve(th1, every)
-    if float(r1 @ r1) > NO_POLISH * other_chi2:
-        res = projected_fit(coarse, th1, lo, hi, nfev=0)
-    else:
-        slips = refine(slips, np.flatnonzero(z1[1:1 + slips.size] > 0))
-        res = projected_fit(gms_problem(s, slips), th1, lo, hi, nfev=POLISH_NFEV)
-    th, z, cov = res.theta, res.z, res.cov
-    N = slips.size
-    f, m, s2 = z[1:1 + N], float(z[0]), float(z[-1])
-    F_c = float(f.sum())
-    r, v_s, delta, c = math.exp(th[0]), math.exp(th[1]), float(th[2]), math.exp(th[3])
-    act = np.flatnonzero(f > 0)
-    fi = 5 + np.arange(N)                    # f's entries in (theta, z)
-    g_Fc = np.zeros(cov.shape[0])
-    g_Fc[fi] = 1.0
-    var_Fc = _grad_var(cov, g_Fc)
-    rel_Fc = var_Fc / max(F_c, 1e-300) ** 2
-    g = g_Fc / max(F_c, 1e-300)              # log F_c's gradient
-    gs, gC = g.copy(), g.copy()
-    gs[0] += 1.0
-    gC[3] += 1.0
-    values = dict(F_c_N=F_c, F_s_N=r * F_c, v_s_m_per_s=v_s, delta=delta, C_N_per_s=c * F_c, sigma2_N_s_per_m=s2,
-                  k_N_per_m=[float(f[i] / slips[i]) for i in act], alpha=[float(f[i] / F_c) for i in act])
-    ks, alphas = [], []
-    for i in act:
-        ks.append(_lin_q(float(f[i] / slips[i]), cov[fi[i], fi[i]] / slips[i] ** 2, "N/m"))
-        alphas.append(_lin_q(float(f[i] / F_c), cov[fi[i], fi[i]] / F_c ** 2, "1"))
-    params = dict(F_c_N=_log_q(F_c, rel_Fc, "N"), F_s_N=_log_q(r * F_c, _grad_var(cov, gs), "N"),
-                  v_s_m_per_s=_log_q(v_s, cov[1, 1], "m/s"),
-                  delta=_lin_q(delta, cov[2, 2], "1", floor=None),
-                  C_N_per_s=_log_q(c * F_c, _grad_var(cov, gC), "N/s"),
-                  sigma2_N_s_per_m=_lin_q(s2, cov[-1, -1], "N s/m"), mass_kg=_lin_q(m, cov[4, 4], "kg"),
-                  k_N_per_m=ks, alpha=alphas)
-    params["slip_m"] = [float(slips[i]) for i in act]
     return res, values, params

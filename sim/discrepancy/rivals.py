@@ -40,6 +40,7 @@ from scipy.optimize import nnls
 from ..friction import MODELS
 from ..friction.iwan import design_matrix, virgin_interval
 from ..identify import path_harmonics, period_paths
+from . import gms_rival
 from . import rate_rivals as rr
 from .fit import Z95, Fit, Weights, fit
 from .gain import frf, heldout_error
@@ -354,7 +355,7 @@ def rate_fits(masing: Fit, dahl: ModelFit, d: Data, W: Weights, others: tuple = 
     F_c, sigma = (dahl.values["F_c_N"], dahl.values["sigma_N_per_m"]) if dahl.fitted else (F_s, F_s / x_s)
     best = lambda: min((f.chi2 for f in (*others, *out.values()) if f.fitted), default=math.inf)  # noqa: E731
     makers = dict(lugre=lambda: rr.lugre_fit(s, F_c, sigma),
-                  gms=lambda: rr.gms_fit(s, iwan_grid(masing, d, rr.GMS_ELEMENTS), best()))
+                  gms=lambda: gms_rival.gms_fit(s, iwan_grid(masing, d, gms_rival.GMS_ELEMENTS), best()))
     for name, make in makers.items():
         if name not in FITTED:
             continue

@@ -104,6 +104,7 @@ def test_the_gms_unit_elements_sum_to_the_models_own_periodic_force():
     # element's force); sum f_i u_i + sigma_2 v must be the model's own steady force
     import numpy as np
 
+    from sim.discrepancy import gms_rival
     from sim.discrepancy import rate_rivals as rr
     from sim.friction import MODELS
     from sim.identify import path_harmonics, period_paths
@@ -119,7 +120,7 @@ def test_the_gms_unit_elements_sum_to_the_models_own_periodic_force():
     s.d = type("D", (), dict(omega=w, X=X))()
     slips = np.array([a * p["F_c_N"] / k for a, k in zip(p["alpha"], p["k_N_per_m"])])
     rows = np.arange(4)
-    H = rr.gms_units(s, slips, p["F_s_N"] / p["F_c_N"], p["v_s_m_per_s"], p["delta"], p["C_N_per_s"] / p["F_c_N"], rows)
+    H = gms_rival.gms_units(s, slips, p["F_s_N"] / p["F_c_N"], p["v_s_m_per_s"], p["delta"], p["C_N_per_s"] / p["F_c_N"], rows)
     G = H @ (np.array(p["alpha"]) * p["F_c_N"]) + p["sigma2_N_s_per_m"] * path_harmonics(vel, starts, 3)
     G_model = path_harmonics(MODELS["gms"].periodic_force(p, paths, w), starts, 3)
     assert np.abs(G - G_model).max() < 1e-6 * np.abs(G_model).max()
@@ -251,3 +252,43 @@ def test_lugre_intervals_cover_the_truth_as_often_as_they_claim(tmp_path):
             counts[n] += ok
     assert all(c >= 53 for c in counts.values()), counts
     assert 391 <= sum(counts.values()) <= 414, counts
+
+
+# ---------------------------------------------------------------- GMS's 95 % intervals (decision 0090)
+GMS_BIASED = ("F_s_N", "C_N_per_s", "sigma2_N_s_per_m")
+
+
+def test_gms_intervals_cover_the_truth_the_fixed_grid_missed(tmp_path):
+    # noise seeds 0-2 of the 5 x 3 grid (benchtools/gms_coverage.py, the independent
+    # simulator's data): main's fit (periods from their largest sample, slips on the fixed
+    # grid) covered F_s, C and sigma_2 on none of 30 seeds, every seed off the same way (F_s
+    # 12.02-12.03 N for 12, C 9200-9650 N/s for 1e4); the truth's elements are found (3, 6.5,
+    # 14, 30 um to 1 %); ~15 s
+    from benchtools.gms_coverage import covered, gms_inputs
+
+    for seed in range(3):
+        ok, res, p = covered(*gms_inputs(tmp_path, seed), names=GMS_BIASED)
+        assert all(ok.values()), (seed, {n: p[n] for n in GMS_BIASED})
+        slips = [q["value"] for q in p["slip_m"]]
+        for true in (3e-6, 6.5e-6, 14e-6, 30e-6):
+            assert min(abs(s / true - 1) for s in slips) < 0.01, (seed, slips)
+
+
+def test_gms_fit_reaches_the_noise_at_a_hundredth_of_it(tmp_path):
+    # the bias is the fit's, not the noise's: at 1 % of the rig's noise main's GMS fit left a
+    # reduced chi-square of 237-240 (the misfit a half-sample-late reversal made, decision
+    # 0090); measured 1.35-1.74 (seeds 0-2); ~5 s
+    from benchtools.gms_coverage import covered, gms_inputs
+
+    _, res, _ = covered(*gms_inputs(tmp_path, 0, noise_scale=0.01), names=())
+    assert res.chi2 / (res.n_data - res.n_params) < 3.0
+
+
+@pytest.mark.campaign
+def test_gms_intervals_cover_the_truth_as_often_as_they_claim():
+    # 30 noise seeds of the 5 x 3 grid: each scalar and the mass covered at least 25 of 30 (a
+    # 95 % interval misses 6 or more in 1.6 %); main covered F_s, C, sigma_2 0/30, F_c 6/30; ~3 min
+    from benchtools.gms_coverage import main
+
+    counts = main(30)
+    assert all(c >= 25 for c in counts.values()), counts
