@@ -263,3 +263,48 @@ def binomial_range(n: int, p: float = 0.95, alpha: float = 0.01) -> tuple[int, i
     """The counts of n trials a true coverage p gives with probability 1 - alpha (two-sided)."""
     from scipy import stats
     return int(stats.binom.ppf(alpha / 2, n, p)), int(stats.binom.isf(alpha / 2, n, p))
+
+
+# The simulator's steady states at the grid points of tests/bench/test_import_coverage.py's
+# sample (decision 0083, third addendum): the test's 25-35 s of CPU were these integrations
+# (the imports and `bench modes` of ten seeds: about 1 s).  Written by ``store_states``;
+# the campaign version of the test integrates them live, and the sample checks two of them.
+STATES = Path(__file__).with_name("frf_coverage_states.json")
+
+
+def grid_points(t: Truth, placements: int) -> list[float]:
+    """Every frequency ``write_trial`` can give ``t`` with ``placements`` placements."""
+    k = np.arange(math.floor((t.f1_Hz - t.resonance_Hz) / STEP_HZ) - MARGIN,
+                  math.ceil((t.f2_Hz - t.resonance_Hz) / STEP_HZ) + MARGIN + 1)
+    return sorted({float(x) for j in range(placements)
+                   for x in np.round(t.resonance_Hz + STEP_HZ * (k + (j + 0.5) / placements - 0.5), 6)})
+
+
+def store_states(truths: list[Truth], placements: int, path: Path = STATES) -> None:
+    """The simulator's X1/F1 (and the held levels' force) at every grid point, as JSON."""
+    import json
+    sim, rows = Simulator(), []
+    for t in truths:
+        for f in grid_points(t, placements):
+            if t.kind == "force":
+                H, P = sim.at_force(t.level, f), t.level
+            else:
+                H, P = sim.at_held(t.level, f)
+            rows.append([t.kind, t.level, f, H.real, H.imag, P])
+    head = json.dumps({"placements": placements, "model": MODEL, "settle": sim.settle, "measure": sim.measure,
+                       "rtol": sim.rtol})
+    path.write_text(head[:-1] + ', "states": [\n' + ",\n".join(json.dumps(r) for r in rows) + "\n]}\n")
+
+
+def stored_simulator(path: Path = STATES) -> Simulator:
+    """A Simulator whose cache holds the stored states (a point not stored is integrated)."""
+    import json
+    data = json.loads(path.read_text())
+    sim = Simulator(settle=data["settle"], measure=data["measure"], rtol=data["rtol"])
+    assert data["model"] == MODEL, "the stored states are of another model: run store_states"
+    for kind, level, f, re, im, P in data["states"]:
+        if kind == "force":
+            sim.cache[("F", level, f)] = complex(re, im)
+        else:
+            sim.cache[("X", level, f)] = (complex(re, im), P)
+    return sim

@@ -55,7 +55,10 @@ def run_rig(seed, out):
 
 def run_rigs(seeds, outs, workers: int = 2):
     """``run_rig`` over ``seeds``, one process per core (each rig runs its own twins on
-    ephemeral ports)."""
+    ephemeral ports); one rig in this process (a spawned process would import numpy, scipy
+    and the project again for nothing: decision 0083, third addendum)."""
+    if len(seeds) == 1 or workers == 1:
+        return [run_rig(seed, out) for seed, out in zip(seeds, outs, strict=True)]
     with ProcessPoolExecutor(max_workers=min(workers, os.cpu_count() or 1),
                              mp_context=multiprocessing.get_context("spawn")) as ex:
         return list(ex.map(run_rig, seeds, outs))

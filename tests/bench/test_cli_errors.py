@@ -4,8 +4,13 @@ documented exit code (bench/cli.py, docs/reliability.md).
 The subcommands are enumerated from the parser, so a subcommand added later is covered
 without editing this file: each gets an unknown option, and each that takes a path (a
 positional argument, a required option, --plan, --rig) gets one that does not exist.
-The commands run as real processes, all at once (they are independent), each with a
-time bound.
+Every case runs through :func:`bench.cli.main` in this process (what the command does with
+a bad input: its exit code, its one line, no traceback, no warning raised while it runs).
+Three of them also run as real processes (``python -m bench.cli``), all at once, each with a
+time bound: the real entry point, where anything printed outside ``main`` (an import's
+warning, an exception at exit) would also show.  Every case as a real process, as this test
+ran until decision 0083's third addendum (19 processes, 34 s of CPU: each pays the import of
+numpy, scipy and the project), is the campaign (`make bench`).
 """
 
 from __future__ import annotations
@@ -13,6 +18,7 @@ from __future__ import annotations
 import argparse
 import subprocess
 import time
+import warnings
 from pathlib import Path
 
 import pytest
@@ -23,6 +29,9 @@ from benchtools.procs import bench_process
 MISSING = "/nonexistent/guideway-bench/input"
 PATH_OPTIONS = {"--plan", "--rig", "--spec", "--source", "--run", "--config"}
 TIME_LIMIT_S = 120
+# the real processes of `make test`: a positional path, the plan and rig options (the config
+# loader), a bad value (decision 0083, third addendum); the campaign runs every case
+IN_PROCESSES = {"resume", "dry-run", "frf"}
 
 
 def subcommands() -> dict[str, argparse.ArgumentParser]:
@@ -62,13 +71,48 @@ def test_unknown_options_to_every_subcommand_are_one_usage_line(capsys):
         assert len(err) == 1 and "error:" in err[0] and "Traceback" not in err[0], (args, err)
 
 
-def test_bad_paths_and_values_to_every_subcommand_are_one_line_without_traceback(tmp_path):
+def bad_cases(tmp: Path) -> list[tuple[list[str], ExitCode]]:
+    """Every subcommand given a path that does not exist, and two bad values."""
     cases = []
     for name, sub in subcommands().items():
-        args = bad_path_args(name, sub, tmp_path)
+        args = bad_path_args(name, sub, tmp)
         if args:
             cases.append((args, ExitCode.USAGE))
-    cases += [(["frf", "--gamma0", "nan"], ExitCode.USAGE), (["paper", "--out", "/dev/null/x"], ExitCode.USAGE)]
+    return cases + [(["frf", "--gamma0", "nan"], ExitCode.USAGE), (["paper", "--out", "/dev/null/x"], ExitCode.USAGE)]
+
+
+def one_line_problem(args: list[str], code: int, expected: int, err: str) -> str | None:
+    lines = [line for line in err.splitlines() if line.strip()]
+    if "Traceback" in err:
+        return f"bench {' '.join(args)}: traceback:\n{err[-1500:]}"
+    if code != expected:
+        return f"bench {' '.join(args)}: exit {code}, expected {int(expected)}: {err[-500:]}"
+    if len(lines) != 1 or "error:" not in lines[0]:
+        return f"bench {' '.join(args)}: expected one error line, got {lines}"
+    return None
+
+
+def test_bad_paths_and_values_to_every_subcommand_are_one_line_without_traceback(tmp_path, capsys):
+    cases = bad_cases(tmp_path)
+    assert len(cases) >= 15 and {args[0] for args, _ in cases} >= IN_PROCESSES
+    problems = []
+    for args, expected in cases:
+        with warnings.catch_warnings(record=True) as seen:
+            warnings.simplefilter("always")
+            code = main(args)
+        err = capsys.readouterr().err
+        problem = one_line_problem(args, code, expected, err)
+        if problem is None and seen:
+            problem = f"bench {' '.join(args)}: warned {[str(w.message) for w in seen]}"
+        if problem:
+            problems.append(problem)
+    assert not problems, "\n".join(problems)
+
+
+@pytest.mark.parametrize("which", ["sample", pytest.param("every_case", marks=pytest.mark.campaign)])
+def test_bad_inputs_to_the_real_entry_point_are_one_line_without_traceback(tmp_path, which):
+    cases = [(args, code) for args, code in bad_cases(tmp_path) if which != "sample" or args[0] in IN_PROCESSES]
+    assert len(cases) == (len(IN_PROCESSES) if which == "sample" else len(bad_cases(tmp_path)))
     procs = [(args, code, bench_process(*args, text=True, stdout=subprocess.PIPE,
                                         stderr=subprocess.PIPE))
              for args, code in cases]
@@ -82,13 +126,9 @@ def test_bad_paths_and_values_to_every_subcommand_are_one_line_without_traceback
             proc.communicate()
             problems.append(f"bench {' '.join(args)}: no answer within {TIME_LIMIT_S} s")
             continue
-        lines = [line for line in err.splitlines() if line.strip()]
-        if "Traceback" in err:
-            problems.append(f"bench {' '.join(args)}: traceback:\n{err[-1500:]}")
-        elif proc.returncode != code:
-            problems.append(f"bench {' '.join(args)}: exit {proc.returncode}, expected {int(code)}: {err[-500:]}")
-        elif len(lines) != 1 or "error:" not in lines[0]:
-            problems.append(f"bench {' '.join(args)}: expected one error line, got {lines}")
+        problem = one_line_problem(args, proc.returncode, code, err)
+        if problem:
+            problems.append(problem)
     assert not problems, "\n".join(problems)
 
 
