@@ -46,6 +46,28 @@ def one_period(advance, p, state, x, v, dt, out):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def secant_state(period, advance, p, s, x, v, dt, out, scale):
+    """The one-float state ``s[0]`` at the fixed point of ``period(advance, p, s, x, v, dt,
+    out)`` (a period map that updates ``s``), by the secant method on g(s) = period(s) - s
+    from ``s``; leaves it there and returns the number of period-map evaluations."""
+    a = s[0]
+    period(advance, p, s, x, v, dt, out)
+    ga = s[0] - a
+    b = s[0]
+    used = 1
+    while used < PERIODS_MAX:
+        s[0] = b
+        period(advance, p, s, x, v, dt, out)
+        gb = s[0] - b
+        used += 1
+        if abs(gb) <= TOL * scale or gb == ga:
+            break
+        a, ga, b = b, gb, b - gb * (b - a) / (gb - ga)
+    s[0] = b
+    return used
+
+
+@njit(cache=True, nogil=True, inline="always")
 def periodic_row(advance, p, x, v, dt, state_size, scale, out):
     """Steady periodic force along one period ``x`` (m; velocity ``v``, m/s; samples ``dt``
     s apart) into ``out``; ``scale`` is the state's magnitude (the tolerance's unit).
@@ -59,20 +81,7 @@ def periodic_row(advance, p, x, v, dt, state_size, scale, out):
     advance(p, s, x[0], math.inf, 0.0)          # virgin, quasi-static, from 0 to the first sample
     used = 0
     if state_size == 1:
-        a = s[0]                                 # secant on g(s) = period(s) - s
-        one_period(advance, p, s, x, v, dt, none)
-        ga = s[0] - a
-        b = s[0]
-        used = 1
-        while used < PERIODS_MAX:
-            s[0] = b
-            one_period(advance, p, s, x, v, dt, none)
-            gb = s[0] - b
-            used += 1
-            if abs(gb) <= TOL * scale or gb == ga:
-                break
-            a, ga, b = b, gb, b - gb * (b - a) / (gb - ga)
-        s[0] = b
+        used = secant_state(one_period, advance, p, s, x, v, dt, none, scale)
     else:
         prev = np.empty(state_size)
         while used < PERIODS_MAX:

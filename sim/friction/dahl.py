@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 
 from ._base import FrictionModel, Parameter
-from ._periodic import PERIODS_MAX, TOL, one_period
+from ._periodic import one_period, secant_state
 
 
 @njit(cache=True, nogil=True)
@@ -72,10 +72,12 @@ def _runs(x):
     return travel[:k + 1]
 
 
-@njit(cache=True, nogil=True)
-def _period(p, state, travel):
+@njit(cache=True, nogil=True, inline="always")
+def _period(advance, p, state, travel, v, dt, out):
+    """The period map taken a run at a time (``v``, ``dt``, ``out`` unused: the signature of
+    :func:`~sim.friction._periodic.one_period`)."""
     for t in travel:
-        dahl_advance(p, state, t, math.inf, 0.0)
+        advance(p, state, t, math.inf, 0.0)
 
 
 @njit(cache=True, nogil=True)
@@ -91,20 +93,7 @@ def dahl_rows(p, paths, vel, dts, state_size, scale, out):
         travel = _runs(x)
         s = np.zeros(1)
         dahl_advance(p, s, x[0], math.inf, 0.0)      # virgin, quasi-static, to the first sample
-        a = s[0]                                      # secant on g(s) = period(s) - s
-        _period(p, s, travel)
-        ga = s[0] - a
-        b = s[0]
-        used = 1
-        while used < PERIODS_MAX:
-            s[0] = b
-            _period(p, s, travel)
-            gb = s[0] - b
-            used += 1
-            if abs(gb) <= TOL * scale or gb == ga:
-                break
-            a, ga, b = b, gb, b - gb * (b - a) / (gb - ga)
-        s[0] = b
+        used = secant_state(_period, dahl_advance, p, s, travel, travel, 0.0, travel, scale)
         one_period(dahl_advance, p, s, x, vel[i], dts[i], out[i])
         worst = max(worst, used)
     return worst
