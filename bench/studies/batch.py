@@ -97,6 +97,7 @@ def flatten(result: dict) -> dict:
     row["artefacts"] = (",".join(dict.fromkeys(c.get("id", "") for c in causes if c.get("kind") == "artefact"))
                         if causes is not None else None)
     row["unexplained"] = result.get("unexplained")
+    row["friction_model"] = result.get("friction_model")
     row["verdict"] = result.get("verdict")
     used = result.get("steps_used")
     row["steps_used"] = len(used) if isinstance(used, list) else used

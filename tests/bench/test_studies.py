@@ -494,6 +494,7 @@ def test_batch_analysis_with_analyze_source_on_the_cluster(cluster, sources, tmp
     for r in rows:            # the plain simulated rig (F_s 10 N, n 1.5, m 10 kg): nothing to explain
         assert r["F_s_N_value"] == pytest.approx(10.0, rel=0.05) and r["n_value"] == pytest.approx(1.5, rel=0.05)
         assert r["causes"] == "" and r["unexplained"] is False and r["verdict"]
+        assert r["friction_model"] == "masing"     # no rival beats it through the gates (they are shut)
         assert "line_interference" not in r["artefacts"]     # the carriage's free vibrations are not hum
     assert len(rows) == len(chosen)
     for name in ("analysis.json", "analysis.html"):
