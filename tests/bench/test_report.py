@@ -40,6 +40,14 @@ def report(run_dir):
     return write_report(run_dir)
 
 
+@pytest.fixture
+def no_png(monkeypatch):
+    """The report's figures written as empty files, not drawn (a draw is ~0.5 s each): for the
+    tests that read the text and which files there are; the plots are checked on `report`."""
+    from bench.reports import _figures
+    monkeypatch.setattr(_figures, "save_png", lambda fig, path: (path.write_bytes(b""), path)[1])
+
+
 def _copy(run_dir, tmp_path):
     dst = tmp_path / "run"
     shutil.copytree(run_dir, dst, ignore=shutil.ignore_patterns("report", "export"))
@@ -186,7 +194,7 @@ def test_texts_say_where_compliance_pp_comes_from(report):
     assert "raw record" not in text
 
 
-def test_run_stored_before_fitted_compliance_pp_is_reported_as_raw(run_dir, tmp_path):
+def test_run_stored_before_fitted_compliance_pp_is_reported_as_raw(run_dir, tmp_path, no_png):
     """Older runs have no disp.raw_peak_to_peak and their compliance_pp is the raw record's."""
     run = _copy(run_dir, tmp_path)
     for p in (run / "steps").glob("*.json"):
@@ -273,7 +281,7 @@ def test_identification_plot_keeps_truth_and_final_estimate_on_scale(run_dir):
         assert ax.get_yscale() == ("log" if p.log_y else "linear")
 
 
-def test_interrupted_run_reports_the_last_online_estimate(run_dir, tmp_path):
+def test_interrupted_run_reports_the_last_online_estimate(run_dir, tmp_path, no_png):
     run = _copy(run_dir, tmp_path)
     meta = json.loads((run / "run.json").read_text())
     del meta["identification"]
@@ -291,7 +299,7 @@ def test_interrupted_run_reports_the_last_online_estimate(run_dir, tmp_path):
     assert (run / "report" / "identification.png").is_file()
 
 
-def test_run_without_identification_says_so_and_has_no_plot(run_dir, tmp_path):
+def test_run_without_identification_says_so_and_has_no_plot(run_dir, tmp_path, no_png):
     run = _copy(run_dir, tmp_path)
     (run / "identification.jsonl").unlink()
     meta = json.loads((run / "run.json").read_text())
@@ -305,7 +313,7 @@ def test_run_without_identification_says_so_and_has_no_plot(run_dir, tmp_path):
     assert "identification.png" not in text
 
 
-def test_unreadable_identification_entry_is_shown_not_fatal(run_dir, tmp_path):
+def test_unreadable_identification_entry_is_shown_not_fatal(run_dir, tmp_path, no_png):
     run = _copy(run_dir, tmp_path)
     meta = json.loads((run / "run.json").read_text())
     meta["identification"] = {"method": "something else"}
@@ -315,7 +323,7 @@ def test_unreadable_identification_entry_is_shown_not_fatal(run_dir, tmp_path):
     assert "last online estimate" in section       # the history is still there
 
 
-def test_partial_run_reports_its_interruption(run_dir, tmp_path):
+def test_partial_run_reports_its_interruption(run_dir, tmp_path, no_png):
     run = _copy(run_dir, tmp_path)
     for p in sorted((run / "steps").glob("*.json"))[7:]:
         p.unlink()
@@ -345,7 +353,7 @@ def test_report_has_no_analysis_section_before_bench_analyze(report):
     assert "## Analysis" not in report.read_text()
 
 
-def test_report_includes_the_analysis_when_bench_analyze_wrote_it(run_dir, tmp_path, analysis_example):
+def test_report_includes_the_analysis_when_bench_analyze_wrote_it(run_dir, tmp_path, analysis_example, no_png):
     run = _copy(run_dir, tmp_path)
     (run / "analysis").mkdir()
     (run / "analysis" / "analysis.json").write_text(json.dumps(analysis_example))
@@ -404,7 +412,7 @@ def test_every_plant_effect_the_engine_leaves_out_is_named_in_the_model_notes():
         assert list(notes) == [name] and name in notes[name], name
 
 
-def test_the_report_lists_the_same_rejected_and_flagged_steps_as_bench_analyze(run_dir, tmp_path):
+def test_the_report_lists_the_same_rejected_and_flagged_steps_as_bench_analyze(run_dir, tmp_path, no_png):
     """One notion of step quality (issue 19): a step whose force clips is rejected and one
     with hum on the probe is kept with the hum removed, in the report exactly as in the
     source that `bench analyze` reads."""
