@@ -542,10 +542,29 @@ def generate_uff(path, model: str, params: dict, mass_kg: float, levels_N, freqs
     sets: list[dict] = []
     case = 0
     for level in levels_N:
-        for _, x, acc, P in simulate_level(model, params, mass_kg, float(level), sorted(freqs_Hz), settle, measure,
-                                           fs, rtol=rtol):
+        for x, acc, P in _level_records(model, params, mass_kg, float(level), sorted(freqs_Hz), settle, measure, fs,
+                                        rtol):
             case += 1
             force, accel, disp = add_noise(P, acc, x, noise, F_scale, length, rng)
             sets += step_sets(case, len(sets) + 1, fs, force, accel, disp)
     write_sets(path, sets)
     return case
+
+
+# The noise-free sweeps of the levels simulated last in this process (the noise is drawn after
+# them): a case written again with another noise seed, or at another noise scale, integrates
+# nothing again.  The records are the same arrays the simulation yields, so the files are the
+# same bytes with or without it.
+_SWEEPS: dict[str, list] = {}
+_SWEEPS_KEPT = 32
+
+
+def _level_records(model, params, mass_kg, level, freqs, settle, measure, fs, rtol):
+    key = repr((model, sorted((k, np.asarray(v, float).tolist()) for k, v in params.items()), float(mass_kg), level,
+                [float(f) for f in freqs], settle, measure, float(fs), float(rtol)))
+    if key not in _SWEEPS:
+        while len(_SWEEPS) >= _SWEEPS_KEPT:
+            del _SWEEPS[next(iter(_SWEEPS))]
+        _SWEEPS[key] = [(x, acc, P) for _, x, acc, P in simulate_level(model, params, mass_kg, level, freqs, settle,
+                                                                        measure, fs, rtol=rtol)]
+    return _SWEEPS[key]
